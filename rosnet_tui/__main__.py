@@ -1,0 +1,3 @@
+from rosnet_tui.cli import main
+
+raise SystemExit(main())

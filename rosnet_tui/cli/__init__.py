@@ -1,0 +1,71 @@
+"""Command line: `rosnet-tui` opens the wizard; sub-commands run the same core headless.
+
+Each sub-command lives in its own module exposing ``register(subparsers)``; it sets ``func`` on
+its parser, a callable ``func(args) -> int`` (the exit code). Exit codes: 0 fine, 1 a check or an
+action failed, 2 usage or settings error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from pathlib import Path
+
+from rosnet_tui import __version__
+
+EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+
+# Sub-command modules, in the order --help lists them.
+SUBCOMMAND_MODULES = ("check", "hosts", "ros", "undo", "report", "probe_server")
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # argparse's default, with a hint
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n"
+                              f"Try '{self.prog} --help' for more.\n")
+
+
+def add_config_option(parser: argparse.ArgumentParser, *, top: bool = False) -> None:
+    parser.add_argument(
+        "--config", metavar="FILE", type=Path,
+        default=None if top else argparse.SUPPRESS,
+        help="settings file (default: $XDG_CONFIG_HOME/rosnet-tui/config.toml)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="rosnet-tui",
+        description="Put a robot and its operators on one ROS network across the internet, by "
+                    "port forwarding, and prove that it works. With no command, opens the wizard.",
+        epilog="Exit codes: 0 all good, 1 a check or action failed, 2 usage or settings error.")
+    parser.add_argument("--version", action="version", version=f"rosnet-tui {__version__}")
+    add_config_option(parser, top=True)
+    parser.add_argument("--setup", action="store_true",
+                        help="open the wizard on the set-up screen even when settings are complete")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name in SUBCOMMAND_MODULES:
+        module = importlib.import_module(f"rosnet_tui.cli.{name}")
+        module.register(sub)
+    return parser
+
+
+def config_path(args: argparse.Namespace) -> Path:
+    from rosnet_tui.core.settings import default_config_path
+
+    return Path(args.config).expanduser() if getattr(args, "config", None) else default_config_path()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        from rosnet_tui.cli.wizard import run_wizard
+
+        return run_wizard(args)
+    try:
+        return int(args.func(args))
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130

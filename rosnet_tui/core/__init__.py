@@ -1,0 +1,1 @@
+"""Core logic: checks, advisor, configuration writers and address sync. Imports no Textual."""

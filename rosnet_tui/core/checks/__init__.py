@@ -1,0 +1,116 @@
+"""The live checks of each step: a registry of small async functions, each under a timeout.
+
+A check is ``async def check(ctx: CheckContext) -> Outcome``, registered with :func:`check`.
+:func:`run_checks` runs a selection concurrently and yields each result as it lands; a check that
+raises or overruns its timeout becomes a ``fail`` result, never an exception.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rosnet_tui.core.results import CheckResult, Outcome, Status
+from rosnet_tui.core.settings import Settings, default_state_dir
+
+STEP_IDS = ("isp", "router", "linux", "ros")
+
+
+@dataclass
+class CheckContext:
+    """Everything a check may use; tests build one pointed at the network lab."""
+
+    settings: Settings
+    timeout_s: float = 3.0
+    hosts_path: Path = Path("/etc/hosts")
+    bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
+    state_dir: Path = field(default_factory=default_state_dir)
+    env: dict[str, str] = field(default_factory=dict)
+    # Results of checks that already ran in this round, by id (for checks that build on others).
+    results: dict[str, CheckResult] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+CheckFunc = Callable[[CheckContext], Awaitable[Outcome]]
+
+
+@dataclass(frozen=True)
+class CheckSpec:
+    id: str
+    step: str
+    title: str
+    func: CheckFunc
+    # Seconds this check may take, as a multiple of the context's timeout (some do several probes).
+    timeout_factor: float = 1.0
+
+
+REGISTRY: dict[str, CheckSpec] = {}
+
+
+def check(id: str, step: str, title: str, timeout_factor: float = 1.0
+          ) -> Callable[[CheckFunc], CheckFunc]:
+    """Register a check function under *id* for *step*."""
+    if step not in STEP_IDS:
+        raise ValueError(f"unknown step {step!r}")
+
+    def deco(func: CheckFunc) -> CheckFunc:
+        REGISTRY[id] = CheckSpec(id, step, title, func, timeout_factor)
+        return func
+
+    return deco
+
+
+def load_builtin_checks() -> None:
+    """Import the modules that register the built-in checks (idempotent)."""
+    import importlib
+    import pkgutil
+
+    for mod in pkgutil.iter_modules(__path__):
+        if not mod.name.startswith("_"):
+            importlib.import_module(f"{__name__}.{mod.name}")
+
+
+def checks_for(steps: Iterable[str] | None = None) -> list[CheckSpec]:
+    """The registered checks of *steps* (all steps when None), in step order then id order."""
+    load_builtin_checks()
+    wanted = list(steps) if steps else list(STEP_IDS)
+    order = {s: i for i, s in enumerate(STEP_IDS)}
+    specs = [c for c in REGISTRY.values() if c.step in wanted]
+    return sorted(specs, key=lambda c: (order[c.step], list(REGISTRY).index(c.id)))
+
+
+async def run_check(spec: CheckSpec, ctx: CheckContext) -> CheckResult:
+    """Run one check under its timeout; always returns a result."""
+    timeout = ctx.timeout_s * spec.timeout_factor
+    start = time.monotonic()
+    try:
+        outcome = await asyncio.wait_for(spec.func(ctx), timeout)
+    except asyncio.TimeoutError:
+        outcome = Outcome(Status.FAIL, f"no verdict within {timeout:g} s (timed out)",
+                          [f"the check was stopped after {timeout:g} s"])
+    except asyncio.CancelledError:
+        raise
+    except Exception as exc:  # a bug or an unexpected failure is a result, not a crash
+        outcome = Outcome(Status.FAIL, f"the check failed unexpectedly: {type(exc).__name__}: {exc}",
+                          [repr(exc)])
+    return CheckResult(spec.id, spec.step, outcome.status, outcome.summary,
+                       list(outcome.evidence), time.monotonic() - start, timeout,
+                       dict(outcome.data))
+
+
+async def run_checks(specs: Iterable[CheckSpec], ctx: CheckContext) -> AsyncIterator[CheckResult]:
+    """Run *specs* concurrently; yield each result as soon as it lands."""
+    tasks = [asyncio.ensure_future(run_check(s, ctx)) for s in specs]
+    try:
+        for fut in asyncio.as_completed(tasks):
+            result = await fut
+            ctx.results[result.id] = result
+            yield result
+    finally:
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
