@@ -1,0 +1,1 @@
+"""The Textual wizard. Everything it decides comes from rosnet_tui.core."""

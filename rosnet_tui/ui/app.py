@@ -1,0 +1,181 @@
+"""The wizard: a thin Textual layer over rosnet_tui.core."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from textual.app import App
+from textual.binding import Binding
+
+from rosnet_tui.core.checks import CheckContext, CheckSpec, checks_for
+from rosnet_tui.core.netinfo import LocalNet, detect_local_net
+from rosnet_tui.core.results import CheckResult
+from rosnet_tui.core.settings import Settings, atomic_write_text, default_state_dir, save_settings
+from rosnet_tui.core.steps import STEPS
+from rosnet_tui.ui.help_screen import HelpScreen
+from rosnet_tui.ui.setup_screen import SetupScreen
+from rosnet_tui.ui.step_screen import StepScreen
+from rosnet_tui.ui.widgets import NOT_RUN, StepBar, aggregate
+
+
+@dataclass
+class AppDeps:
+    """What the app needs from the outside world; tests hand in their own."""
+
+    config_path: Path
+    settings: Settings
+    state_dir: Path = field(default_factory=default_state_dir)
+    detect_net: Callable[[], LocalNet] = detect_local_net
+    specs_for: Callable[[str], list[CheckSpec]] = lambda step: checks_for([step])
+    make_context: Callable[[Settings], CheckContext] | None = None
+    open_setup: bool = False
+
+
+class RosnetApp(App[int]):
+    CSS_PATH = "app.tcss"
+    TITLE = "rosnet-tui"
+    ENABLE_COMMAND_PALETTE = False
+
+    BINDINGS = [
+        Binding("1", "goto('isp')", "ISP", show=False),
+        Binding("2", "goto('router')", "Router", show=False),
+        Binding("3", "goto('linux')", "Linux", show=False),
+        Binding("4", "goto('ros')", "ROS", show=False),
+        Binding("b", "back", "Back"),
+        Binding("n", "next", "Next"),
+        Binding("s", "setup", "Set-up"),
+        Binding("question_mark", "help", "Help", key_display="?"),
+        Binding("q", "quit", "Quit"),
+    ]
+
+    def __init__(self, deps: AppDeps) -> None:
+        super().__init__()
+        self.deps = deps
+        self.settings = deps.settings
+        self.detected = LocalNet()
+        self._states: dict[str, tuple[str, CheckResult | None]] = {}
+        self._specs: dict[str, list[CheckSpec]] = {}
+        self.current_step = self._load_ui_state().get("last_step", "isp")
+        if self.current_step not in {s.id for s in STEPS}:
+            self.current_step = "isp"
+
+    # ------------------------------------------------------------------ start-up
+    def on_mount(self) -> None:
+        self.detected = self.deps.detect_net()
+        self.set_class(self.size.width >= self.WIDE_AT, "wide")
+        for step in STEPS:
+            specs = self.deps.specs_for(step.id)
+            self._specs[step.id] = specs
+            self.install_screen(StepScreen(step, specs), name=f"step-{step.id}")
+        self.push_screen(f"step-{self.current_step}")
+        if self.deps.open_setup or not self.settings.complete:
+            self.action_setup()
+
+    WIDE_AT = 110  # columns from which configuration and verification sit side by side
+
+    def on_resize(self, event) -> None:
+        self.set_class(event.size.width >= self.WIDE_AT, "wide")
+
+    # ------------------------------------------------------------------ shared check state
+    def check_state(self, check_id: str) -> tuple[str, CheckResult | None]:
+        return self._states.get(check_id, (NOT_RUN, None))
+
+    def set_check_state(self, check_id: str, state: str, result: CheckResult | None) -> None:
+        self._states[check_id] = (state, result)
+
+    def step_states(self) -> dict[str, str]:
+        return {s.id: aggregate([self.check_state(c.id)[0] for c in self._specs.get(s.id, [])])
+                for s in STEPS}
+
+    def make_context(self) -> CheckContext:
+        settings = self.runtime_settings()
+        if self.deps.make_context is not None:
+            return self.deps.make_context(settings)
+        return CheckContext(settings=settings, timeout_s=settings.checks.timeout_s,
+                            env=dict(os.environ), state_dir=self.deps.state_dir)
+
+    def runtime_settings(self) -> Settings:
+        """The saved settings, with what they leave blank filled in from this machine."""
+        from dataclasses import replace
+
+        t = self.settings.this
+        if t.local_ip and t.interface:
+            return self.settings
+        this = replace(t, local_ip=t.local_ip or self.detected.local_ip,
+                       interface=t.interface or self.detected.interface)
+        return replace(self.settings, this=this)
+
+    # ------------------------------------------------------------------ settings
+    def save_settings(self, settings: Settings) -> None:
+        save_settings(settings, self.deps.config_path)
+        self.settings = settings
+        for step in STEPS:
+            screen = self.get_screen(f"step-{step.id}")
+            if isinstance(screen, StepScreen) and screen.is_mounted:
+                screen.refresh_config()
+
+    # ------------------------------------------------------------------ ui state
+    def _ui_state_path(self) -> Path:
+        return self.deps.state_dir / "ui.json"
+
+    def _load_ui_state(self) -> dict:
+        try:
+            data = json.loads(self._ui_state_path().read_text(encoding="utf-8"))
+            return data if isinstance(data, dict) else {}
+        except (OSError, ValueError):
+            return {}
+
+    def record_step_progress(self) -> None:
+        try:
+            atomic_write_text(self._ui_state_path(),
+                              json.dumps({"last_step": self.current_step}) + "\n")
+        except OSError:
+            pass  # remembering the step is a convenience, never a reason to fail
+
+    # ------------------------------------------------------------------ navigation
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action in ("goto", "back", "next", "setup", "quit"):
+            return isinstance(self.screen, StepScreen)
+        return True
+
+    def action_goto(self, step_id: str) -> None:
+        if step_id == self.current_step and isinstance(self.screen, StepScreen):
+            return
+        self.current_step = step_id
+        self.switch_screen(f"step-{step_id}")
+        self.record_step_progress()
+
+    def _step_index(self) -> int:
+        return next(i for i, s in enumerate(STEPS) if s.id == self.current_step)
+
+    def action_next(self) -> None:
+        i = self._step_index()
+        if i + 1 < len(STEPS):
+            self.action_goto(STEPS[i + 1].id)
+        else:
+            self.notify("This is the last step.", timeout=3)
+
+    def action_back(self) -> None:
+        i = self._step_index()
+        if i > 0:
+            self.action_goto(STEPS[i - 1].id)
+        else:
+            self.notify("This is the first step.", timeout=3)
+
+    def on_step_bar_selected(self, message: StepBar.Selected) -> None:
+        self.action_goto(message.step_id)
+
+    def action_setup(self) -> None:
+        def done(saved: bool | None) -> None:
+            if saved:
+                self.notify(f"Settings saved to {self.deps.config_path}", timeout=4)
+
+        self.push_screen(SetupScreen(self.detected), done)
+
+    def action_help(self) -> None:
+        if not isinstance(self.screen, HelpScreen):
+            self.push_screen(HelpScreen())

@@ -1,0 +1,154 @@
+"""One generic screen renders any of the four steps: Expected outcome, Configuration, Verification."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, cast
+
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Container, Vertical, VerticalScroll
+from textual.screen import Screen
+from textual.widgets import Footer, Header, Markdown, Static
+
+from rosnet_tui.core.checks import CheckSpec, run_checks
+from rosnet_tui.core.steps import Step
+from rosnet_tui.ui.widgets import NOT_RUN, RUNNING, CheckList, StepBar, aggregate
+
+if TYPE_CHECKING:
+    from rosnet_tui.ui.app import RosnetApp
+
+
+class StepScreen(Screen):
+    """A step of the procedure, with its checks run live in a worker."""
+
+    BINDINGS = [
+        Binding("r", "run_checks", "Run checks"),
+        Binding("R", "run_one", "Re-run one", show=False),
+        Binding("c", "cancel_checks", "Cancel", show=False),
+        Binding("e", "toggle_evidence", "Evidence"),
+        Binding("z", "zoom", "Zoom pane", show=False),
+    ]
+
+    def __init__(self, step: Step, specs: list[CheckSpec], **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.step = step
+        self.specs = specs
+
+    @property
+    def rosnet(self) -> RosnetApp:
+        return cast("RosnetApp", self.app)
+
+    def compose(self) -> ComposeResult:
+        yield Header(show_clock=False, icon="")
+        yield StepBar(self.step.id, id="step-bar")
+        with Container(id="panes"):
+            with Vertical(id="expected-pane", classes="pane") as expected:
+                expected.border_title = f"{self.step.number} {self.step.title}: expected outcome"
+                yield Static(self.step.expected, id="expected-text")
+            with Container(id="lower"):
+                with VerticalScroll(id="config-pane", classes="pane") as config:
+                    config.border_title = "Configuration"
+                    yield Markdown(self.step.configure(self.rosnet.settings), id="config-text")
+                with Vertical(id="verify-pane", classes="pane") as verify:
+                    verify.border_title = "Verification"
+                    known = {s.id for s in self.specs}
+                    rows = [(s.id, s.title) for s in self.specs]
+                    rows += [(cid, cid) for cid in self.step.check_ids if cid not in known]
+                    yield CheckList(rows, id="check-list")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.query_one("#check-table").focus()
+        self.title = "rosnet-tui"
+        self.refresh_subtitle()
+        self._sync_results()
+
+    def on_screen_resume(self) -> None:
+        self.query_one(StepBar).current = self.step.id
+        self._sync_results()
+        self.refresh_subtitle()
+
+    def refresh_subtitle(self) -> None:
+        t = self.rosnet.settings.this
+        self.sub_title = f"{t.name or '?'} · {t.role} · {t.connection} · {t.profile}"
+
+    def refresh_config(self) -> None:
+        """Settings changed: re-render the tailored configuration."""
+        self.query_one("#config-text", Markdown).update(self.step.configure(self.rosnet.settings))
+        self.refresh_subtitle()
+
+    def _sync_results(self) -> None:
+        """Show the latest known state of every check and every step (shared through the app)."""
+        app = self.rosnet
+        checks = self.query_one(CheckList)
+        for cid in checks.rows:
+            state, result = app.check_state(cid)
+            if checks.rows[cid].state != state or checks.rows[cid].result is not result:
+                checks.set_state(cid, state, result)
+        bar = self.query_one(StepBar)
+        for step_id, state in app.step_states().items():
+            bar.set_state(step_id, state)
+
+    # ------------------------------------------------------------------ actions
+    def action_run_checks(self) -> None:
+        self.run_specs(self.specs)
+
+    def action_run_one(self) -> None:
+        cid = self.query_one(CheckList).highlighted_id
+        spec = next((s for s in self.specs if s.id == cid), None)
+        if spec is not None:
+            self.run_specs([spec])
+
+    def action_cancel_checks(self) -> None:
+        if self.workers.cancel_group(self, "checks"):
+            self.notify("Checks cancelled.", timeout=3)
+
+    def action_toggle_evidence(self) -> None:
+        self.query_one(CheckList).toggle_evidence()
+
+    def on_check_list_evidence_toggled(self, message: CheckList.EvidenceToggled) -> None:
+        self.set_class(message.shown, "-evidence")
+
+    def action_zoom(self) -> None:
+        if self.maximized is not None:
+            self.minimize()
+            return
+        focused = self.focused
+        pane = None
+        while focused is not None:
+            if focused.has_class("pane"):
+                pane = focused
+                break
+            focused = focused.parent  # type: ignore[assignment]
+        if pane is not None:
+            self.maximize(pane, container=False)
+
+    def run_specs(self, specs: list[CheckSpec]) -> None:
+        if not specs:
+            self.notify("This step has no checks registered yet.", severity="warning")
+            return
+        app = self.rosnet
+        for s in specs:
+            app.set_check_state(s.id, RUNNING, None)
+        self._sync_results()
+        self._run_worker(specs)
+
+    @work(exclusive=True, exit_on_error=False, group="checks")
+    async def _run_worker(self, specs: list[CheckSpec]) -> None:
+        app = self.rosnet
+        ctx = app.make_context()
+        ids = {s.id for s in specs}
+        try:
+            async for result in run_checks(specs, ctx):
+                ids.discard(result.id)
+                app.set_check_state(result.id, result.status.value, result)
+                self._sync_results()
+        finally:
+            for cid in ids:  # cancelled before a verdict: back to "not run"
+                app.set_check_state(cid, NOT_RUN, None)
+            self._sync_results()
+            app.record_step_progress()
+
+    def step_state(self) -> str:
+        return aggregate(self.query_one(CheckList).states())
