@@ -81,7 +81,7 @@ class SetupScreen(Screen[bool]):
     BINDINGS = [
         Binding("escape", "cancel", "Back"),
         Binding("ctrl+s", "save", "Save"),
-        Binding("ctrl+a", "add_peer", "Add peer"),
+        Binding("ctrl+n", "add_peer", "Add peer"),
     ]
 
     def __init__(self, detected: LocalNet, **kwargs) -> None:

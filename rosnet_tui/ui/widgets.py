@@ -78,7 +78,8 @@ class StepBar(Widget):
 
     def compose(self) -> ComposeResult:
         for s in STEPS:
-            yield Static(self._label(s.id), id=f"step-item-{s.id}", classes="step-item")
+            yield Static(self._label(s.id), id=f"step-item-{s.id}", classes="step-item",
+                         markup=False)
 
     def on_mount(self) -> None:
         self._refresh_items()

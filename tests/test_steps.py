@@ -1,0 +1,83 @@
+"""The configuration text of each step is tailored to the connection type and the role."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from rosnet_tui.core.settings import Peer, Settings, ThisComponent
+from rosnet_tui.core.steps import STEP_BY_ID, STEPS
+
+
+def settings(role="master", connection="telecom", profile="remote") -> Settings:
+    s = Settings()
+    name = "turtlebot" if role == "master" else "sami"
+    local = "10.10.10.1" if role == "master" else "192.168.1.10"
+    s.this = ThisComponent(name=name, role=role, connection=connection, profile=profile,
+                           local_ip=local)
+    other = Peer("sami", "192.168.1.10", "198.51.100.2", "ops") if role == "master" else \
+        Peer("turtlebot", "10.10.10.1", "203.0.113.2", "root", office_ip="172.16.0.5")
+    s.peers = [other]
+    s.ros.master = "turtlebot"
+    return s
+
+
+def test_four_steps_in_procedure_order():
+    assert [s.id for s in STEPS] == ["isp", "router", "linux", "ros"]
+    assert [s.number for s in STEPS] == [1, 2, 3, 4]
+    for s in STEPS:
+        assert s.expected and s.check_ids
+
+
+@pytest.mark.parametrize("connection, words", [
+    ("corporate", ["network administrator", "Wi-Fi router"]),
+    ("home", ["nobody to ask", "modem restarts"]),
+    ("telecom", ["networking", "100.64.0.0/10", "coverage"]),
+])
+def test_isp_text_per_connection(connection, words):
+    text = STEP_BY_ID["isp"].configure(settings(connection=connection))
+    for w in words:
+        assert w in text
+    others = {"corporate": "network administrator", "home": "nobody to ask",
+              "telecom": "100.64.0.0/10"}
+    for c, w in others.items():
+        if c != connection:
+            assert w not in text
+
+
+def test_router_text_names_this_components_address_and_port():
+    s = settings()
+    s.probe.port = 23456
+    text = STEP_BY_ID["router"].configure(s)
+    assert "1024-65000" in text and "10.10.10.1" in text and "23456" in text
+    assert "DMZ" in text and "DHCP" in text
+    assert "no authentication" in text
+    assert "administrator does this step" in STEP_BY_ID["router"].configure(
+        settings(connection="corporate"))
+
+
+def has_entry(text: str, ip: str, name: str) -> bool:
+    return re.search(rf"^{re.escape(ip)}\s+{re.escape(name)}$", text, re.M) is not None
+
+
+def test_linux_text_holds_this_components_hosts_entries():
+    master = STEP_BY_ID["linux"].configure(settings("master"))
+    assert has_entry(master, "10.10.10.1", "turtlebot")
+    assert has_entry(master, "198.51.100.2", "sami")
+    member = STEP_BY_ID["linux"].configure(settings("member"))
+    assert has_entry(member, "192.168.1.10", "sami")
+    assert has_entry(member, "203.0.113.2", "turtlebot")
+    office = STEP_BY_ID["linux"].configure(settings("member", profile="office"))
+    assert has_entry(office, "172.16.0.5", "turtlebot") and "203.0.113.2" not in office
+
+
+def test_ros_text_per_role():
+    master = STEP_BY_ID["ros"].configure(settings("master"))
+    assert "export ROS_MASTER_URI=http://turtlebot:11311" in master
+    assert "never its public IP" in master and "roscore" in master
+    member = STEP_BY_ID["ros"].configure(settings("member"))
+    assert "export ROS_MASTER_URI=http://turtlebot:11311" in member
+    assert "is a member" in member
+    for text in (master, member):
+        assert "ROS_IP" in text and "ROS_HOSTNAME" in text

@@ -1,0 +1,254 @@
+"""The wizard, driven as a technician would with the keyboard (Textual's Pilot)."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import pytest
+from textual.widgets import DataTable, Input, Markdown
+
+from rosnet_tui.core.checks import CheckContext, CheckSpec
+from rosnet_tui.core.netinfo import LocalNet
+from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.settings import Peer, Settings, ThisComponent, load_settings
+from rosnet_tui.ui.app import AppDeps, RosnetApp
+from rosnet_tui.ui.setup_screen import SetupScreen
+from rosnet_tui.ui.step_screen import StepScreen
+from rosnet_tui.ui.widgets import CheckList
+
+NET = LocalNet("wlan0", "10.10.10.1", "10.10.10.254", "02:00:00:00:0a:01", "255.255.255.0")
+
+
+def complete_settings() -> Settings:
+    s = Settings()
+    s.this = ThisComponent(name="turtlebot", role="master", connection="telecom",
+                           local_ip="10.10.10.1")
+    s.peers = [Peer("sami", "192.168.1.10", "198.51.100.2", "ops")]
+    s.ros.master = "turtlebot"
+    return s
+
+
+def make_app(tmp_path: Path, settings: Settings | None = None, specs=None, **kw) -> RosnetApp:
+    deps = AppDeps(config_path=tmp_path / "config.toml", settings=settings or Settings(),
+                   state_dir=tmp_path / "state", detect_net=lambda: NET,
+                   specs_for=specs or (lambda step: []), **kw)
+    return RosnetApp(deps)
+
+
+async def test_first_run_opens_setup_prefilled_and_refuses_bad_input(tmp_path):
+    app = make_app(tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        assert isinstance(app.screen, SetupScreen)
+        assert app.screen.query_one("#this-local-ip", Input).value == "10.10.10.1"
+        await pilot.press(*"turtle bot")
+        await pilot.pause()
+        error = app.screen.query_one("#this-name-error")
+        assert error.display and "spaces" in str(error.render())
+        await pilot.press("ctrl+s")
+        await pilot.pause()
+        assert isinstance(app.screen, SetupScreen)  # refused in place
+        assert not (tmp_path / "config.toml").exists()  # nothing saved
+        assert app.screen.focused is app.screen.query_one("#this-name", Input)
+
+
+async def test_setup_saves_valid_settings_and_opens_steps(tmp_path):
+    app = make_app(tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        await pilot.press(*"turtlebot")
+        await pilot.press("ctrl+n")  # add a peer
+        await pilot.pause()
+        await pilot.press(*"sami", "tab", *"192.168.1.10", "tab", *"198.51.100.2", "tab", *"ops")
+        await pilot.press("ctrl+s")
+        await pilot.pause()
+        assert isinstance(app.screen, StepScreen)
+    saved = load_settings(tmp_path / "config.toml")
+    assert saved is not None and saved.complete
+    assert saved.this.name == "turtlebot" and saved.this.local_ip == "10.10.10.1"
+    assert saved.peers == [Peer("sami", "192.168.1.10", "198.51.100.2", "ops")]
+
+
+async def test_bad_peer_address_is_refused_with_its_reason(tmp_path):
+    app = make_app(tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        await pilot.press(*"turtlebot", "ctrl+n")
+        await pilot.pause()
+        await pilot.press(*"sami", "tab", *"192.168.1", "ctrl+s")
+        await pilot.pause()
+        assert isinstance(app.screen, SetupScreen)
+        assert "not an IP" in str(app.screen.query_one("#peer-error").render())
+        assert not (tmp_path / "config.toml").exists()
+
+
+async def test_complete_settings_open_on_the_steps_where_the_user_left_off(tmp_path):
+    (tmp_path / "state").mkdir()
+    (tmp_path / "state" / "ui.json").write_text('{"last_step": "linux"}')
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        assert isinstance(app.screen, StepScreen) and app.screen.step.id == "linux"
+        await pilot.press("s")  # set-up stays reachable
+        await pilot.pause()
+        assert isinstance(app.screen, SetupScreen)
+        await pilot.press("escape")
+        await pilot.pause()
+        assert isinstance(app.screen, StepScreen)
+
+
+async def test_walk_all_steps_and_back_with_three_panes_each(tmp_path):
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        seen = []
+        for key in ("1", "n", "n", "n", "n", "b", "b", "b", "b", "4", "2"):
+            await pilot.press(key)
+            await pilot.pause()
+            screen = app.screen
+            assert isinstance(screen, StepScreen)
+            for pane in ("#expected-pane", "#config-pane", "#verify-pane"):
+                widget = screen.query_one(pane)
+                assert widget.region.height > 0 and widget.region.width > 0
+            seen.append(screen.step.id)
+        assert seen == ["isp", "router", "linux", "ros", "ros", "linux", "router", "isp", "isp",
+                        "ros", "router"]
+    assert '"router"' in (tmp_path / "state" / "ui.json").read_text()
+
+
+async def test_digits_typed_into_a_field_do_not_jump_steps(tmp_path):
+    app = make_app(tmp_path, complete_settings(), open_setup=True)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        field = app.screen.query_one("#probe-port", Input)
+        field.focus()
+        field.value = ""
+        await pilot.press("2", "3", "4", "5", "6")
+        await pilot.pause()
+        assert isinstance(app.screen, SetupScreen) and field.value == "23456"
+
+
+async def test_configuration_follows_the_settings(tmp_path):
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("4")
+        await pilot.pause()
+        md = app.screen.query_one("#config-text", Markdown)
+        assert "ROS_MASTER_URI=http://turtlebot:11311" in md.source
+        assert "is the ROS master" in md.source
+
+
+async def wait_until(pilot, predicate, seconds: float) -> None:
+    """Let the app run until *predicate* holds, for at most *seconds*."""
+    for _ in range(int(seconds / 0.05)):
+        if predicate():
+            return
+        await pilot.pause(0.05)
+
+
+def spec(id: str, step: str, func) -> CheckSpec:
+    return CheckSpec(id, step, id.split(".")[1], func)
+
+
+async def test_checks_stream_live_and_the_ui_stays_responsive(tmp_path):
+    release = asyncio.Event()
+
+    async def quick(ctx: CheckContext) -> Outcome:
+        return Outcome(Status.PASS, "quick one passed", ["saw it"])
+
+    async def slow(ctx: CheckContext) -> Outcome:
+        await release.wait()
+        return Outcome(Status.WARN, "slow one warned")
+
+    async def hangs(ctx: CheckContext) -> Outcome:
+        await asyncio.sleep(3600)
+        return Outcome(Status.PASS, "never")
+
+    specs = {"isp": [spec("isp.quick", "isp", quick), spec("isp.slow", "isp", slow),
+                     spec("isp.hangs", "isp", hangs)]}
+    ctx_factory = lambda s: CheckContext(settings=s, timeout_s=2.0)  # noqa: E731
+    app = make_app(tmp_path, complete_settings(), specs=lambda step: specs.get(step, []),
+                   make_context=ctx_factory)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("1", "r")
+        await pilot.pause(0.2)
+        rows = app.screen.query_one(CheckList).rows
+        assert rows["isp.quick"].state == "pass"
+        assert rows["isp.slow"].state == "running" and rows["isp.hangs"].state == "running"
+        await pilot.press("2")  # the UI answers while checks run
+        await pilot.pause()
+        assert app.screen.step.id == "router"
+        assert app.screen.query_one(CheckList).rows  # and it is drawn
+        release.set()
+        await pilot.press("1")
+        rows = app.screen.query_one(CheckList).rows
+        await wait_until(pilot, lambda: rows["isp.hangs"].state != "running", 5)
+        assert rows["isp.slow"].state == "warn"
+        assert rows["isp.hangs"].state == "fail"
+        assert "timed out" in rows["isp.hangs"].result.summary
+        bar = app.screen.query_one("#step-item-isp")
+        assert bar.has_class("-fail") and "[x]" in str(bar.render())
+
+
+async def test_cancel_puts_unfinished_checks_back_to_not_run(tmp_path):
+    async def hangs(ctx: CheckContext) -> Outcome:
+        await asyncio.sleep(3600)
+        return Outcome(Status.PASS, "never")
+
+    specs = {"ros": [spec("ros.hangs", "ros", hangs)]}
+    app = make_app(tmp_path, complete_settings(), specs=lambda step: specs.get(step, []),
+                   make_context=lambda s: CheckContext(settings=s, timeout_s=30))
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("4", "r")
+        await pilot.pause(0.1)
+        assert app.screen.query_one(CheckList).rows["ros.hangs"].state == "running"
+        await pilot.press("c")
+        await pilot.pause(0.2)
+        assert app.screen.query_one(CheckList).rows["ros.hangs"].state == "not run"
+
+
+async def test_evidence_expands_for_the_highlighted_check(tmp_path):
+    async def evidence(ctx: CheckContext) -> Outcome:
+        return Outcome(Status.FAIL, "port closed", ["GET /port/12345 -> reachable: false"])
+
+    specs = {"router": [spec("router.demo", "router", evidence)]}
+    app = make_app(tmp_path, complete_settings(), specs=lambda step: specs.get(step, []))
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("2", "r")
+        await pilot.pause(0.2)
+        await pilot.press("e")
+        await pilot.pause()
+        box = app.screen.query_one("#evidence")
+        assert box.display and "reachable: false" in str(box.render())
+        assert isinstance(app.screen.focused, DataTable)
+        await pilot.press("enter")  # Enter toggles too
+        await pilot.pause()
+        assert not box.display
+
+
+async def test_help_opens_and_closes(tmp_path):
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("question_mark")
+        await pilot.pause()
+        assert type(app.screen).__name__ == "HelpScreen"
+        await pilot.press("escape")
+        await pilot.pause()
+        assert isinstance(app.screen, StepScreen)
+
+
+@pytest.mark.parametrize("size", [(80, 24), (120, 40)])
+async def test_layout_fits_small_and_large_terminals(tmp_path, size):
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=size) as pilot:
+        await pilot.press("2")
+        await pilot.pause()
+        screen = app.screen
+        config = screen.query_one("#config-pane").region
+        verify = screen.query_one("#verify-pane").region
+        if size[0] >= 110:
+            assert config.y == verify.y and config.right <= verify.x  # side by side
+        else:
+            assert config.bottom <= verify.y  # stacked
+        assert verify.height >= 5
