@@ -55,7 +55,7 @@ class StepBar(Widget):
 
     DEFAULT_CSS = """
     StepBar { height: 1; layout: horizontal; background: $panel; }
-    StepBar > .step-item { width: auto; padding: 0 1; color: $text-muted; }
+    StepBar > .step-item { width: auto; padding: 0 1 0 0; color: $text-muted; }
     StepBar > .step-item.-current { background: $primary; color: $text; text-style: bold; }
     StepBar > .step-item.-fail { color: $error; }
     StepBar > .step-item.-warn { color: $warning; }
@@ -87,7 +87,8 @@ class StepBar(Widget):
     def _label(self, step_id: str) -> str:
         step = next(s for s in STEPS if s.id == step_id)
         mark = STEP_MARK.get(self._states[step_id], "")
-        return f"{step.number} {step.title}" + (f" [{mark}]" if mark else "")
+        here = ">" if step_id == self.current else " "  # readable without colour too
+        return f"{here}{step.number} {step.title}" + (f" [{mark}]" if mark else "")
 
     def set_state(self, step_id: str, state: str) -> None:
         if self._states.get(step_id) != state:
