@@ -1,0 +1,214 @@
+"""The lab's addresses, names and the text of its configuration (links, firewalls, files).
+
+Only documentation ranges are "public" here (192.0.2.0/24, 198.51.100.0/24, 203.0.113.0/24),
+plus the private LANs of the procedure and 100.64.0.0/10 behind the carrier in the CGNAT variant.
+
+    robot 10.10.10.1 --- robot_modem 10.10.10.254 | 203.0.113.2 ---.
+      (turtlebot)                                                   |  internet 203.0.113.1
+                                 carrier 203.0.113.3 (cgnat only) --'            198.51.100.1
+    laptop 192.168.1.10 - laptop_modem 192.168.1.254 | 198.51.100.2 ---  services 192.0.2.10/.53
+      (sami)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Addresses:
+    ROBOT_LOCAL: str = "10.10.10.1"
+    ROBOT_PUBLIC: str = "203.0.113.2"
+    ROBOT_GW: str = "10.10.10.254"
+    LAPTOP_LOCAL: str = "192.168.1.10"
+    LAPTOP_PUBLIC: str = "198.51.100.2"
+    LAPTOP_GW: str = "192.168.1.254"
+    PROBE_IP: str = "192.0.2.10"
+    DNS_IP: str = "192.0.2.53"
+    # Beyond the common contract:
+    INTERNET_ROBOT_SIDE: str = "203.0.113.1"     # the robot modem's (and carrier's) gateway
+    INTERNET_LAPTOP_SIDE: str = "198.51.100.1"   # the laptop modem's gateway
+    CARRIER_PUBLIC: str = "203.0.113.3"          # the robot's public IP in the cgnat variant
+    CARRIER_LAN: str = "100.64.0.1"
+    ROBOT_MODEM_CGNAT_WAN: str = "100.64.0.2"
+    STALE_ROBOT_PUBLIC: str = "203.0.113.99"     # nothing answers there (stale_hosts)
+    ROBOT_WRONG_FORWARD: str = "10.10.10.2"      # nobody lives there (wrong_forward)
+    LAPTOP_WRONG_FORWARD: str = "192.168.1.11"
+    PROBE_NAME: str = "probe.lab.test"
+    PROBE_URL: str = "http://probe.lab.test"
+    PUBLIC_IP_URL: str = "http://probe.lab.test/ip"
+    ROBOT_NAME: str = "turtlebot"
+    LAPTOP_NAME: str = "sami"
+    ROS_MASTER_URI: str = "http://turtlebot:11311"
+
+
+ADDR = Addresses()
+
+HOSTS = ("robot", "laptop", "robot_modem", "laptop_modem", "internet", "carrier")
+COMPUTERS = ("robot", "laptop")          # the hosts with a name, sshd, HOME and ROS
+HOSTNAMES = {"robot": ADDR.ROBOT_NAME, "laptop": ADDR.LAPTOP_NAME, "robot_modem": "robot-modem",
+             "laptop_modem": "laptop-modem", "internet": "internet", "carrier": "carrier"}
+PEER = {"robot": "laptop", "laptop": "robot"}
+MODEM = {"robot": "robot_modem", "laptop": "laptop_modem"}
+LOCAL_IP = {"robot": ADDR.ROBOT_LOCAL, "laptop": ADDR.LAPTOP_LOCAL}
+PUBLIC_IP = {"robot": ADDR.ROBOT_PUBLIC, "laptop": ADDR.LAPTOP_PUBLIC}
+GATEWAY = {"robot": ADDR.ROBOT_GW, "laptop": ADDR.LAPTOP_GW}
+WRONG_FORWARD = {"robot": ADDR.ROBOT_WRONG_FORWARD, "laptop": ADDR.LAPTOP_WRONG_FORWARD}
+UPSTREAM = {"robot_modem": ADDR.INTERNET_ROBOT_SIDE, "laptop_modem": ADDR.INTERNET_LAPTOP_SIDE}
+
+VARIANTS = ("healthy", "no_forwarding", "wrong_forward", "cgnat", "ros_ip_laptop", "stale_hosts",
+            "lossy", "unplugged")
+
+# veth pairs: (host A, interface in A, host B, interface in B)
+LINKS = (
+    ("robot", "eth0", "robot_modem", "lan0"),
+    ("laptop", "eth0", "laptop_modem", "lan0"),
+    ("robot_modem", "wan0", "internet", "r-wan"),
+    ("laptop_modem", "wan0", "internet", "l-wan"),
+    ("carrier", "wan0", "internet", "c-wan"),
+)
+
+ROUTERS = ("robot_modem", "laptop_modem", "internet", "carrier")
+
+
+def ip_batch(host: str, robot_wan: str = ADDR.ROBOT_PUBLIC) -> list[str]:
+    """`ip -batch` lines that address and route *host* (its links already exist)."""
+    lines = ["link set lo up"]
+    if host in COMPUTERS:
+        lines += [f"addr add {LOCAL_IP[host]}/24 dev eth0", "link set eth0 up",
+                  f"route add default via {GATEWAY[host]}"]
+    elif host in ("robot_modem", "laptop_modem"):
+        side = "robot" if host == "robot_modem" else "laptop"
+        wan = robot_wan if side == "robot" else ADDR.LAPTOP_PUBLIC
+        lines += [f"addr add {GATEWAY[side]}/24 dev lan0", "link set lan0 up",
+                  f"addr add {wan}/24 dev wan0", "link set wan0 up",
+                  f"route add default via {UPSTREAM[host]}"]
+    elif host == "internet":
+        # Point-to-point links, no bridge (a bridge port only forwards once the kernel's link
+        # watcher has seen its carrier, up to a second after build). The carrier's link borrows
+        # the robot side's gateway address with a host route to the carrier.
+        lines += [f"addr add {ADDR.PROBE_IP}/32 dev lo", f"addr add {ADDR.DNS_IP}/32 dev lo",
+                  f"addr add {ADDR.INTERNET_ROBOT_SIDE}/24 dev r-wan", "link set r-wan up",
+                  f"addr add {ADDR.INTERNET_LAPTOP_SIDE}/24 dev l-wan", "link set l-wan up",
+                  f"addr add {ADDR.INTERNET_ROBOT_SIDE}/32 dev c-wan", "link set c-wan up",
+                  f"route add {ADDR.CARRIER_PUBLIC}/32 dev c-wan"]
+    elif host == "carrier":
+        lines += [f"addr add {ADDR.CARRIER_PUBLIC}/32 dev wan0", "link set wan0 up",
+                  f"route add {ADDR.INTERNET_ROBOT_SIDE}/32 dev wan0",
+                  f"route add default via {ADDR.INTERNET_ROBOT_SIDE}"]
+    return lines
+
+
+def sysctl_script(host: str) -> str:
+    """Shell lines setting this namespace's kernel knobs (run inside the namespace)."""
+    fwd = "1" if host in ROUTERS else "0"
+    return "\n".join([
+        f"echo {fwd} > /proc/sys/net/ipv4/ip_forward",
+        "echo 0 > /proc/sys/net/ipv4/icmp_ratelimit",
+        "for f in /proc/sys/net/ipv4/conf/*/rp_filter; do echo 0 > $f; done",
+    ])
+
+
+def forward_rules(side: str, mode: str) -> list[str]:
+    """The modem's port-forwarding (DNAT) rules, for chain RNL_PF of the nat table."""
+    if mode == "none":
+        return []
+    target = LOCAL_IP[side] if mode == "healthy" else WRONG_FORWARD[side]
+    return [f"-A RNL_PF -p tcp --dport 22 -j DNAT --to-destination {target}",
+            f"-A RNL_PF -p tcp --dport 1024:65000 -j DNAT --to-destination {target}",
+            f"-A RNL_PF -p udp --dport 1024:65000 -j DNAT --to-destination {target}"]
+
+
+def modem_ruleset(side: str) -> str:
+    """A consumer modem: masquerade, port forwarding, stateful firewall (iptables-restore)."""
+    return "\n".join([
+        "*nat",
+        ":PREROUTING ACCEPT [0:0]", ":INPUT ACCEPT [0:0]", ":OUTPUT ACCEPT [0:0]",
+        ":POSTROUTING ACCEPT [0:0]", ":RNL_PF - [0:0]",
+        "-A PREROUTING -i wan0 -j RNL_PF",
+        "-A POSTROUTING -o wan0 -j MASQUERADE",
+        *forward_rules(side, "healthy"),
+        "COMMIT",
+        "*filter",
+        ":INPUT DROP [0:0]", ":FORWARD DROP [0:0]", ":OUTPUT ACCEPT [0:0]",
+        "-A INPUT -i lo -j ACCEPT",
+        "-A INPUT -m conntrack --ctstate ESTABLISHED,RELATED -j ACCEPT",
+        "-A INPUT -i lan0 -j ACCEPT",
+        "-A INPUT -p icmp --icmp-type echo-request -j ACCEPT",
+        "-A FORWARD -m conntrack --ctstate ESTABLISHED,RELATED -j ACCEPT",
+        "-A FORWARD -i lan0 -o wan0 -j ACCEPT",
+        "-A FORWARD -i wan0 -o lan0 -m conntrack --ctstate DNAT -j ACCEPT",
+        "COMMIT",
+        "*mangle",
+        ":RNL_LOSS - [0:0]",
+        "-A PREROUTING -i wan0 -j RNL_LOSS",
+        "-A POSTROUTING -o wan0 -j RNL_LOSS",
+        "COMMIT",
+        "",
+    ])
+
+
+def carrier_ruleset() -> str:
+    """The carrier's NAT in front of the robot modem (cgnat): no inbound forwarding at all."""
+    return "\n".join([
+        "*nat",
+        ":PREROUTING ACCEPT [0:0]", ":INPUT ACCEPT [0:0]", ":OUTPUT ACCEPT [0:0]",
+        ":POSTROUTING ACCEPT [0:0]",
+        "-A POSTROUTING -s 100.64.0.0/10 -o wan0 -j MASQUERADE",
+        "COMMIT",
+        "*filter",
+        ":INPUT DROP [0:0]", ":FORWARD DROP [0:0]", ":OUTPUT ACCEPT [0:0]",
+        "-A INPUT -i lo -j ACCEPT",
+        "-A INPUT -m conntrack --ctstate ESTABLISHED,RELATED -j ACCEPT",
+        "-A INPUT -p icmp --icmp-type echo-request -j ACCEPT",
+        "-A FORWARD -m conntrack --ctstate ESTABLISHED,RELATED -j ACCEPT",
+        "-A FORWARD -o wan0 -s 100.64.0.0/10 -j ACCEPT",
+        "COMMIT",
+        "",
+    ])
+
+
+def hosts_text(host: str, *, robot_public: str = ADDR.ROBOT_PUBLIC) -> str:
+    """/etc/hosts of *host* from its own point of view (own name -> local IP, peer -> public IP)."""
+    lines = ["127.0.0.1\tlocalhost", "::1\tlocalhost ip6-localhost ip6-loopback"]
+    if host == "robot":
+        lines += [f"{ADDR.ROBOT_LOCAL}\t{ADDR.ROBOT_NAME}", f"{ADDR.LAPTOP_PUBLIC}\t{ADDR.LAPTOP_NAME}"]
+    elif host == "laptop":
+        lines += [f"{ADDR.LAPTOP_LOCAL}\t{ADDR.LAPTOP_NAME}", f"{robot_public}\t{ADDR.ROBOT_NAME}"]
+    return "\n".join(lines) + "\n"
+
+
+def resolv_text() -> str:
+    return f"nameserver {ADDR.DNS_IP}\noptions timeout:1 attempts:2\n"
+
+
+def bashrc_text(host: str, *, ros_ip: str | None = None) -> str:
+    lines = [f"# ~/.bashrc of {HOSTNAMES[host]} (rosnet-tui network lab)",
+             f"export ROS_MASTER_URI={ADDR.ROS_MASTER_URI}"]
+    if ros_ip:
+        lines.append(f"export ROS_IP={ros_ip}")
+    return "\n".join(lines) + "\n"
+
+
+def sshd_config(host_key: str, home: str, path: str, pythonpath: str) -> str:
+    return "\n".join([
+        "Port 22",
+        "ListenAddress 0.0.0.0",
+        f"HostKey {host_key}",
+        "PidFile none",
+        "PermitRootLogin prohibit-password",
+        "PubkeyAuthentication yes",
+        "PasswordAuthentication no",
+        "KbdInteractiveAuthentication no",
+        "AuthorizedKeysFile .ssh/authorized_keys",
+        "UsePAM no",
+        "UseDNS no",
+        "PrintMotd no",
+        "PrintLastLog no",
+        "MaxStartups 64:30:128",
+        "MaxSessions 32",
+        "LogLevel INFO",
+        f"SetEnv HOME={home} PATH={path} PYTHONPATH={pythonpath}",
+        "Subsystem sftp internal-sftp",
+        "",
+    ])

@@ -1,0 +1,296 @@
+"""The network lab itself: the healthy network works like the procedure says, the variants break
+it the way they should, and tear-down leaves nothing behind."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.lab import ADDR, Lab, cleanup, procs
+
+pytestmark = pytest.mark.lab
+
+SSH = ["ssh", "-o", "BatchMode=yes", "-o", "StrictHostKeyChecking=yes", "-o", "ConnectTimeout=5"]
+NAME = {"robot": "turtlebot", "laptop": "sami"}
+OTHER = {"robot": "laptop", "laptop": "robot"}
+_ports = itertools.count(40100)
+_topics = itertools.count()
+
+
+def port_check(lab: Lab, host: str, port: int) -> dict:
+    status, body = lab.http_get(host, f"{ADDR.PROBE_URL}/port/{port}")
+    assert status == 200, body
+    return json.loads(body)
+
+
+@pytest.fixture(scope="module")
+def roscore(lab):
+    lab.start_roscore()
+    yield lab
+    lab.stop_roscore()
+
+
+# ---------------------------------------------------------------------------- healthy network
+@pytest.mark.parametrize("host", ["laptop", "robot"])
+def test_ping_by_name(healthy_lab, host):
+    r = healthy_lab.run(host, ["ping", "-c", "1", "-W", "3", NAME[OTHER[host]]])
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert healthy_lab.public_ip(OTHER[host]) in r.stdout
+
+
+@pytest.mark.parametrize("host", ["laptop", "robot"])
+def test_ssh_by_name_with_a_verified_host_key(healthy_lab, host):
+    peer = NAME[OTHER[host]]
+    r = healthy_lab.run(host, [*SSH, f"root@{peer}", "hostname; echo $HOME"], timeout=20)
+    assert r.returncode == 0, r.stderr
+    name, home = r.stdout.split()
+    assert name == peer
+    assert home == str(healthy_lab.home(OTHER[host]))
+    # known_hosts names the peer, not its address: by address the key is unknown and refused.
+    r = healthy_lab.run(host, [*SSH, f"root@{healthy_lab.public_ip(OTHER[host])}", "true"],
+                        timeout=20)
+    assert r.returncode != 0 and "Host key verification failed" in r.stderr
+
+
+def test_computers_see_their_own_world(healthy_lab):
+    lab = healthy_lab
+    assert lab.run("robot", ["hostname"]).stdout.strip() == "turtlebot"
+    assert lab.run("laptop", ["getent", "hosts", "turtlebot"]).stdout.split()[0] == ADDR.ROBOT_PUBLIC
+    assert lab.run("robot", ["getent", "hosts", "turtlebot"]).stdout.split()[0] == ADDR.ROBOT_LOCAL
+    assert lab.run("robot", ["getent", "hosts", ADDR.PROBE_NAME]).stdout.split()[0] == ADDR.PROBE_IP
+    assert lab.run("laptop", ["getent", "hosts", "nothing.lab.test"]).returncode != 0
+    assert lab.http_get("robot", f"{ADDR.PROBE_URL}/ip") == (200, ADDR.ROBOT_PUBLIC + "\n")
+    assert lab.http_get("laptop", f"{ADDR.PROBE_URL}/") == (200, ADDR.LAPTOP_PUBLIC + "\n")
+    assert "ROS_MASTER_URI=http://turtlebot:11311" in lab.bashrc_path("laptop").read_text()
+    text = lab.config_path("laptop").read_text()
+    assert 'port_check_url = "http://probe.lab.test"' in text
+    # No way out of the lab: no default route in the internet namespace.
+    assert "default" not in lab.run("internet", ["ip", "route"]).stdout
+
+
+@pytest.mark.parametrize("server", ["robot", "laptop"])
+def test_tcp_chat_by_name(healthy_lab, server):
+    lab, client, port = healthy_lab, OTHER[server], next(_ports)
+    listener = lab.spawn(server, ["nc", "-l", "-N", str(port)], stdin=subprocess.PIPE)
+    listener.stdin.write(f"hello from {NAME[server]}\n")  # sent once the client connects
+    listener.stdin.close()
+    assert lab.wait_listening(server, port, proc=listener)
+    r = lab.run(client, ["nc", "-N", "-w", "5", NAME[server], str(port)],
+                input=f"hello from {NAME[client]}\n", timeout=15)
+    assert r.stdout == f"hello from {NAME[server]}\n", r.stderr
+    assert lab.wait_output(listener, f"hello from {NAME[client]}", 5)
+    lab.kill(listener)
+
+
+@pytest.mark.parametrize("talker_host", ["laptop", "robot"])
+def test_a_talker_is_heard_on_the_other_side(roscore, talker_host):
+    lab, topic = roscore, f"/rnl_chat_{next(_topics)}"
+    listener = lab.listener(OTHER[talker_host], topic)
+    talker = lab.talker(talker_host, topic)
+    try:
+        m = lab.wait_output(listener, r"heard: hello from (\S+)", 20)
+        assert m, lab.output(listener) + lab.output(talker)
+        assert m.group(1) == NAME[talker_host]
+    finally:
+        lab.kill(talker)
+        lab.kill(listener)
+
+
+def test_port_checker_sees_the_forwarded_listener(healthy_lab):
+    lab, port = healthy_lab, next(_ports)
+    listener = lab.spawn("robot", ["nc", "-l", "-k", str(port)])
+    try:
+        assert lab.wait_listening("robot", port, proc=listener)
+        assert port_check(lab, "robot", port) == {"ip": ADDR.ROBOT_PUBLIC, "port": port,
+                                                  "reachable": True}
+        with lab.variant("no_forwarding"):
+            assert lab.listening("robot", port)
+            assert port_check(lab, "robot", port)["reachable"] is False
+        assert port_check(lab, "robot", port)["reachable"] is True  # restored
+        assert port_check(lab, "laptop", port + 1)["reachable"] is False  # nothing listens
+    finally:
+        lab.kill(listener)
+
+
+# ---------------------------------------------------------------------------- variants
+def test_ros_ip_on_the_laptop_silences_its_talker(roscore):
+    lab, topic = roscore, f"/rnl_chat_{next(_topics)}"
+    with lab.variant("ros_ip_laptop"):
+        assert lab.ros_env("laptop")["ROS_IP"] == ADDR.LAPTOP_LOCAL
+        assert f"ROS_IP={ADDR.LAPTOP_LOCAL}" in lab.bashrc_path("laptop").read_text()
+        listener = lab.listener("robot", topic)
+        talker = lab.talker("laptop", topic)
+        try:
+            assert lab.wait_output(talker, rf"at http://{ADDR.LAPTOP_LOCAL}:\d+/", 15)
+            assert lab.wait_output(listener, r"listener on", 15)
+            assert lab.wait_output(listener, r"heard:", 5) is None
+        finally:
+            lab.kill(talker)
+            lab.kill(listener)
+    assert "ROS_IP" not in lab.ros_env("laptop")
+    assert "ROS_IP" not in lab.bashrc_path("laptop").read_text()
+
+
+def test_wrong_forward_and_cgnat_close_the_port(healthy_lab):
+    lab, port = healthy_lab, next(_ports)
+    listener = lab.spawn("robot", ["nc", "-l", "-k", str(port)])
+    try:
+        assert lab.wait_listening("robot", port, proc=listener)
+        with lab.variant("wrong_forward"):
+            assert port_check(lab, "robot", port)["reachable"] is False
+        with lab.variant("cgnat"):
+            assert lab.public_ip("robot") == ADDR.CARRIER_PUBLIC
+            assert lab.http_get("robot", f"{ADDR.PROBE_URL}/ip")[1].strip() == ADDR.CARRIER_PUBLIC
+            assert port_check(lab, "robot", port) == {"ip": ADDR.CARRIER_PUBLIC, "port": port,
+                                                      "reachable": False}
+            hops = lab.run("robot", ["ip", "route", "get", ADDR.PROBE_IP]).stdout
+            assert ADDR.ROBOT_GW in hops
+            r = lab.run("robot_modem", ["ip", "-4", "addr", "show", "wan0"])
+            assert ADDR.ROBOT_MODEM_CGNAT_WAN in r.stdout
+        assert port_check(lab, "robot", port) == {"ip": ADDR.ROBOT_PUBLIC, "port": port,
+                                                  "reachable": True}
+    finally:
+        lab.kill(listener)
+
+
+def test_stale_hosts_unplugged_and_lossy(healthy_lab):
+    lab = healthy_lab
+    with lab.variant("stale_hosts"):
+        out = lab.run("laptop", ["getent", "hosts", "turtlebot"]).stdout
+        assert out.split()[0] == ADDR.STALE_ROBOT_PUBLIC
+        assert lab.run("laptop", ["ping", "-c", "1", "-W", "1", "turtlebot"]).returncode != 0
+    assert lab.run("laptop", ["getent", "hosts", "turtlebot"]).stdout.split()[0] == ADDR.ROBOT_PUBLIC
+    with lab.variant("unplugged"):
+        assert lab.http_get("laptop", f"{ADDR.PROBE_URL}/ip", timeout=2)[0] == 0
+        assert lab.run("robot", ["ping", "-c", "1", "-W", "1", ADDR.LAPTOP_LOCAL]).returncode != 0
+    assert lab.http_get("laptop", f"{ADDR.PROBE_URL}/ip")[0] == 200
+    with lab.variant("lossy", loss=0.02):
+        qdisc = lab.run("robot_modem", ["tc", "qdisc", "show", "dev", "wan0"]).stdout
+        assert ("netem" in qdisc) or ("tbf" in qdisc)
+        assert lab.http_get("laptop", f"{ADDR.PROBE_URL}/ip", timeout=15)[0] == 200
+    assert "netem" not in lab.run("robot_modem", ["tc", "qdisc", "show", "dev", "wan0"]).stdout
+
+
+def test_set_robot_wan_moves_the_public_address(healthy_lab):
+    lab = healthy_lab
+    with lab.set_robot_wan("203.0.113.20"):
+        assert lab.public_ip("robot") == "203.0.113.20"
+        assert lab.http_get("robot", f"{ADDR.PROBE_URL}/ip")[1].strip() == "203.0.113.20"
+        # The laptop's hosts entry still names the old address (the address-sync problem).
+        assert lab.run("laptop", ["ping", "-c", "1", "-W", "1", "turtlebot"]).returncode != 0
+    assert lab.http_get("robot", f"{ADDR.PROBE_URL}/ip")[1].strip() == ADDR.ROBOT_PUBLIC
+    with pytest.raises(ValueError):
+        lab.set_robot_wan("8.8.8.8")
+
+
+# ---------------------------------------------------------------------------- tear-down
+def test_without_root_the_lab_says_why(monkeypatch):
+    from tests.lab import lab_available
+
+    monkeypatch.setattr(os, "geteuid", lambda: 1000)
+    ok, why = lab_available()
+    assert not ok and "root" in why
+    monkeypatch.setattr(os, "geteuid", lambda: 0)
+    monkeypatch.setattr("shutil.which", lambda name: None if name == "unshare" else "/bin/x")
+    ok, why = lab_available()
+    assert not ok and "unshare" in why
+
+
+def _leftovers(prefix: str) -> list[str]:
+    out = []
+    if os.path.isdir("/run/netns"):
+        out += [f"netns {n}" for n in os.listdir("/run/netns") if n.startswith(prefix)]
+    if os.path.isdir("/etc/netns"):
+        out += [f"/etc/netns/{n}" for n in os.listdir("/etc/netns") if n.startswith(prefix)]
+    out += [f"dir {d}" for d in Path(tempfile.gettempdir()).glob(prefix + "*")]
+    return out
+
+
+def test_teardown_leaves_no_namespace_file_or_process(lab_session):
+    t0 = time.monotonic()
+    other = Lab().build()
+    build_s = time.monotonic() - t0
+    prefix = other.prefix
+    try:
+        other.start_roscore()
+        other.spawn("laptop", ["sleep", "300"])
+        # A process the lab did not track: detached, in its own session, inside the laptop.
+        other.run("laptop", ["sh", "-c", "setsid sleep 301 >/dev/null 2>&1 < /dev/null &"])
+        inodes = list(other._netns_inodes)
+        pids = other.lab_pids()
+        assert len(pids) >= 7  # 2 sshd, probe, dns, roscore (+ master, rosout), 2 sleeps
+        assert _leftovers(prefix)
+    finally:
+        other.destroy()
+    assert build_s < 5.0  # typically 0.3 s; generous for a loaded CI machine
+    assert _leftovers(prefix) == []
+    assert procs.pids_in_netns(inodes) == []
+    assert [p for p in pids if procs.alive(p)] == []
+    assert other.lab_pids() == []
+
+
+def _dead_pid() -> int:
+    p = subprocess.Popen(["true"])
+    p.wait()
+    return p.pid
+
+
+def test_sweep_removes_a_crashed_runs_leftovers(lab_session):
+    prefix = f"rnl-{_dead_pid()}-0-"
+    ns = prefix + "robot"
+    subprocess.run(["ip", "netns", "add", ns], check=True)
+    try:
+        Path(f"/etc/netns/{ns}").mkdir(parents=True)
+        Path(f"/etc/netns/{ns}/hosts").write_text("127.0.0.1 localhost\n")
+        Path(tempfile.gettempdir(), prefix + "x").mkdir()
+        orphan = subprocess.Popen(["ip", "netns", "exec", ns, "sleep", "300"],
+                                  start_new_session=True)
+        deadline = time.monotonic() + 5
+        while orphan.pid not in procs.pids_in_netns([procs.netns_inode(f"/run/netns/{ns}")]):
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        removed = cleanup.sweep_stale()
+        assert ns in removed
+        assert orphan.wait(timeout=5) == -signal.SIGKILL
+        assert _leftovers(prefix) == []
+    finally:
+        cleanup.remove_netns([ns])
+
+
+_CHILD = """
+import sys, time
+sys.path.insert(0, {repo!r})
+from tests.lab import Lab
+lab = Lab().build()
+print(lab.prefix, flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_killed_run_cleans_up(lab_session, sig):
+    repo = str(Path(__file__).resolve().parents[1])
+    # Default SIGINT handling in the child even when this run ignores it (started with &).
+    child = subprocess.Popen([sys.executable, "-c", _CHILD.format(repo=repo)],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        prefix = child.stdout.readline().strip()
+        assert prefix.startswith("rnl-"), child.stderr.read()
+        assert _leftovers(prefix)
+        child.send_signal(sig)
+        child.wait(timeout=15)
+        assert _leftovers(prefix) == []
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
