@@ -1,0 +1,101 @@
+"""The ros.* checks on the network lab: `rosnet-tui check --step ros` run on a component, the peer's
+side over the lab's SSH, the master on the robot behind its modem's port forwarding."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pytest
+
+pytest_plugins = ["tests.lab.fixtures"]
+pytestmark = pytest.mark.lab
+
+ROS_IDS = ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in"]
+
+
+@pytest.fixture(scope="module")
+def ros_lab(lab):
+    lab.start_roscore()
+    yield lab
+    lab.stop_roscore()
+
+
+def ros_check(lab, host: str) -> dict[str, dict]:
+    """`rosnet-tui check --json --step ros` on *host*, in its ROS environment."""
+    r = lab.rosnet(host, "check", "--json", "--step", "ros", "--config",
+                   str(lab.config_path(host)), env=lab.ros_env(host), timeout=60)
+    assert r.stdout.strip(), r.stderr
+    results = {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+    assert list(results) == ROS_IDS, r.stderr
+    return results
+
+
+def explain(results: dict[str, dict]) -> str:
+    return "\n".join(f"{c['id']}: {c['status']} - {c['summary']}\n  " + "\n  ".join(c["evidence"])
+                     for c in results.values())
+
+
+def test_healthy_lab_passes_both_directions_from_each_seat(ros_lab):
+    lab = ros_lab
+    lab.reset()
+    for host, peer in (("laptop", "turtlebot"), ("robot", "sami")):
+        results = ros_check(lab, host)
+        assert all(c["status"] == "pass" for c in results.values()), explain(results)
+        assert results["ros.pubsub_out"]["data"]["peer"] == peer
+        assert results["ros.pubsub_in"]["data"]["ok"] is True
+        assert results["ros.node_uris"]["data"]["from"] == ["here", peer]
+        assert "/rosout" in results["ros.master"]["data"]["nodes"]
+
+
+def test_ros_ip_on_the_laptop_names_its_node_and_breaks_one_direction(ros_lab):
+    lab = ros_lab
+    with lab.variant("ros_ip_laptop"):
+        talker = lab.talker("laptop", "/rnl_chatter_ros_ip")
+        try:
+            line = lab.wait_output(talker, r"talker on \S+ as (\S+) at (\S+)", timeout=15)
+            assert line, lab.output(talker)
+            results = ros_check(lab, "laptop")
+        finally:
+            lab.kill(talker)
+    text = explain(results)
+    assert results["ros.env"]["status"] == "warn" and results["ros.env"]["data"]["ros_ip"] == \
+        lab.addr.LAPTOP_LOCAL, text
+
+    uris = results["ros.node_uris"]
+    assert uris["status"] == "fail", text
+    bad = {u["node"]: u for u in uris["data"]["unreachable"]}
+    assert bad and all(u["from"] == "turtlebot" for u in bad.values()), text
+    assert all(u["host"] == lab.addr.LAPTOP_LOCAL for u in bad.values()), text
+    assert any(n.startswith("/rnl_talker") for n in bad), text        # the user's node
+    assert any(n.startswith("/rosnet_probe_sami") for n in bad), text  # and ours, started alike
+    assert lab.addr.LAPTOP_LOCAL in uris["summary"]
+
+    out, back = results["ros.pubsub_out"], results["ros.pubsub_in"]
+    assert out["status"] == "fail", text
+    assert out["data"]["failed_hop"] == "xmlrpc_callback", text
+    assert out["data"]["node"].startswith("/rosnet_probe_sami"), text
+    assert f"http://{lab.addr.LAPTOP_LOCAL}:" in out["data"]["uri"], text
+    assert "ROS_IP" in out["summary"], text
+    assert back["status"] == "pass", text  # the laptop can still subscribe to the robot
+
+
+def test_master_down_fails_within_its_timeout(ros_lab):
+    lab = ros_lab
+    lab.reset()
+    lab.stop_roscore()
+    try:
+        start = time.monotonic()
+        results = ros_check(lab, "laptop")
+        took = time.monotonic() - start
+    finally:
+        lab.start_roscore()
+    master = results["ros.master"]
+    assert master["status"] == "fail", explain(results)
+    assert master["duration_s"] <= master["timeout_s"] + 0.5
+    assert "did not answer" in master["summary"] or "no answer" in master["summary"]
+    assert master["data"]["reachable"] is False
+    for cid in ("ros.node_uris", "ros.pubsub_out", "ros.pubsub_in"):
+        assert results[cid]["status"] == "fail", explain(results)
+    assert results["ros.pubsub_out"]["data"]["failed_hop"] == "registration"
+    assert took < 30
