@@ -17,7 +17,7 @@ from rosnet_tui import __version__
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
 
 # Sub-command modules, in the order --help lists them.
-SUBCOMMAND_MODULES = ("check", "hosts", "ros", "undo", "report", "probe_server")
+SUBCOMMAND_MODULES = ("check", "hosts", "ros", "undo", "report", "sync", "probe_server")
 
 
 class _Parser(argparse.ArgumentParser):

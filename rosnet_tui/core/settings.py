@@ -150,6 +150,19 @@ class CheckSettings:
     timeout_s: float = 3.0
 
 
+SYNC_STORES = ("folder", "dns")
+
+
+@dataclass
+class SyncSettings:
+    store: str = "folder"            # "folder" | "dns"
+    folder: str = ""                 # folder store: the shared folder
+    interval_s: float = 60           # public-IP poll interval
+    dns_server: str = ""             # dns store: the server taking RFC 2136 updates
+    zone: str = ""                   # dns store: the zone holding NAME.ZONE A records
+    tsig_key_file: str = ""          # dns store: BIND-style TSIG key file
+
+
 @dataclass
 class Settings:
     this: ThisComponent = field(default_factory=ThisComponent)
@@ -157,6 +170,9 @@ class Settings:
     ros: RosSettings = field(default_factory=RosSettings)
     probe: ProbeSettings = field(default_factory=ProbeSettings)
     checks: CheckSettings = field(default_factory=CheckSettings)
+    sync: SyncSettings = field(default_factory=SyncSettings)
+    # Whether the file had a [sync] table (so saving does not add one the user never asked for).
+    has_sync: bool = field(default=False, compare=False, repr=False)
 
     def peer(self, name: str) -> Peer | None:
         return next((p for p in self.peers if p.name == name), None)
@@ -220,6 +236,16 @@ class Settings:
         add("probe.port_check_url", validate_url(self.probe.port_check_url))
         if not 0.1 <= float(self.checks.timeout_s) <= 120:
             add("checks.timeout_s", "must be between 0.1 and 120 seconds")
+        y = self.sync
+        add("sync.store", None if y.store in SYNC_STORES
+            else f"must be one of {', '.join(SYNC_STORES)}")
+        if not 1 <= float(y.interval_s) <= 86400:
+            add("sync.interval_s", "must be between 1 and 86400 seconds")
+        if y.dns_server:
+            add("sync.dns_server", validate_ip(y.dns_server))
+        if y.zone:
+            zone = y.zone.rstrip(".")
+            add("sync.zone", validate_name(zone) if zone else "a zone name is required")
         return out
 
     @property
@@ -247,6 +273,8 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "ros": {"master": str, "port": int},
     "probe": {"port": int, "public_ip_urls": list, "port_check_url": str},
     "checks": {"timeout_s": (int, float)},
+    "sync": {"store": str, "folder": str, "interval_s": (int, float), "dns_server": str,
+             "zone": str, "tsig_key_file": str},
 }
 _TYPE_WORDS = {str: "a string in quotes", int: "a whole number", list: "a list [ ... ]",
                (int, float): "a number"}
@@ -332,6 +360,10 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
     if "checks" in raw:
         _check_table(text, path, "checks", raw["checks"])
         s.checks = replace(s.checks, **raw["checks"])
+    if "sync" in raw:
+        _check_table(text, path, "sync", raw["sync"])
+        s.sync = replace(s.sync, **raw["sync"])
+        s.has_sync = True
 
     for key, why in s.problems():
         # Incomplete is fine (the wizard fills it in); wrong is not.
@@ -376,7 +408,13 @@ def _table_values(s: Settings) -> dict[str, dict[str, Any]]:
     ros: dict[str, Any] = {"master": s.ros.master or s.master_name, "port": s.ros.port}
     probe = {"port": s.probe.port, "public_ip_urls": list(s.probe.public_ip_urls),
              "port_check_url": s.probe.port_check_url}
-    return {"this": this, "ros": ros, "probe": probe, "checks": {"timeout_s": s.checks.timeout_s}}
+    y = s.sync
+    sync: dict[str, Any] = {"store": y.store, "interval_s": y.interval_s}
+    for k in ("folder", "dns_server", "zone", "tsig_key_file"):
+        if getattr(y, k):
+            sync[k] = getattr(y, k)
+    return {"this": this, "ros": ros, "probe": probe, "checks": {"timeout_s": s.checks.timeout_s},
+            "sync": sync}
 
 
 def _peer_values(p: Peer) -> dict[str, Any]:
@@ -420,6 +458,8 @@ def render_settings(s: Settings, previous_text: str | None = None) -> str:
         del doc["peer"]
     for name in ("ros", "probe", "checks"):
         _merge_table(doc, name, values[name])
+    if s.has_sync or s.sync != SyncSettings():
+        _merge_table(doc, "sync", values["sync"])
     if s.peers:
         # Keep peers before [ros] when writing fresh, as in the documented example.
         body = doc.as_string()
