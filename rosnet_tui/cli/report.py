@@ -1,0 +1,439 @@
+"""`rosnet-tui report`: a shareable document of the settings, the check results and the advice.
+
+For the provider, the IT administrator or a colleague: what this component is, what every check
+saw, what the advisor makes of it and what to do, in Markdown (readable as plain text, in a
+terminal or an e-mail) or JSON. Nothing secret goes in: the settings without key material and
+no environment variable but ``ROS_*``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import dataclasses
+import datetime as dt
+import json
+import os
+import re
+import sys
+import textwrap
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from rosnet_tui import __version__
+from rosnet_tui.core.advisor import Finding, advice_by_check, advise, step_title
+from rosnet_tui.core.results import CheckResult, Status
+from rosnet_tui.core.settings import (
+    CheckSettings,
+    Peer,
+    ProbeSettings,
+    RosSettings,
+    Settings,
+    SettingsError,
+    ThisComponent,
+    atomic_write_text,
+)
+
+EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+STEPS = ("isp", "router", "linux", "ros")
+STEP_NAMES = {"isp": "ISP", "router": "Router/modem", "linux": "Linux", "ros": "ROS"}
+# Settings keys that could hold or point at secrets never go into a report.
+_SECRET_KEY = re.compile(r"key|secret|passw|token|tsig|credential", re.IGNORECASE)
+WIDTH = 100
+
+
+class ReportError(Exception):
+    """A report that cannot be made (unreadable input, bad settings): exit code 2."""
+
+
+# --------------------------------------------------------------------------- CLI
+def register(sub: argparse._SubParsersAction) -> None:
+    from rosnet_tui.cli import add_config_option
+
+    p = sub.add_parser(
+        "report", help="write a shareable report: settings, results and advice",
+        description="Run the checks (or read a saved `rosnet-tui check --json`) and write a "
+                    "report for the provider, the IT administrator or a colleague: this "
+                    "component's settings (no secrets), every check's result and evidence, and "
+                    "the advisor's findings with what to do.",
+        epilog="Exit codes: 0 no check failed, 1 a check failed, 2 usage, settings or input "
+               "error.")
+    p.add_argument("--format", choices=("md", "json"), default="md",
+                   help="Markdown (default; plain-text readable) or JSON")
+    p.add_argument("-o", "--output", metavar="FILE", type=Path,
+                   help="write the report to FILE (default: standard output)")
+    add_config_option(p)
+    p.add_argument("--step", choices=STEPS, action="extend", nargs="+", metavar="STEP",
+                   help="only these steps' checks: isp, router, linux, ros (default: all)")
+    p.add_argument("--from-json", metavar="FILE", type=Path,
+                   help="read results saved by `rosnet-tui check --json` (or a JSON report) "
+                        "instead of running the checks; '-' reads standard input")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        doc = make_report(args)
+    except ReportError as exc:
+        print(f"rosnet-tui report: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    text = render_json(doc) if args.format == "json" else render_markdown(doc)
+    out: Path | None = getattr(args, "output", None)
+    if out is None:
+        sys.stdout.write(text)
+    else:
+        try:
+            atomic_write_text(out.expanduser(), text)
+        except OSError as exc:
+            print(f"rosnet-tui report: cannot write {out}: {exc.strerror or exc}",
+                  file=sys.stderr)
+            return EXIT_USAGE
+        print(f"report written to {out}", file=sys.stderr)
+    return EXIT_FAIL if doc["summary"]["fail"] else EXIT_OK
+
+
+def _load_settings(args: argparse.Namespace, *, required: bool) -> tuple[Settings | None, Path]:
+    from rosnet_tui.cli import config_path
+    from rosnet_tui.core.settings import load_settings
+
+    path = config_path(args)
+    try:
+        s = load_settings(path)
+    except SettingsError as exc:
+        raise ReportError(str(exc)) from None
+    if s is None and required:
+        raise ReportError(f"no settings file at {path}: run `rosnet-tui` to set up, or pass "
+                          "--config FILE")
+    return s, path
+
+
+def make_report(args: argparse.Namespace) -> dict[str, Any]:
+    """The report document (the JSON form) for *args*: live checks or a saved file."""
+    steps = list(dict.fromkeys(args.step)) if getattr(args, "step", None) else None
+    src: Path | None = getattr(args, "from_json", None)
+    env: dict[str, str] | None = None
+    if src is not None:
+        results, saved_settings, meta = load_results_json(src)
+        settings: Settings | None = None
+        if getattr(args, "config", None) or saved_settings is None:
+            settings, _ = _load_settings(args, required=False)
+        if settings is None:
+            settings = saved_settings
+        if steps:
+            results = [r for r in results if r.step in steps]
+        source = f"results saved in {'standard input' if str(src) == '-' else src}"
+        if meta.get("generated"):
+            source += f" ({meta['generated']})"
+        env = meta.get("environment")
+    else:
+        settings, path = _load_settings(args, required=True)
+        assert settings is not None
+        complete_for_run(settings, path)
+        results = run_checks_now(settings, steps)
+        source = "checks run live on this machine"
+        env = ros_environment(os.environ)
+    known = settings is not None
+    if settings is None:
+        settings = Settings()
+        source += "; no settings were found, so the advice knows no names"
+    doc = build_report(results, settings, source=source, steps=steps, environment=env)
+    if not known:
+        doc["report"].update(role=None, connection=None, profile=None)
+        doc["settings"] = {}
+    return doc
+
+
+# --------------------------------------------------------------------------- running the checks
+def complete_for_run(settings: Settings, path: Path) -> None:
+    """Fill in this machine's local IP/interface when the file leaves them out (for this run
+    only, as `rosnet-tui check` does); refuse incomplete settings."""
+    if not settings.this.local_ip or not settings.this.interface:
+        from rosnet_tui.core.netinfo import detect_local_net
+
+        net = detect_local_net()
+        if not settings.this.local_ip and net.local_ip:
+            settings.this.local_ip = net.local_ip
+            settings.this.interface = settings.this.interface or net.interface
+        elif not settings.this.interface and net.local_ip == settings.this.local_ip:
+            settings.this.interface = net.interface
+    problems = settings.problems()
+    if problems:
+        raise ReportError(f"the settings in {path} are not complete: "
+                          + "; ".join(f"{k}: {why}" for k, why in problems)
+                          + " (fix them by hand or with the wizard: rosnet-tui --setup)")
+
+
+def run_checks_now(settings: Settings, steps: Iterable[str] | None) -> list[CheckResult]:
+    """Run the checks of *steps* (all when None), as `rosnet-tui check` does."""
+    try:  # the check command's helpers, when it has them
+        from rosnet_tui.cli import check as check_cli
+
+        helper = getattr(check_cli, "collect_results", None)
+        if helper is not None:
+            return list(helper(settings, steps))
+    except ImportError:
+        pass
+    from rosnet_tui.core.checks import CheckContext, checks_for, run_checks
+
+    async def collect() -> list[CheckResult]:
+        ctx = CheckContext(settings=settings, timeout_s=float(settings.checks.timeout_s),
+                           env=dict(os.environ))
+        return [r async for r in run_checks(checks_for(steps), ctx)]
+
+    results = asyncio.run(collect())
+    order = {c.id: i for i, c in enumerate(checks_for(steps))}
+    return sorted(results, key=lambda r: order.get(r.id, len(order)))
+
+
+# --------------------------------------------------------------------------- reading saved results
+def _result_from_json(obj: Any, where: str) -> CheckResult:
+    if not isinstance(obj, dict) or not isinstance(obj.get("id"), str):
+        raise ReportError(f"{where}: each check needs at least an \"id\" and a \"status\"")
+    try:
+        status = Status(obj.get("status"))
+    except ValueError:
+        raise ReportError(f"{where}: unknown status {obj.get('status')!r} "
+                          "(expected pass, warn, fail or skip)") from None
+    cid = obj["id"]
+    evidence = obj.get("evidence") or []
+    data = obj.get("data") or {}
+    return CheckResult(
+        id=cid, step=str(obj.get("step") or cid.split(".")[0]), status=status,
+        summary=str(obj.get("summary") or ""),
+        evidence=[str(e) for e in evidence] if isinstance(evidence, list) else [str(evidence)],
+        duration_s=float(obj.get("duration_s") or 0.0),
+        timeout_s=float(obj.get("timeout_s") or 0.0),
+        data=data if isinstance(data, dict) else {})
+
+
+def load_results_json(path: Path) -> tuple[list[CheckResult], Settings | None, dict[str, Any]]:
+    """Results from `check --json` output or a JSON report; also its settings and header."""
+    try:
+        text = sys.stdin.read() if str(path) == "-" else path.expanduser().read_text("utf-8")
+    except OSError as exc:
+        raise ReportError(f"cannot read {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise ReportError(f"{path} is not UTF-8 text") from None
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ReportError(f"{path} is not JSON (line {exc.lineno}: {exc.msg}); expected the "
+                          "output of `rosnet-tui check --json`") from None
+    if not isinstance(obj, dict) or not isinstance(obj.get("checks"), list):
+        raise ReportError(f"{path}: expected {{\"checks\": [...]}} as written by "
+                          "`rosnet-tui check --json`")
+    results = [_result_from_json(c, f"{path}, check {i + 1}")
+               for i, c in enumerate(obj["checks"])]
+    settings = settings_from_dict(obj["settings"]) if isinstance(obj.get("settings"),
+                                                                 dict) else None
+    meta: dict[str, Any] = dict(obj.get("report") or {}) if isinstance(obj.get("report"),
+                                                                       dict) else {}
+    if isinstance(obj.get("environment"), dict):
+        meta["environment"] = ros_environment(obj["environment"])
+    return results, settings, meta
+
+
+# --------------------------------------------------------------------------- settings, no secrets
+def _scrub(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _scrub(v) for k, v in value.items() if not _SECRET_KEY.search(str(k))}
+    if isinstance(value, list):
+        return [_scrub(v) for v in value]
+    return value
+
+
+def public_settings(settings: Settings) -> dict[str, Any]:
+    """The settings as a dict for a report: every key that could hold a secret left out."""
+    d = dataclasses.asdict(settings)
+    out = {"this": d.pop("this"), "peer": d.pop("peers")}
+    out.update(d)
+    return _scrub(out)
+
+
+def settings_from_dict(d: dict[str, Any]) -> Settings:
+    """Settings back from :func:`public_settings` (unknown keys ignored)."""
+    def pick(cls: type, raw: Any) -> Any:
+        if not isinstance(raw, dict):
+            return cls() if cls is not Peer else None
+        names = {f.name for f in dataclasses.fields(cls)}
+        try:
+            return cls(**{k: v for k, v in raw.items() if k in names})
+        except TypeError:
+            return None
+
+    peers = [pick(Peer, p) for p in d.get("peer") or d.get("peers") or []]
+    return Settings(this=pick(ThisComponent, d.get("this")),
+                    peers=[p for p in peers if p is not None],
+                    ros=pick(RosSettings, d.get("ros")), probe=pick(ProbeSettings, d.get("probe")),
+                    checks=pick(CheckSettings, d.get("checks")))
+
+
+def ros_environment(environ: dict[str, Any] | os._Environ) -> dict[str, str]:
+    """Only the ``ROS_*`` variables of *environ*."""
+    return {k: str(v) for k, v in sorted(environ.items()) if k.startswith("ROS_")}
+
+
+# --------------------------------------------------------------------------- the document
+def build_report(results: Iterable[CheckResult], settings: Settings, *, source: str,
+                 steps: list[str] | None = None, environment: dict[str, str] | None = None,
+                 now: dt.datetime | None = None) -> dict[str, Any]:
+    """The report as a JSON-ready dict; :func:`render_markdown` prints the same content."""
+    results = list(results)
+    findings = advise(results, settings)
+    by_check = advice_by_check(findings)
+    counts = {s.value: 0 for s in Status}
+    for r in results:
+        counts[Status(r.status).value] += 1
+    now = now or dt.datetime.now(dt.timezone.utc)
+    t = settings.this
+    checks = []
+    for r in results:
+        entry = r.to_json()
+        entry["advice"] = [f.to_json() for f in by_check.get(r.id, [])]
+        checks.append(entry)
+    return {
+        "report": {"tool": "rosnet-tui", "version": __version__,
+                   "generated": now.astimezone(dt.timezone.utc).isoformat(timespec="seconds"),
+                   "component": t.name, "role": t.role, "connection": t.connection,
+                   "profile": t.profile, "source": source,
+                   "steps": steps or list(STEPS)},
+        "summary": counts,
+        "findings": [f.to_dict() for f in findings],
+        "checks": checks,
+        "settings": public_settings(settings),
+        "environment": dict(environment or {}),
+    }
+
+
+def render_json(doc: dict[str, Any]) -> str:
+    return json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
+
+
+def _wrap(text: str, indent: str = "", first: str | None = None) -> list[str]:
+    first = indent if first is None else first
+    return textwrap.wrap(text, WIDTH, initial_indent=first, subsequent_indent=indent,
+                         break_long_words=False, break_on_hyphens=False) or [first.rstrip()]
+
+
+_SEV_WORD = {"fail": "FAIL", "warn": "WARN", "security": "SECURITY", "info": "INFO"}
+
+
+def _finding_md(n: int, f: dict[str, Any]) -> list[str]:
+    head = f"{n}. [{_SEV_WORD.get(f['severity'], f['severity'].upper())}] "
+    pad = " " * len(f"{n}. ")
+    lines = _wrap(f["meaning"], pad, head)
+    lines.append(f"{pad}What to do:")
+    for a in f["actions"]:
+        lines += _wrap(a, pad + "  ", pad + "- ")
+    tail = []
+    if f.get("goto_step"):
+        tail.append(f"Go to: {step_title(f['goto_step'])}.")
+    if f.get("check_ids"):
+        tail.append("Explains: " + ", ".join(f["check_ids"]) + ".")
+    tail.append(f"Rule: {f['rule']}.")
+    lines += _wrap(" ".join(tail), pad)
+    return lines
+
+
+def render_markdown(doc: dict[str, Any]) -> str:
+    """The report in Markdown that reads as plain text (lines up to ~100 columns)."""
+    h, counts = doc["report"], doc["summary"]
+    name = h.get("component") or "(unnamed component)"
+    out = [f"# rosnet-tui report: {name}", ""]
+    out.append(f"- Generated: {h['generated']} (UTC), by rosnet-tui {h['version']}")
+    if h.get("role"):
+        out.append(f"- Component: {name} - ROS {h['role']}, {h.get('connection')} connection, "
+                   f"{h.get('profile')} network profile")
+    else:
+        out.append(f"- Component: {name} (no settings)")
+    out.append(f"- Results: {h['source']}")
+    out.append(f"- Steps: {', '.join(STEP_NAMES.get(s, s) for s in h['steps'])}")
+    verdict = ", ".join(f"{counts[k]} {w}" for k, w in
+                        (("fail", "failed"), ("warn", "warned"), ("pass", "passed"),
+                         ("skip", "skipped")) if counts.get(k))
+    out.append(f"- Verdict: {verdict or 'no checks'}")
+    out.append("")
+
+    findings = doc["findings"]
+    out += ["## Findings", ""]
+    if not findings:
+        out += ["The advisor has nothing to report.", ""]
+    groups = (("fail", "Causes of failures (most likely first, in the order of the steps)"),
+              ("warn", "Warnings"), ("security", "Security"), ("info", "For information"))
+    n = 0
+    number: dict[int, int] = {}      # id(finding dict) -> its number in the list
+    for sev, title in groups:
+        part = [f for f in findings if f["severity"] == sev]
+        if not part:
+            continue
+        out += [f"### {title}", ""]
+        for f in part:
+            n += 1
+            number[id(f)] = n
+            out += _finding_md(n, f)
+            out.append("")
+    refs: dict[str, list[str]] = {}
+    for f in findings:
+        for cid in f.get("check_ids") or []:
+            refs.setdefault(cid, []).append(f"{number.get(id(f), '?')} ({f['rule']})")
+
+    out += ["## Results by step", ""]
+    for step in STEPS:
+        rows = [c for c in doc["checks"] if c["step"] == step]
+        if not rows:
+            continue
+        out += [f"### {step_title(step)[0].upper() + step_title(step)[1:]}", ""]
+        for c in rows:
+            st = str(c["status"]).upper()
+            timing = f"{c.get('duration_s', 0):.2f} s of {c.get('timeout_s', 0):g} s"
+            out += _wrap(f"{c['summary']} ({timing})", "  ", f"- {st} {c['id']}: ")
+            if c.get("evidence"):
+                out.append("")
+                out.append("  ```")
+                out += [f"  {e}" for e in c["evidence"]]
+                out.append("  ```")
+            if refs.get(c["id"]):
+                out += _wrap("see finding " + ", ".join(refs[c["id"]]), "     ", "  -> ")
+            out.append("")
+
+    out += ["## Settings", ""]
+    if doc["settings"]:
+        out += ["This component's settings file, without key material or secrets:", "",
+                "```toml", _toml(doc["settings"]).rstrip("\n"), "```", ""]
+    else:
+        out += ["No settings were available.", ""]
+    env = doc.get("environment") or {}
+    out += ["## ROS environment", ""]
+    if env:
+        out += ["```"] + [f"{k}={v}" for k, v in env.items()] + ["```", ""]
+    else:
+        out += ["No ROS_* variables were recorded." if "live" not in h["source"]
+                else "No ROS_* variable is set in the environment the checks ran in.", ""]
+    return "\n".join(out)
+
+
+def _toml(settings: dict[str, Any]) -> str:
+    import tomlkit
+
+    doc = tomlkit.document()
+    for key in ("this", "peer", "ros", "probe", "checks"):
+        val = settings.get(key)
+        if key == "peer":
+            if val:
+                aot = tomlkit.aot()
+                for p in val:
+                    aot.append({k: v for k, v in p.items() if v not in ("", None)})
+                doc["peer"] = aot
+        elif isinstance(val, dict):
+            doc[key] = {k: v for k, v in val.items() if v not in ("", None)}
+    for key, val in settings.items():
+        if key not in ("this", "peer", "ros", "probe", "checks") and isinstance(val, dict):
+            doc[key] = {k: v for k, v in val.items() if v not in ("", None)}
+    return tomlkit.dumps(doc)
+
+
+__all__ = ["Finding", "ReportError", "build_report", "complete_for_run", "load_results_json",
+           "make_report",
+           "public_settings", "register", "render_json", "render_markdown", "ros_environment",
+           "run", "run_checks_now", "settings_from_dict"]
