@@ -252,3 +252,57 @@ async def test_layout_fits_small_and_large_terminals(tmp_path, size):
         else:
             assert config.bottom <= verify.y  # stacked
         assert verify.height >= 5
+
+
+async def test_advisor_names_the_cause_and_jumps_to_its_step(tmp_path):
+    """Table 1, listener up + Closed: the advisor's findings show, and g goes to their step."""
+
+    async def local_ip(ctx):
+        return Outcome(Status.PASS, "same", data={"local_ip": "10.10.10.1", "interface": "wlan0",
+                                                  "gateway": "10.10.10.254",
+                                                  "expected_ip": "10.10.10.1", "differs": False})
+
+    async def port_free(ctx):
+        return Outcome(Status.PASS, "free", data={"port": 12345, "in_use": False,
+                                                  "process": None, "pid": None})
+
+    async def listener(ctx):
+        return Outcome(Status.PASS, "up", data={"port": 12345, "listening": True})
+
+    async def port_open(ctx):
+        return Outcome(Status.FAIL, "closed from outside", data={
+            "ports": [{"port": 12345, "reachable": False, "listener": True, "via": "echoip"}],
+            "test_port": 12345, "test_port_open": False, "public_ip": "203.0.113.2"})
+
+    specs = {"router": [spec("router.local_ip", "router", local_ip),
+                        spec("router.port_free", "router", port_free),
+                        spec("router.listener", "router", listener),
+                        spec("router.port_open", "router", port_open)]}
+    app = make_app(tmp_path, complete_settings(), specs=lambda step: specs.get(step, []))
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("2", "r")
+        rows = app.screen.query_one(CheckList).rows
+        await wait_until(pilot, lambda: rows["router.port_open"].state == "fail", 5)
+        rules = [f.rule for f in app.findings]
+        assert any(r.startswith("table1.listener_up_closed") for r in rules)
+        # the evidence of the failed check carries the advice
+        await pilot.press("end", "e")
+        await pilot.pause()
+        assert "Advice 1:" in str(app.screen.query_one("#evidence").render())
+        await pilot.press("a")
+        await pilot.pause()
+        assert type(app.screen).__name__ == "AdvisorScreen"
+        n_findings = app.screen.query_one(DataTable).row_count
+        assert n_findings == len(app.findings) >= 3
+        first = app.findings[0]
+        detail = str(app.screen.query_one("#advisor-detail").render())
+        assert first.meaning.split(".")[0][:40] in detail.replace("\n", " ")
+        await pilot.press("t")  # every rule, the matching ones marked
+        await pilot.pause()
+        assert app.screen.query_one(DataTable).row_count > n_findings
+        await pilot.press("t")
+        await pilot.pause()
+        target = next(f.goto_step for f in app.findings if f.goto_step)
+        await pilot.press("g")
+        await pilot.pause()
+        assert isinstance(app.screen, StepScreen) and app.screen.step.id == target

@@ -11,11 +11,13 @@ from pathlib import Path
 from textual.app import App
 from textual.binding import Binding
 
+from rosnet_tui.core.advisor import Finding, advise
 from rosnet_tui.core.checks import CheckContext, CheckSpec, checks_for
 from rosnet_tui.core.netinfo import LocalNet, detect_local_net
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings, atomic_write_text, default_state_dir, save_settings
 from rosnet_tui.core.steps import STEPS
+from rosnet_tui.ui.advisor_screen import AdvisorScreen
 from rosnet_tui.ui.help_screen import HelpScreen
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
@@ -47,6 +49,7 @@ class RosnetApp(App[int]):
         Binding("4", "goto('ros')", "ROS", show=False),
         Binding("b", "back", "Back"),
         Binding("n", "next", "Next"),
+        Binding("a", "advisor", "Advisor"),
         Binding("s", "setup", "Set-up"),
         Binding("question_mark", "help", "Help", key_display="?"),
         Binding("q", "quit", "Quit"),
@@ -59,6 +62,7 @@ class RosnetApp(App[int]):
         self.detected = LocalNet()
         self._states: dict[str, tuple[str, CheckResult | None]] = {}
         self._specs: dict[str, list[CheckSpec]] = {}
+        self.findings: list[Finding] = []
         self.current_step = self._load_ui_state().get("last_step", "isp")
         if self.current_step not in {s.id for s in STEPS}:
             self.current_step = "isp"
@@ -86,6 +90,14 @@ class RosnetApp(App[int]):
 
     def set_check_state(self, check_id: str, state: str, result: CheckResult | None) -> None:
         self._states[check_id] = (state, result)
+        if result is not None or state == NOT_RUN:
+            self.findings = advise(self.latest_results(), self.runtime_settings())
+
+    def latest_results(self) -> dict[str, CheckResult]:
+        return {cid: r for cid, (_state, r) in self._states.items() if r is not None}
+
+    def findings_for(self, check_id: str) -> list[Finding]:
+        return [f for f in self.findings if check_id in f.check_ids]
 
     def step_states(self) -> dict[str, str]:
         return {s.id: aggregate([self.check_state(c.id)[0] for c in self._specs.get(s.id, [])])
@@ -138,7 +150,7 @@ class RosnetApp(App[int]):
 
     # ------------------------------------------------------------------ navigation
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action in ("goto", "back", "next", "setup", "quit"):
+        if action in ("goto", "back", "next", "setup", "quit", "advisor"):
             return isinstance(self.screen, StepScreen)
         return True
 
@@ -175,6 +187,13 @@ class RosnetApp(App[int]):
                 self.notify(f"Settings saved to {self.deps.config_path}", timeout=4)
 
         self.push_screen(SetupScreen(self.detected), done)
+
+    def action_advisor(self) -> None:
+        def done(step_id: str | None) -> None:
+            if step_id:
+                self.action_goto(step_id)
+
+        self.push_screen(AdvisorScreen(), done)
 
     def action_help(self) -> None:
         if not isinstance(self.screen, HelpScreen):

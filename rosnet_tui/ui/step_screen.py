@@ -27,6 +27,7 @@ class StepScreen(Screen):
         Binding("R", "run_one", "Re-run one", show=False),
         Binding("c", "cancel_checks", "Cancel", show=False),
         Binding("e", "toggle_evidence", "Evidence"),
+        Binding("g", "go_finding", "Go to cause", show=False),
         Binding("z", "zoom", "Zoom pane", show=False),
     ]
 
@@ -55,7 +56,7 @@ class StepScreen(Screen):
                     known = {s.id for s in self.specs}
                     rows = [(s.id, s.title) for s in self.specs]
                     rows += [(cid, cid) for cid in self.step.check_ids if cid not in known]
-                    yield CheckList(rows, id="check-list")
+                    yield CheckList(rows, advice=self.rosnet.findings_for, id="check-list")
         yield Footer()
 
     def on_mount(self) -> None:
@@ -103,6 +104,19 @@ class StepScreen(Screen):
     def action_cancel_checks(self) -> None:
         if self.workers.cancel_group(self, "checks"):
             self.notify("Checks cancelled.", timeout=3)
+
+    def action_go_finding(self) -> None:
+        """Go back to the step that the highlighted check's first finding points to."""
+        cid = self.query_one(CheckList).highlighted_id
+        for f in self.rosnet.findings_for(cid) if cid else []:
+            if f.goto_step and f.severity in ("fail", "warn"):
+                if f.goto_step == self.step.id:
+                    self.notify("The cause is on this step: see the configuration above.",
+                                timeout=4)
+                else:
+                    self.rosnet.action_goto(f.goto_step)
+                return
+        self.notify("No finding points elsewhere for this check.", timeout=3)
 
     def action_toggle_evidence(self) -> None:
         self.query_one(CheckList).toggle_evidence()

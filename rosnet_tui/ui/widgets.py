@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from rich.text import Text
 from textual import events
 from textual.app import ComposeResult
+from textual.binding import Binding
 from textual.containers import Vertical
 from textual.message import Message
 from textual.reactive import reactive
@@ -114,6 +115,13 @@ class StepBar(Widget):
             self.post_message(self.Selected(widget.id.removeprefix("step-item-")))
 
 
+class RowTable(DataTable):
+    """A row-cursor table where Home and End go to the first and last row, as expected."""
+
+    BINDINGS = [Binding("home", "scroll_top", "First", show=False),
+                Binding("end", "scroll_bottom", "Last", show=False)]
+
+
 @dataclass
 class CheckRow:
     id: str
@@ -143,12 +151,14 @@ class CheckList(Vertical):
             self.shown = shown
             super().__init__()
 
-    def __init__(self, rows: list[tuple[str, str]], **kwargs) -> None:
+    def __init__(self, rows: list[tuple[str, str]], advice=None, **kwargs) -> None:
         super().__init__(**kwargs)
         self.rows: dict[str, CheckRow] = {cid: CheckRow(cid, title) for cid, title in rows}
+        # check id -> list of advisor findings (objects with meaning, actions, goto_step)
+        self.advice = advice or (lambda check_id: [])
 
     def compose(self) -> ComposeResult:
-        table: DataTable = DataTable(cursor_type="row", zebra_stripes=False, id="check-table")
+        table: DataTable = RowTable(cursor_type="row", zebra_stripes=False, id="check-table")
         yield table
         yield Static("", id="evidence", markup=False)
 
@@ -236,6 +246,12 @@ class CheckList(Vertical):
                 lines = [f"{r.status.label}  {row.id}  ({r.duration_s:.2f} s of {r.timeout_s:g} s)",
                          r.summary]
                 lines += [f"  {e}" for e in r.evidence]
+                if r.status.value in ("fail", "warn"):
+                    for n, f in enumerate(self.advice(row.id)[:3], 1):
+                        lines.append(f"Advice {n}: {f.meaning}")
+                        lines += [f"  - {a}" for a in f.actions]
+                        if f.goto_step:
+                            lines.append(f"  (go back to the {f.goto_step} step: press g)")
                 text = "\n".join(lines)
         self.query_one("#evidence", Static).update(text)
 
