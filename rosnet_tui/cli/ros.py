@@ -1,0 +1,123 @@
+"""`rosnet-tui ros apply|export`: ROS_MASTER_URI for this component's role, in ~/.bashrc."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option
+from rosnet_tui.cli.hosts import (
+    add_writer_options,
+    ask,
+    confirm,
+    err,
+    interactive,
+    load_settings_for,
+    print_changes,
+    report_settings_problems,
+    rerun_checks,
+    show_preview,
+    state_dir_of,
+    write_preview,
+)
+from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core.bashrc import (
+    ROS_IP_REASON,
+    default_bashrc_path,
+    find_ros_ip_lines,
+    preview_bashrc,
+    shell_lines,
+)
+from rosnet_tui.core.hosts import WriterSettingsError
+
+ROS_CHECKS = ("ros.env",)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("ros", help="write ROS_MASTER_URI for this component's role into ~/.bashrc",
+                       description="ROS settings for this component's role, in a marked block "
+                                   "of ~/.bashrc (or another shell file).")
+    p.set_defaults(func=lambda a: (p.print_help(sys.stderr), EXIT_USAGE)[1])
+    rs = p.add_subparsers(dest="ros_command", metavar="ACTION", parser_class=type(p))
+
+    a = rs.add_parser("apply", help="write the ROS_MASTER_URI block")
+    add_writer_options(a, file_help="shell file to write (default: ~/.bashrc)")
+    a.add_argument("--comment-ros-ip", action="store_true",
+                   help="also comment out ROS_IP / ROS_HOSTNAME lines (they break remote "
+                        "networks)")
+    a.set_defaults(func=run_apply)
+
+    e = rs.add_parser("export", help="print the lines that set up the current shell "
+                                     "(eval \"$(rosnet-tui ros export)\")")
+    add_config_option(e)
+    e.set_defaults(func=run_export)
+
+
+def _decide_comment(args: argparse.Namespace, path: Path) -> bool:
+    if args.comment_ros_ip:
+        return True
+    if args.yes or args.dry_run or not interactive():
+        return False
+    try:
+        old = mf.read_bytes(path)
+        found = find_ros_ip_lines(mf.decode(old) if old is not None else None)
+    except mf.ManagedFileError:
+        return False
+    if not found:
+        return False
+    print(f"{path} sets ROS_IP or ROS_HOSTNAME:")
+    print_changes(found)
+    print(f"Why it matters: {ROS_IP_REASON}.")
+    return ask("Comment these lines out (they stay in the file, and in the backup)?")
+
+
+def run_apply(args: argparse.Namespace) -> int:
+    settings = load_settings_for(args)
+    if settings is None:
+        return EXIT_USAGE
+    path = Path(args.file).expanduser().absolute() if args.file else default_bashrc_path()
+    comment = _decide_comment(args, path)
+    try:
+        preview = preview_bashrc(settings, path, comment_ros_ip=comment)
+        lines = shell_lines(settings, os.environ)
+    except WriterSettingsError as exc:
+        return report_settings_problems(exc)
+    except mf.ManagedFileError as exc:
+        err(f"rosnet-tui: {exc}")
+        return EXIT_FAIL
+    if args.expect_digest and preview.digest != args.expect_digest:
+        err(f"rosnet-tui: {path} changed since the preview was made; nothing was written")
+        return EXIT_FAIL
+    role = "the ROS master" if settings.is_master else f"a member (master: {settings.master_name})"
+    print(f"ROS settings for {settings.this.name}, {role}, in {path}:")
+    show_preview(preview)
+    rc = EXIT_OK
+    if preview.changed:
+        if args.dry_run:
+            print("Dry run: nothing was written.")
+            return EXIT_OK
+        stop = confirm(args, f"Write these changes to {path}?")
+        if stop is not None:
+            return stop
+        rc = write_preview(args, preview, None)
+    if rc == EXIT_OK:
+        print("New shells get it from the file. For this shell, run:")
+        for line in lines:
+            print(f"  {line}")
+        if not args.no_checks:
+            rerun_checks(ROS_CHECKS, settings, bashrc_path=path, state_dir=state_dir_of(args))
+    return rc
+
+
+def run_export(args: argparse.Namespace) -> int:
+    settings = load_settings_for(args)
+    if settings is None:
+        return EXIT_USAGE
+    try:
+        for line in shell_lines(settings, os.environ):
+            print(line)
+    except WriterSettingsError as exc:
+        return report_settings_problems(exc)
+    return EXIT_OK

@@ -1,0 +1,115 @@
+"""`rosnet-tui undo`: put back the files of the last apply, byte for byte (one apply per call)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, add_config_option
+from rosnet_tui.cli.hosts import (
+    HOSTS_CHECKS,
+    confirm,
+    err,
+    interactive,
+    rerun_checks,
+    state_dir_of,
+)
+from rosnet_tui.cli.ros import ROS_CHECKS
+from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import privilege
+from rosnet_tui.core.hosts import DEFAULT_HOSTS_PATH
+from rosnet_tui.core.settings import Settings, SettingsError, load_settings
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("undo", help="restore the files of the last change rosnet-tui made",
+                       description="Restore, byte for byte, the files of the last apply "
+                                   "(hosts or ros). One apply per call; run it again to go "
+                                   "further back.")
+    add_config_option(p)
+    p.add_argument("--yes", "-y", action="store_true",
+                   help="restore without asking (needed where there is no terminal)")
+    p.add_argument("--dry-run", action="store_true", help="show what would be restored")
+    p.add_argument("--force", action="store_true",
+                   help="restore even a file someone changed after rosnet-tui wrote it")
+    p.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
+                   help="where backups and the undo journal live "
+                        "(default: $XDG_STATE_HOME/rosnet-tui)")
+    p.add_argument("--expect-entry", metavar="ID", default=None,
+                   help="refuse unless the last change is still this one (used with sudo)")
+    p.add_argument("--no-checks", action="store_true",
+                   help="do not re-run the affected checks afterwards")
+    p.set_defaults(func=run)
+
+
+def _settings_quietly(args: argparse.Namespace) -> Settings | None:
+    from rosnet_tui.cli import config_path
+
+    try:
+        return load_settings(config_path(args))
+    except SettingsError:
+        return None
+
+
+def run(args: argparse.Namespace) -> int:
+    sd = state_dir_of(args)
+    try:
+        plan = mf.plan_undo(sd, entry_id=args.expect_entry)
+    except mf.NothingToUndoError as exc:
+        print(f"rosnet-tui: {exc}")
+        return EXIT_FAIL
+    except mf.ManagedFileError as exc:
+        err(f"rosnet-tui: {exc}")
+        return EXIT_FAIL
+    e = plan.entry
+    print(f"Undo change #{e.id} ({e.label or 'no label'}, made {e.created}):")
+    for f in e.files:
+        what = "put back as it was" if f.existed else "removed (rosnet-tui created it)"
+        print(f"  {f.path}: {what}")
+    diff = plan.diff()
+    if diff:
+        sys.stdout.write(diff)
+    else:
+        print("The files are already as they were before that change.")
+    if plan.conflicts and not args.force:
+        err("rosnet-tui: changed by someone else since rosnet-tui wrote it: "
+            + ", ".join(plan.conflicts) + ". Undoing would lose that change; nothing was "
+            "restored. Pass --force to restore anyway.")
+        return EXIT_FAIL
+    if args.dry_run:
+        print("Dry run: nothing was restored.")
+        return EXIT_OK
+    if diff:
+        stop = confirm(args, "Restore these files?")
+        if stop is not None:
+            return stop
+    if plan.needs_privilege:
+        cmd = privilege.undo_command(entry_id=e.id, state_dir=sd, force=args.force)
+        line = privilege.format_command(cmd)
+        if not privilege.sudo_available():
+            err(f"rosnet-tui: restoring needs root, and sudo is not installed; run this as "
+                f"root:\n  {line}")
+            return EXIT_FAIL
+        print(f"Restoring needs root; running:\n  {line}")
+        sys.stdout.flush()
+        rc = privilege.run_privileged(cmd, interactive=interactive())
+        if rc != 0:
+            err(f"rosnet-tui: the privileged undo did not succeed (exit {rc})")
+            return EXIT_FAIL
+    else:
+        try:
+            result = mf.apply_undo(plan, force=args.force)
+        except mf.ManagedFileError as exc:
+            err(f"rosnet-tui: {exc}")
+            return EXIT_FAIL
+        print(f"Restored: {', '.join(str(p) for p in result.files)}")
+    if not args.no_checks:
+        settings = _settings_quietly(args)
+        paths = [Path(f.path) for f in e.files]
+        hosts = [p for p in paths if p == DEFAULT_HOSTS_PATH or p.name == "hosts"]
+        others = [p for p in paths if p not in hosts]
+        ids = (HOSTS_CHECKS if hosts else ()) + (ROS_CHECKS if others else ())
+        rerun_checks(ids, settings, hosts_path=hosts[0] if hosts else None,
+                     bashrc_path=others[0] if others else None, state_dir=sd)
+    return EXIT_OK

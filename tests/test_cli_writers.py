@@ -1,0 +1,342 @@
+"""`rosnet-tui hosts|ros|undo` as a user runs them: diff, ask, --yes, exit codes, privilege."""
+
+from __future__ import annotations
+
+import os
+import pty
+import select
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core.settings import load_settings
+
+REPO = Path(__file__).resolve().parent.parent
+
+CONFIG = """\
+# my robot
+[this]
+name = "turtlebot"
+role = "master"
+connection = "telecom"
+profile = "remote"
+local_ip = "10.10.10.1"
+public_ip = "203.0.113.2"
+office_ip = "172.16.0.5"
+
+[[peer]]
+name = "sami"
+local_ip = "192.168.1.10"
+public_ip = "198.51.100.2"
+office_ip = "172.16.0.6"
+
+[ros]
+master = "turtlebot"
+port = 11311
+"""
+HOSTS = b"127.0.0.1\tlocalhost\r\n::1 localhost ip6-localhost\n# end"
+BASHRC = b"# bashrc\nexport ROS_IP=10.10.10.1\n"
+
+
+@pytest.fixture
+def box(tmp_path):
+    """A home with settings, a hosts file and a .bashrc; env pointing everything there."""
+    home = tmp_path / "home"
+    home.mkdir()
+    cfg = home / ".config" / "rosnet-tui" / "config.toml"
+    cfg.parent.mkdir(parents=True)
+    cfg.write_text(CONFIG)
+    (tmp_path / "hosts").write_bytes(HOSTS)
+    (home / ".bashrc").write_bytes(BASHRC)
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "XDG_"))}
+    env.update(HOME=str(home), PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
+
+    class Box:
+        pass
+
+    b = Box()
+    b.home, b.cfg, b.hosts, b.bashrc, b.env = home, cfg, tmp_path / "hosts", home / ".bashrc", env
+    b.state = home / ".local" / "state" / "rosnet-tui"
+    return b
+
+
+def run(box, *args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "rosnet_tui", *args], capture_output=True,
+                          text=True, timeout=60, stdin=subprocess.DEVNULL, cwd=REPO,
+                          env=env or box.env)
+
+
+def run_tty(box, args: list[str], answers: list[str], timeout: float = 30) -> tuple[int, str]:
+    """Run on a pseudo-terminal; answer each '[y/N]' prompt in turn."""
+    master, slave = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "rosnet_tui", *args], stdin=slave,
+                            stdout=slave, stderr=slave, cwd=REPO, env=box.env,
+                            start_new_session=True)
+    os.close(slave)
+    out, pending = b"", list(answers)
+    deadline = time.monotonic() + timeout
+    try:
+        while time.monotonic() < deadline:
+            r, _, _ = select.select([master], [], [], 0.1)
+            if r:
+                try:
+                    chunk = os.read(master, 4096)
+                except OSError:
+                    chunk = b""
+                if not chunk:
+                    break
+                out += chunk
+                if pending and out.count(b"[y/N]") > len(answers) - len(pending):
+                    os.write(master, pending.pop(0).encode() + b"\n")
+            elif proc.poll() is not None:
+                break
+        rc = proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=5)
+        os.close(master)
+    return rc, out.decode(errors="replace")
+
+
+def hosts_args(box, *extra: str) -> list[str]:
+    return ["hosts", "apply", "--file", str(box.hosts), *extra]
+
+
+# --------------------------------------------------------------------------- hosts
+def test_without_terminal_and_without_yes_shows_the_diff_and_refuses(box):
+    out = run(box, *hosts_args(box))
+    assert out.returncode == 2
+    assert "+10.10.10.1      turtlebot" in out.stdout and "--yes" in out.stderr
+    assert box.hosts.read_bytes() == HOSTS
+
+
+def test_dry_run_writes_nothing(box):
+    out = run(box, *hosts_args(box, "--dry-run"))
+    assert out.returncode == 0 and "Dry run" in out.stdout and "+# BEGIN rosnet-tui" in out.stdout
+    assert box.hosts.read_bytes() == HOSTS
+
+
+def test_yes_writes_then_nothing_more_to_do_then_undo(box):
+    out = run(box, *hosts_args(box, "--yes"))
+    assert out.returncode == 0, out.stderr
+    assert "Wrote" in out.stdout and "Backup:" in out.stdout
+    data = box.hosts.read_bytes()
+    assert data.endswith(HOSTS) and b"198.51.100.2    sami" in data
+    again = run(box, *hosts_args(box, "--yes"))
+    assert again.returncode == 0 and "already up to date" in again.stdout
+    assert box.hosts.read_bytes() == data
+    undo = run(box, "undo", "--yes")
+    assert undo.returncode == 0 and "Restored" in undo.stdout
+    assert box.hosts.read_bytes() == HOSTS
+    nothing = run(box, "undo", "--yes")
+    assert nothing.returncode == 1 and "nothing to undo" in nothing.stdout
+
+
+def test_use_switches_the_set_and_saves_the_profile_keeping_comments(box):
+    out = run(box, "hosts", "use", "office", "--file", str(box.hosts), "--yes")
+    assert out.returncode == 0, out.stderr
+    assert "# Active set: office" in box.hosts.read_text()
+    assert load_settings(box.cfg).this.profile == "office"
+    assert box.cfg.read_text().startswith("# my robot")
+    show = run(box, "hosts", "show", "--file", str(box.hosts))
+    assert show.returncode == 0 and "172.16.0.6" in show.stdout
+    assert "'office' set is active" in show.stdout and "exactly this set" in show.stdout
+
+
+def test_dry_run_of_use_saves_nothing(box):
+    out = run(box, "hosts", "use", "office", "--file", str(box.hosts), "--dry-run")
+    assert out.returncode == 0
+    assert load_settings(box.cfg).this.profile == "remote" and box.hosts.read_bytes() == HOSTS
+
+
+def test_bad_settings_exit_2_and_write_nothing(box):
+    box.cfg.write_text(CONFIG.replace('local_ip = "10.10.10.1"', 'local_ip = "10.10.10.256"'))
+    out = run(box, *hosts_args(box, "--yes"))
+    assert out.returncode == 2 and "this.local_ip" in out.stderr
+    assert box.hosts.read_bytes() == HOSTS
+
+
+def test_incomplete_settings_exit_2_and_say_what_is_missing(box):
+    box.cfg.write_text(CONFIG.replace('local_ip = "10.10.10.1"\n', ""))
+    out = run(box, *hosts_args(box, "--yes"))
+    assert out.returncode == 2 and "this.local_ip" in out.stderr and "nothing was written" \
+        in out.stderr
+    assert box.hosts.read_bytes() == HOSTS
+
+
+def test_no_settings_file_is_exit_2(box):
+    box.cfg.unlink()
+    out = run(box, *hosts_args(box, "--yes"))
+    assert out.returncode == 2 and "no settings file" in out.stderr
+
+
+def test_stale_expected_digest_is_refused(box):
+    out = run(box, *hosts_args(box, "--yes", "--expect-digest", "0" * 64))
+    assert out.returncode == 1 and "changed since the preview" in out.stderr
+    assert box.hosts.read_bytes() == HOSTS
+
+
+def test_terminal_answer_yes_writes_and_no_does_not(box):
+    rc, out = run_tty(box, hosts_args(box), ["n"])
+    assert rc == 1 and "Cancelled" in out and box.hosts.read_bytes() == HOSTS
+    rc, out = run_tty(box, hosts_args(box), ["y"])
+    assert rc == 0 and "Wrote" in out, out
+    assert b"# END rosnet-tui" in box.hosts.read_bytes()
+
+
+def test_terminal_asks_about_conflicting_lines(box):
+    box.hosts.write_bytes(b"127.0.1.1\tturtlebot\n")
+    rc, out = run_tty(box, hosts_args(box), ["y", "y"])
+    assert rc == 0, out
+    assert "conflict" in out and box.hosts.read_bytes().endswith(b"# rosnet-tui: 127.0.1.1\tturtlebot\n")
+
+
+# --------------------------------------------------------------------------- ros
+def test_ros_apply_comments_ros_ip_only_when_asked(box):
+    out = run(box, "ros", "apply", "--yes", "--file", str(box.bashrc))
+    assert out.returncode == 0, out.stderr
+    text = box.bashrc.read_text()
+    assert "export ROS_IP=10.10.10.1\n" in text and "--comment-ros-ip" in out.stdout
+    assert "export ROS_MASTER_URI=http://turtlebot:11311" in text
+    assert "export ROS_MASTER_URI=http://turtlebot:11311" in out.stdout  # for this shell
+    out = run(box, "ros", "apply", "--yes", "--comment-ros-ip")  # default file: ~/.bashrc
+    assert out.returncode == 0, out.stderr
+    assert "# rosnet-tui: export ROS_IP=10.10.10.1\n" in box.bashrc.read_text()
+    assert run(box, "undo", "--yes").returncode == 0
+    assert run(box, "undo", "--yes").returncode == 0
+    assert box.bashrc.read_bytes() == BASHRC
+
+
+def test_ros_apply_on_a_terminal_asks_about_ros_ip(box):
+    rc, out = run_tty(box, ["ros", "apply"], ["y", "y"])
+    assert rc == 0, out
+    assert "ROS_IP" in out and "# rosnet-tui: export ROS_IP" in box.bashrc.read_text()
+
+
+def test_ros_export_prints_the_line_for_this_shell(box):
+    env = dict(box.env, ROS_HOSTNAME="turtlebot")
+    out = run(box, "ros", "export", env=env)
+    assert out.stdout.splitlines() == ["export ROS_MASTER_URI=http://turtlebot:11311",
+                                       "unset ROS_HOSTNAME"]
+
+
+def test_ros_bad_settings_exit_2(box):
+    box.cfg.write_text(CONFIG.replace('role = "master"', 'role = "member"')
+                       .replace('master = "turtlebot"', 'master = "nobody"'))
+    out = run(box, "ros", "apply", "--yes")
+    assert out.returncode == 2 and box.bashrc.read_bytes() == BASHRC
+
+
+# --------------------------------------------------------------------------- undo
+def test_undo_without_terminal_and_without_yes_refuses(box):
+    assert run(box, *hosts_args(box, "--yes")).returncode == 0
+    out = run(box, "undo")
+    assert out.returncode == 2 and "--yes" in out.stderr
+    assert box.hosts.read_bytes() != HOSTS
+
+
+def test_undo_refuses_to_lose_a_later_edit(box):
+    assert run(box, *hosts_args(box, "--yes")).returncode == 0
+    with open(box.hosts, "ab") as f:
+        f.write(b"\n10.9.9.9 added-by-hand\n")
+    out = run(box, "undo", "--yes")
+    assert out.returncode == 1 and "--force" in out.stderr
+    assert run(box, "undo", "--yes", "--force").returncode == 0
+    assert box.hosts.read_bytes() == HOSTS
+
+
+# --------------------------------------------------------------------------- privilege
+def test_when_root_is_needed_the_exact_sudo_command_is_run(box, tmp_path, monkeypatch, capsys):
+    """In process, as if this user could not write the file; a stand-in sudo on PATH runs the
+    command for real (we are root already), so the whole path is exercised but the password."""
+    from rosnet_tui.cli import main
+
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "sudo").write_text('#!/bin/sh\necho "sudo $*" > "$(dirname "$0")/called"\n[ "$1" = "-n" ] && shift\nexec "$@"\n')
+    os.chmod(fake / "sudo", 0o755)
+    monkeypatch.setenv("PATH", f"{fake}{os.pathsep}{os.environ.get('PATH', '')}")
+    monkeypatch.setenv("HOME", str(box.home))
+    monkeypatch.setattr(mf, "can_write", lambda path: False)
+    rc = main(["hosts", "apply", "--file", str(box.hosts), "--yes", "--no-checks"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    called = (fake / "called").read_text().split()
+    called = [x for x in called if x != "-n"]  # no terminal here: sudo -n
+    assert called[:4] == ["sudo", sys.executable, "-m", "rosnet_tui"]
+    assert f"--expect-digest {mf.file_digest(HOSTS)}" in " ".join(called)
+    assert "needs root; running:" in out
+    assert b"198.51.100.2    sami" in box.hosts.read_bytes()
+    assert [e.label for e in mf.journal_entries(box.state)] == ["hosts: remote set"]
+    # and undo goes the same way
+    rc = main(["undo", "--yes", "--no-checks"])
+    assert rc == 0 and box.hosts.read_bytes() == HOSTS
+    assert "undo --yes --expect-entry" in (fake / "called").read_text()
+
+
+def test_without_sudo_the_command_is_shown_and_nothing_written(box, monkeypatch, capsys):
+    from rosnet_tui.cli import main
+    from rosnet_tui.core import privilege
+
+    monkeypatch.setenv("HOME", str(box.home))
+    monkeypatch.setattr(mf, "can_write", lambda path: False)
+    monkeypatch.setattr(privilege, "sudo_available", lambda: False)
+    rc = main(["hosts", "apply", "--file", str(box.hosts), "--yes"])
+    err = capsys.readouterr().err
+    assert rc == 1 and "sudo is not installed" in err and "--expect-digest" in err
+    assert box.hosts.read_bytes() == HOSTS
+
+
+def test_root_hands_the_users_journal_back_to_the_user(box):
+    """What sudo runs writes into the user's state dir; the journal stays the user's."""
+    if os.geteuid() != 0:
+        pytest.skip("needs root")
+    box.state.mkdir(parents=True)
+    for p in (box.home / ".local", box.home / ".local" / "state", box.state):
+        os.chown(p, 65534, 65534)
+    out = run(box, "hosts", "apply", "--file", str(box.hosts), "--yes", "--state-dir",
+              str(box.state))
+    assert out.returncode == 0, out.stderr
+    (entry,) = mf.journal_entries(box.state)
+    for p in (box.state / "journal" / f"{entry.id}.json", box.state / "backups" / entry.id,
+              box.state / "lock"):
+        assert os.stat(p).st_uid == 65534, p
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("setpriv")
+                    or not Path("/usr/bin/python3").exists(),
+                    reason="needs root, setpriv and /usr/bin/python3")
+def test_can_write_as_a_normal_user():
+    """The real permission logic, run as the user nobody (stdlib-only module)."""
+    with tempfile.TemporaryDirectory(prefix="rosnet-can-write-") as d:
+        os.chmod(d, 0o755)
+        _can_write_as_nobody(Path(d))
+
+
+def _can_write_as_nobody(tmp_path: Path) -> None:
+    root_file, own_file = tmp_path / "root-owned", tmp_path / "own"
+    root_file.write_text("x")
+    own_file.write_text("x")
+    (tmp_path / "open").mkdir(mode=0o777)
+    os.chmod(tmp_path / "open", 0o777)
+    os.chown(own_file, 65534, 65534)
+    code = ("import sys; sys.path.insert(0, sys.argv[1]);"
+            "import importlib.util as u;"
+            "spec = u.spec_from_file_location('mf', sys.argv[1] + '/rosnet_tui/core/managed_file.py');"
+            "m = u.module_from_spec(spec); sys.modules['mf'] = m; spec.loader.exec_module(m);"
+            "print(*[m.can_write(p) for p in sys.argv[2:]])")
+    r = subprocess.run([shutil.which("setpriv"), "--reuid=65534", "--regid=65534",
+                        "--clear-groups", "/usr/bin/python3", "-c", code, str(REPO),
+                        str(root_file), str(own_file), str(tmp_path / "new-in-root-dir"),
+                        str(tmp_path / "open" / "new")],
+                       capture_output=True, text=True, timeout=30, cwd="/")
+    if r.returncode != 0:
+        pytest.skip(f"cannot run Python as nobody here: {r.stderr.strip()[-200:]}")
+    assert r.stdout.split() == ["False", "True", "False", "True"]

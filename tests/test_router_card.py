@@ -1,0 +1,115 @@
+"""The router card: exact values for the modem's web page, warnings, and an 80-column rendering."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import uuid
+from dataclasses import asdict
+from pathlib import Path
+
+import pytest
+
+from rosnet_tui.core.netinfo import LocalNet
+from rosnet_tui.core.router_card import build_router_card, render_router_card
+from rosnet_tui.core.settings import Peer, RosSettings, Settings, ThisComponent
+
+REPO = Path(__file__).resolve().parent.parent
+NET = LocalNet(interface="wlan0", local_ip="10.10.10.1", gateway="10.10.10.254",
+               mac="02:00:0a:0a:0a:01", netmask="255.255.255.0")
+
+
+def robot(connection: str = "telecom", local_ip: str = "10.10.10.1",
+          interface: str = "") -> Settings:
+    return Settings(this=ThisComponent(name="turtlebot", role="master", connection=connection,
+                                       local_ip=local_ip, public_ip="203.0.113.2",
+                                       interface=interface),
+                    peers=[Peer(name="sami", local_ip="192.168.1.10", public_ip="198.51.100.2")],
+                    ros=RosSettings(master="turtlebot"))
+
+
+def test_card_values_forward_range_to_local_ip_and_reserve_it_for_the_mac():
+    card = build_router_card(robot(), NET)
+    tcp = card.forwards[0]
+    assert (tcp.protocol, tcp.external_ports, tcp.internal_ip, tcp.internal_ports, tcp.required) \
+        == ("TCP", "1024-65000", "10.10.10.1", "1024-65000", True)
+    assert card.forwards[1].protocol == "UDP" and not card.forwards[1].required
+    assert card.dmz_host == "10.10.10.1"
+    assert (card.reservation_ip, card.reservation_mac) == ("10.10.10.1", "02:00:0a:0a:0a:01")
+    assert card.modem_page == "http://10.10.10.254/"
+    assert card.warnings == [] and card.missing == []
+    json.dumps(asdict(card))  # plain data, ready for the UI or a report
+
+
+def test_exposure_warning_names_the_master_port_ssh_and_the_allowed_sources():
+    text = " ".join(build_router_card(robot(), NET).exposure_warning)
+    assert "no authentication" in text and "11311" in text and "SSH" in text
+    assert "198.51.100.2 (sami)" in text and "keys only" in text
+
+
+@pytest.mark.parametrize("connection, words", [
+    ("corporate", ["administrator"]),
+    ("telecom", ["carrier-grade NAT", "100.64.0.0/10"]),
+    ("home", ["http://10.10.10.254/", "Port forwarding"]),
+])
+def test_connection_notes(connection, words):
+    text = " ".join(build_router_card(robot(connection), NET).connection_notes)
+    for w in words:
+        assert w in text
+
+
+def test_settings_that_disagree_with_the_machine_are_flagged():
+    card = build_router_card(robot(local_ip="10.10.10.7"), NET)
+    assert card.forwards[0].internal_ip == "10.10.10.7"
+    assert any("10.10.10.1" in w and "10.10.10.7" in w for w in card.warnings)
+
+
+def test_missing_facts_say_how_to_find_them():
+    card = build_router_card(robot(interface="eth9"), LocalNet(interface="eth9"))
+    text = " ".join(card.missing)
+    assert "ip link show eth9" in text and "default via" in text
+
+
+@pytest.mark.parametrize("markdown", [False, True])
+@pytest.mark.parametrize("connection", ["corporate", "home", "telecom"])
+def test_rendering_fits_80_columns_and_carries_every_value(markdown, connection):
+    card = build_router_card(robot(connection, local_ip="192.168.100.200"),
+                             LocalNet("enx00e04c680001", "192.168.100.201", "192.168.100.1",
+                                      "00:e0:4c:68:00:01", "255.255.255.0"))
+    out = render_router_card(card, markdown=markdown)
+    assert max(len(x) for x in out.splitlines()) <= 80
+    for value in ("1024-65000", "192.168.100.200", "00:e0:4c:68:00:01", "http://192.168.100.1/",
+                  "DMZ", "11311"):
+        assert value in out
+    if markdown:
+        assert "| TCP | 1024-65000 | 192.168.100.200 | 1024-65000 | required |" in out
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("ip"),
+                    reason="an interface in a private namespace needs root and ip(8)")
+def test_mac_is_read_from_the_real_interface():
+    """An interface with a known MAC (a veth pair with both ends inside a namespace of the
+    test's own, so nothing touches the root namespace)."""
+    ns = f"rosnet-card-{uuid.uuid4().hex[:8]}"
+    if subprocess.run(["ip", "netns", "add", ns], capture_output=True, timeout=10).returncode:
+        pytest.skip("cannot create a network namespace here")
+    try:
+        script = ("ip link add dummy7 address 02:42:ac:11:00:07 type veth peer name dummy7b && "
+                  "ip addr add 10.77.0.5/24 dev dummy7 && ip link set dummy7 up")
+        r = subprocess.run(["ip", "netns", "exec", ns, "sh", "-c", script], capture_output=True,
+                           text=True, timeout=10)
+        if r.returncode:
+            pytest.skip(f"no veth interfaces here: {r.stderr.strip()}")
+        code = ("from rosnet_tui.core.router_card import build_router_card;"
+                "from rosnet_tui.core.settings import Settings, ThisComponent;"
+                "s = Settings(this=ThisComponent(name='turtlebot', interface='dummy7'));"
+                "c = build_router_card(s); print(c.mac, c.local_ip)")
+        out = subprocess.run(["ip", "netns", "exec", ns, sys.executable, "-c", code],
+                             capture_output=True, text=True, timeout=30, cwd=REPO,
+                             env=dict(os.environ, PYTHONPATH=str(REPO)))
+        assert out.stdout.split() == ["02:42:ac:11:00:07", "10.77.0.5"], out.stderr
+    finally:
+        subprocess.run(["ip", "netns", "delete", ns], capture_output=True, timeout=10)
