@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.listener import ListenerPool
 from rosnet_tui.core.results import CheckResult, Outcome, Status
 from rosnet_tui.core.settings import Settings, default_state_dir
 
@@ -33,6 +34,18 @@ class CheckContext:
     # Results of checks that already ran in this round, by id (for checks that build on others).
     results: dict[str, CheckResult] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
+    # SSH (rosnet_tui.core.ssh): the folder with our keys and known_hosts (None: $HOME/.ssh), the
+    # known_hosts files to trust (None: that folder's known_hosts + /etc/ssh/ssh_known_hosts), and
+    # whether to offer the ssh-agent's keys.
+    ssh_dir: Path | None = None
+    known_hosts_files: list[Path] | None = None
+    ssh_agent: bool = True
+    # isp.cgnat may ask the modem over UPnP (SSDP multicast on the LAN); tests outside the lab
+    # turn it off so nothing leaves the machine.
+    upnp: bool = True
+    # Our own test-port listeners, shared by the checks of a round (router.*, linux.chat_in);
+    # each is bound only while a check holds it.
+    listeners: ListenerPool = field(default_factory=ListenerPool)
 
 
 CheckFunc = Callable[[CheckContext], Awaitable[Outcome]]

@@ -1,0 +1,155 @@
+"""`rosnet-tui check`: run the live checks headless, print a table (or JSON), exit 0/1/2.
+
+Progress lines go to stderr as results land; the verdicts go to stdout in the registry's order,
+so the output is the same however the concurrent checks happened to finish.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import sys
+from typing import Any
+
+from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, config_path
+from rosnet_tui.core.checks import STEP_IDS
+
+_STYLES = {"pass": "green", "warn": "yellow", "fail": "bold red", "skip": "dim"}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "check", help="run the live checks headless and print what they saw",
+        description="Run each step's live checks (concurrently, each under its timeout) and print "
+                    "the verdicts: a table, or JSON with --json. Progress goes to stderr.",
+        epilog="Exit codes: 0 no check failed, 1 a check failed, 2 usage or settings error.")
+    p.add_argument("--step", action="append", choices=STEP_IDS, metavar="STEP",
+                   help=f"only this step's checks ({'|'.join(STEP_IDS)}); repeatable; "
+                        "default: every step")
+    p.add_argument("--json", action="store_true",
+                   help='print {"checks": [...]} as JSON instead of a table')
+    add_config_option(p)
+    p.add_argument("--timeout", type=float, metavar="S", default=None,
+                   help="seconds each check may take (default: checks.timeout_s in the settings)")
+    p.add_argument("--no-upnp", action="store_true",
+                   help="do not ask the modem over UPnP (isp.cgnat then relies on the path probe)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=run)
+
+
+def _err(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _load(args: argparse.Namespace):  # -> Settings | None
+    from rosnet_tui.core.netinfo import detect_local_net
+    from rosnet_tui.core.settings import SettingsError, load_settings
+
+    path = config_path(args)
+    try:
+        settings = load_settings(path)
+    except SettingsError as exc:
+        _err(f"rosnet-tui check: the settings file cannot be used: {exc}")
+        return None
+    if settings is None:
+        _err(f"rosnet-tui check: no settings file at {path}; run 'rosnet-tui' (the wizard) first, "
+             "or pass --config FILE")
+        return None
+    if not settings.this.local_ip or not settings.this.interface:
+        net = detect_local_net()  # filled in for this run only; the file is not touched
+        if not settings.this.local_ip and net.local_ip:
+            settings.this.local_ip = net.local_ip
+            if not settings.this.interface:
+                settings.this.interface = net.interface
+        elif not settings.this.interface and net.local_ip == settings.this.local_ip:
+            settings.this.interface = net.interface
+    problems = settings.problems()
+    if problems:
+        _err(f"rosnet-tui check: the settings in {path} are not complete:")
+        for key, why in problems:
+            _err(f"  {key}: {why}")
+        _err("Fix them by hand or with the wizard (rosnet-tui --setup).")
+        return None
+    return settings
+
+
+def run(args: argparse.Namespace) -> int:
+    timeout = args.timeout
+    if timeout is not None and not 0.1 <= timeout <= 120:
+        _err("rosnet-tui check: --timeout must be between 0.1 and 120 seconds")
+        return EXIT_USAGE
+    settings = _load(args)
+    if settings is None:
+        return EXIT_USAGE
+
+    from rosnet_tui.core.checks import CheckContext, checks_for, run_checks
+
+    steps = list(dict.fromkeys(args.step)) if args.step else None
+    specs = checks_for(steps)
+    ctx = CheckContext(settings=settings,
+                       timeout_s=float(timeout if timeout is not None else settings.checks.timeout_s),
+                       env=dict(os.environ), upnp=not args.no_upnp)
+    progress = not args.quiet
+    total = len(specs)
+
+    async def go() -> dict:
+        got = {}
+        async for r in run_checks(specs, ctx):
+            got[r.id] = r
+            if progress:
+                _err(f"[{len(got)}/{total}] {r.status.label:<4} {r.id}: {r.summary}")
+        return got
+
+    results = asyncio.run(go())
+    ordered = [results[s.id] for s in specs if s.id in results]
+    advice = _advice(results, settings)
+    failed = any(r.status.value == "fail" for r in ordered)
+    if args.json:
+        out = []
+        for r in ordered:
+            entry = r.to_json()
+            entry["advice"] = [f.to_json() for f in advice if r.id in f.check_ids]
+            out.append(entry)
+        sys.stdout.write(json.dumps({"checks": out}, indent=2, default=str) + "\n")
+        sys.stdout.flush()
+    else:
+        _print_table(ordered, advice)
+    return EXIT_FAIL if failed else EXIT_OK
+
+
+def _advice(results: dict, settings: Any) -> list:
+    try:
+        from rosnet_tui.core.advisor import advise
+
+        return list(advise(results, settings))
+    except Exception as exc:  # the verdicts matter more than the advice
+        _err(f"(no advice: the advisor failed: {type(exc).__name__}: {exc})")
+        return []
+
+
+def _print_table(ordered: list, advice: list) -> None:
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
+    console = Console(highlight=False, soft_wrap=False)
+    table = Table(show_header=True, header_style="bold", expand=False, show_lines=False)
+    table.add_column("Status", no_wrap=True)
+    table.add_column("Check", no_wrap=True)
+    table.add_column("What was seen", overflow="fold")
+    for r in ordered:
+        st = r.status.value
+        text = escape(r.summary)
+        if st != "pass" and r.evidence:
+            text += "\n" + "\n".join(f"[dim]  {escape(e)}[/dim]" for e in r.evidence)
+        for f in advice:
+            if r.id in f.check_ids and st in ("fail", "warn"):
+                text += f"\n[bold]-> {escape(f.meaning)}[/bold]"
+                for a in f.actions:
+                    text += f"\n   - {escape(a)}"
+        table.add_row(f"[{_STYLES[st]}]{r.status.label}[/]", r.id, text)
+    console.print(table)
+    counts = {s: sum(1 for r in ordered if r.status.value == s) for s in _STYLES}
+    console.print(", ".join(f"{n} {s}" for s, n in counts.items() if n) or "no checks ran")

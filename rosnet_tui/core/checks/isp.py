@@ -1,0 +1,593 @@
+"""Step 1, ISP: is there internet, what is our public IP (and does it change), is there carrier NAT.
+
+Traffic goes only to the endpoints the settings name (``probe.public_ip_urls``,
+``probe.port_check_url``), plus, for ``isp.cgnat``, a UPnP question to the modem on the LAN when
+``ctx.upnp`` allows it. HTTP ignores proxy variables: a proxy would answer with its own address.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import ipaddress
+import socket
+import struct
+import time
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+from urllib.parse import urljoin, urlsplit
+
+import psutil
+import requests
+
+from rosnet_tui import __version__
+from rosnet_tui.core.checks import REGISTRY, CheckContext, check
+from rosnet_tui.core.netinfo import is_overlay
+from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.ssh import resolve_ipv4, run_blocking
+from rosnet_tui.core.state import PublicIpRecord, now_iso, record_public_ip
+
+CGNAT_NET = ipaddress.ip_network("100.64.0.0/10")
+RFC1918 = tuple(ipaddress.ip_network(n) for n in ("10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16"))
+MAX_BODY = 64 * 1024
+
+
+def budget(ctx: CheckContext, check_id: str) -> float:
+    """Seconds *check_id* may take under *ctx* (its timeout times its factor)."""
+    spec = REGISTRY.get(check_id)
+    return ctx.timeout_s * (spec.timeout_factor if spec else 1.0)
+
+
+def is_cgnat(ip: str) -> bool:
+    try:
+        return ipaddress.ip_address(ip) in CGNAT_NET
+    except ValueError:
+        return False
+
+
+def is_rfc1918(ip: str) -> bool:
+    """A home/office LAN address (10/8, 172.16/12, 192.168/16); documentation ranges are not."""
+    try:
+        a = ipaddress.ip_address(ip)
+    except ValueError:
+        return False
+    return any(a in n for n in RFC1918)
+
+
+def is_public_v4(ip: str) -> bool:
+    try:
+        a = ipaddress.ip_address(ip)
+    except ValueError:
+        return False
+    return (a.version == 4 and not is_rfc1918(ip) and not is_cgnat(ip) and not a.is_loopback
+            and not a.is_link_local and not a.is_unspecified and not a.is_multicast)
+
+
+# --------------------------------------------------------------------------- HTTP
+@dataclass
+class HttpAnswer:
+    url: str
+    ok: bool                 # a 2xx answer arrived
+    status: int | None
+    text: str
+    error: str | None        # why not, in a few words
+
+    def describe(self) -> str:
+        if self.ok:
+            return f"GET {self.url} -> HTTP {self.status}: {self.text.strip()[:80]!r}"
+        return f"GET {self.url} -> {self.error}"
+
+
+def _short_error(exc: BaseException) -> str:
+    text = str(exc)
+    if isinstance(exc, requests.exceptions.ConnectTimeout):
+        return "no answer (timed out connecting)"
+    if isinstance(exc, requests.exceptions.ReadTimeout):
+        return "connected, but no reply in time"
+    if isinstance(exc, requests.exceptions.SSLError):
+        return "TLS error (" + text[:120] + ")"
+    low = text.lower()
+    for needle, words in (("name or service not known", "the name does not resolve"),
+                          ("failed to resolve", "the name does not resolve"),
+                          ("temporary failure in name resolution", "the name does not resolve (DNS)"),
+                          ("connection refused", "connection refused"),
+                          ("no route to host", "no route to the host"),
+                          ("network is unreachable", "the network is unreachable"),
+                          ("timed out", "timed out")):
+        if needle in low:
+            return words
+    return text[:160] or type(exc).__name__
+
+
+def _http_get_blocking(url: str, timeout: float) -> HttpAnswer:
+    deadline = time.monotonic() + timeout
+    with requests.Session() as s:
+        s.trust_env = False  # no proxies from the environment: we want our own public address
+        current = url
+        for _ in range(4):
+            left = max(deadline - time.monotonic(), 0.05)
+            try:
+                r = s.get(current, timeout=(left, left), stream=True, allow_redirects=False,
+                          headers={"User-Agent": f"rosnet-tui/{__version__}",
+                                   "Accept": "text/plain, application/json;q=0.9, */*;q=0.5"})
+            except requests.RequestException as exc:
+                return HttpAnswer(url, False, None, "", _short_error(exc))
+            with r:
+                if r.is_redirect and r.headers.get("location"):
+                    nxt = urljoin(current, r.headers["location"])
+                    if urlsplit(nxt).hostname != urlsplit(url).hostname:
+                        return HttpAnswer(url, False, r.status_code, "",
+                                          f"HTTP {r.status_code}: redirected to another host ({nxt}); "
+                                          "not followed")
+                    current = nxt
+                    continue
+                try:
+                    body = r.raw.read(MAX_BODY, decode_content=True) or b""
+                except Exception as exc:  # noqa: BLE001
+                    return HttpAnswer(url, False, r.status_code, "", _short_error(exc))
+                text = body.decode(r.encoding or "utf-8", "replace")
+                if 200 <= r.status_code < 300:
+                    return HttpAnswer(url, True, r.status_code, text, None)
+                return HttpAnswer(url, False, r.status_code, text,
+                                  f"HTTP {r.status_code} {r.reason or ''}".strip())
+        return HttpAnswer(url, False, None, "", "too many redirects")
+
+
+async def http_get(url: str, timeout: float) -> HttpAnswer:
+    """GET *url* within *timeout* seconds overall; never raises for network trouble."""
+    try:
+        return await run_blocking(_http_get_blocking, url, timeout, timeout=timeout + 0.3)
+    except asyncio.TimeoutError:
+        return HttpAnswer(url, False, None, "", f"no answer within {timeout:.1f} s")
+
+
+def parse_ip(text: str) -> str | None:
+    """The IPv4 address a what-is-my-IP service answered (plain text, or JSON with "ip")."""
+    t = text.strip()
+    if t.startswith("{"):
+        import json
+
+        with contextlib.suppress(ValueError, AttributeError):
+            t = str(json.loads(t).get("ip", ""))
+    t = t.split()[0] if t.split() else ""
+    try:
+        a = ipaddress.ip_address(t)
+    except ValueError:
+        return None
+    return str(a) if a.version == 4 else None
+
+
+async def fetch_public_ip(ctx: CheckContext, timeout: float) -> str | None:
+    """This component's public IP: from this round's isp.public_ip if it ran, else one quick ask."""
+    res = ctx.results.get("isp.public_ip")
+    if res is not None and res.data.get("public_ip"):
+        return str(res.data["public_ip"])
+    for url in ctx.settings.probe.public_ip_urls[:1]:
+        ans = await http_get(url, timeout)
+        if ans.ok:
+            return parse_ip(ans.text)
+    return None
+
+
+# --------------------------------------------------------------------------- isp.internet
+def _endpoints(ctx: CheckContext) -> list[str]:
+    urls = list(ctx.settings.probe.public_ip_urls)
+    if ctx.settings.probe.port_check_url:
+        urls.append(ctx.settings.probe.port_check_url)
+    return list(dict.fromkeys(urls))
+
+
+def _is_ip_literal(host: str) -> bool:
+    try:
+        ipaddress.ip_address(host)
+        return True
+    except ValueError:
+        return False
+
+
+@check("isp.internet", "isp", "Internet: DNS and HTTP work", 1.0)
+async def check_internet(ctx: CheckContext) -> Outcome:
+    urls = _endpoints(ctx)
+    if not urls:
+        return Outcome(Status.SKIP, "no endpoints in the settings (probe.public_ip_urls is empty)",
+                       data={"dns_ok": None, "http_ok": None, "failed_part": None, "url": ""})
+    total = budget(ctx, "isp.internet") * 0.9
+    start = time.monotonic()
+
+    async def probe(url: str) -> dict:
+        host = urlsplit(url).hostname or ""
+        ev: list[str] = []
+        dns_ok: bool | None = None
+        if host and not _is_ip_literal(host):
+            addrs, err = await resolve_ipv4(host, total * 0.45)
+            dns_ok = bool(addrs)
+            ev.append(f"resolve {host} -> {', '.join(addrs)}" if addrs else f"resolve {host}: {err}")
+            if not addrs:
+                return {"url": url, "dns_ok": False, "http_ok": None, "evidence": ev}
+        ans = await http_get(url, max(total - (time.monotonic() - start), 0.2))
+        ev.append(ans.describe())
+        return {"url": url, "dns_ok": dns_ok, "http_ok": ans.ok, "evidence": ev}
+
+    probes = await asyncio.gather(*(probe(u) for u in urls))
+    evidence = [line for p in probes for line in p["evidence"]]
+    good = [p for p in probes if p["http_ok"]]
+    bad = [p for p in probes if not p["http_ok"]]
+
+    def part(p: dict) -> str:
+        return "dns" if p["dns_ok"] is False else "http"
+
+    shown = bad[0] if bad and good else probes[0]
+    data = {"dns_ok": shown["dns_ok"], "http_ok": shown["http_ok"],
+            "failed_part": None if shown["http_ok"] else part(shown), "url": shown["url"],
+            "endpoints": {p["url"]: {"dns_ok": p["dns_ok"], "http_ok": p["http_ok"]} for p in probes}}
+    if not bad:
+        n = len(probes)
+        return Outcome(Status.PASS, f"DNS and HTTP work ({n} endpoint{'s' if n > 1 else ''} answered)",
+                       evidence, data)
+    if good:
+        names = ", ".join(p["url"] for p in bad)
+        return Outcome(Status.WARN, f"the internet works, but {names} failed "
+                                    f"({'name resolution' if part(bad[0]) == 'dns' else 'HTTP'})",
+                       evidence, data)
+    if all(part(p) == "dns" for p in bad):
+        data["failed_part"] = "dns"
+        return Outcome(Status.FAIL, "no internet: names do not resolve (DNS fails)", evidence, data)
+    data["failed_part"] = "http"
+    if any(p["dns_ok"] for p in bad):
+        return Outcome(Status.FAIL, "no internet: names resolve but no HTTP request gets an answer",
+                       evidence, data)
+    return Outcome(Status.FAIL, "no internet: no HTTP request gets an answer", evidence, data)
+
+
+# --------------------------------------------------------------------------- isp.public_ip
+@check("isp.public_ip", "isp", "Public IP: what the internet sees, and whether it changes", 1.0)
+async def check_public_ip(ctx: CheckContext) -> Outcome:
+    s = ctx.settings
+    urls = list(dict.fromkeys(s.probe.public_ip_urls))
+    settings_ip = s.this.public_ip
+    base: dict[str, Any] = {"public_ip": None, "sources": {}, "agree": False,
+                            "settings_ip": settings_ip, "matches_settings": None,
+                            "previous_ip": None, "changed": False, "history": []}
+    if not urls:
+        return Outcome(Status.SKIP, "no what-is-my-IP service configured (probe.public_ip_urls)",
+                       data=base)
+    answers = await asyncio.gather(*(http_get(u, budget(ctx, "isp.public_ip") * 0.85) for u in urls))
+    sources: dict[str, str] = {}
+    evidence: list[str] = []
+    for a in answers:
+        ip = parse_ip(a.text) if a.ok else None
+        if ip:
+            sources[a.url] = ip
+            evidence.append(f"GET {a.url} -> {ip}")
+        else:
+            why = a.error or f"not an IPv4 address: {a.text.strip()[:60]!r}"
+            sources[a.url] = f"error: {why}"
+            evidence.append(f"GET {a.url} -> {why}")
+    ips = [v for v in sources.values() if not v.startswith("error:")]
+    data = dict(base, sources=sources)
+    if not ips:
+        return Outcome(Status.FAIL, "no what-is-my-IP service answered, so the public IP is unknown",
+                       evidence, data)
+    counts = Counter(ips)
+    if len(counts) > 1:
+        listing = ", ".join(f"{u} says {v}" for u, v in sources.items() if not v.startswith("error:"))
+        data.update(agree=False, public_ip=None)
+        return Outcome(Status.FAIL, f"the services disagree about the public IP ({listing}): "
+                                    "several exits (a proxy, VPN or load-balancing modem)",
+                       evidence, data)
+    public_ip = ips[0]
+    errors = len(ips) < len(urls)
+    try:
+        rec = record_public_ip(ctx.state_dir, public_ip)
+    except OSError as exc:  # an unwritable state folder must not hide the address
+        now = now_iso()
+        rec = PublicIpRecord(public_ip, None, False, [{"ip": public_ip, "first_seen": now,
+                                                       "last_seen": now}])
+        evidence.append(f"could not record the address in {ctx.state_dir}: {exc.strerror or exc}")
+    matches = None if not settings_ip else settings_ip == public_ip
+    data.update(public_ip=public_ip, agree=not errors, matches_settings=matches,
+                previous_ip=rec.previous_ip, changed=rec.changed, history=rec.history)
+    if len(rec.history) > 1:
+        evidence.append("addresses seen: " + ", ".join(
+            f"{h['ip']} ({h['first_seen']} .. {h['last_seen']})" for h in rec.history[-5:]))
+    else:
+        evidence.append(f"first recorded {rec.history[0]['first_seen']}")
+    notes: list[str] = []
+    status = Status.PASS
+    if not is_public_v4(public_ip):
+        status = Status.WARN
+        notes.append(f"{public_ip} is not a public address (is the service on your own network?)")
+    if errors:
+        status = Status.WARN
+        notes.append(f"{len(urls) - len(ips)} of {len(urls)} services did not answer")
+    if rec.changed:
+        status = Status.WARN
+        notes.append(f"it changed since the last run (was {rec.previous_ip}): this connection's "
+                     "address is not fixed; peers' hosts entries go stale")
+    if matches is False:
+        status = Status.WARN
+        notes.append(f"the settings say {settings_ip}: update them and the peers' hosts files")
+    if status is Status.PASS:
+        kept = rec.history[-1]["first_seen"]
+        how = f"unchanged since {kept}" if len(rec.history) > 1 or rec.previous_ip else "recorded"
+        agree = f"{len(ips)} sources agree" if len(ips) > 1 else "from 1 source"
+        return Outcome(Status.PASS, f"public IP {public_ip} ({how}; {agree})",
+                       evidence, data)
+    return Outcome(status, f"public IP {public_ip}; " + "; ".join(notes), evidence, data)
+
+
+# --------------------------------------------------------------------------- isp.cgnat
+IP_RECVERR = getattr(socket, "IP_RECVERR", 11)
+SO_EE_ORIGIN_ICMP = 2
+_EE = struct.Struct("=IBBBBII")
+TRACE_BASE_PORT = 33434
+MAX_HOPS = 6
+
+
+@dataclass
+class Hop:
+    ttl: int
+    ip: str | None
+    reached: bool = False   # the destination itself answered (port unreachable)
+
+
+def _parse_errqueue(ancdata: list) -> tuple[str, int, int] | None:
+    for level, ctype, data in ancdata:
+        if level == socket.SOL_IP and ctype == IP_RECVERR and len(data) >= _EE.size + 8:
+            _errno, origin, icmp_type, icmp_code, _pad, _info, _d = _EE.unpack_from(data)
+            if origin != SO_EE_ORIGIN_ICMP:
+                continue
+            addr = socket.inet_ntoa(data[_EE.size + 4:_EE.size + 8])
+            return addr, icmp_type, icmp_code
+    return None
+
+
+async def ttl_probe(target: str, max_hops: int, timeout: float) -> list[Hop]:
+    """Which routers a UDP packet to *target* passes: one probe per TTL, answers read from the
+    socket error queue (IP_RECVERR), so no raw socket and no privileges are needed."""
+    socks: dict[int, socket.socket] = {}
+    hops: dict[int, Hop] = {}
+    try:
+        for ttl in range(1, max_hops + 1):
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            s.setblocking(False)
+            s.setsockopt(socket.SOL_IP, IP_RECVERR, 1)
+            s.setsockopt(socket.SOL_IP, socket.IP_TTL, ttl)
+            s.connect((target, TRACE_BASE_PORT + ttl))
+            socks[ttl] = s
+        deadline = time.monotonic() + timeout
+        resend_at = time.monotonic() + timeout / 2
+        resent = False
+        for s in socks.values():
+            with contextlib.suppress(OSError):
+                s.send(b"rosnet-tui path probe")
+        while time.monotonic() < deadline:
+            for ttl, s in socks.items():
+                if ttl in hops:
+                    continue
+                try:
+                    _data, anc, _flags, _addr = s.recvmsg(512, 512, socket.MSG_ERRQUEUE)
+                except (BlockingIOError, InterruptedError):
+                    continue
+                except OSError:
+                    continue
+                got = _parse_errqueue(anc)
+                if got:
+                    ip, icmp_type, _code = got
+                    hops[ttl] = Hop(ttl, ip, reached=(icmp_type == 3 and ip == target))
+            reached = [t for t, h in hops.items() if h.reached or h.ip == target]
+            if reached and all(t in hops for t in range(1, min(reached) + 1)):
+                break
+            if len(hops) == len(socks):
+                break
+            if not resent and time.monotonic() >= resend_at:
+                resent = True
+                for ttl, s in socks.items():
+                    if ttl not in hops:
+                        with contextlib.suppress(OSError):
+                            s.send(b"rosnet-tui path probe")
+            await asyncio.sleep(0.02)
+    finally:
+        for s in socks.values():
+            s.close()
+    out: list[Hop] = []
+    for ttl in range(1, max_hops + 1):
+        h = hops.get(ttl, Hop(ttl, None))
+        out.append(h)
+        if h.reached or h.ip == target:
+            break
+    return out
+
+
+SSDP_ADDR = ("239.255.255.250", 1900)
+_IGD_TYPES = ("urn:schemas-upnp-org:device:InternetGatewayDevice:1",
+              "urn:schemas-upnp-org:device:InternetGatewayDevice:2")
+
+
+async def ssdp_find_igd(timeout: float) -> str | None:
+    """Ask the LAN (SSDP multicast, TTL 2) whether an internet gateway answers; its LOCATION.
+
+    miniupnpc's own discovery always takes seconds when nobody answers, so this quick question
+    decides whether asking miniupnpc is worth it.
+    """
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        s.setblocking(False)
+        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 2)
+        for st in _IGD_TYPES:
+            msg = (f"M-SEARCH * HTTP/1.1\r\nHOST: {SSDP_ADDR[0]}:{SSDP_ADDR[1]}\r\n"
+                   f"MAN: \"ssdp:discover\"\r\nMX: 1\r\nST: {st}\r\n\r\n")
+            try:
+                s.sendto(msg.encode(), SSDP_ADDR)
+            except OSError:
+                return None
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                data, _addr = s.recvfrom(2048)
+            except (BlockingIOError, InterruptedError):
+                await asyncio.sleep(0.02)
+                continue
+            except OSError:
+                return None
+            for line in data.decode("latin-1").splitlines():
+                if line.lower().startswith("location:"):
+                    return line.split(":", 1)[1].strip()
+        return None
+    finally:
+        s.close()
+
+
+def _upnp_wan_ip(delay_ms: int) -> str:
+    import miniupnpc
+
+    u = miniupnpc.UPnP()
+    u.discoverdelay = delay_ms
+    if u.discover() <= 0:
+        raise LookupError("no UPnP device answered")
+    u.selectigd()
+    return str(u.externalipaddress())
+
+
+def _route_source(target: str) -> tuple[str, str]:
+    """(source address, interface) this machine would use towards *target* (no packet sent)."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        s.connect((target, TRACE_BASE_PORT))
+        src = s.getsockname()[0]
+    finally:
+        s.close()
+    for name, addrs in psutil.net_if_addrs().items():
+        if any(a.family == socket.AF_INET and a.address == src for a in addrs):
+            return src, name
+    return src, ""
+
+
+@check("isp.cgnat", "isp", "No carrier-grade or double NAT on the way out", 2.0)
+async def check_cgnat(ctx: CheckContext) -> Outcome:
+    total = budget(ctx, "isp.cgnat") * 0.85
+    data: dict = {"wan_ip": None, "method": "none", "cgnat": False, "double_nat": False,
+                  "hop": None, "hops": []}
+    evidence: list[str] = []
+    urls = ctx.settings.probe.public_ip_urls
+    host = urlsplit(urls[0]).hostname if urls else None
+    target: str | None = None
+    if host:
+        if _is_ip_literal(host):
+            target = host
+        else:
+            addrs, err = await resolve_ipv4(host, total * 0.3)
+            target = addrs[0] if addrs else None
+            if not addrs:
+                evidence.append(f"resolve {host}: {err}")
+    start = time.monotonic()
+
+    async def upnp() -> str | None:
+        if not ctx.upnp:
+            evidence.append("UPnP: not asked (turned off for this run)")
+            return None
+        location = await ssdp_find_igd(min(0.8, total * 0.25))
+        if location is None:
+            evidence.append("UPnP: no internet gateway answered on the LAN")
+            return None
+        evidence.append(f"UPnP: a gateway answered ({location})")
+        delay = int(min(0.5, total * 0.2) * 1000)
+        try:
+            ip = await run_blocking(_upnp_wan_ip, delay, timeout=max(total * 0.6, 0.5))
+        except asyncio.TimeoutError:
+            evidence.append("UPnP: the modem did not finish answering in time")
+            return None
+        except Exception as exc:  # noqa: BLE001 - miniupnpc raises bare Exception
+            evidence.append(f"UPnP: {exc or 'no answer'}")
+            return None
+        evidence.append(f"UPnP: the modem reports its WAN address is {ip}")
+        return ip or None
+
+    async def trace() -> list[Hop] | None:
+        if target is None:
+            return None
+        try:
+            src, ifname = await run_blocking(_route_source, target, timeout=1.0)
+        except (OSError, asyncio.TimeoutError) as exc:
+            evidence.append(f"no route towards {target}: {exc}")
+            return None
+        if ifname == "lo" or ipaddress.ip_address(target).is_loopback:
+            evidence.append(f"{target} is this machine itself; there is no path to probe")
+            return None
+        if ifname and is_overlay(ifname):
+            evidence.append(f"traffic to {target} leaves through {ifname}, an overlay network; its "
+                            "path says nothing about the modem, so it was not probed")
+            return None
+        data["source"] = src
+        try:
+            hops = await ttl_probe(target, MAX_HOPS, max(total - (time.monotonic() - start) - 0.2, 0.3))
+        except OSError as exc:
+            evidence.append(f"TTL-limited probe not possible here: {exc}")
+            return None
+        evidence.append(f"TTL-limited UDP probe towards {target}: " + ", ".join(
+            f"{h.ttl}:{h.ip or '*'}" for h in hops))
+        return hops
+
+    wan_ip, hops = await asyncio.gather(upnp(), trace())
+    if wan_ip:
+        data.update(wan_ip=wan_ip, method="upnp")
+        public_ip = None
+        if is_public_v4(wan_ip):
+            public_ip = await fetch_public_ip(ctx, max(total - (time.monotonic() - start), 0.5))
+            if public_ip:
+                evidence.append(f"the internet sees {public_ip}")
+        status, summary, updates = judge_wan(wan_ip, public_ip)
+        data.update(updates)
+        return Outcome(status, summary, evidence, data)
+    if hops is None:
+        if target is None and not host:
+            return Outcome(Status.SKIP, "cannot tell: no public-IP service in the settings to probe "
+                                        "towards, and no UPnP answer from the modem", evidence, data)
+        if target is None:
+            return Outcome(Status.SKIP, f"cannot tell: {host} does not resolve and the modem did not "
+                                        "answer UPnP", evidence, data)
+        return Outcome(Status.SKIP, "cannot tell: " + (evidence[-1] if evidence else "no probe"),
+                       evidence, data)
+    data["method"] = "traceroute"
+    data["hops"] = [h.ip for h in hops]
+    status, summary, updates = judge_path(hops, target or "", data.get("source"))
+    data.update(updates)
+    return Outcome(status, summary, evidence, data)
+
+
+def judge_wan(wan_ip: str, public_ip: str | None) -> tuple[Status, str, dict]:
+    """Verdict from the modem's own WAN address (UPnP) and the address the internet sees."""
+    if is_cgnat(wan_ip):
+        return (Status.WARN, f"carrier-grade NAT: the modem's internet-side address is {wan_ip} "
+                             "(the carriers' shared 100.64.0.0/10); port forwarding on this modem "
+                             "cannot be reached from the internet", {"cgnat": True, "hop": wan_ip})
+    if is_rfc1918(wan_ip):
+        return (Status.WARN, f"double NAT: the modem's internet-side address {wan_ip} is private; "
+                             "the router in front of it must forward too",
+                {"double_nat": True, "hop": wan_ip})
+    if public_ip and public_ip != wan_ip:
+        return (Status.WARN, f"NAT beyond the modem: its WAN address is {wan_ip} but the internet "
+                             f"sees {public_ip}", {"double_nat": True, "hop": wan_ip})
+    return Status.PASS, f"no carrier NAT: the modem holds the public address {wan_ip}", {}
+
+
+def judge_path(hops: list[Hop], target: str, source: str | None) -> tuple[Status, str, dict]:
+    """Verdict from the routers on the way out (hop 1 is our own modem, so it is not judged)."""
+    if source and is_cgnat(source):
+        return (Status.WARN, f"carrier-grade NAT: this machine's own address {source} is in the "
+                             "carriers' range 100.64.0.0/10", {"cgnat": True, "hop": source})
+    for h in hops[1:]:
+        if h.ip and h.ip != target and is_cgnat(h.ip):
+            return (Status.WARN, f"carrier-grade NAT: hop {h.ttl} on the way out is {h.ip} "
+                                 "(100.64.0.0/10, the carriers' shared range); forwarding on the "
+                                 "modem cannot be reached from the internet",
+                    {"cgnat": True, "hop": h.ip})
+    for h in hops[1:]:
+        if h.ip and h.ip != target and is_rfc1918(h.ip):
+            return (Status.WARN, f"double NAT: hop {h.ttl} on the way out is the private address "
+                                 f"{h.ip}; the router there must forward too",
+                    {"double_nat": True, "hop": h.ip})
+    if any(h.ip for h in hops[1:]) or any(h.reached for h in hops):
+        return Status.PASS, "no sign of carrier NAT (the hops after the modem are public)", {}
+    return Status.PASS, "no sign of carrier NAT (no hop after the modem answered the probe)", {}

@@ -1,0 +1,406 @@
+"""Step 2, Router/modem: local address, the test port, our listener, and forwarding from outside.
+
+``router.port_open`` is the procedure's "start ``nc -l PORT``, ask a port checker" loop: our own
+listener (:mod:`rosnet_tui.core.listener`) answers on each port we probe, and the outside view
+comes from the peer over SSH (it connects to our public IP and must read our listener's greeting,
+so a port forwarded to the wrong machine is caught) or from the echoip service in the settings.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import json
+import os
+import random
+import socket
+from typing import Any
+
+import psutil
+
+from rosnet_tui.core.checks import CheckContext, check
+from rosnet_tui.core.checks.isp import budget, fetch_public_ip, http_get
+from rosnet_tui.core.listener import GREETING, TestListener
+from rosnet_tui.core.netinfo import detect_local_net, interface_ipv4
+from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Peer
+from rosnet_tui.core.ssh import run_blocking, ssh_run
+
+
+# --------------------------------------------------------------------------- router.local_ip
+@check("router.local_ip", "router", "Local IP is the one the modem forwards to", 1.0)
+async def check_local_ip(ctx: CheckContext) -> Outcome:
+    t = ctx.settings.this
+    expected = t.local_ip
+    net = await run_blocking(detect_local_net, timeout=budget(ctx, "router.local_ip") * 0.8)
+    interface = t.interface or net.interface
+    evidence = [f"default route: {net.gateway or 'none'}"
+                + (f" via {net.interface}" if net.interface else "")]
+    stats = psutil.net_if_stats()
+    local_ip, mask = interface_ipv4(interface) if interface else ("", "")
+    if interface:
+        up = interface in stats and stats[interface].isup
+        evidence.append(f"{interface}{' (from the settings)' if t.interface else ''}: "
+                        f"{'up' if up else 'DOWN' if interface in stats else 'no such interface'}, "
+                        f"{local_ip or 'no IPv4 address'}" + (f"/{mask}" if mask else ""))
+    else:
+        up = False
+    gateway = net.gateway if (not net.interface or net.interface == interface) else ""
+    addrs_here = {a.address for addrs in psutil.net_if_addrs().values() for a in addrs
+                  if a.family == socket.AF_INET}
+    differs = bool(expected) and expected != local_ip
+    data = {"local_ip": local_ip if up else "", "interface": interface, "gateway": gateway,
+            "expected_ip": expected, "differs": differs}
+    if not interface:
+        return Outcome(Status.FAIL, "no network interface with an IPv4 address: this machine is not "
+                                    "on a network", evidence, data)
+    if interface not in stats:
+        return Outcome(Status.FAIL, f"the interface {interface} from the settings does not exist "
+                                    "here", evidence, data)
+    if not up:
+        return Outcome(Status.FAIL, f"{interface} is down (cable unplugged or Wi-Fi off)",
+                       evidence, data)
+    if not local_ip:
+        return Outcome(Status.FAIL, f"{interface} has no IPv4 address (no DHCP lease?)",
+                       evidence, data)
+    if differs:
+        also = " (it is on another interface here)" if expected in addrs_here else ""
+        return Outcome(Status.WARN, f"local IP is {local_ip} on {interface}, but the modem forwards to "
+                                    f"{expected}{also}: after a DHCP change the forwarding points "
+                                    "nowhere; reserve the address in the modem or update the "
+                                    "forwarding", evidence, data)
+    if not gateway:
+        return Outcome(Status.WARN, f"{local_ip} on {interface}, but no default gateway through it: "
+                                    "no way out to the internet", evidence, data)
+    return Outcome(Status.PASS, f"{local_ip} on {interface}, gateway {gateway}", evidence, data)
+
+
+# --------------------------------------------------------------------------- router.port_free
+def who_listens(port: int) -> tuple[int | None, str | None, bool]:
+    """(pid, process name, found) of a TCP listener on *port* (pid None: another user's)."""
+    try:
+        conns = psutil.net_connections(kind="tcp")
+    except (psutil.AccessDenied, OSError):
+        return None, None, False
+    for c in conns:
+        if c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == port:
+            if c.pid is None:
+                return None, None, True
+            try:
+                p = psutil.Process(c.pid)
+                name = " ".join(p.cmdline()[:3]) or p.name()
+            except (psutil.Error, OSError):
+                name = None
+            return c.pid, name, True
+    return None, None, False
+
+
+def listening_locally(port: int) -> bool:
+    """Whether some process listens on TCP *port* on an address others can reach."""
+    try:
+        conns = psutil.net_connections(kind="tcp")
+    except (psutil.AccessDenied, OSError):
+        return False
+    return any(c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == port
+               and not c.laddr.ip.startswith("127.") and c.laddr.ip != "::1" for c in conns)
+
+
+@check("router.port_free", "router", "The test port is free for our listener", 1.0)
+async def check_port_free(ctx: CheckContext) -> Outcome:
+    port = ctx.settings.probe.port
+    data: dict[str, Any] = {"port": port, "in_use": False, "process": None, "pid": None}
+    if ctx.listeners.holds(port):
+        return Outcome(Status.PASS, f"port {port} is free (our own listener has it for this round)",
+                       [f"TCP {port}: held by rosnet-tui (pid {os.getpid()})"], data)
+    try:
+        async with ctx.listeners.hold(port):
+            pass
+    except OSError as exc:
+        pid, name, _found = await run_blocking(who_listens, port, timeout=budget(ctx, "router.port_free") * 0.7)
+        data.update(in_use=True, pid=pid, process=name)
+        who = (f"{name} (pid {pid})" if pid else
+               "a process of another user (run as root to see which)")
+        return Outcome(Status.FAIL, f"port {port} is in use by {who}: stop it or choose another test "
+                                    "port above 1024", [f"bind 0.0.0.0:{port}: {exc.strerror or exc}",
+                                                        f"listening there: {who}"], data)
+    return Outcome(Status.PASS, f"port {port} is free", [f"bind 0.0.0.0:{port}: ok (released)"], data)
+
+
+# --------------------------------------------------------------------------- router.listener
+async def _talk_to(ip: str, port: int, timeout: float) -> tuple[bool, str]:
+    """Connect to our own listener and read its greeting; (ok, what was seen)."""
+    writer = None
+    try:
+        reader, writer = await asyncio.wait_for(asyncio.open_connection(ip, port), timeout)
+        line = await asyncio.wait_for(reader.readline(), timeout)
+        text = line.decode(errors="replace").strip()
+        return text.startswith(GREETING), text
+    except (OSError, asyncio.TimeoutError) as exc:
+        return False, str(exc) or type(exc).__name__
+    finally:
+        if writer is not None:
+            writer.close()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(writer.wait_closed(), 0.5)
+
+
+@check("router.listener", "router", "Our listener is up on the test port", 1.0)
+async def check_listener(ctx: CheckContext) -> Outcome:
+    port = ctx.settings.probe.port
+    t = budget(ctx, "router.listener") * 0.4
+    data = {"port": port, "listening": False}
+    try:
+        async with ctx.listeners.hold(port) as lst:
+            evidence = [f"listening on 0.0.0.0:{port} (like nc -l {port})"]
+            targets = ["127.0.0.1"]
+            local = ctx.settings.this.local_ip
+            if local and local != "127.0.0.1":
+                targets.append(local)
+            results = await asyncio.gather(*(_talk_to(ip, port, t) for ip in targets))
+            for ip, (ok, seen) in zip(targets, results, strict=True):
+                evidence.append(f"connect {ip}:{port} -> {seen!r}" if ok else
+                                f"connect {ip}:{port} -> {seen}")
+            if all(ok for ok, _ in results):
+                data["listening"] = True
+                return Outcome(Status.PASS, f"our listener answers on port {port} "
+                                            f"({', '.join(targets)})", evidence, data)
+            data["listening"] = lst.listening and results[0][0]
+            bad = [ip for ip, (ok, _) in zip(targets, results, strict=True) if not ok]
+            return Outcome(Status.FAIL, f"our listener on port {port} does not answer on "
+                                        f"{', '.join(bad)} (a local firewall?)", evidence, data)
+    except OSError as exc:
+        return Outcome(Status.FAIL, f"cannot listen on port {port}: {exc.strerror or exc} "
+                                    "(see router.port_free)",
+                       [f"bind 0.0.0.0:{port}: {exc.strerror or exc}"], data)
+
+
+# --------------------------------------------------------------------------- router.port_open
+_PROBE_SCRIPT = r"""
+import json, socket, sys, threading
+ip = sys.argv[1]; t = float(sys.argv[2]); ports = [int(p) for p in sys.argv[3].split(",")]
+res = {}
+def probe(p):
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.settimeout(t)
+    try:
+        s.connect((ip, p))
+    except socket.timeout:
+        res[p] = ["timeout", ""]; s.close(); return
+    except Exception as e:
+        res[p] = ["error", str(e)]; s.close(); return
+    s.settimeout(min(t, 1.5))
+    b = b""
+    try:
+        while b"\n" not in b and len(b) < 200:
+            c = s.recv(200)
+            if not c:
+                break
+            b += c
+    except Exception:
+        pass
+    s.close()
+    res[p] = ["open", b.decode("utf-8", "replace").strip()[:160]]
+th = [threading.Thread(target=probe, args=(p,)) for p in ports]
+for x in th:
+    x.daemon = True; x.start()
+for x in th:
+    x.join(t + 2)
+print("RESULT " + json.dumps(res))
+"""
+
+
+def python_command(script: str, *args: str, python: str = "python3") -> str:
+    """A shell command running stdlib-only *script* with python3 on a peer (no install needed)."""
+    b64 = base64.b64encode(script.encode()).decode()
+    quoted = " ".join("'" + a.replace("'", "'\\''") + "'" for a in args)
+    return (f"{python} -c 'import base64;exec(base64.b64decode(\"{b64}\"))' {quoted}").strip()
+
+
+def ssh_peer(ctx: CheckContext) -> Peer | None:
+    """The first peer we can run commands on (one with an SSH user)."""
+    return next((p for p in ctx.settings.peers if p.ssh_user), None)
+
+
+def _pick_random_ports(n: int, avoid: set[int]) -> list[int]:
+    rng = random.SystemRandom()
+    out: list[int] = []
+    while len(out) < n:
+        p = rng.randint(PORT_MIN, PORT_MAX)
+        if p not in avoid and p not in out:
+            out.append(p)
+    return out
+
+
+async def _probe_from_peer(ctx: CheckContext, peer: Peer, public_ip: str, ports: list[int],
+                           t_connect: float, total: float) -> tuple[dict[int, tuple[str, str]] | None, str]:
+    cmd = python_command(_PROBE_SCRIPT, public_ip, f"{t_connect:.2f}", ",".join(map(str, ports)))
+    res = await ssh_run(ctx, peer, cmd, timeout=total, connect_timeout=total * 0.45)
+    if not res.ok:
+        return None, f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
+    for line in res.stdout.splitlines():
+        if line.startswith("RESULT "):
+            try:
+                raw = json.loads(line[7:])
+                return {int(k): (v[0], v[1]) for k, v in raw.items()}, ""
+            except (ValueError, KeyError, IndexError, TypeError):
+                break
+    why = (res.stderr.strip().splitlines() or ["no output"])[-1]
+    if "python3" in res.stderr and ("not found" in res.stderr or "No such file" in res.stderr):
+        why = "python3 is not installed there"
+    return None, f"the probe on {peer.name} did not run: {why}"
+
+
+def _explain_connect_error(text: str) -> str:
+    low = text.lower()
+    if "refused" in low:
+        return (" (refused: the modem rejects it, or forwards it to a machine where nothing "
+                "listens)")
+    if "no route" in low or "unreachable" in low:
+        return (" (no machine answered: the modem may forward to a local IP where nobody is, "
+                "or the address is not this modem's)" if "host" in low else "")
+    return ""
+
+
+async def _probe_echoip(ctx: CheckContext, port: int, timeout: float) -> tuple[bool | None, str]:
+    base = ctx.settings.probe.port_check_url.rstrip("/")
+    ans = await http_get(f"{base}/port/{port}", timeout)
+    if not ans.ok:
+        if ans.status == 429:
+            return None, f"GET {base}/port/{port} -> HTTP 429: the checker's rate limit; try later"
+        return None, ans.describe()
+    try:
+        body = json.loads(ans.text)
+        reachable = body.get("reachable")
+    except (ValueError, AttributeError):
+        return None, f"GET {base}/port/{port} -> not echoip JSON: {ans.text.strip()[:80]!r}"
+    if not isinstance(reachable, bool):
+        return None, f"GET {base}/port/{port} -> no 'reachable' in {ans.text.strip()[:80]!r}"
+    ip = body.get("ip")
+    return reachable, (f"GET {base}/port/{port} -> reachable={str(reachable).lower()}"
+                       + (f" (tested {ip})" if ip else ""))
+
+
+@check("router.port_open", "router", "Ports are open from outside (port forwarding works)", 3.0)
+async def check_port_open(ctx: CheckContext) -> Outcome:
+    s = ctx.settings
+    total = budget(ctx, "router.port_open") * 0.9
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+
+    def left() -> float:
+        return max(total - (loop.time() - start), 0.2)
+
+    test_port = s.probe.port
+    ours: dict[int, TestListener | None] = {}
+    evidence: list[str] = []
+    async with contextlib.AsyncExitStack() as stack:
+        try:
+            ours[test_port] = await stack.enter_async_context(ctx.listeners.hold(test_port))
+        except OSError as exc:
+            ours[test_port] = None
+            evidence.append(f"our listener could not bind {test_port}: {exc.strerror or exc}")
+        randoms: list[int] = []
+        for p in _pick_random_ports(12, {test_port, 11311, s.ros.port}):
+            if len(randoms) == 2:
+                break
+            try:
+                ours[p] = await stack.enter_async_context(ctx.listeners.hold(p))
+                randoms.append(p)
+            except OSError:
+                continue
+        services: list[int] = []
+        for p in (22, s.ros.port or 11311):
+            if p not in services and await run_blocking(listening_locally, p, timeout=1.0):
+                services.append(p)
+        ports = [test_port, *randoms, *services]
+        peer = ssh_peer(ctx) if s.this.profile == "remote" else None
+        via = "echoip"
+        public_ip: str | None = None
+        outcomes: dict[int, tuple[bool | None, str]] = {}
+        if peer is not None:
+            public_ip = await fetch_public_ip(ctx, min(left() * 0.25, 3.0)) or s.this.public_ip or None
+            if public_ip and s.this.public_ip and public_ip != s.this.public_ip:
+                evidence.append(f"the internet sees {public_ip}; the settings say {s.this.public_ip}")
+            if not public_ip:
+                evidence.append("the public IP is unknown, so the peer cannot be asked")
+            else:
+                raw, why = await _probe_from_peer(ctx, peer, public_ip, ports,
+                                                  t_connect=min(max(left() * 0.35, 0.5), 3.0),
+                                                  total=left() * 0.9)
+                if raw is None:
+                    evidence.append(why + "; asking the port checker instead")
+                else:
+                    via = f"peer:{peer.name}"
+                    for p in ports:
+                        state, text = raw.get(p, ("error", "no result"))
+                        lst = ours.get(p)
+                        if state == "open":
+                            if lst is not None and lst.token not in text:
+                                outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: accepted, but "
+                                                      f"not by our listener (it said {text!r}): the "
+                                                      "port is forwarded to another machine")
+                            else:
+                                src = ""
+                                if lst is not None:
+                                    seen = [x.address for x in lst.seen]
+                                    src = f"; our listener saw {seen[-1]}" if seen else ""
+                                outcomes[p] = (True, f"{peer.name} -> {public_ip}:{p}: open, read "
+                                                     f"{text[:60]!r}{src}")
+                        elif state == "timeout":
+                            outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: no answer "
+                                                  "(dropped: no forwarding or a firewall)")
+                        else:
+                            outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: {text}"
+                                           + _explain_connect_error(text))
+        if not outcomes:
+            via = "echoip"
+            checkable = [p for p in ports if p >= 1024]
+            for p in ports:
+                if p < 1024:
+                    outcomes[p] = (None, f"port {p}: the port checker only tests 1024-65535")
+            t = left() * 0.9
+            got = await asyncio.gather(*(_probe_echoip(ctx, p, t) for p in checkable))
+            outcomes.update(zip(checkable, got, strict=True))
+            if public_ip is None:
+                res = ctx.results.get("isp.public_ip")
+                public_ip = (res.data.get("public_ip") if res else None) or s.this.public_ip or None
+    rows: list[dict[str, Any]] = []
+    for p in ports:
+        reachable, line = outcomes[p]
+        listener = ours.get(p) is not None if p in ours else True
+        rows.append({"port": p, "reachable": reachable, "listener": listener, "via": via})
+        evidence.append(line)
+    test_open = outcomes[test_port][0]
+    data = {"ports": rows, "test_port": test_port, "test_port_open": test_open,
+            "public_ip": public_ip}
+    exposed = [p for p in services if outcomes[p][0]]
+    if exposed:
+        evidence.append("open to the whole internet: " + ", ".join(
+            {22: "22 (SSH)"}.get(p, f"{p} (ROS master)") for p in exposed))
+    where = f"from {via[5:]}" if via.startswith("peer:") else "by the port checker"
+    listener_up = ours.get(test_port) is not None
+    if test_open is None and all(r["reachable"] is None for r in rows):
+        return Outcome(Status.FAIL, "could not test from outside: " + outcomes[test_port][1],
+                       evidence, data)
+    if test_open is False:
+        if listener_up:
+            return Outcome(Status.FAIL, f"test port {test_port} is closed {where} while our listener "
+                                        "runs: port forwarding is not working", evidence, data)
+        return Outcome(Status.FAIL, f"test port {test_port} is closed {where}, and our listener could "
+                                    "not start there (port in use)", evidence, data)
+    closed = [r["port"] for r in rows if r["reachable"] is False]
+    unknown = [r["port"] for r in rows if r["reachable"] is None and int(r["port"]) >= 1024]
+    hard = [p for p in closed if p != 22 and (p != s.ros.port or s.is_master or p in randoms)]
+    if hard:
+        return Outcome(Status.FAIL, f"test port {test_port} is open {where}, but "
+                                    f"{', '.join(map(str, hard))} {'is' if len(hard) == 1 else 'are'} "
+                                    "closed: forward the whole range 1024-65000, not single ports",
+                       evidence, data)
+    if closed or unknown:
+        what = ", ".join(map(str, closed + unknown))
+        return Outcome(Status.WARN, f"test port {test_port} is open {where}; {what} could not be "
+                                    "confirmed", evidence, data)
+    n = len(ports)
+    return Outcome(Status.PASS, f"{n} port{'s' if n > 1 else ''} open {where} "
+                                f"({', '.join(map(str, ports))})", evidence, data)

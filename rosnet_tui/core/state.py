@@ -1,0 +1,109 @@
+"""Small persistent state under the state directory (``$XDG_STATE_HOME/rosnet-tui``).
+
+Plain JSON files, written atomically (temp file + rename) under an advisory lock, so two
+``rosnet-tui`` processes never leave a half-written file. Today: the history of this component's
+public IP, which tells the user whether their address is fixed or changes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from rosnet_tui.core.settings import atomic_write_text
+
+PUBLIC_IP_FILE = "public_ip.json"
+MAX_HISTORY = 100
+
+
+@contextlib.contextmanager
+def locked(state_dir: Path, wait_s: float = 2.0) -> Iterator[None]:
+    """An exclusive advisory lock on the state directory, held very briefly by anyone.
+
+    Waits at most *wait_s*; after that it goes ahead unlocked (writes stay atomic anyway, a
+    concurrent update could only be lost).
+    """
+    state_dir.mkdir(parents=True, exist_ok=True, mode=0o700)
+    fd = os.open(state_dir / ".lock", os.O_RDWR | os.O_CREAT, 0o600)
+    got = False
+    try:
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                got = True
+                break
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    break
+                time.sleep(0.02)
+        yield
+    finally:
+        if got:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
+
+
+def read_json(path: Path) -> Any | None:
+    """The JSON in *path*, or None when missing or unreadable (state is never worth a crash)."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def write_json(path: Path, data: Any) -> None:
+    atomic_write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n", mode=0o600)
+
+
+def now_iso() -> str:
+    return datetime.now(timezone.utc).replace(microsecond=0).isoformat()
+
+
+@dataclass
+class PublicIpRecord:
+    ip: str
+    previous_ip: str | None      # the address seen on the run before this one
+    changed: bool
+    history: list[dict[str, str]] = field(default_factory=list)  # oldest first
+
+
+def _clean_history(raw: Any) -> list[dict[str, str]]:
+    out: list[dict[str, str]] = []
+    if isinstance(raw, list):
+        for e in raw:
+            if isinstance(e, dict) and all(isinstance(e.get(k), str)
+                                           for k in ("ip", "first_seen", "last_seen")):
+                out.append({"ip": e["ip"], "first_seen": e["first_seen"], "last_seen": e["last_seen"]})
+    return out
+
+
+def public_ip_history(state_dir: Path) -> list[dict[str, str]]:
+    """Every public address seen so far: [{"ip", "first_seen", "last_seen"}], oldest first."""
+    data = read_json(state_dir / PUBLIC_IP_FILE)
+    return _clean_history(data.get("history") if isinstance(data, dict) else None)
+
+
+def record_public_ip(state_dir: Path, ip: str, *, when: str | None = None) -> PublicIpRecord:
+    """Add *ip* to the history (a new entry when it differs from the last one seen)."""
+    when = when or now_iso()
+    path = state_dir / PUBLIC_IP_FILE
+    with locked(state_dir):
+        data = read_json(path)
+        history = _clean_history(data.get("history") if isinstance(data, dict) else None)
+        previous = history[-1]["ip"] if history else None
+        if history and history[-1]["ip"] == ip:
+            history[-1]["last_seen"] = when
+        else:
+            history.append({"ip": ip, "first_seen": when, "last_seen": when})
+        history = history[-MAX_HISTORY:]
+        write_json(path, {"version": 1, "history": history})
+    return PublicIpRecord(ip, previous, previous is not None and previous != ip, history)

@@ -1,0 +1,204 @@
+"""Linux checks on loopback: hosts files in tmp, the system resolver (localhost only: nothing
+here may ask a real DNS server), ping, and a real sshd for the SSH and chat checks."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+from rosnet_tui.core.checks import REGISTRY, CheckContext, linux, load_builtin_checks, run_check
+from rosnet_tui.core.hosts import HostsEntry
+from rosnet_tui.core.results import Status
+from rosnet_tui.core.settings import Peer, ProbeSettings, Settings, ThisComponent
+from tests.test_checks_isp import free_port
+from tests.test_ssh import ssh_client, sshd  # noqa: F401
+
+load_builtin_checks()
+
+
+def settings(name="turtlebot", local_ip="10.10.10.1", peers=None, profile="remote") -> Settings:
+    return Settings(this=ThisComponent(name=name, local_ip=local_ip, profile=profile),
+                    peers=peers if peers is not None else
+                    [Peer(name="sami", local_ip="192.168.1.10", public_ip="198.51.100.2")],
+                    probe=ProbeSettings(port=free_port()))
+
+
+def ctx(s: Settings, tmp_path, client=None, timeout=2.0, **kw) -> CheckContext:
+    if client is not None:
+        kw.setdefault("ssh_dir", client.dir)
+        kw.setdefault("known_hosts_files", [client.dir / "known_hosts"])
+    kw.setdefault("ssh_agent", False)
+    kw.setdefault("upnp", False)
+    return CheckContext(settings=s, timeout_s=timeout, state_dir=tmp_path / "state", **kw)
+
+
+async def run(check_id: str, c: CheckContext):
+    return await run_check(REGISTRY[check_id], c)
+
+
+# --------------------------------------------------------------------------- linux.hosts
+GOOD = "127.0.0.1\tlocalhost\n10.10.10.1 turtlebot\n198.51.100.2 sami # the laptop\n"
+
+
+@pytest.mark.parametrize("text,status,key,value", [
+    (GOOD, Status.PASS, None, None),
+    (GOOD + "198.51.100.2 SAMI\n", Status.PASS, None, None),  # same address twice: harmless
+    ("127.0.0.1 localhost\n10.10.10.1 turtlebot\n", Status.FAIL, "missing", ["sami"]),
+    ("10.10.10.1 turtlebot\n203.0.113.99 sami\n", Status.FAIL, "wrong",
+     [{"name": "sami", "found": "203.0.113.99", "expected": "198.51.100.2"}]),
+    (GOOD + "127.0.1.1 turtlebot\n", Status.FAIL, "loopback", ["turtlebot"]),
+    (GOOD + "198.51.100.77 sami\n", Status.FAIL, "duplicates", ["sami"]),
+    ("#198.51.100.2 sami\n10.10.10.1 turtlebot\n", Status.FAIL, "missing", ["sami"]),
+])
+async def test_hosts_file_audit(tmp_path, text, status, key, value):
+    hosts = tmp_path / "hosts"
+    hosts.write_text(text)
+    r = await run("linux.hosts", ctx(settings(), tmp_path, hosts_path=hosts))
+    assert r.status is status, r.summary
+    assert set(r.data) >= {"missing", "wrong", "duplicates", "loopback"}
+    if key:
+        assert r.data[key] == value
+    else:
+        assert not any(r.data[k] for k in ("missing", "wrong", "duplicates", "loopback"))
+
+
+async def test_hosts_entries_follow_the_profile(tmp_path):
+    hosts = tmp_path / "hosts"
+    hosts.write_text("10.10.10.1 turtlebot\n192.168.1.10 sami\n")
+    r = await run("linux.hosts", ctx(settings(profile="office"), tmp_path, hosts_path=hosts))
+    assert r.status is Status.PASS
+    r = await run("linux.hosts", ctx(settings(profile="remote"), tmp_path, hosts_path=hosts))
+    assert r.status is Status.FAIL and r.data["wrong"][0]["expected"] == "198.51.100.2"
+
+
+async def test_unreadable_hosts_file_fails(tmp_path):
+    r = await run("linux.hosts", ctx(settings(), tmp_path, hosts_path=tmp_path / "nope"))
+    assert r.status is Status.FAIL and "cannot read" in r.summary
+
+
+def test_audit_reports_the_lines():
+    a = linux.audit_hosts(GOOD, [HostsEntry("198.51.100.2", "sami", "peer")])
+    assert a["lines"]["sami"] == ["line 3: 198.51.100.2"]
+
+
+# --------------------------------------------------------------------------- linux.resolve
+async def test_resolve_flags_a_name_on_loopback(tmp_path):
+    s = settings(name="localhost", local_ip="10.1.2.3", peers=[])
+    r = await run("linux.resolve", ctx(s, tmp_path))
+    assert r.status is Status.FAIL and r.data["loopback"] == ["localhost"]
+    assert r.data["names"]["localhost"] == {"resolved": "127.0.0.1", "expected": "10.1.2.3"}
+
+
+async def test_resolve_passes_when_the_name_gives_the_expected_address(tmp_path):
+    s = settings(peers=[Peer(name="localhost", public_ip="127.0.0.1")], local_ip="")
+    s.this.name = ""
+    r = await run("linux.resolve", ctx(s, tmp_path))
+    assert r.status is Status.PASS and r.data["names"]["localhost"]["resolved"] == "127.0.0.1"
+    assert r.data["wrong"] == [] and r.data["loopback"] == []
+
+
+async def test_resolve_names_the_wrong_address(tmp_path):
+    s = settings(peers=[Peer(name="localhost", public_ip="127.0.0.2")], local_ip="")
+    s.this.name = ""
+    r = await run("linux.resolve", ctx(s, tmp_path))
+    assert r.status is Status.FAIL and r.data["wrong"] == ["localhost"]
+    assert "localhost -> 127.0.0.1 (expected 127.0.0.2)" in r.summary
+
+
+# --------------------------------------------------------------------------- linux.ping
+@pytest.mark.skipif(shutil.which("ping") is None, reason="needs ping")
+async def test_ping_by_name_with_the_tcp_fallback_reported(tmp_path):
+    s = settings(peers=[Peer(name="localhost", public_ip="127.0.0.1", ssh_port=free_port())])
+    r = await run("linux.ping", ctx(s, tmp_path))
+    assert r.status is Status.PASS, r.evidence
+    assert r.data["peers"]["localhost"] == {"icmp": True, "tcp22": False}
+    assert any("ping localhost (127.0.0.1): reply" in e for e in r.evidence)
+
+
+async def test_ping_skips_without_peers(tmp_path):
+    r = await run("linux.ping", ctx(settings(peers=[]), tmp_path))
+    assert r.status is Status.SKIP and "no peers" in r.summary
+
+
+# --------------------------------------------------------------------------- linux.ssh
+async def test_ssh_passes_with_a_verified_key(ssh_client, sshd, tmp_path):  # noqa: F811
+    s = settings(peers=[ssh_client.peer(), Peer(name="nouser", public_ip="198.51.100.9")])
+    r = await run("linux.ssh", ctx(s, tmp_path, ssh_client))
+    assert r.status is Status.PASS, r.evidence
+    p = r.data["peers"]["localhost"]
+    assert p["ok"] and p["failure"] is None and p["fingerprint"] == sshd.fingerprint
+    assert r.data["peers"]["nouser"]["failure"] == "no_user"
+
+
+async def test_ssh_unknown_host_key_fails_with_the_fingerprint(ssh_client, sshd, tmp_path):  # noqa: F811
+    (ssh_client.dir / "known_hosts").write_text("")
+    r = await run("linux.ssh", ctx(settings(peers=[ssh_client.peer()]), tmp_path, ssh_client))
+    assert r.status is Status.FAIL
+    p = r.data["peers"]["localhost"]
+    assert p["failure"] == "host_key_unknown" and p["fingerprint"] == sshd.fingerprint
+    assert p["host_key"].startswith("ssh-ed25519 ")
+    assert sshd.fingerprint in " ".join(r.evidence)
+
+
+async def test_ssh_skips_without_an_ssh_user(tmp_path):
+    r = await run("linux.ssh", ctx(settings(), tmp_path))
+    assert r.status is Status.SKIP and "ssh_user" in r.summary
+    assert r.data["peers"]["sami"]["failure"] == "no_user"
+
+
+# --------------------------------------------------------------------------- chats
+async def test_chat_out_by_name(ssh_client, tmp_path):  # noqa: F811
+    r = await run("linux.chat_out", ctx(settings(peers=[ssh_client.peer()]), tmp_path, ssh_client))
+    assert r.status is Status.PASS, r.evidence
+    assert r.data["peers"]["localhost"] == {"ok": True, "failure": None}
+    assert any("python3" in e for e in r.evidence)
+
+
+async def test_chat_in_by_name(ssh_client, tmp_path):  # noqa: F811
+    c = ctx(settings(name="localhost", local_ip="127.0.0.1", peers=[ssh_client.peer()]),
+            tmp_path, ssh_client)
+    r = await run("linux.chat_in", c)
+    assert r.status is Status.PASS, r.evidence
+    assert r.data["peers"]["localhost"] == {"ok": True, "failure": None}
+    assert any("localhost resolves localhost -> 127.0.0.1" in e for e in r.evidence)
+    assert not c.listeners.holds(c.settings.probe.port)
+
+
+@pytest.mark.skipif(shutil.which("nc") is None, reason="needs nc")
+async def test_chats_fall_back_to_nc_without_python3(ssh_client, tmp_path, monkeypatch):  # noqa: F811
+    monkeypatch.setattr(linux, "PYTHON", "no-such-python3")
+    out = await run("linux.chat_out", ctx(settings(peers=[ssh_client.peer()]), tmp_path,
+                                          ssh_client, timeout=3.0))
+    assert out.status is Status.PASS, out.evidence
+    assert any("(over SSH, nc)" in e for e in out.evidence)
+    c = ctx(settings(name="localhost", local_ip="127.0.0.1", peers=[ssh_client.peer()]),
+            tmp_path, ssh_client, timeout=3.0)
+    inn = await run("linux.chat_in", c)
+    assert inn.status is Status.PASS, inn.evidence
+
+
+async def test_chat_in_fails_when_the_peer_cannot_reach_us(ssh_client, tmp_path):  # noqa: F811
+    c = ctx(settings(name="localhost", local_ip="127.0.0.1", peers=[ssh_client.peer()]),
+            tmp_path, ssh_client)
+    # Something else holds our test port: the peer reaches it, but not our listener.
+    import socket
+
+    with socket.socket() as other:
+        other.bind(("0.0.0.0", c.settings.probe.port))
+        other.listen(4)
+        r = await run("linux.chat_in", c)
+    assert r.status is Status.FAIL
+    assert r.data["peers"]["localhost"]["failure"] == "local_listen"
+
+
+async def test_chat_out_reports_ssh_trouble(ssh_client, tmp_path):  # noqa: F811
+    s = settings(peers=[ssh_client.peer(ssh_port=free_port())])
+    r = await run("linux.chat_out", ctx(s, tmp_path, ssh_client))
+    assert r.status is Status.FAIL and r.data["peers"]["localhost"]["failure"] == "ssh:network"
+
+
+async def test_chats_skip_without_an_ssh_user(tmp_path):
+    for cid in ("linux.chat_out", "linux.chat_in"):
+        r = await run(cid, ctx(settings(), tmp_path))
+        assert r.status is Status.SKIP and r.data["peers"]["sami"]["failure"] == "no_user"

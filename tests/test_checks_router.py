@@ -1,0 +1,210 @@
+"""Router/modem checks on loopback: real listeners, psutil, the real probe server, a real sshd."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import shutil
+import socket
+import subprocess
+import time
+
+import pytest
+
+from rosnet_tui.core.checks import (
+    REGISTRY,
+    CheckContext,
+    load_builtin_checks,
+    run_check,
+    run_checks,
+)
+from rosnet_tui.core.listener import GREETING, ListenerPool
+from rosnet_tui.core.netinfo import detect_local_net
+from rosnet_tui.core.results import Status
+from rosnet_tui.core.settings import ProbeSettings, RosSettings, Settings, ThisComponent
+from tests.test_checks_isp import free_port, probe_server, web  # noqa: F401
+from tests.test_ssh import ssh_client, sshd  # noqa: F401
+
+load_builtin_checks()
+
+
+def ctx_for(tmp_path, *, port_check_url="http://127.0.0.1:9", peers=(), public_ip="127.0.0.1",
+            urls=(), ros_port=None, local_ip=None, interface="", timeout=2.0, **kw) -> CheckContext:
+    s = Settings(this=ThisComponent(name="turtlebot", local_ip=local_ip or "127.0.0.1",
+                                    public_ip=public_ip, interface=interface),
+                 peers=list(peers),
+                 ros=RosSettings(master="turtlebot", port=ros_port or free_port()),
+                 probe=ProbeSettings(port=free_port(), public_ip_urls=list(urls),
+                                     port_check_url=port_check_url))
+    kw.setdefault("upnp", False)
+    kw.setdefault("ssh_agent", False)
+    return CheckContext(settings=s, timeout_s=timeout, state_dir=tmp_path / "state", **kw)
+
+
+async def run(check_id: str, ctx: CheckContext):
+    return await run_check(REGISTRY[check_id], ctx)
+
+
+def can_bind(port: int) -> bool:
+    with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(("0.0.0.0", port))
+            return True
+        except OSError:
+            return False
+
+
+# --------------------------------------------------------------------------- router.local_ip
+async def test_local_ip_matches_this_machine(tmp_path):
+    net = detect_local_net()
+    if not net.local_ip or not net.gateway:
+        pytest.skip("this machine has no default route")
+    r = await run("router.local_ip", ctx_for(tmp_path, local_ip=net.local_ip))
+    assert r.status is Status.PASS, r.summary
+    assert r.data == {"local_ip": net.local_ip, "interface": net.interface, "gateway": net.gateway,
+                      "expected_ip": net.local_ip, "differs": False}
+
+
+async def test_local_ip_warns_after_a_dhcp_change(tmp_path):
+    if not detect_local_net().local_ip:
+        pytest.skip("this machine has no LAN address")
+    r = await run("router.local_ip", ctx_for(tmp_path, local_ip="10.99.99.99"))
+    assert r.status is Status.WARN and r.data["differs"] and r.data["expected_ip"] == "10.99.99.99"
+    assert "10.99.99.99" in r.summary
+
+
+async def test_local_ip_fails_for_a_missing_interface(tmp_path):
+    r = await run("router.local_ip", ctx_for(tmp_path, interface="nosuch0"))
+    assert r.status is Status.FAIL and "does not exist" in r.summary
+
+
+# --------------------------------------------------------------------------- router.port_free
+async def test_port_free_passes_and_leaves_the_port_free(tmp_path):
+    ctx = ctx_for(tmp_path)
+    r = await run("router.port_free", ctx)
+    assert r.status is Status.PASS and r.data == {"port": ctx.settings.probe.port, "in_use": False,
+                                                  "process": None, "pid": None}
+    assert can_bind(ctx.settings.probe.port)
+
+
+@pytest.mark.skipif(shutil.which("nc") is None, reason="needs nc")
+async def test_port_free_names_the_process_that_holds_the_port(tmp_path):
+    ctx = ctx_for(tmp_path)
+    port = ctx.settings.probe.port
+    nc = subprocess.Popen(["nc", "-l", str(port)], stdin=subprocess.DEVNULL,
+                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 5
+        while can_bind(port) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        r = await run("router.port_free", ctx)
+    finally:
+        nc.kill()
+        nc.wait(5)
+    assert r.status is Status.FAIL and r.data["in_use"] is True
+    assert r.data["pid"] == nc.pid and "nc" in r.data["process"]
+    assert f"pid {nc.pid}" in r.summary
+
+
+# --------------------------------------------------------------------------- router.listener
+async def test_listener_answers_and_is_closed_after_the_check(tmp_path):
+    ctx = ctx_for(tmp_path)
+    port = ctx.settings.probe.port
+    r = await run("router.listener", ctx)
+    assert r.status is Status.PASS and r.data == {"port": port, "listening": True}
+    assert any(GREETING in e for e in r.evidence)
+    assert can_bind(port) and not ctx.listeners.holds(port)
+
+
+async def test_listener_fails_when_the_port_is_taken(tmp_path):
+    ctx = ctx_for(tmp_path)
+    with socket.socket() as s:
+        s.bind(("0.0.0.0", ctx.settings.probe.port))
+        s.listen(1)
+        r = await run("router.listener", ctx)
+    assert r.status is Status.FAIL and r.data["listening"] is False
+
+
+async def test_the_pool_shares_one_listener_and_records_chat_lines():
+    pool = ListenerPool()
+    port = free_port()
+    async with pool.hold(port) as a, pool.hold(port) as b:
+        assert a is b and pool.holds(port)
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        hello = await reader.readline()
+        assert hello.decode().startswith(f"{GREETING} {pool.token} {port}")
+        writer.write(b"ROSNET-TUI CHAT abc\n")
+        echo = await reader.readline()
+        writer.close()
+        assert b"ECHO ROSNET-TUI CHAT abc" in echo
+        seen = await a.wait_for_line("abc", 2)
+        assert seen is not None and seen.address == "127.0.0.1"
+    assert not pool.holds(port) and can_bind(port)
+
+
+# --------------------------------------------------------------------------- router.port_open
+async def test_port_open_via_the_probe_server(probe_server, tmp_path):  # noqa: F811
+    ros_port = free_port()
+    ctx = ctx_for(tmp_path, port_check_url=probe_server.url, ros_port=ros_port)
+    with socket.socket() as roscore_stand_in:  # a "service" listening there: probed too
+        roscore_stand_in.bind(("0.0.0.0", ros_port))
+        roscore_stand_in.listen(8)
+        r = await run("router.port_open", ctx)
+    assert r.status is Status.PASS, (r.summary, r.evidence)
+    ports = [p["port"] for p in r.data["ports"]]
+    test_port = ctx.settings.probe.port
+    assert ports[0] == test_port and ros_port in ports and len(ports) == 4
+    assert all(p["reachable"] and p["listener"] and p["via"] == "echoip" for p in r.data["ports"])
+    assert r.data["test_port_open"] is True
+    assert {p for _, p in probe_server.server.recent_connect_backs} >= set(ports)
+    assert all(1024 <= p <= 65000 for p in ports[1:3])
+    assert all(can_bind(p) for p in ports[:3])  # our listeners are gone
+
+
+async def test_port_open_closed_while_listening_is_table1_row3(web, tmp_path):  # noqa: F811
+    web.fallback = lambda path: (200, json.dumps({"ip": "127.0.0.1", "reachable": False,
+                                                  "port": int(path.rsplit("/", 1)[-1])}))
+    ctx = ctx_for(tmp_path, port_check_url=web.url(""))
+    r = await run("router.port_open", ctx)
+    assert r.status is Status.FAIL and r.data["test_port_open"] is False
+    assert "while our listener runs" in r.summary
+    assert r.data["ports"][0]["listener"] is True
+
+
+async def test_port_open_without_a_checker_cannot_tell(tmp_path):
+    r = await run("router.port_open", ctx_for(tmp_path, port_check_url=f"http://127.0.0.1:{free_port()}"))
+    assert r.status is Status.FAIL and r.data["test_port_open"] is None
+    assert "could not test" in r.summary
+
+
+async def test_port_open_from_the_peer_over_ssh(ssh_client, web, tmp_path):  # noqa: F811
+    web.routes["/ip"] = (200, "127.0.0.1\n")
+    ctx = ctx_for(tmp_path, peers=[ssh_client.peer()], urls=[web.url("/ip")],
+                  ssh_dir=ssh_client.dir, known_hosts_files=[ssh_client.dir / "known_hosts"],
+                  timeout=3.0)
+    r = await run("router.port_open", ctx)
+    assert r.status is Status.PASS, (r.summary, r.evidence)
+    assert all(p["via"] == "peer:localhost" and p["reachable"] for p in r.data["ports"])
+    assert r.data["public_ip"] == "127.0.0.1"
+    assert any(ctx.listeners.token in e for e in r.evidence)  # the peer read OUR listener
+
+
+async def test_port_open_falls_back_to_the_checker_when_ssh_fails(ssh_client, probe_server,  # noqa: F811
+                                                                  web, tmp_path):  # noqa: F811
+    web.routes["/ip"] = (200, "127.0.0.1\n")
+    peer = ssh_client.peer(ssh_port=free_port())
+    ctx = ctx_for(tmp_path, peers=[peer], urls=[web.url("/ip")], port_check_url=probe_server.url,
+                  ssh_dir=ssh_client.dir, known_hosts_files=[ssh_client.dir / "known_hosts"])
+    r = await run("router.port_open", ctx)
+    assert r.status is Status.PASS and r.data["ports"][0]["via"] == "echoip"
+    assert "asking the port checker instead" in r.evidence[0]
+
+
+async def test_router_step_runs_concurrently_without_fighting_over_the_port(probe_server,  # noqa: F811
+                                                                            tmp_path):
+    ctx = ctx_for(tmp_path, port_check_url=probe_server.url)
+    specs = [REGISTRY[i] for i in ("router.port_free", "router.listener", "router.port_open")]
+    got = {r.id: r async for r in run_checks(specs, ctx)}
+    assert all(r.status is Status.PASS for r in got.values()), {i: r.summary for i, r in got.items()}
+    assert can_bind(ctx.settings.probe.port) and not ctx.listeners.holds(ctx.settings.probe.port)
