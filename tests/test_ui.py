@@ -306,3 +306,44 @@ async def test_advisor_names_the_cause_and_jumps_to_its_step(tmp_path):
         await pilot.press("g")
         await pilot.pause()
         assert isinstance(app.screen, StepScreen) and app.screen.step.id == target
+
+
+async def test_write_hosts_and_bashrc_with_preview_then_undo(tmp_path):
+    hosts = tmp_path / "hosts"
+    stock = "127.0.0.1\tlocalhost\n# keep me\n::1 ip6-localhost\n"
+    hosts.write_text(stock)
+    bashrc = tmp_path / "bashrc"
+    bashrc.write_text("alias ll='ls -l'\nexport ROS_IP=10.10.10.1\n")
+    app = make_app(tmp_path, complete_settings(), hosts_path=hosts, bashrc_path=bashrc)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("3", "w")
+        await pilot.pause()
+        assert type(app.screen).__name__ == "WriteScreen"
+        assert "+198.51.100.2" in str(app.screen.preview.diff()).replace(" ", "").replace("\t", "")
+        assert hosts.read_text() == stock  # a preview writes nothing
+        await pilot.click("#write-apply")
+        await pilot.pause()
+        assert isinstance(app.screen, StepScreen)
+        text = hosts.read_text()
+        assert "# BEGIN rosnet-tui" in text and "# keep me" in text and "sami" in text
+        assert "::1 ip6-localhost" in text
+
+        await pilot.press("4", "w")
+        await pilot.pause()
+        screen = app.screen
+        assert type(screen).__name__ == "WriteScreen"
+        await pilot.click("#write-option")  # comment out the ROS_IP line
+        await pilot.pause()
+        await pilot.click("#write-apply")
+        await pilot.pause()
+        written = bashrc.read_text()
+        assert "export ROS_MASTER_URI=http://turtlebot:11311" in written
+        assert "alias ll='ls -l'" in written
+        assert "\nexport ROS_IP=10.10.10.1" not in written and "ROS_IP=10.10.10.1" in written
+
+        await pilot.press("u")  # undo the last write: the bashrc
+        await pilot.pause()
+        await pilot.click("#write-apply")
+        await pilot.pause()
+        assert bashrc.read_text() == "alias ll='ls -l'\nexport ROS_IP=10.10.10.1\n"
+        assert "# BEGIN rosnet-tui" in hosts.read_text()  # one apply per undo

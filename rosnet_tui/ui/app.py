@@ -35,6 +35,8 @@ class AppDeps:
     specs_for: Callable[[str], list[CheckSpec]] = lambda step: checks_for([step])
     make_context: Callable[[Settings], CheckContext] | None = None
     open_setup: bool = False
+    hosts_path: Path = Path("/etc/hosts")
+    bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
 
 
 class RosnetApp(App[int]):
@@ -108,7 +110,8 @@ class RosnetApp(App[int]):
         if self.deps.make_context is not None:
             return self.deps.make_context(settings)
         return CheckContext(settings=settings, timeout_s=settings.checks.timeout_s,
-                            env=dict(os.environ), state_dir=self.deps.state_dir)
+                            env=dict(os.environ), state_dir=self.deps.state_dir,
+                            hosts_path=self.deps.hosts_path, bashrc_path=self.deps.bashrc_path)
 
     def runtime_settings(self) -> Settings:
         """The saved settings, with what they leave blank filled in from this machine."""
@@ -194,6 +197,63 @@ class RosnetApp(App[int]):
                 self.action_goto(step_id)
 
         self.push_screen(AdvisorScreen(), done)
+
+    # ------------------------------------------------------------------ writing configuration
+    def configuration_text(self, step_id: str) -> str:
+        """The Configuration pane's Markdown for *step_id*: the router step gets the card."""
+        from rosnet_tui.core.steps import STEP_BY_ID
+
+        settings = self.runtime_settings()
+        if step_id == "router":
+            from rosnet_tui.core.router_card import build_router_card, render_router_card
+
+            card = build_router_card(settings, self.detected if self.detected.local_ip else None)
+            return render_router_card(card, markdown=True)
+        return STEP_BY_ID[step_id].configure(settings)
+
+    def write_plan(self, step_id: str):
+        """What `w` writes on *step_id*: the hosts set (Linux) or the ROS block (ROS)."""
+        from rosnet_tui.core import bashrc, hosts, privilege
+        from rosnet_tui.ui.write_screen import WritePlan
+
+        settings = self.runtime_settings()
+        deps = self.deps
+        if step_id == "linux":
+            profile = settings.this.profile
+
+            def conflicts() -> int:
+                text = deps.hosts_path.read_text(errors="replace") if deps.hosts_path.exists() else None
+                return len(hosts.find_hosts_conflicts(text, settings, profile))
+
+            return WritePlan(
+                title=f"Write the '{profile}' hosts set to {deps.hosts_path}",
+                explain="Our marked block only; every other line stays. Review the change:",
+                make_preview=lambda fix: hosts.preview_hosts(settings, profile, deps.hosts_path,
+                                                             fix_conflicts=fix),
+                option_label="also comment out other lines that give our names other addresses",
+                option_count=conflicts,
+                sudo_command=lambda p, fix: privilege.hosts_apply_command(
+                    profile=profile, config=deps.config_path, digest=p.digest,
+                    hosts_file=deps.hosts_path, state_dir=deps.state_dir, fix_conflicts=fix),
+                after=("linux.hosts", "linux.resolve"))
+        if step_id == "ros":
+            def ros_ip_lines() -> int:
+                path = deps.bashrc_path
+                return len(bashrc.find_ros_ip_lines(
+                    path.read_text(errors="replace") if path.exists() else None))
+
+            return WritePlan(
+                title=f"Write ROS_MASTER_URI to {deps.bashrc_path}",
+                explain="A marked block at the end of the file; every other line stays:",
+                make_preview=lambda fix: bashrc.preview_bashrc(settings, deps.bashrc_path,
+                                                               comment_ros_ip=fix),
+                option_label="comment out ROS_IP / ROS_HOSTNAME lines (they break remote "
+                             "networks: a node then publishes but cannot subscribe, or the "
+                             "reverse)",
+                option_count=ros_ip_lines,
+                after=("ros.env",),
+                footnote=f"For the shell you are in now: {bashrc.export_line(settings)}")
+        return None
 
     def action_help(self) -> None:
         if not isinstance(self.screen, HelpScreen):

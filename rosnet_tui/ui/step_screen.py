@@ -27,6 +27,8 @@ class StepScreen(Screen):
         Binding("R", "run_one", "Re-run one", show=False),
         Binding("c", "cancel_checks", "Cancel", show=False),
         Binding("e", "toggle_evidence", "Evidence"),
+        Binding("w", "write", "Write config"),
+        Binding("u", "undo", "Undo write", show=False),
         Binding("g", "go_finding", "Go to cause", show=False),
         Binding("z", "zoom", "Zoom pane", show=False),
     ]
@@ -50,7 +52,7 @@ class StepScreen(Screen):
             with Container(id="lower"):
                 with VerticalScroll(id="config-pane", classes="pane") as config:
                     config.border_title = "Configuration"
-                    yield Markdown(self.step.configure(self.rosnet.settings), id="config-text")
+                    yield Markdown(self.rosnet.configuration_text(self.step.id), id="config-text")
                 with Vertical(id="verify-pane", classes="pane") as verify:
                     verify.border_title = "Verification"
                     known = {s.id for s in self.specs}
@@ -76,7 +78,7 @@ class StepScreen(Screen):
 
     def refresh_config(self) -> None:
         """Settings changed: re-render the tailored configuration."""
-        self.query_one("#config-text", Markdown).update(self.step.configure(self.rosnet.settings))
+        self.query_one("#config-text", Markdown).update(self.rosnet.configuration_text(self.step.id))
         self.refresh_subtitle()
 
     def _sync_results(self) -> None:
@@ -104,6 +106,34 @@ class StepScreen(Screen):
     def action_cancel_checks(self) -> None:
         if self.workers.cancel_group(self, "checks"):
             self.notify("Checks cancelled.", timeout=3)
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action == "write":
+            return self.step.id in ("linux", "ros")
+        return True
+
+    def action_write(self) -> None:
+        from rosnet_tui.ui.write_screen import WriteScreen
+
+        plan = self.rosnet.write_plan(self.step.id)
+        if plan is None:
+            return
+
+        def done(written: bool | None) -> None:
+            if written:
+                self.run_specs([s for s in self.specs if s.id in plan.after])
+
+        self.app.push_screen(WriteScreen(plan), done)
+
+    def action_undo(self) -> None:
+        from rosnet_tui.ui.write_screen import UndoScreen
+
+        def done(undone: bool | None) -> None:
+            if undone:
+                self.run_specs([s for s in self.specs if s.id in
+                                ("linux.hosts", "linux.resolve", "ros.env")])
+
+        self.app.push_screen(UndoScreen(), done)
 
     def action_go_finding(self) -> None:
         """Go back to the step that the highlighted check's first finding points to."""

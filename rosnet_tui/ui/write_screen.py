@@ -1,0 +1,219 @@
+"""Write configuration from the wizard: a diff preview first, then an atomic, undoable apply.
+
+The core does the work (rosnet_tui.core.hosts / bashrc / managed_file / privilege); this screen
+only shows the preview, asks, and reports. A file this user may not write (``/etc/hosts``) is
+written by re-running our own writer under sudo, with the TUI suspended so sudo can ask for the
+password in the terminal; the exact command is shown first.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
+
+from rich.syntax import Syntax
+from textual import on
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical, VerticalScroll
+from textual.screen import ModalScreen
+from textual.widgets import Button, Checkbox, Static
+
+from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import privilege
+
+if TYPE_CHECKING:
+    from rosnet_tui.ui.app import RosnetApp
+
+
+@dataclass
+class WritePlan:
+    """What the screen needs to preview and apply one write."""
+
+    title: str
+    explain: str
+    # Build the preview; the flag is the user's answer to the option (e.g. comment ROS_IP lines).
+    make_preview: Callable[[bool], mf.Preview]
+    option_label: str = ""            # empty: no option
+    option_count: Callable[[], int] = lambda: 0
+    # The sudo command for a preview that needs privilege (None: privilege cannot help).
+    sudo_command: Callable[[mf.Preview, bool], list[str]] | None = None
+    after: tuple[str, ...] = ()       # checks to re-run after a write
+    footnote: str = ""
+
+
+class WriteScreen(ModalScreen[bool]):
+    """Preview -> confirm -> apply. Dismisses True when something was written."""
+
+    BINDINGS = [Binding("escape", "cancel", "Cancel"), Binding("y", "apply", "Apply", show=False)]
+
+    def __init__(self, plan: WritePlan, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.plan = plan
+        self.preview: mf.Preview | None = None
+        self.option = False
+
+    @property
+    def rosnet(self) -> RosnetApp:
+        return cast("RosnetApp", self.app)
+
+    def compose(self) -> ComposeResult:
+        with Vertical(id="write-box"):
+            yield Static(self.plan.title, id="write-title")
+            yield Static(self.plan.explain, id="write-explain")
+            if self.plan.option_label and self.plan.option_count():
+                yield Checkbox(self.plan.option_label, id="write-option", compact=True)
+            with VerticalScroll(id="write-diff-box"):
+                yield Static("", id="write-diff")
+            yield Static("", id="write-status", markup=False)
+            with Horizontal(id="write-buttons"):
+                yield Button("Apply", id="write-apply", variant="primary", compact=True)
+                yield Button("Cancel", id="write-cancel", compact=True)
+
+    def on_mount(self) -> None:
+        self.refresh_preview()
+        self.query_one("#write-diff-box").focus()
+
+    @on(Checkbox.Changed, "#write-option")
+    def _option(self, event: Checkbox.Changed) -> None:
+        self.option = event.value
+        self.refresh_preview()
+
+    def refresh_preview(self) -> None:
+        status = self.query_one("#write-status", Static)
+        try:
+            self.preview = self.plan.make_preview(self.option)
+        except (mf.ManagedFileError, ValueError, OSError) as exc:
+            self.preview = None
+            self.query_one("#write-diff", Static).update("")
+            status.update(f"Cannot write: {exc}")
+            self.query_one("#write-apply", Button).disabled = True
+            return
+        p = self.preview
+        diff = p.diff()
+        self.query_one("#write-diff", Static).update(
+            Syntax(diff, "diff", theme="ansi_dark", word_wrap=True) if diff else
+            f"{p.path} already holds this configuration: nothing to write.")
+        notes = list(p.notes)
+        if p.changed and p.needs_privilege and self.plan.sudo_command is not None:
+            cmd = privilege.format_command(self.plan.sudo_command(p, self.option))
+            notes.append(f"{p.path} needs root: Apply runs, in this terminal, {cmd}")
+        elif p.changed:
+            notes.append(f"Apply writes {p.path} (backup kept; `rosnet-tui undo` reverts).")
+        if self.plan.footnote:
+            notes.append(self.plan.footnote)
+        status.update("\n".join(notes))
+        self.query_one("#write-apply", Button).disabled = not p.changed
+
+    @on(Button.Pressed, "#write-cancel")
+    def action_cancel(self) -> None:
+        self.dismiss(False)
+
+    @on(Button.Pressed, "#write-apply")
+    def action_apply(self) -> None:
+        p = self.preview
+        if p is None or not p.changed:
+            return
+        state_dir = self.rosnet.deps.state_dir
+        try:
+            if p.needs_privilege:
+                if self.plan.sudo_command is None:
+                    raise mf.PermissionNeededError(f"this user may not write {p.path}", [p.path])
+                argv = self.plan.sudo_command(p, self.option)
+                with self.app.suspend():
+                    print(f"\nrosnet-tui: running {privilege.format_command(argv)}\n", flush=True)
+                    code = privilege.run_privileged(argv, interactive=True)
+                if code != 0:
+                    self.notify(f"The privileged write did not complete (exit {code}); nothing "
+                                "else was changed.", severity="error", timeout=8)
+                    self.refresh_preview()
+                    return
+            else:
+                mf.apply_preview(p, state_dir=state_dir)
+        except mf.StalePreviewError:
+            self.notify("The file changed since this preview: here is the new preview.",
+                        severity="warning", timeout=6)
+            self.refresh_preview()
+            return
+        except (mf.ManagedFileError, OSError) as exc:
+            self.notify(f"Not written: {exc}", severity="error", timeout=10)
+            return
+        self.notify(f"Wrote {p.path}. `rosnet-tui undo` reverts it.", timeout=5)
+        self.dismiss(True)
+
+
+class UndoScreen(ModalScreen[bool]):
+    """Show what undoing the last apply does, and do it on confirmation."""
+
+    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.plan: mf.UndoPlan | None = None
+
+    @property
+    def rosnet(self) -> RosnetApp:
+        return cast("RosnetApp", self.app)
+
+    def compose(self) -> ComposeResult:
+        with Vertical(id="write-box"):
+            yield Static("Undo the last write", id="write-title")
+            with VerticalScroll(id="write-diff-box"):
+                yield Static("", id="write-diff")
+            yield Static("", id="write-status", markup=False)
+            with Horizontal(id="write-buttons"):
+                yield Button("Undo", id="write-apply", variant="primary", compact=True)
+                yield Button("Cancel", id="write-cancel", compact=True)
+
+    def on_mount(self) -> None:
+        status = self.query_one("#write-status", Static)
+        try:
+            self.plan = mf.plan_undo(self.rosnet.deps.state_dir)
+        except mf.ManagedFileError as exc:
+            status.update(str(exc))
+            self.query_one("#write-apply", Button).disabled = True
+            return
+        diff = self.plan.diff()
+        self.query_one("#write-diff", Static).update(
+            Syntax(diff, "diff", theme="ansi_dark", word_wrap=True) if diff else "")
+        notes = [f"Changed since by someone else: {c}" for c in self.plan.conflicts]
+        if self.plan.conflicts:
+            notes.append("Undo would lose those changes: run `rosnet-tui undo --force` if you "
+                         "are sure.")
+            self.query_one("#write-apply", Button).disabled = True
+        elif self.plan.needs_privilege:
+            cmd = privilege.format_command(self._sudo_argv())
+            notes.append(f"Needs root: Undo runs, in this terminal, {cmd}")
+        status.update("\n".join(notes))
+
+    def _sudo_argv(self) -> list[str]:
+        assert self.plan is not None
+        return privilege.undo_command(entry_id=self.plan.entry.id,
+                                      state_dir=self.rosnet.deps.state_dir)
+
+    @on(Button.Pressed, "#write-cancel")
+    def action_cancel(self) -> None:
+        self.dismiss(False)
+
+    @on(Button.Pressed, "#write-apply")
+    def _undo(self) -> None:
+        if self.plan is None:
+            return
+        try:
+            if self.plan.needs_privilege:
+                argv = self._sudo_argv()
+                with self.app.suspend():
+                    print(f"\nrosnet-tui: running {privilege.format_command(argv)}\n", flush=True)
+                    code = privilege.run_privileged(argv, interactive=True)
+                if code != 0:
+                    self.notify(f"The privileged undo did not complete (exit {code}).",
+                                severity="error", timeout=8)
+                    return
+            else:
+                mf.apply_undo(self.plan)
+        except mf.ManagedFileError as exc:
+            self.notify(f"Not undone: {exc}", severity="error", timeout=10)
+            return
+        self.notify("Restored the files of the last write.", timeout=5)
+        self.dismiss(True)
