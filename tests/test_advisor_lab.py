@@ -11,7 +11,6 @@ import json
 
 import pytest
 
-pytest_plugins = ["tests.lab.fixtures"]
 pytestmark = pytest.mark.lab
 
 T1 = "table1.listener_up_closed"

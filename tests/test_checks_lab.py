@@ -12,7 +12,6 @@ import time
 
 import pytest
 
-pytest_plugins = ["tests.lab.fixtures"]
 pytestmark = pytest.mark.lab
 
 STEPS = ("--step", "isp", "--step", "router", "--step", "linux")

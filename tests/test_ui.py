@@ -347,3 +347,40 @@ async def test_write_hosts_and_bashrc_with_preview_then_undo(tmp_path):
         await pilot.pause()
         assert bashrc.read_text() == "alias ll='ls -l'\nexport ROS_IP=10.10.10.1\n"
         assert "# BEGIN rosnet-tui" in hosts.read_text()  # one apply per undo
+
+
+async def test_unknown_host_key_is_shown_and_trusted_only_on_request(tmp_path):
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+    from rosnet_tui.core.results import CheckResult
+
+    pub = Ed25519PrivateKey.generate().public_key().public_bytes(
+        serialization.Encoding.OpenSSH, serialization.PublicFormat.OpenSSH).decode()
+    ssh_dir = tmp_path / "ssh"
+    data = {"peers": {"sami": {"ok": False, "failure": "host_key_unknown", "host_key": pub,
+                               "fingerprint": "SHA256:test", "address": "198.51.100.2"}}}
+    result = CheckResult("linux.ssh", "linux", Status.FAIL, "host key not trusted yet", [],
+                         0.1, 3.0, data)
+
+    async def ssh_check(ctx):
+        return Outcome(Status.FAIL, "host key not trusted yet", data=data)
+
+    specs = {"linux": [spec("linux.ssh", "linux", ssh_check)]}
+    app = make_app(tmp_path, complete_settings(), specs=lambda step: specs.get(step, []),
+                   make_context=lambda s: CheckContext(settings=s, ssh_dir=ssh_dir))
+    async with app.run_test(size=(80, 24)) as pilot:
+        app.set_check_state("linux.ssh", "fail", result)
+        await pilot.press("3", "k")
+        await pilot.pause()
+        assert type(app.screen).__name__ == "TrustKeyScreen"
+        assert "SHA256:test" in str(app.screen.query_one("#trust-text").render())
+        await pilot.press("enter")  # the focused default is "Do not trust"
+        await pilot.pause()
+        assert isinstance(app.screen, StepScreen)
+        assert not (ssh_dir / "known_hosts").exists()
+        await pilot.press("k")
+        await pilot.pause()
+        await pilot.click("#trust-yes")
+        await pilot.pause()
+        assert (ssh_dir / "known_hosts").read_text().split()[1:] == pub.split()

@@ -10,7 +10,6 @@ import pytest
 
 from tests.lab import ADDR
 
-pytest_plugins = ["tests.lab.fixtures"]
 pytestmark = pytest.mark.lab
 
 COMPUTERS = ("robot", "laptop")

@@ -29,6 +29,7 @@ class StepScreen(Screen):
         Binding("e", "toggle_evidence", "Evidence"),
         Binding("w", "write", "Write config"),
         Binding("u", "undo", "Undo write", show=False),
+        Binding("k", "trust_key", "Review host key", show=False),
         Binding("g", "go_finding", "Go to cause", show=False),
         Binding("z", "zoom", "Zoom pane", show=False),
     ]
@@ -110,6 +111,8 @@ class StepScreen(Screen):
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         if action == "write":
             return self.step.id in ("linux", "ros")
+        if action == "trust_key":
+            return self.step.id == "linux"
         return True
 
     def action_write(self) -> None:
@@ -124,6 +127,43 @@ class StepScreen(Screen):
                 self.run_specs([s for s in self.specs if s.id in plan.after])
 
         self.app.push_screen(WriteScreen(plan), done)
+
+    def unknown_host_keys(self) -> list[tuple[str, dict]]:
+        """Peers whose SSH host key linux.ssh met but nobody has trusted yet."""
+        _state, result = self.rosnet.check_state("linux.ssh")
+        peers = (result.data.get("peers") or {}) if result is not None else {}
+        return [(name, d) for name, d in peers.items()
+                if isinstance(d, dict) and d.get("failure") == "host_key_unknown"
+                and d.get("host_key")]
+
+    def action_trust_key(self) -> None:
+        from rosnet_tui.core.ssh import trust_host_key
+        from rosnet_tui.ui.trust_screen import TrustKeyScreen
+
+        pending = self.unknown_host_keys()
+        if not pending:
+            self.notify("No unknown SSH host key to review (run the Linux checks first).",
+                        timeout=4)
+            return
+        name, d = pending[0]
+        peer = self.rosnet.settings.peer(name)
+        port = peer.ssh_port if peer else 22
+
+        def done(trust: bool | None) -> None:
+            if not trust:
+                self.notify(f"Not trusted: SSH checks to {name} stay refused.", timeout=5)
+                return
+            try:
+                path = trust_host_key(self.rosnet.make_context(), name, port, d["host_key"])
+            except (ValueError, OSError) as exc:
+                self.notify(f"Not written: {exc}", severity="error", timeout=8)
+                return
+            self.notify(f"Trusted {name}'s key ({path}).", timeout=5)
+            self.run_specs([s for s in self.specs if s.id.startswith("linux.")])
+
+        self.app.push_screen(TrustKeyScreen(name, port, d["host_key"], d.get("fingerprint") or "?",
+                                            d.get("address") or "", peer.ssh_user if peer else ""),
+                             done)
 
     def action_undo(self) -> None:
         from rosnet_tui.ui.write_screen import UndoScreen
@@ -193,6 +233,9 @@ class StepScreen(Screen):
                 app.set_check_state(cid, NOT_RUN, None)
             self._sync_results()
             app.record_step_progress()
+        for name, _d in self.unknown_host_keys():
+            self.notify(f"{name} has an SSH host key this machine does not know yet. Press k "
+                        "to compare its fingerprint and decide.", severity="warning", timeout=12)
 
     def step_state(self) -> str:
         return aggregate(self.query_one(CheckList).states())

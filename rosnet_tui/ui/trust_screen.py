@@ -1,0 +1,52 @@
+"""Ask before trusting a peer's SSH host key: show its fingerprint and how to verify it."""
+
+from __future__ import annotations
+
+from textual import on
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.screen import ModalScreen
+from textual.widgets import Button, Static
+
+from rosnet_tui.core.ssh import verify_commands
+
+
+class TrustKeyScreen(ModalScreen[bool]):
+    """Dismisses True only when the user chose to trust the key."""
+
+    BINDINGS = [Binding("escape", "refuse", "Do not trust")]
+
+    def __init__(self, name: str, port: int, host_key: str, fingerprint: str, address: str,
+                 user: str = "", **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.peer_name, self.port, self.host_key = name, port, host_key
+        self.fingerprint, self.address, self.user = fingerprint, address, user
+
+    def compose(self) -> ComposeResult:
+        ktype = self.host_key.split(" ", 1)[0]
+        with Vertical(id="write-box"):
+            yield Static(f"Trust the SSH host key of {self.peer_name}?", id="write-title")
+            yield Static(
+                f"{self.peer_name} ({self.address or 'address unknown'}) presented a {ktype} key "
+                "that this machine has never seen:\n\n"
+                f"    {self.fingerprint}\n\n"
+                "Compare it with the key on that machine, over a channel you trust (its screen, "
+                "or a colleague reading it to you). If they differ, someone may be in between: "
+                "do not trust it.\n\n"
+                + verify_commands(self.peer_name, self.port, ktype, self.user),
+                id="trust-text", markup=False)
+            with Horizontal(id="write-buttons"):
+                yield Button("They match: trust", id="trust-yes", variant="warning", compact=True)
+                yield Button("Do not trust", id="trust-no", variant="primary", compact=True)
+
+    def on_mount(self) -> None:
+        self.query_one("#trust-no", Button).focus()
+
+    @on(Button.Pressed, "#trust-yes")
+    def _trust(self) -> None:
+        self.dismiss(True)
+
+    @on(Button.Pressed, "#trust-no")
+    def action_refuse(self) -> None:
+        self.dismiss(False)
