@@ -42,15 +42,21 @@ def demo_net() -> LocalNet:
 DEMO_RESULTS = [
     CheckResult("router.local_ip", "router", Status.PASS,
                 "10.10.10.1 on wlan0, gateway 10.10.10.254: the address the modem forwards to",
-                ["interface wlan0: 10.10.10.1/24", "default route via 10.10.10.254"], 0.01, 3.0),
+                ["interface wlan0: 10.10.10.1/24", "default route via 10.10.10.254"], 0.01, 3.0,
+                {"local_ip": "10.10.10.1", "interface": "wlan0", "gateway": "10.10.10.254",
+                 "expected_ip": "10.10.10.1", "differs": False}),
     CheckResult("router.port_free", "router", Status.PASS, "port 12345 is free",
-                ["no process listens on TCP 12345"], 0.02, 3.0),
+                ["no process listens on TCP 12345"], 0.02, 3.0,
+                {"port": 12345, "in_use": False, "process": None, "pid": None}),
     CheckResult("router.listener", "router", Status.PASS, "our listener is up on port 12345",
-                ["listening on 0.0.0.0:12345"], 0.01, 3.0),
+                ["listening on 0.0.0.0:12345"], 0.01, 3.0, {"port": 12345, "listening": True}),
     CheckResult("router.port_open", "router", Status.FAIL,
                 "203.0.113.2:12345 is Closed from outside while our listener runs",
                 ["GET http://probe.example/port/12345 -> reachable: false",
-                 "GET http://probe.example/port/40211 -> reachable: false"], 2.41, 9.0),
+                 "GET http://probe.example/port/40211 -> reachable: false"], 2.41, 9.0,
+                {"ports": [{"port": 12345, "reachable": False, "listener": True, "via": "echoip"},
+                           {"port": 40211, "reachable": False, "listener": True, "via": "echoip"}],
+                 "test_port": 12345, "test_port_open": False, "public_ip": "203.0.113.2"}),
 ]
 
 

@@ -7,9 +7,18 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core.settings import (Peer, Settings, SettingsError, load_settings, parse_settings,
-                                      render_settings, save_settings, validate_ip, validate_name,
-                                      validate_port)
+from rosnet_tui.core.settings import (
+    Peer,
+    Settings,
+    SettingsError,
+    load_settings,
+    parse_settings,
+    render_settings,
+    save_settings,
+    validate_ip,
+    validate_name,
+    validate_port,
+)
 
 DOC_EXAMPLE = """\
 [this]

@@ -1,16 +1,327 @@
-"""`rosnet-tui sync` (placeholder until its issue lands)."""
+"""`rosnet-tui sync`: keep every component's names right when public addresses change.
+
+``sync`` runs the service in the foreground (logs on stderr, stops cleanly on SIGTERM/Ctrl-C);
+``sync --once`` does one round; ``sync status`` shows what it saw and did; ``sync
+install-service`` writes a systemd unit that runs it at boot.
+"""
 
 from __future__ import annotations
 
 import argparse
+import difflib
+import json
+import logging
+import os
+import pwd
+import shlex
 import sys
+import time
+from pathlib import Path
+
+import rosnet_tui
+from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, config_path
+
+UNIT_NAME = "rosnet-tui-sync.service"
+
+_DESCRIPTION = (
+    "Publish this component's addresses (local IP, public IP) to a shared record store and "
+    "follow the peers' records: when a peer's address changes, rewrite this component's hosts "
+    "set and ROS_MASTER_URI (the safe writer: our block only, atomic, with a backup), then run "
+    "the affected checks again. The store is set in the settings' [sync] table: a shared folder "
+    "(Syncthing, Dropbox, NFS) or a DNS zone taking TSIG-signed dynamic updates.")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("sync", help="(not built yet)")
-    p.set_defaults(func=run)
+    p = sub.add_parser("sync", help="keep hosts entries and ROS_MASTER_URI right when public IPs "
+                                    "change (a service)",
+                       description=_DESCRIPTION,
+                       epilog="Exit codes: 0 stopped cleanly (or --once went well), 1 a round "
+                              "failed, 2 usage or settings error.")
+    add_config_option(p)
+    _service_options(p)
+    p.add_argument("--once", action="store_true",
+                   help="one round (publish, read, apply, check), then exit (for cron or tests)")
+    p.add_argument("--interval", type=float, metavar="S", default=None,
+                   help="public-IP poll interval in seconds (default: sync.interval_s, 60)")
+    p.add_argument("-v", "--verbose", action="store_true", help="log every step (debug)")
+    p.add_argument("-q", "--quiet", action="store_true", help="log only warnings and errors")
+    p.set_defaults(func=run_service)
+    ss = p.add_subparsers(dest="sync_command", metavar="ACTION", parser_class=type(p))
+
+    st = ss.add_parser("status", help="show each component's last record, the last change and "
+                                      "the last error",
+                       description="What the sync service of this component last saw and did "
+                                   "(read from its state dir; the service need not run).")
+    st.add_argument("--json", action="store_true", help="print the status as JSON")
+    st.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
+                    help="state dir of the service (default: $XDG_STATE_HOME/rosnet-tui)")
+    st.set_defaults(func=run_status)
+
+    ins = ss.add_parser("install-service", help="write a systemd unit that runs the sync service",
+                        description="Write a systemd unit (Restart=on-failure) that runs "
+                                    "'rosnet-tui sync' with this component's settings. It is shown "
+                                    "before it is written. Writing /etc/hosts needs root, so the "
+                                    "system unit is the usual choice; --user writes a user unit.")
+    add_config_option(ins)
+    ins.add_argument("--user", action="store_true",
+                     help="a user unit in ~/.config/systemd/user (it can only write files this "
+                          "user may write)")
+    ins.add_argument("--yes", "-y", action="store_true",
+                     help="write without asking (needed where there is no terminal)")
+    ins.add_argument("--dry-run", action="store_true", help="show the unit, write nothing")
+    ins.add_argument("--unit-dir", metavar="DIR", type=Path, default=None,
+                     help="write the unit into DIR instead of the systemd folder")
+    _service_options(ins)
+    ins.set_defaults(func=run_install)
 
 
-def run(args: argparse.Namespace) -> int:
-    print("rosnet-tui sync: not built yet", file=sys.stderr)
-    return 2
+def _service_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
+                   help="where status, journal and backups go (default: "
+                        "$XDG_STATE_HOME/rosnet-tui)")
+    p.add_argument("--hosts-file", metavar="PATH", type=Path, default=None,
+                   help="hosts file to keep right (default: /etc/hosts)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--bashrc", metavar="PATH", type=Path, default=None,
+                   help="shell file for the ROS_MASTER_URI block (default: ~/.bashrc)")
+    g.add_argument("--no-bashrc", action="store_true", help="leave the shell files alone")
+    p.add_argument("--no-checks", action="store_true",
+                   help="do not run the affected checks after a change")
+    p.add_argument("--no-save-settings", action="store_true",
+                   help="do not keep the learned addresses in the settings file")
+
+
+def _err(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _state_dir(args: argparse.Namespace) -> Path:
+    from rosnet_tui.core.settings import default_state_dir
+
+    sd = getattr(args, "state_dir", None)
+    return Path(sd).expanduser().absolute() if sd else default_state_dir()
+
+
+def _bashrc(args: argparse.Namespace) -> Path | None:
+    if getattr(args, "no_bashrc", False):
+        return None
+    if getattr(args, "bashrc", None):
+        return Path(args.bashrc).expanduser().absolute()
+    return Path.home() / ".bashrc"
+
+
+def _setup_logging(args: argparse.Namespace) -> None:
+    logger = logging.getLogger("rosnet_tui.sync")
+    logger.handlers.clear()
+    h = logging.StreamHandler(sys.stderr)
+    h.setFormatter(logging.Formatter("%(asctime)s %(levelname)-7s %(message)s",
+                                     datefmt="%Y-%m-%d %H:%M:%S"))
+    logger.addHandler(h)
+    logger.propagate = False
+    logger.setLevel(logging.DEBUG if args.verbose else
+                    logging.WARNING if args.quiet else logging.INFO)
+
+
+# --------------------------------------------------------------------------- the service
+def run_service(args: argparse.Namespace) -> int:
+    from rosnet_tui.core.hosts import DEFAULT_HOSTS_PATH
+    from rosnet_tui.core.sync.service import SyncError, SyncService, install_signal_handlers
+
+    _setup_logging(args)
+    if args.interval is not None and not 1 <= args.interval <= 86400:
+        _err("rosnet-tui sync: --interval must be between 1 and 86400 seconds")
+        return EXIT_USAGE
+    hosts = Path(args.hosts_file).expanduser().absolute() if args.hosts_file else DEFAULT_HOSTS_PATH
+    try:
+        service = SyncService(config_path(args), state_dir=_state_dir(args), hosts_path=hosts,
+                              bashrc_path=_bashrc(args), run_checks=not args.no_checks,
+                              interval_s=args.interval, save_learned=not args.no_save_settings)
+    except SyncError as exc:
+        _err(f"rosnet-tui sync: {exc}")
+        return EXIT_USAGE
+    try:
+        if args.once:
+            result = service.run_once()
+            if not result.ok:
+                for part, msg in result.errors.items():
+                    _err(f"rosnet-tui sync: {part}: {msg}")
+            return EXIT_OK if result.ok else EXIT_FAIL
+        install_signal_handlers(service)
+        return service.run()
+    except SyncError as exc:
+        _err(f"rosnet-tui sync: {exc}")
+        return EXIT_FAIL
+
+
+# --------------------------------------------------------------------------- status
+def run_status(args: argparse.Namespace) -> int:
+    from rosnet_tui.core.sync.status import load_status, render_status, status_path, with_ages
+
+    sd = _state_dir(args)
+    status = load_status(sd)
+    if status is None:
+        msg = (f"sync has not run on this component yet (no {status_path(sd)}); start it with "
+               "'rosnet-tui sync' or 'rosnet-tui sync install-service'")
+        if args.json:
+            print(json.dumps({"status": None, "message": msg}))
+        else:
+            print(msg)
+        return EXIT_FAIL
+    now = time.time()
+    if args.json:
+        print(json.dumps(with_ages(status, now), indent=2, sort_keys=True))
+    else:
+        for line in render_status(status, now):
+            print(line)
+    return EXIT_FAIL if status.get("errors") else EXIT_OK
+
+
+# --------------------------------------------------------------------------- install-service
+def _interactive() -> bool:
+    try:
+        return sys.stdin.isatty() and sys.stdout.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def _systemd_quote(arg: str) -> str:
+    """One ExecStart word: as is when plain, else in double quotes with \\ and " escaped."""
+    if arg and all(c.isalnum() or c in "/._-=:+@,%" for c in arg):
+        return arg
+    return '"' + arg.replace("\\", "\\\\").replace('"', '\\"').replace("%", "%%") + '"'
+
+
+def _owner_home(path: Path) -> Path | None:
+    """HOME of the user owning *path* (the settings file says whose component this is)."""
+    try:
+        return Path(pwd.getpwuid(path.stat().st_uid).pw_dir)
+    except (OSError, KeyError):
+        return None
+
+
+def _package_root() -> Path:
+    return Path(rosnet_tui.__file__).resolve().parent.parent
+
+
+def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
+    """The unit file's text and the notes to show with it."""
+    cfg = config_path(args).expanduser().absolute()
+    notes: list[str] = []
+    argv = [sys.executable, "-m", "rosnet_tui", "--config", str(cfg), "sync"]
+    if args.state_dir:
+        argv += ["--state-dir", str(_state_dir(args))]
+    elif not user:
+        # The settings owner's state dir (root hands what it writes there back to that user), so
+        # 'rosnet-tui sync status' and 'rosnet-tui undo' as that user find it.
+        home = _owner_home(cfg)
+        sd = (home / ".local" / "state" / "rosnet-tui") if home and home != Path("/root") \
+            else Path("/var/lib/rosnet-tui")
+        argv += ["--state-dir", str(sd)]
+    if args.hosts_file:
+        argv += ["--hosts-file", str(Path(args.hosts_file).expanduser().absolute())]
+    if args.no_bashrc:
+        argv.append("--no-bashrc")
+    else:
+        bashrc = Path(args.bashrc).expanduser().absolute() if args.bashrc else None
+        if bashrc is None:
+            home = Path.home() if user else (_owner_home(cfg) or Path.home())
+            bashrc = home / ".bashrc"
+        argv += ["--bashrc", str(bashrc)]
+    if args.no_checks:
+        argv.append("--no-checks")
+    if args.no_save_settings:
+        argv.append("--no-save-settings")
+    if not cfg.exists():
+        notes.append(f"the settings file {cfg} does not exist yet: the service will not start "
+                     "until it does (run 'rosnet-tui' first)")
+    if user and not args.hosts_file:
+        notes.append("a user service cannot write /etc/hosts: the hosts set will fail to apply "
+                     "(use the system unit, without --user)")
+    root = _package_root()
+    site = any(part in ("site-packages", "dist-packages") for part in root.parts)
+    lines = [
+        "# Written by 'rosnet-tui sync install-service'.",
+        "[Unit]",
+        "Description=rosnet-tui address sync (hosts entries and ROS_MASTER_URI follow public IP "
+        "changes)",
+        "Wants=network-online.target",
+        "After=network-online.target",
+        "",
+        "[Service]",
+        "Type=simple",
+        "ExecStart=" + " ".join(_systemd_quote(a) for a in argv),
+        "Restart=on-failure",
+        "RestartSec=10",
+        "Environment=PYTHONUNBUFFERED=1",
+    ]
+    if not site:
+        lines.append("Environment=" + _systemd_quote(f"PYTHONPATH={root}"))
+    lines += ["", "[Install]", f"WantedBy={'default.target' if user else 'multi-user.target'}", ""]
+    return "\n".join(lines), notes
+
+
+def _unit_dir(args: argparse.Namespace) -> Path:
+    if args.unit_dir:
+        return Path(args.unit_dir).expanduser().absolute()
+    if args.user:
+        base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
+        return Path(base) / "systemd" / "user"
+    return Path("/etc/systemd/system")
+
+
+def run_install(args: argparse.Namespace) -> int:
+    from rosnet_tui.core.settings import atomic_write_text
+
+    text, notes = unit_text(args, user=args.user)
+    path = _unit_dir(args) / UNIT_NAME
+    try:
+        old = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        old = None
+    except OSError as exc:
+        _err(f"rosnet-tui: cannot read {path}: {exc.strerror}")
+        return EXIT_FAIL
+    print(f"The systemd unit {path}:")
+    if old is None:
+        for line in text.splitlines():
+            print(f"  {line}")
+    elif old == text:
+        print("  (already there, exactly this content; nothing to write)")
+    else:
+        sys.stdout.writelines(difflib.unified_diff(old.splitlines(True), text.splitlines(True),
+                                                   f"{path} (now)", f"{path} (after)"))
+    for n in notes:
+        print(f"note: {n}")
+    ctl = "systemctl --user" if args.user else "systemctl"
+    then = f"Then: {ctl} daemon-reload && {ctl} enable --now {UNIT_NAME}"
+    if old == text:
+        print(then)
+        return EXIT_OK
+    if args.dry_run:
+        print("Dry run: nothing was written.")
+        return EXIT_OK
+    if not args.yes:
+        if not _interactive():
+            _err("rosnet-tui: not writing without a terminal to ask on; read the unit above, "
+                 "then run the same command with --yes")
+            return EXIT_USAGE
+        try:
+            answer = input(f"Write {path}? [y/N] ")
+        except EOFError:
+            answer = ""
+        if answer.strip().lower() not in ("y", "yes"):
+            print("Nothing was written.")
+            return EXIT_FAIL
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(path, text, mode=0o644)
+    except PermissionError:
+        _err(f"rosnet-tui: this user may not write {path}; run it with sudo: "
+             f"sudo {shlex.join([sys.executable, '-m', 'rosnet_tui', *sys.argv[1:]])}")
+        return EXIT_FAIL
+    except OSError as exc:
+        _err(f"rosnet-tui: cannot write {path}: {exc.strerror}")
+        return EXIT_FAIL
+    print(f"Wrote {path}.")
+    print(then)
+    return EXIT_OK

@@ -200,16 +200,18 @@ class RosnetApp(App[int]):
 
     # ------------------------------------------------------------------ writing configuration
     def configuration_text(self, step_id: str) -> str:
-        """The Configuration pane's Markdown for *step_id*: the router step gets the card."""
+        """The Configuration pane's Markdown for *step_id*."""
         from rosnet_tui.core.steps import STEP_BY_ID
 
-        settings = self.runtime_settings()
-        if step_id == "router":
-            from rosnet_tui.core.router_card import build_router_card, render_router_card
+        return STEP_BY_ID[step_id].configure(self.runtime_settings())
 
-            card = build_router_card(settings, self.detected if self.detected.local_ip else None)
-            return render_router_card(card, markdown=True)
-        return STEP_BY_ID[step_id].configure(settings)
+    def router_card_text(self, width: int) -> str:
+        """The router card as plain text *width* columns wide: values to type into the modem."""
+        from rosnet_tui.core.router_card import build_router_card, render_router_card
+
+        card = build_router_card(self.runtime_settings(),
+                                 self.detected if self.detected.local_ip else None)
+        return render_router_card(card, markdown=False, width=max(40, width))
 
     def write_plan(self, step_id: str):
         """What `w` writes on *step_id*: the hosts set (Linux) or the ROS block (ROS)."""

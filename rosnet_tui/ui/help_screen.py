@@ -23,7 +23,12 @@ what to configure on *this* component, and live checks.
 | `r` | run the step's checks |
 | `R` | re-run the highlighted check |
 | `c` | cancel running checks |
-| `e` or `Enter` | show / hide the evidence of the highlighted check |
+| `e` or `Enter` | show / hide the evidence and advice of the highlighted check |
+| `a` | the advisor: what the results mean, what to do |
+| `g` | go back to the step where the highlighted check's cause is |
+| `w` | write the configuration (Linux: hosts set; ROS: `ROS_MASTER_URI`) |
+| `u` | undo the last write |
+| `k` | review a peer's unknown SSH host key (Linux step) |
 | `z` | zoom the focused pane (again to restore) |
 | `Tab` | move between panes |
 | `s` | set-up: this component and its peers |

@@ -53,7 +53,11 @@ class StepScreen(Screen):
             with Container(id="lower"):
                 with VerticalScroll(id="config-pane", classes="pane") as config:
                     config.border_title = "Configuration"
-                    yield Markdown(self.rosnet.configuration_text(self.step.id), id="config-text")
+                    if self.step.id == "router":  # the card: plain text, fit to the pane
+                        yield Static("", id="router-card", markup=False)
+                    else:
+                        yield Markdown(self.rosnet.configuration_text(self.step.id),
+                                       id="config-text")
                 with Vertical(id="verify-pane", classes="pane") as verify:
                     verify.border_title = "Verification"
                     known = {s.id for s in self.specs}
@@ -63,6 +67,8 @@ class StepScreen(Screen):
         yield Footer()
 
     def on_mount(self) -> None:
+        if self.step.id == "router":
+            self.call_after_refresh(self._render_card)
         self.query_one("#check-table").focus()
         self.title = "rosnet-tui"
         self.refresh_subtitle()
@@ -79,8 +85,21 @@ class StepScreen(Screen):
 
     def refresh_config(self) -> None:
         """Settings changed: re-render the tailored configuration."""
-        self.query_one("#config-text", Markdown).update(self.rosnet.configuration_text(self.step.id))
+        if self.step.id == "router":
+            self._render_card()
+        else:
+            self.query_one("#config-text", Markdown).update(
+                self.rosnet.configuration_text(self.step.id))
         self.refresh_subtitle()
+
+    def _render_card(self) -> None:
+        pane = self.query_one("#config-pane")
+        width = pane.scrollable_content_region.width or 76
+        self.query_one("#router-card", Static).update(self.rosnet.router_card_text(width - 3))
+
+    def on_resize(self) -> None:
+        if self.step.id == "router":
+            self.call_after_refresh(self._render_card)
 
     def _sync_results(self) -> None:
         """Show the latest known state of every check and every step (shared through the app)."""

@@ -1,0 +1,28 @@
+"""Address sync between components (issue 7): when a modem restart changes a public IP, every
+peer's hosts entry and ROS_MASTER_URI follow without anyone touching them.
+
+- :mod:`.records`: the record each component publishes, its validation, choosing among copies;
+- :mod:`.folder`, :mod:`.dnsstore`: the stores (a shared folder; RFC 2136 + TSIG on DNS);
+- :mod:`.watcher`: this component's own addresses (netlink, public-IP polling);
+- :mod:`.plan`: the hosts set by evidence (same public IP -> on this LAN);
+- :mod:`.service`: the loop (back-off, the safe writer, the affected checks);
+- :mod:`.status`: what ``rosnet-tui sync status`` shows.
+"""
+
+from __future__ import annotations
+
+from .backoff import Backoff, backoff_cap
+from .folder import FolderStore
+from .plan import Plan, PlanError, plan_hosts
+from .records import Candidate, Record, RecordError, choose_best, new_record, parse_record
+from .service import AFFECTED_CHECKS, RoundResult, SyncError, SyncService, run_affected_checks
+from .status import load_status, render_status, status_path
+from .store import FetchResult, Refusal, StoreConfigError, StoreError, make_store
+
+__all__ = [
+    "AFFECTED_CHECKS", "Backoff", "Candidate", "FetchResult", "FolderStore", "Plan", "PlanError",
+    "Record", "RecordError", "Refusal", "RoundResult", "StoreConfigError", "StoreError",
+    "SyncError", "SyncService", "backoff_cap", "choose_best", "load_status", "make_store",
+    "new_record", "parse_record", "plan_hosts", "render_status", "run_affected_checks",
+    "status_path",
+]

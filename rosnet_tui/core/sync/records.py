@@ -1,0 +1,242 @@
+"""Address records: what each component publishes about itself, and how copies are judged.
+
+One record per component: its name, local IP, public IP, role, a sequence number that grows with
+every new content, a timestamp and the record format version. Stores (a shared folder, DNS) hold
+copies that may be partial, stale or in conflict; :func:`parse_record` refuses anything malformed
+(it is never applied) and :func:`choose_best` picks among valid copies: the highest ``seq``, then
+the newest ``timestamp``.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import json
+import math
+import time
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, replace
+from datetime import datetime, timezone
+from typing import Any
+
+from rosnet_tui.core.settings import ROLES, validate_ip, validate_name
+
+RECORD_VERSION = 1
+MAX_RECORD_BYTES = 4096
+MAX_SEQ = 2**53                   # what a JSON number holds exactly everywhere
+MAX_FUTURE_S = 24 * 3600          # a record from further in the future is refused (clock or forgery)
+MIN_TIMESTAMP = 946684800.0       # 2000-01-01: anything older is not a real clock
+_FIELDS = ("version", "name", "role", "local_ip", "public_ip", "seq", "timestamp")
+
+
+class RecordError(ValueError):
+    """A record that must not be used; the message says why, in a few words."""
+
+
+@dataclass(frozen=True)
+class Record:
+    name: str
+    local_ip: str
+    public_ip: str
+    role: str
+    seq: int
+    timestamp: float              # seconds since the epoch (UTC)
+    version: int = RECORD_VERSION
+
+    # ------------------------------------------------------------------ forms
+    def to_json(self) -> dict[str, Any]:
+        return {"version": self.version, "name": self.name, "role": self.role,
+                "local_ip": self.local_ip, "public_ip": self.public_ip, "seq": self.seq,
+                "timestamp": format_time(self.timestamp)}
+
+    def to_text(self) -> str:
+        """The record file's text: small, stable key order, one trailing newline."""
+        return json.dumps(self.to_json(), indent=2) + "\n"
+
+    def to_compact(self) -> str:
+        return json.dumps(self.to_json(), separators=(",", ":"))
+
+    # ------------------------------------------------------------------ comparisons
+    def same_content(self, other: Record | None) -> bool:
+        """Same addresses and role (seq and timestamp aside)."""
+        return other is not None and (self.name, self.local_ip, self.public_ip, self.role) == (
+            other.name, other.local_ip, other.public_ip, other.role)
+
+    @property
+    def rank(self) -> tuple[int, int]:
+        return (self.seq, millis(self.timestamp))
+
+    def next(self, *, local_ip: str, public_ip: str, role: str,
+             now: float | None = None) -> Record:
+        """The record that follows this one with new content (seq + 1, fresh timestamp)."""
+        return replace(self, local_ip=local_ip, public_ip=public_ip, role=role, seq=self.seq + 1,
+                       timestamp=now if now is not None else time.time(), version=RECORD_VERSION)
+
+    def describe(self) -> str:
+        return (f"{self.name} ({self.role}): local {self.local_ip or '?'}, "
+                f"public {self.public_ip or '?'}, #{self.seq} of {format_time(self.timestamp)}")
+
+
+def new_record(name: str, *, local_ip: str, public_ip: str, role: str, seq: int = 1,
+               now: float | None = None) -> Record:
+    """A fresh record (validated: raises RecordError when it would be refused by peers)."""
+    rec = Record(name, local_ip, public_ip, role, seq, now if now is not None else time.time())
+    check_record(rec)
+    return rec
+
+
+# --------------------------------------------------------------------------- time
+def millis(ts: float) -> int:
+    """A timestamp in whole milliseconds: the precision records are written and compared at."""
+    return int(round(ts * 1000))
+
+
+def format_time(ts: float) -> str:
+    """ISO 8601 UTC with milliseconds, e.g. 2025-03-01T12:00:00.123Z."""
+    secs, ms = divmod(millis(ts), 1000)
+    dt = datetime.fromtimestamp(secs, tz=timezone.utc)
+    return dt.strftime("%Y-%m-%dT%H:%M:%S.") + f"{ms:03d}Z"
+
+
+def parse_time(value: Any) -> float:
+    """Seconds since the epoch from an ISO 8601 string (UTC 'Z' or an offset) or a number."""
+    if isinstance(value, bool):
+        raise RecordError("timestamp must be a time, not true/false")
+    if isinstance(value, (int, float)):
+        ts = float(value)
+    elif isinstance(value, str):
+        text = value.strip()
+        if text.endswith(("Z", "z")):
+            text = text[:-1] + "+00:00"
+        try:
+            dt = datetime.fromisoformat(text)
+        except ValueError:
+            raise RecordError(f"timestamp {value[:40]!r} is not an ISO 8601 time") from None
+        if dt.tzinfo is None:
+            raise RecordError(f"timestamp {value[:40]!r} has no time zone (write it in UTC, ...Z)")
+        ts = dt.timestamp()
+    else:
+        raise RecordError("timestamp is missing or not a time")
+    if not math.isfinite(ts):
+        raise RecordError("timestamp is not a finite number")
+    return ts
+
+
+# --------------------------------------------------------------------------- validation
+def address_problem(value: str) -> str | None:
+    """Why *value* cannot be a component's address in a record (None: it can)."""
+    why = validate_ip(value, required=True)
+    if why:
+        return why
+    a = ipaddress.ip_address(value)
+    if a.is_loopback:
+        return f"{value} is a loopback address"
+    if a.is_link_local:
+        return f"{value} is a link-local address"
+    if a.is_reserved:
+        return f"{value} is a reserved address"
+    return None
+
+
+def check_record(rec: Record, *, now: float | None = None) -> None:
+    """Raise RecordError when *rec* must not be used."""
+    if rec.version != RECORD_VERSION:
+        raise RecordError(f"record format version {rec.version} is not known to this rosnet-tui "
+                          f"(it reads version {RECORD_VERSION})")
+    why = validate_name(rec.name)
+    if why:
+        raise RecordError(f"name {rec.name[:40]!r}: {why}")
+    if rec.role not in ROLES:
+        raise RecordError(f"role {rec.role[:20]!r} is not one of {', '.join(ROLES)}")
+    if not rec.local_ip and not rec.public_ip:
+        raise RecordError("the record has no address at all")
+    for key in ("local_ip", "public_ip"):
+        value = getattr(rec, key)
+        if value and (why := address_problem(value)):
+            raise RecordError(f"{key}: {why}")
+    if isinstance(rec.seq, bool) or not isinstance(rec.seq, int) or not 0 <= rec.seq <= MAX_SEQ:
+        raise RecordError(f"seq must be a whole number from 0 to {MAX_SEQ}")
+    now = time.time() if now is None else now
+    if rec.timestamp < MIN_TIMESTAMP:
+        raise RecordError(f"timestamp {format_time(rec.timestamp)} is before the year 2000")
+    if rec.timestamp > now + MAX_FUTURE_S:
+        raise RecordError(f"timestamp {format_time(rec.timestamp)} is more than a day in the "
+                          "future (a wrong clock, or a forged record)")
+
+
+def parse_record(data: bytes | str | Mapping[str, Any], *, expect_name: str | None = None,
+                 now: float | None = None) -> Record:
+    """A validated Record from a record file's bytes, text or decoded JSON.
+
+    Raises RecordError (never anything else) for anything malformed: not JSON, not an object,
+    too big, a missing or ill-typed field, a bad address, a name other than *expect_name*.
+    Unknown extra fields are ignored (a newer minor version may add some).
+    """
+    if isinstance(data, (bytes, bytearray)):
+        if len(data) > MAX_RECORD_BYTES:
+            raise RecordError(f"too big ({len(data)} bytes; a record is under {MAX_RECORD_BYTES})")
+        try:
+            data = bytes(data).decode("utf-8")
+        except UnicodeDecodeError:
+            raise RecordError("not UTF-8 text") from None
+    if isinstance(data, str):
+        if len(data) > MAX_RECORD_BYTES:
+            raise RecordError(f"too big ({len(data)} characters)")
+        if not data.strip():
+            raise RecordError("empty (a partial copy?)")
+        try:
+            data = json.loads(data)
+        except ValueError as exc:
+            raise RecordError(f"not valid JSON ({exc.msg} at character {exc.pos}; "
+                              "a partial copy?)") from None
+    if not isinstance(data, Mapping):
+        raise RecordError("not a JSON object")
+    missing = [k for k in _FIELDS if k not in data]
+    if missing:
+        raise RecordError(f"missing field(s): {', '.join(missing)}")
+    version = data["version"]
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise RecordError("version must be a whole number")
+    for key in ("name", "role", "local_ip", "public_ip"):
+        if not isinstance(data[key], str):
+            raise RecordError(f"{key} must be a string")
+    seq = data["seq"]
+    if isinstance(seq, bool) or not isinstance(seq, int):
+        raise RecordError("seq must be a whole number")
+    rec = Record(name=data["name"].strip(), local_ip=data["local_ip"].strip(),
+                 public_ip=data["public_ip"].strip(), role=data["role"].strip(), seq=seq,
+                 timestamp=parse_time(data["timestamp"]), version=version)
+    check_record(rec, now=now)
+    if expect_name is not None and rec.name.lower() != expect_name.lower():
+        raise RecordError(f"it names {rec.name!r}, not {expect_name!r}")
+    return rec
+
+
+# --------------------------------------------------------------------------- choosing
+@dataclass(frozen=True)
+class Candidate:
+    """A valid record and where it was read (a file name, a DNS name)."""
+
+    record: Record
+    source: str
+
+
+def choose_best(candidates: Iterable[Candidate]) -> tuple[Candidate | None, list[str]]:
+    """The copy to use: highest seq, then newest timestamp; plus notes on conflicting copies.
+
+    Ties (same seq and timestamp) with different content are a real conflict: the one from the
+    source that sorts first wins (the plain ``NAME.json`` before ``NAME.sync-conflict-...``), so
+    every component decides the same way, and a note says so.
+    """
+    cands = list(candidates)
+    if not cands:
+        return None, []
+    best = sorted(cands, key=lambda c: (-c.record.seq, -millis(c.record.timestamp),
+                                        len(c.source), c.source))[0]
+    notes = []
+    for c in cands:
+        if c is not best and c.record.rank == best.record.rank \
+                and not c.record.same_content(best.record):
+            notes.append(f"{c.source} has the same seq #{c.record.seq} and time as {best.source} "
+                         f"but other content; using {best.source}")
+    return best, notes
+

@@ -1,0 +1,80 @@
+"""What every record store offers (folder, DNS), and picking one from the settings."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+from rosnet_tui.core.settings import Settings
+
+from .records import Candidate, Record
+
+
+class StoreError(Exception):
+    """The store cannot be used right now (unreachable, refused, misconfigured): says why."""
+
+
+class StoreConfigError(StoreError):
+    """The settings do not describe a usable store (retrying will not help)."""
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """A copy that was not used, and why (malformed, foreign, a garbage peer record)."""
+
+    source: str
+    name: str | None
+    why: str
+
+
+@dataclass
+class FetchResult:
+    """The best valid copy of each name that has one, and what was refused or noted."""
+
+    records: dict[str, Candidate] = field(default_factory=dict)
+    refused: list[Refusal] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    # Every valid copy seen for our own name (to continue its seq, and to tidy up).
+    own_copies: list[Candidate] = field(default_factory=list)
+
+
+class RecordStore(Protocol):
+    kind: str
+
+    def describe(self) -> str:
+        """Where the records live, in a few words (for logs and status)."""
+        ...
+
+    def publish(self, record: Record) -> None:
+        """Make *record* this component's current record (atomic). Raises StoreError."""
+        ...
+
+    def fetch(self, names: Iterable[str], own_name: str) -> FetchResult:
+        """The best valid record of each of *names*. Raises StoreError when unreachable."""
+        ...
+
+
+def make_store(settings: Settings, *, timeout_s: float | None = None) -> RecordStore:
+    """The store the settings' [sync] table names. Raises StoreConfigError when incomplete."""
+    y = settings.sync
+    timeout = timeout_s if timeout_s is not None else max(1.0, float(settings.checks.timeout_s))
+    if y.store == "folder":
+        from .folder import FolderStore
+
+        if not y.folder:
+            raise StoreConfigError("the folder store needs sync.folder (the shared folder) in "
+                                   "the settings")
+        return FolderStore(Path(y.folder).expanduser())
+    if y.store == "dns":
+        from .dnsstore import DnsStore
+
+        missing = [k for k in ("dns_server", "zone") if not getattr(y, k)]
+        if missing:
+            raise StoreConfigError("the dns store needs " + " and ".join(f"sync.{k}" for k in missing)
+                                   + " in the settings")
+        return DnsStore(y.dns_server, y.zone,
+                        Path(y.tsig_key_file).expanduser() if y.tsig_key_file else None,
+                        timeout_s=timeout)
+    raise StoreConfigError(f"unknown store {y.store!r} (sync.store is 'folder' or 'dns')")
