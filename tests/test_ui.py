@@ -384,3 +384,21 @@ async def test_unknown_host_key_is_shown_and_trusted_only_on_request(tmp_path):
         await pilot.click("#trust-yes")
         await pilot.pause()
         assert (ssh_dir / "known_hosts").read_text().split()[1:] == pub.split()
+
+
+async def test_a_burst_of_keys_is_applied_in_order(tmp_path):
+    """Over a laggy SSH link keys arrive in bursts: a backspace must not overtake the letters."""
+    from textual import events
+
+    app = make_app(tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        field = app.screen.query_one("#this-name", Input)
+        field.focus()
+        burst = [("t", "t"), ("u", "u"), ("r", "r"), ("x", "x"), ("backspace", None),
+                 ("t", "t"), ("l", "l"), ("e", "e"), ("left", None), ("left", None),
+                 ("Z", "Z")]
+        for key, char in burst:  # posted at once, without waiting between them
+            app.post_message(events.Key(key, char))
+        await pilot.pause(0.3)
+        assert field.value == "turtZle"

@@ -15,6 +15,7 @@ from textual.widgets import Button, Footer, Header, Input, Label, Select, Static
 
 from rosnet_tui.core import settings as S
 from rosnet_tui.core.netinfo import LocalNet
+from rosnet_tui.ui.widgets import OrderedInput
 
 if TYPE_CHECKING:
     from rosnet_tui.ui.app import RosnetApp
@@ -57,13 +58,13 @@ class PeerRow(Horizontal):
 
     def compose(self) -> ComposeResult:
         i, p = self.index, self.peer
-        yield Input(p.name, placeholder="name", id=f"peer-{i}-name", compact=True,
+        yield OrderedInput(p.name, placeholder="name", id=f"peer-{i}-name", compact=True,
                     validators=[CoreValidator(S.validate_name)], classes="peer-name")
-        yield Input(p.local_ip, placeholder="local IP", id=f"peer-{i}-local", compact=True,
+        yield OrderedInput(p.local_ip, placeholder="local IP", id=f"peer-{i}-local", compact=True,
                     validators=[CoreValidator(S.validate_ip, required=False)])
-        yield Input(p.public_ip, placeholder="public IP", id=f"peer-{i}-public", compact=True,
+        yield OrderedInput(p.public_ip, placeholder="public IP", id=f"peer-{i}-public", compact=True,
                     validators=[CoreValidator(S.validate_ip, required=False)])
-        yield Input(p.ssh_user, placeholder="ssh user", id=f"peer-{i}-user", compact=True,
+        yield OrderedInput(p.ssh_user, placeholder="ssh user", id=f"peer-{i}-user", compact=True,
                     validators=[CoreValidator(S.validate_ssh_user)], classes="peer-user")
         yield Button("del", id=f"peer-{i}-remove", compact=True, classes="peer-remove",
                      tooltip="Remove this peer")
@@ -104,7 +105,7 @@ class SetupScreen(Screen[bool]):
             yield Static("This component", classes="section")
             with Horizontal(classes="field"):
                 yield Label("Name", classes="field-label")
-                yield Input(t.name, placeholder="e.g. turtlebot", id="this-name", compact=True,
+                yield OrderedInput(t.name, placeholder="e.g. turtlebot", id="this-name", compact=True,
                             validators=[CoreValidator(S.validate_name)])
             yield Label("", id="this-name-error", classes="field-error")
             with Horizontal(classes="field"):
@@ -121,17 +122,17 @@ class SetupScreen(Screen[bool]):
                              id="this-profile", compact=True)
             with Horizontal(classes="field"):
                 yield Label("Local IP", classes="field-label")
-                yield Input(local_ip, placeholder="e.g. 10.10.10.1", id="this-local-ip",
+                yield OrderedInput(local_ip, placeholder="e.g. 10.10.10.1", id="this-local-ip",
                             compact=True, validators=[CoreValidator(S.validate_ip)])
             yield Label(self._local_ip_hint(), id="this-local-ip-error", classes="field-hint")
             with Horizontal(classes="field"):
                 yield Label("Test port", classes="field-label")
-                yield Input(str(s.probe.port), id="probe-port", compact=True, type="integer",
+                yield OrderedInput(str(s.probe.port), id="probe-port", compact=True, type="integer",
                             validators=[CoreValidator(S.validate_port)])
             yield Label("", id="probe-port-error", classes="field-error")
             with Horizontal(classes="field", id="master-field"):
                 yield Label("ROS master", classes="field-label")
-                yield Input(s.ros.master if t.role == "member" else "",
+                yield OrderedInput(s.ros.master if t.role == "member" else "",
                             placeholder="name of the peer that runs roscore", id="ros-master",
                             compact=True, validators=[CoreValidator(S.validate_name)])
             yield Label("", id="ros-master-error", classes="field-error")
