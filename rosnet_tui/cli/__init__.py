@@ -57,6 +57,42 @@ def config_path(args: argparse.Namespace) -> Path:
     return Path(args.config).expanduser() if getattr(args, "config", None) else default_config_path()
 
 
+def say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def load_settings_or_say(args: argparse.Namespace, *, complete: bool = False):
+    """The settings named by --config (Settings), or None after saying why on stderr.
+
+    With *complete*, blank local IP and interface are filled in from this machine for this run,
+    and settings that are still incomplete are refused (the caller exits 2).
+    """
+    from rosnet_tui.core.netinfo import with_detected
+    from rosnet_tui.core.settings import SettingsError, load_settings
+
+    path = config_path(args)
+    try:
+        settings = load_settings(path)
+    except SettingsError as exc:
+        say(f"rosnet-tui: the settings file cannot be used: {exc}")
+        return None
+    if settings is None:
+        say(f"rosnet-tui: no settings file at {path}; run 'rosnet-tui' (the wizard) first, "
+            "or pass --config FILE")
+        return None
+    if not complete:
+        return settings
+    settings = with_detected(settings)
+    problems = settings.problems()
+    if problems:
+        say(f"rosnet-tui: the settings in {path} are not complete:")
+        for key, why in problems:
+            say(f"  {key}: {why}")
+        say("Fix them by hand or with the wizard (rosnet-tui --setup).")
+        return None
+    return settings
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)

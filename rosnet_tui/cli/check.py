@@ -13,7 +13,7 @@ import os
 import sys
 from typing import Any
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, config_path
+from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, load_settings_or_say
 from rosnet_tui.core.checks import STEP_IDS
 
 _STYLES = {"pass": "green", "warn": "yellow", "fail": "bold red", "skip": "dim"}
@@ -43,67 +43,18 @@ def _err(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def _load(args: argparse.Namespace):  # -> Settings | None
-    from rosnet_tui.core.netinfo import detect_local_net
-    from rosnet_tui.core.settings import SettingsError, load_settings
-
-    path = config_path(args)
-    try:
-        settings = load_settings(path)
-    except SettingsError as exc:
-        _err(f"rosnet-tui check: the settings file cannot be used: {exc}")
-        return None
-    if settings is None:
-        _err(f"rosnet-tui check: no settings file at {path}; run 'rosnet-tui' (the wizard) first, "
-             "or pass --config FILE")
-        return None
-    if not settings.this.local_ip or not settings.this.interface:
-        net = detect_local_net()  # filled in for this run only; the file is not touched
-        if not settings.this.local_ip and net.local_ip:
-            settings.this.local_ip = net.local_ip
-            if not settings.this.interface:
-                settings.this.interface = net.interface
-        elif not settings.this.interface and net.local_ip == settings.this.local_ip:
-            settings.this.interface = net.interface
-    problems = settings.problems()
-    if problems:
-        _err(f"rosnet-tui check: the settings in {path} are not complete:")
-        for key, why in problems:
-            _err(f"  {key}: {why}")
-        _err("Fix them by hand or with the wizard (rosnet-tui --setup).")
-        return None
-    return settings
-
-
 def run(args: argparse.Namespace) -> int:
     timeout = args.timeout
     if timeout is not None and not 0.1 <= timeout <= 120:
         _err("rosnet-tui check: --timeout must be between 0.1 and 120 seconds")
         return EXIT_USAGE
-    settings = _load(args)
+    settings = load_settings_or_say(args, complete=True)
     if settings is None:
         return EXIT_USAGE
-
-    from rosnet_tui.core.checks import CheckContext, checks_for, run_checks
-
     steps = list(dict.fromkeys(args.step)) if args.step else None
-    specs = checks_for(steps)
-    ctx = CheckContext(settings=settings,
-                       timeout_s=float(timeout if timeout is not None else settings.checks.timeout_s),
-                       env=dict(os.environ), upnp=not args.no_upnp)
-    progress = not args.quiet
-    total = len(specs)
-
-    async def go() -> dict:
-        got = {}
-        async for r in run_checks(specs, ctx):
-            got[r.id] = r
-            if progress:
-                _err(f"[{len(got)}/{total}] {r.status.label:<4} {r.id}: {r.summary}")
-        return got
-
-    results = asyncio.run(go())
-    ordered = [results[s.id] for s in specs if s.id in results]
+    ordered = collect_results(settings, steps, timeout=timeout, upnp=not args.no_upnp,
+                              progress=not args.quiet)
+    results = {r.id: r for r in ordered}
     advice = _advice(results, settings)
     failed = any(r.status.value == "fail" for r in ordered)
     if args.json:
@@ -117,6 +68,33 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print_table(ordered, advice)
     return EXIT_FAIL if failed else EXIT_OK
+
+
+def collect_results(settings: Any, steps: list[str] | None = None, *, timeout: float | None = None,
+                    upnp: bool = True, progress: bool = False) -> list:
+    """Run the checks of *steps* (all when None) concurrently; results in registry order.
+
+    The one way the headless commands (check, report) run checks; *progress* prints each
+    verdict to stderr as it lands.
+    """
+    from rosnet_tui.core.checks import CheckContext, checks_for, run_checks
+
+    specs = checks_for(steps)
+    ctx = CheckContext(settings=settings,
+                       timeout_s=float(timeout if timeout is not None else settings.checks.timeout_s),
+                       env=dict(os.environ), upnp=upnp)
+    total = len(specs)
+
+    async def go() -> dict:
+        got = {}
+        async for r in run_checks(specs, ctx):
+            got[r.id] = r
+            if progress:
+                _err(f"[{len(got)}/{total}] {r.status.label:<4} {r.id}: {r.summary}")
+        return got
+
+    results = asyncio.run(go())
+    return [results[s.id] for s in specs if s.id in results]
 
 
 def _advice(results: dict, settings: Any) -> list:

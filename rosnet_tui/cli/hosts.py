@@ -13,7 +13,14 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, config_path
+from rosnet_tui.cli import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    config_path,
+    load_settings_or_say,
+)
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import (
@@ -31,7 +38,6 @@ from rosnet_tui.core.settings import (
     Settings,
     SettingsError,
     default_state_dir,
-    load_settings,
     save_settings,
 )
 
@@ -63,16 +69,7 @@ def ask(question: str) -> bool:
 
 def load_settings_for(args: argparse.Namespace) -> Settings | None:
     """The settings, or None after saying why (the caller exits 2)."""
-    path = config_path(args)
-    try:
-        s = load_settings(path)
-    except SettingsError as exc:
-        err(f"rosnet-tui: the settings file cannot be used: {exc}")
-        return None
-    if s is None:
-        err(f"rosnet-tui: no settings file at {path}; run 'rosnet-tui' (the wizard) first, "
-            "or pass --config FILE")
-    return s
+    return load_settings_or_say(args)
 
 
 def report_settings_problems(exc: WriterSettingsError) -> int:

@@ -9,7 +9,6 @@ no environment variable but ``ROS_*``.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import dataclasses
 import datetime as dt
 import json
@@ -129,7 +128,7 @@ def make_report(args: argparse.Namespace) -> dict[str, Any]:
     else:
         settings, path = _load_settings(args, required=True)
         assert settings is not None
-        complete_for_run(settings, path)
+        settings = complete_for_run(settings, path)
         results = run_checks_now(settings, steps)
         source = "checks run live on this machine"
         env = ros_environment(os.environ)
@@ -145,45 +144,25 @@ def make_report(args: argparse.Namespace) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- running the checks
-def complete_for_run(settings: Settings, path: Path) -> None:
+def complete_for_run(settings: Settings, path: Path) -> Settings:
     """Fill in this machine's local IP/interface when the file leaves them out (for this run
     only, as `rosnet-tui check` does); refuse incomplete settings."""
-    if not settings.this.local_ip or not settings.this.interface:
-        from rosnet_tui.core.netinfo import detect_local_net
+    from rosnet_tui.core.netinfo import with_detected
 
-        net = detect_local_net()
-        if not settings.this.local_ip and net.local_ip:
-            settings.this.local_ip = net.local_ip
-            settings.this.interface = settings.this.interface or net.interface
-        elif not settings.this.interface and net.local_ip == settings.this.local_ip:
-            settings.this.interface = net.interface
+    settings = with_detected(settings)
     problems = settings.problems()
     if problems:
         raise ReportError(f"the settings in {path} are not complete: "
                           + "; ".join(f"{k}: {why}" for k, why in problems)
                           + " (fix them by hand or with the wizard: rosnet-tui --setup)")
+    return settings
 
 
 def run_checks_now(settings: Settings, steps: Iterable[str] | None) -> list[CheckResult]:
     """Run the checks of *steps* (all when None), as `rosnet-tui check` does."""
-    try:  # the check command's helpers, when it has them
-        from rosnet_tui.cli import check as check_cli
+    from rosnet_tui.cli.check import collect_results
 
-        helper = getattr(check_cli, "collect_results", None)
-        if helper is not None:
-            return list(helper(settings, steps))
-    except ImportError:
-        pass
-    from rosnet_tui.core.checks import CheckContext, checks_for, run_checks
-
-    async def collect() -> list[CheckResult]:
-        ctx = CheckContext(settings=settings, timeout_s=float(settings.checks.timeout_s),
-                           env=dict(os.environ))
-        return [r async for r in run_checks(checks_for(steps), ctx)]
-
-    results = asyncio.run(collect())
-    order = {c.id: i for i, c in enumerate(checks_for(steps))}
-    return sorted(results, key=lambda r: order.get(r.id, len(order)))
+    return collect_results(settings, list(steps) if steps else None)
 
 
 # --------------------------------------------------------------------------- reading saved results

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import ipaddress
 import socket
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import netifaces
 import psutil
+
+if TYPE_CHECKING:
+    from rosnet_tui.core.settings import Settings
 
 # Overlay and virtual interfaces that are never the LAN the modem forwards to.
 OVERLAY_PREFIXES = ("lo", "tailscale", "zt", "hnet", "docker", "br-", "veth", "virbr", "wg", "tun")
@@ -71,3 +75,21 @@ def detect_local_net() -> LocalNet:
             if a.family == socket.AF_INET and not ipaddress.ip_address(a.address).is_loopback:
                 return LocalNet(name, a.address, "", interface_mac(name), a.netmask or "")
     return LocalNet()
+
+
+def with_detected(settings: Settings, net: LocalNet | None = None) -> Settings:
+    """A copy of *settings* whose blank local IP and interface come from this machine.
+
+    For one run only: the settings file keeps what the user wrote. An interface is taken only
+    when it is the one that holds the local IP.
+    """
+    t = settings.this
+    if t.local_ip and t.interface:
+        return settings
+    net = net if net is not None else detect_local_net()
+    local_ip, interface = t.local_ip, t.interface
+    if not local_ip and net.local_ip:
+        local_ip, interface = net.local_ip, interface or net.interface
+    elif not interface and net.local_ip == local_ip:
+        interface = net.interface
+    return replace(settings, this=replace(t, local_ip=local_ip, interface=interface))

@@ -13,7 +13,7 @@ from textual.binding import Binding
 
 from rosnet_tui.core.advisor import Finding, advise
 from rosnet_tui.core.checks import CheckContext, CheckSpec, checks_for
-from rosnet_tui.core.netinfo import LocalNet, detect_local_net
+from rosnet_tui.core.netinfo import LocalNet, detect_local_net, with_detected
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings, atomic_write_text, default_state_dir, save_settings
 from rosnet_tui.core.steps import STEPS
@@ -115,14 +115,7 @@ class RosnetApp(App[int]):
 
     def runtime_settings(self) -> Settings:
         """The saved settings, with what they leave blank filled in from this machine."""
-        from dataclasses import replace
-
-        t = self.settings.this
-        if t.local_ip and t.interface:
-            return self.settings
-        this = replace(t, local_ip=t.local_ip or self.detected.local_ip,
-                       interface=t.interface or self.detected.interface)
-        return replace(self.settings, this=this)
+        return with_detected(self.settings, self.detected)
 
     # ------------------------------------------------------------------ settings
     def save_settings(self, settings: Settings) -> None:
