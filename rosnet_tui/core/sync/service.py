@@ -64,6 +64,7 @@ VERIFY_EVERY_S = 30.0        # look at the hosts file again even when nothing ch
 HEARTBEAT_S = 3600.0         # republish an unchanged record this often (its age then says alive)
 RECHECK_AFTER_S = (5.0, 15.0, 45.0)   # re-run failing checks after a change, then give up
 DEBOUNCE_S = 0.3             # netlink: wait for the burst of messages of one change to end
+FORCED_GAP_S = 2.0           # a network change asks for the public IP at most this often
 MAX_WAIT_S = 5.0
 
 log = logging.getLogger("rosnet_tui.sync")
@@ -164,6 +165,7 @@ class SyncService:
 
         now = time.monotonic()
         self.next_public = now
+        self._last_public_poll = -FORCED_GAP_S
         self.next_fetch = now
         self.next_publish = now
         self.next_apply = now
@@ -171,7 +173,8 @@ class SyncService:
         self.recheck_at: float | None = None
         self._recheck_left: list[float] = []
         self._last_plan: Plan | None = None
-        self.backoff = {k: Backoff() for k in ("settings", "public_ip", "store", "apply")}
+        self.backoff = {k: Backoff() for k in ("settings", "public_ip", "store", "apply",
+                                               "round")}
         self._said: set[Any] = set()             # messages logged once
         self._stop = False
         self._wake_r, self._wake_w = os.pipe()
@@ -191,7 +194,11 @@ class SyncService:
                 if rec:
                     self.own = parse_record(rec)
                     self.status["own"]["record"] = self.own.to_json()
-        self._load_settings(initial=True)
+        try:
+            self._load_settings(initial=True)
+        except BaseException:
+            self.close()
+            raise
 
     # ================================================================== settings and store
     @property
@@ -255,10 +262,18 @@ class SyncService:
         self._status_dirty = True
 
     # ================================================================== errors and messages
-    def _once(self, key: Any, level: int, msg: str, *args: Any) -> None:
+    def _remember(self, key: Any) -> bool:
+        """True the first time *key* is seen (bounded memory for a service that runs for ever)."""
         if key in self._said:
-            return
+            return False
+        if len(self._said) > 2000:
+            self._said.clear()
         self._said.add(key)
+        return True
+
+    def _once(self, key: Any, level: int, msg: str, *args: Any) -> None:
+        if not self._remember(key):
+            return
         log.log(level, msg, *args)
 
     def _error(self, part: str, message: str, retry_in: float | None = None) -> None:
@@ -294,8 +309,12 @@ class SyncService:
         if self.settings is None:
             return RoundResult(False, False, {k: v["message"] for k, v in self.status["errors"].items()})
         self._observe_local(mono)
-        if force_public or mono >= self.next_public:
-            self._poll_public(time.monotonic())
+        if force_public:
+            # at once, but not more often than every FORCED_GAP_S (a flapping link)
+            self.next_public = min(self.next_public, self._last_public_poll + FORCED_GAP_S)
+        if time.monotonic() >= self.next_public:
+            self._last_public_poll = time.monotonic()
+            self._poll_public(self._last_public_poll)
         if time.monotonic() >= self.next_fetch:
             self._fetch(time.monotonic())
         if self._fetched_once and time.monotonic() >= self.next_publish:
@@ -321,7 +340,8 @@ class SyncService:
         if local != self.local:
             if self.local is not None:
                 log.info("local address changed: %s -> %s", self.local.describe(), local.describe())
-                self.next_public = mono  # a new route may mean a new public IP: ask now
+                # a new route may mean a new public IP: ask now (within the forced gap)
+                self.next_public = min(self.next_public, self._last_public_poll + FORCED_GAP_S)
             else:
                 log.info("local address: %s", local.describe())
             if (self.local is not None and local.local_ip and self.local.local_ip
@@ -382,10 +402,8 @@ class SyncService:
         self.next_fetch = mono + read_period(self.interval_s)
         now = time.time()
         for r in res.refused:
-            key = ("refused", r.source, r.why)
-            if key in self._said:
+            if not self._remember(("refused", r.source, r.why)):
                 continue
-            self._said.add(key)
             log.warning("refused the record %s (%s): %s; it is not applied", r.source,
                         r.name or "?", r.why)
             self.status["refused"] = (self.status["refused"] + [
@@ -710,9 +728,8 @@ class SyncService:
             os.write(self._wake_w, b"x")
 
     def _next_wake(self) -> float:
-        cands = [self.next_public, self.next_fetch, self.next_verify]
-        if self.dirty:
-            cands.append(self.next_apply)
+        apply_due = self.next_apply if self.dirty else max(self.next_apply, self.next_verify)
+        cands = [self.next_public, self.next_fetch, apply_due]
         if self.recheck_at is not None:
             cands.append(self.recheck_at)
         return min(cands)
@@ -761,7 +778,12 @@ class SyncService:
                     self.round(force_public=force_public)
                 except Exception:  # a bug must not kill the service: log it, keep going
                     log.exception("unexpected error in a sync round; going on")
-                    self.next_fetch = time.monotonic() + self.backoff["apply"].fail()
+                    self._error("round", "an unexpected error (see the log); retrying")
+                    pause = self.backoff["round"].fail()
+                    self.next_fetch = self.next_apply = time.monotonic() + pause
+                else:
+                    if self.backoff["round"].succeed():
+                        self._clear_error("round")
                 force_public = False
                 if self._stop:
                     break
