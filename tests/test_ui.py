@@ -402,3 +402,35 @@ async def test_a_burst_of_keys_is_applied_in_order(tmp_path):
             app.post_message(events.Key(key, char))
         await pilot.pause(0.3)
         assert field.value == "turtZle"
+
+
+async def test_ros_step_shows_the_sync_state(tmp_path):
+    import time
+
+    from rosnet_tui.core.sync.status import empty_status, save_status
+
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("4")
+        await pilot.pause()
+        md = app.screen.query_one("#config-text", Markdown)
+        assert "Address sync" in md.source and "sync install-service" in md.source
+
+    status = empty_status()
+    now = time.time()
+    status.update(name="turtlebot", role="master", store="folder /srv/rosnet", interval_s=60,
+                  pid=None, started_at=now - 100, alive_at=now - 50, stopped_at=now - 40,
+                  profile="remote")
+    status["peers"] = {"sami": {"record": {"name": "sami", "role": "member",
+                                           "local_ip": "192.168.1.10",
+                                           "public_ip": "198.51.100.7", "seq": 3,
+                                           "timestamp": "2026-11-22T02:00:00Z"},
+                                "source": "folder", "seen_at": now - 45}}
+    (tmp_path / "state").mkdir(exist_ok=True)
+    save_status(tmp_path / "state", status)
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("4")
+        await pilot.pause()
+        md = app.screen.query_one("#config-text", Markdown)
+        assert "198.51.100.7" in md.source and "stopped" in md.source

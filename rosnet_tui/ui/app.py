@@ -196,7 +196,26 @@ class RosnetApp(App[int]):
         """The Configuration pane's Markdown for *step_id*."""
         from rosnet_tui.core.steps import STEP_BY_ID
 
-        return STEP_BY_ID[step_id].configure(self.runtime_settings())
+        text = STEP_BY_ID[step_id].configure(self.runtime_settings())
+        if step_id == "ros":
+            text += "\n\n" + self.sync_text()
+        return text
+
+    def sync_text(self) -> str:
+        """The address-sync section of the ROS step: each component's last known addresses."""
+        from rosnet_tui.core.sync.status import load_status, render_status
+
+        status = load_status(self.deps.state_dir)
+        head = "**Address sync.** "
+        if status is None:
+            return (head + "Not running on this machine. Public addresses change when a modem "
+                    "restarts; the sync service then rewrites the hosts entries and "
+                    "`ROS_MASTER_URI` on every component by itself. Set it up on each component "
+                    "(a `[sync]` table in the settings: a shared folder or a DNS zone), then:"
+                    "\n\n```\nrosnet-tui sync install-service\n```")
+        lines = "\n".join(render_status(status))
+        return head + "What the sync service knows (`rosnet-tui sync status`):\n\n" \
+            f"```\n{lines}\n```"
 
     def router_card_text(self, width: int) -> str:
         """The router card as plain text *width* columns wide: values to type into the modem."""
