@@ -1,0 +1,286 @@
+"""Rows 2, 3 and 6: on the network lab (tests/lab: root + network namespaces; skipped otherwise).
+
+All traffic stays inside the lab's namespaces. Every command runs through ``lab.run`` (bounded,
+its process tree killed on timeout); the lab is destroyed at the end, whatever happens.
+"""
+
+from __future__ import annotations
+
+import json
+import random
+import shutil
+import subprocess
+import tempfile
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from bench.model import BenchError, Line, Options, RowResult, goal_ratio, median
+
+BENCH = Path(__file__).resolve().parent
+MANUAL_SCRIPT = BENCH / "manual_check.sh"
+CHECK_TIMEOUT = 120.0       # the bound of one `rosnet-tui check` run
+TITLES = {2: "Full verification on the lab's healthy network",
+          3: "Bad news fast: every verdict within its timeout",
+          6: "Address sync: master address change to member updated"}
+
+
+def rosnet_check(lab: Any, host: str, state: Path, *extra: str) -> dict[str, Any]:
+    """`rosnet-tui check --json` on *host* (all steps, both directions): wall time and verdicts."""
+    config = lab.config_path(host)  # written before the clock starts
+    env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
+    t0 = time.monotonic()
+    r = lab.rosnet(host, "check", "--json", "-q", "--config", str(config), *extra, env=env,
+                   timeout=CHECK_TIMEOUT)
+    wall = time.monotonic() - t0
+    try:
+        checks = json.loads(r.stdout)["checks"]
+    except (ValueError, KeyError) as exc:
+        raise BenchError(f"rosnet-tui check on {host} gave no JSON (exit {r.returncode}): "
+                         f"{r.stderr[-500:]}") from exc
+    margins = [(c["duration_s"] - c["timeout_s"], c["id"], c["duration_s"], c["timeout_s"])
+               for c in checks]
+    worst = max(margins)
+    return {"wall_s": wall, "exit": r.returncode,
+            "all_pass": r.returncode == 0 and all(c["status"] == "pass" for c in checks),
+            "statuses": {c["id"]: c["status"] for c in checks},
+            "worst_margin_s": worst[0], "worst_check": f"{worst[1]} {worst[2]:.2f}/{worst[3]:g} s",
+            "slowest_check_s": max(c["duration_s"] for c in checks)}
+
+
+# =============================================================================== row 2
+def manual_check(lab: Any, rep: int, cap: float) -> dict[str, Any]:
+    """The procedure's manual tests one after another with the standard tools (bench/manual_check.sh)
+    on the laptop, the robot its peer."""
+    from tests.lab.lab import LISTENER, ROS_PYTHON, TALKER
+
+    ports = random.SystemRandom().sample(range(20000, 30000), 3)
+    env = dict(lab.ros_env("laptop"), PEER=lab.addr.ROBOT_NAME, SELF=lab.addr.LAPTOP_NAME,
+               PEER_USER="root", IP_URL=lab.addr.PUBLIC_IP_URL, PORT_URL=lab.addr.PROBE_URL,
+               PORT1=str(ports[0]), PORT2=str(ports[1]), PORT3=str(ports[2]),
+               TALKER=str(TALKER), LISTENER=str(LISTENER), ROS_PY=ROS_PYTHON,
+               TOPIC=f"/bench_manual_{rep}_{random.randrange(10**6)}", CAP=str(int(cap)))
+    t0 = time.monotonic()
+    r = lab.run("laptop", ["bash", str(MANUAL_SCRIPT)], env=env, timeout=cap * 12)
+    wall = time.monotonic() - t0
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith(("PASS", "FAIL"))]
+    return {"wall_s": wall, "exit": r.returncode, "lines": lines,
+            "all_pass": r.returncode == 0 and bool(lines) and all(ln.startswith("PASS")
+                                                                  for ln in lines),
+            "stderr": r.stderr[-500:]}
+
+
+def row2_full(lab: Any, opts: Options, state: Path) -> RowResult:
+    res = RowResult(2, TITLES[2])
+    lab.reset()
+    lab.start_roscore()
+    app_runs, base_runs = [], []
+    for i in range(opts.reps):
+        for who in (("app", "base") if i % 2 == 0 else ("base", "app")):
+            if who == "app":
+                app_runs.append(rosnet_check(lab, "laptop", state / "laptop"))
+            else:
+                base_runs.append(manual_check(lab, i, 60.0))
+    ln = Line(2, "Full verification (wall time)", "s",
+              [r["wall_s"] for r in app_runs], [r["wall_s"] for r in base_runs],
+              baseline="manual tests with standard tools, one after another (script)",
+              goal="<= 0.3x")
+    goal_ratio(ln, 0.3)
+    app_ok = all(r["all_pass"] for r in app_runs)
+    base_ok = all(r["all_pass"] for r in base_runs)
+    n_checks = len(app_runs[0]["statuses"]) if app_runs else 0
+    n_tests = len(base_runs[0]["lines"]) if base_runs else 0
+    ln.note = (f"all steps, both ways, from the laptop: {n_checks} checks vs {n_tests} manual "
+               f"tests; same verdict (all good): "
+               f"{'yes' if app_ok and base_ok else 'NO'}; slowest check "
+               f"{median([r['slowest_check_s'] for r in app_runs]):.2f} s")
+    if not (app_ok and base_ok):
+        ln.status = "error"
+        bad_app = sorted({k for r in app_runs for k, v in r["statuses"].items() if v != "pass"})
+        bad_base = sorted({x for r in base_runs for x in r["lines"] if x.startswith("FAIL")})
+        ln.note += f"; not all good: rosnet-tui {bad_app}, manual {bad_base}"
+    res.lines = [ln]
+    res.details = {"app_runs": app_runs, "base_runs": base_runs}
+    return res
+
+
+# =============================================================================== row 3
+def _scenarios(lab: Any) -> list[dict[str, Any]]:
+    from tests.lab.lab import ROS_PYTHON, TALKER
+
+    ssh = ["ssh", "-o", "BatchMode=yes"]
+    robot, laptop = lab.addr.ROBOT_NAME, lab.addr.LAPTOP_NAME
+    return [
+        {"name": "master down", "short": "Master down", "host": "laptop", "variant": None, "master": False,
+         "tools": [("rostopic list", ["rostopic", "list"]),
+                   ("talker (a rospy node)", [ROS_PYTHON, str(TALKER), "/bench_dead_master"])]},
+        {"name": "port forwarding removed on the robot's modem, seen from the laptop",
+         "short": "No forwarding", "host": "laptop",
+         "variant": "no_forwarding", "master": True,
+         "tools": [("ssh", [*ssh, f"root@{robot}", "true"]),
+                   ("nc -z (test port)", ["nc", "-z", robot, "12345"]),
+                   ("rostopic list", ["rostopic", "list"])]},
+        {"name": "the laptop unplugged, seen from the robot", "short": "Peer unplugged",
+         "host": "robot", "variant": "unplugged",
+         "master": True,
+         "tools": [("ssh", [*ssh, f"root@{laptop}", "true"]),
+                   ("nc -z (test port)", ["nc", "-z", laptop, "12345"])]},
+    ]
+
+
+def _tool_time(lab: Any, host: str, argv: list[str], cap: float) -> dict[str, Any]:
+    t0 = time.monotonic()
+    try:
+        r = lab.run(host, argv, timeout=cap, env=lab.ros_env(host))
+        out = (r.stdout + r.stderr).strip().splitlines()
+        return {"s": time.monotonic() - t0, "capped": False, "exit": r.returncode,
+                "said": out[-1][:120] if out else ""}
+    except subprocess.TimeoutExpired:
+        return {"s": cap, "capped": True, "exit": None, "said": f"still waiting after {cap:g} s"}
+
+
+def row3_bad_news(lab: Any, opts: Options, state: Path) -> RowResult:
+    res = RowResult(3, TITLES[3])
+    cap = opts.tool_cap_s
+    extra = ("--timeout", "1") if opts.quick else ()
+    margins: list[float] = []
+    details = []
+    for sc in _scenarios(lab):
+        lab.reset()
+        if sc["master"]:
+            lab.start_roscore()
+        else:
+            lab.stop_roscore()
+        ctx = lab.variant(sc["variant"]) if sc["variant"] else _nothing()
+        with ctx:
+            runs = [rosnet_check(lab, sc["host"], state / sc["host"], *extra)
+                    for _ in range(opts.reps)]
+            tools = _time_tools(lab, sc["host"], sc["tools"], opts.reps, cap)
+        per_rep = [sum(t["s"] for j, _, t in tools if j == i) for i in range(opts.reps)]
+        worst = max(runs, key=lambda r: r["worst_margin_s"])
+        margins += [r["worst_margin_s"] for r in runs]
+        by_tool = {}
+        for name, _argv in sc["tools"]:
+            ts = [t for _, n, t in tools if n == name]
+            s = median([t["s"] for t in ts])
+            by_tool[name] = f"{s:.1f} s" + (" (capped)" if all(t["capped"] for t in ts) else "")
+        ln = Line(3, f"{sc['short']}: every verdict", "s",
+                  [r["wall_s"] for r in runs], per_rep,
+                  baseline="standard tools with default settings, one after another",
+                  goal="<= timeout+0.5 s")
+        ln.met = all(r["worst_margin_s"] <= 0.5 for r in runs)
+        ln.note = (f"{sc['name']}; worst margin {worst['worst_margin_s']:+.2f} s ({worst['worst_check']}); "
+                   f"tools: " + ", ".join(f"{k} {v}" for k, v in by_tool.items())
+                   + f"; each tool capped at {cap:g} s" + ("; checks at --timeout 1" if extra else ""))
+        res.lines.append(ln)
+        details.append({"scenario": sc["name"], "host": sc["host"], "rosnet_runs": runs,
+                        "tools": [{"rep": i, "tool": n, **t} for i, n, t in tools]})
+    lab.reset()
+    lab.start_roscore()
+    w = Line(3, "Worst verdict margin", "s", [max(margins)] if margins else [], [],
+             goal="<= +0.5 s",
+             note=f"a check's duration minus its timeout: the worst of {len(margins)} runs "
+                  "(all scenarios and repetitions); negative = before the timeout")
+    w.met = bool(margins) and max(margins) <= 0.5
+    res.lines.append(w)
+    res.details = {"scenarios": details, "worst_margins_s": margins}
+    return res
+
+
+def _time_tools(lab: Any, host: str, tools: list[tuple[str, list[str]]], reps: int, cap: float
+                ) -> list[tuple[int, str, dict[str, Any]]]:
+    """Time each tool *reps* times, each run capped at *cap* seconds, in bounded wall time.
+
+    The first repetition runs the tools side by side (a few processes). A tool that hit the cap
+    is waiting on a timer, not on the CPU: its other repetitions run all at once. A tool that
+    finished runs its other repetitions one at a time, so no start-up competes with another.
+    """
+    def run_all(jobs: list[tuple[int, str, list[str]]]) -> list[tuple[int, str, dict[str, Any]]]:
+        if not jobs:
+            return []
+        with ThreadPoolExecutor(max_workers=len(jobs)) as pool:
+            futs = [(i, name, pool.submit(_tool_time, lab, host, argv, cap))
+                    for i, name, argv in jobs]
+            return [(i, name, f.result()) for i, name, f in futs]
+
+    out = run_all([(0, name, argv) for name, argv in tools])
+    capped = {name for _, name, t in out if t["capped"]}
+    out += run_all([(i, name, argv) for i in range(1, reps) for name, argv in tools
+                    if name in capped])
+    for i in range(1, reps):
+        for name, argv in tools:
+            if name not in capped:
+                out.append((i, name, _tool_time(lab, host, argv, cap)))
+    return out
+
+
+class _nothing:
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+
+# =============================================================================== row 6
+def row6_sync(lab: Any, opts: Options, state: Path) -> RowResult:
+    from bench import sync_row
+
+    return sync_row.run(lab, opts, state)
+
+
+# =============================================================================== driver
+def _skipped(rows: list[int], why: str, status: str = "skipped") -> list[RowResult]:
+    return [RowResult(r, TITLES[r], status=status, reason=why) for r in rows]
+
+
+def run_lab_rows(rows: list[int], opts: Options, log: Callable[[str], None]) -> list[RowResult]:
+    wanted = [r for r in (2, 3, 6) if r in rows]
+    if not wanted:
+        return []
+    try:
+        from tests.lab import Lab, LabUnavailable, lab_available
+    except Exception as exc:  # e.g. the lab's own dependencies are missing
+        return _skipped(wanted, f"the network lab cannot be imported: {exc}")
+    ok, why = lab_available()
+    if not ok:
+        return _skipped(wanted, why)
+    out: list[RowResult] = []
+    ros_rows = wanted  # row 6 too: the sync services re-run ros.master
+    if shutil.which("roscore") is None:
+        out += _skipped(ros_rows, "roscore is not installed (Debian package ros-core)")
+        wanted = [r for r in wanted if r not in ros_rows]
+    if 6 in wanted:
+        from bench import sync_row
+
+        ready, why = sync_row.available()
+        if not ready:  # no lab needed to say so
+            out.append(RowResult(6, TITLES[6], status="not available yet", reason=why))
+            wanted.remove(6)
+    if not wanted:
+        return out
+    funcs = {2: row2_full, 3: row3_bad_news, 6: row6_sync}
+    lab = Lab()
+    state = Path(tempfile.mkdtemp(prefix="rosnet-bench-state-"))
+    try:
+        log("lab: building")
+        try:
+            lab.build()
+        except LabUnavailable as exc:
+            return out + _skipped(wanted, str(exc))
+        for r in wanted:
+            log(f"row {r}: running")
+            t0 = time.monotonic()
+            try:
+                res = funcs[r](lab, opts, state)
+            except Exception as exc:
+                res = RowResult(r, TITLES[r], status="error",
+                                reason=f"{type(exc).__name__}: {exc}")
+            res.seconds = time.monotonic() - t0
+            out.append(res)
+    finally:
+        lab.destroy()
+        shutil.rmtree(state, ignore_errors=True)
+    return out
