@@ -48,3 +48,24 @@ def test_malformed_settings_exit_2_naming_line_and_key(tmp_path):
 def test_wizard_without_a_terminal_says_so(tmp_path):
     out = run("--config", str(tmp_path / "c.toml"))
     assert out.returncode == 2 and "needs a terminal" in out.stderr
+
+
+def test_help_summaries_match_each_commands_own_help():
+    """--help lists every command without importing it; the summaries must not drift."""
+    import argparse
+
+    from rosnet_tui.cli import SUBCOMMAND_HELP, build_parser
+
+    parser = build_parser(None)  # every module registers its own parser
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    own = {c.dest: c.help for c in sub._choices_actions}
+    assert own == {name.replace("_", "-"): text for name, text in SUBCOMMAND_HELP.items()}
+
+
+def test_wizard_start_does_not_import_the_subcommands():
+    code = ("import sys\nfrom rosnet_tui.cli import build_parser\n"
+            "build_parser(['--config', 'x.toml']).parse_args(['--config', 'x.toml'])\n"
+            "loaded = [m for m in sys.modules if m.startswith('rosnet_tui.cli.')]\n"
+            "print(loaded)\nsys.exit(1 if loaded else 0)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stdout + out.stderr

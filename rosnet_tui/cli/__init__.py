@@ -18,6 +18,17 @@ EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
 
 # Sub-command modules, in the order --help lists them.
 SUBCOMMAND_MODULES = ("check", "hosts", "ros", "undo", "report", "sync", "probe_server")
+# What `rosnet-tui --help` says of each without importing it (a test keeps these equal to the
+# modules' own help): only the command being run is imported, so start-up stays light.
+SUBCOMMAND_HELP = {
+    "check": "run the live checks headless and print what they saw",
+    "hosts": "write this component's hosts set into /etc/hosts",
+    "ros": "write ROS_MASTER_URI for this component's role into ~/.bashrc",
+    "undo": "restore the files of the last change rosnet-tui made",
+    "report": "write a shareable report: settings, results and advice",
+    "sync": "keep hosts entries and ROS_MASTER_URI right when public IPs change (a service)",
+    "probe_server": "run your own what-is-my-IP and port-check service (echoip-compatible)",
+}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -34,7 +45,15 @@ def add_config_option(parser: argparse.ArgumentParser, *, top: bool = False) -> 
         help="settings file (default: $XDG_CONFIG_HOME/rosnet-tui/config.toml)")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _wanted(argv: list[str] | None) -> set[str]:
+    """The sub-commands *argv* may run (None: all of them, e.g. to test every parser)."""
+    if argv is None:
+        return set(SUBCOMMAND_MODULES)
+    names = {m.replace("_", "-"): m for m in SUBCOMMAND_MODULES}
+    return {names[a] for a in argv if a in names}
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     parser = _Parser(
         prog="rosnet-tui",
         description="Put a robot and its operators on one ROS network across the internet, by "
@@ -45,9 +64,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--setup", action="store_true",
                         help="open the wizard on the set-up screen even when settings are complete")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    wanted = _wanted(argv)
     for name in SUBCOMMAND_MODULES:
-        module = importlib.import_module(f"rosnet_tui.cli.{name}")
-        module.register(sub)
+        if name in wanted:
+            importlib.import_module(f"rosnet_tui.cli.{name}").register(sub)
+        else:  # listed in --help; its module is imported only when it runs
+            sub.add_parser(name.replace("_", "-"), help=SUBCOMMAND_HELP[name], add_help=False)
     return parser
 
 
@@ -94,7 +116,8 @@ def load_settings_or_say(args: argparse.Namespace, *, complete: bool = False):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     if args.command is None:
         from rosnet_tui.cli.wizard import run_wizard

@@ -32,11 +32,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-import paramiko
-
 from rosnet_tui.core.settings import Peer
 
 if TYPE_CHECKING:
+    import paramiko
+
     from rosnet_tui.core.checks import CheckContext
 
 # paramiko logs handshake errors at ERROR level; without a handler Python would print them.
@@ -135,6 +135,8 @@ def host_key_name(name: str, port: int) -> str:
 
 
 def _known_keys(files: list[Path], lookup: str) -> dict[str, paramiko.PKey]:
+    import paramiko
+
     found: dict[str, paramiko.PKey] = {}
     for f in files:
         hk = paramiko.HostKeys()
@@ -192,6 +194,7 @@ class _Holder:
     """What a connecting thread owns, so a cancelled caller can close it."""
 
     def __init__(self) -> None:
+
         self.sock: socket.socket | None = None
         self.transport: paramiko.Transport | None = None
         self.cancelled = False
@@ -219,6 +222,8 @@ def _fail(failure: str, detail: str, *, fingerprint: str | None = None,
 
 def _load_keys(ctx: CheckContext | None) -> tuple[list[paramiko.PKey], list[str]]:
     """Private keys to offer: the agent's, then ~/.ssh/id_* and IdentityFile from ~/.ssh/config."""
+    import paramiko
+
     keys: list[paramiko.PKey] = []
     notes: list[str] = []
     if getattr(ctx, "ssh_agent", True) and os.environ.get("SSH_AUTH_SOCK"):
@@ -256,6 +261,8 @@ _ALGOS_FOR_TYPE = {"ssh-rsa": ("rsa-sha2-512", "rsa-sha2-256", "ssh-rsa")}
 
 def _connect_blocking(ctx: CheckContext | None, peer: Peer, deadline: float,
                       holder: _Holder) -> _Conn:
+    import paramiko
+
     name, port, user = peer.name, int(peer.ssh_port or 22), peer.ssh_user
 
     def left() -> float:
@@ -399,6 +406,7 @@ class SshSession:
     """
 
     def __init__(self, peer: Peer, conn: _Conn, timeout: float) -> None:
+
         self.peer = peer
         self.result = conn.result
         self.timeout = timeout
@@ -447,6 +455,8 @@ class SshSession:
 
     async def write(self, data: bytes | str) -> bool:
         """Send *data* to the command's stdin; False when it could not be sent."""
+        import paramiko
+
         if self._chan is None:
             return False
         buf = data.encode() if isinstance(data, str) else bytes(data)

@@ -7,21 +7,23 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from textual.app import App
 from textual.binding import Binding
 
-from rosnet_tui.core.advisor import Finding, advise
 from rosnet_tui.core.checks import CheckContext, CheckSpec, checks_for
 from rosnet_tui.core.netinfo import LocalNet, detect_local_net, with_detected
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings, atomic_write_text, default_state_dir, save_settings
 from rosnet_tui.core.steps import STEPS
-from rosnet_tui.ui.advisor_screen import AdvisorScreen
 from rosnet_tui.ui.help_screen import HelpScreen
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.widgets import NOT_RUN, StepBar, aggregate
+
+if TYPE_CHECKING:
+    from rosnet_tui.core.advisor import Finding
 
 
 @dataclass
@@ -93,6 +95,8 @@ class RosnetApp(App[int]):
     def set_check_state(self, check_id: str, state: str, result: CheckResult | None) -> None:
         self._states[check_id] = (state, result)
         if result is not None or state == NOT_RUN:
+            from rosnet_tui.core.advisor import advise  # loaded with the first result
+
             self.findings = advise(self.latest_results(), self.runtime_settings())
 
     def latest_results(self) -> dict[str, CheckResult]:
@@ -185,6 +189,8 @@ class RosnetApp(App[int]):
         self.push_screen(SetupScreen(self.detected), done)
 
     def action_advisor(self) -> None:
+        from rosnet_tui.ui.advisor_screen import AdvisorScreen
+
         def done(step_id: str | None) -> None:
             if step_id:
                 self.action_goto(step_id)

@@ -19,7 +19,6 @@ from typing import Any
 from urllib.parse import urljoin, urlsplit
 
 import psutil
-import requests
 
 from rosnet_tui import __version__
 from rosnet_tui.core.checks import REGISTRY, CheckContext, check
@@ -80,6 +79,8 @@ class HttpAnswer:
 
 
 def _short_error(exc: BaseException) -> str:
+    import requests  # here, not at the top: the wizard lists the checks without loading it
+
     text = str(exc)
     if isinstance(exc, requests.exceptions.ConnectTimeout):
         return "no answer (timed out connecting)"
@@ -101,6 +102,8 @@ def _short_error(exc: BaseException) -> str:
 
 
 def _http_get_blocking(url: str, timeout: float) -> HttpAnswer:
+    import requests
+
     deadline = time.monotonic() + timeout
     with requests.Session() as s:
         s.trust_env = False  # no proxies from the environment: we want our own public address
