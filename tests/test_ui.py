@@ -434,3 +434,25 @@ async def test_ros_step_shows_the_sync_state(tmp_path):
         await pilot.pause()
         md = app.screen.query_one("#config-text", Markdown)
         assert "198.51.100.7" in md.source and "stopped" in md.source
+
+
+async def test_ctrl_q_quits_from_the_first_run_setup(tmp_path):
+    app = make_app(tmp_path)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        assert isinstance(app.screen, SetupScreen)
+        await pilot.press("q")  # typed into the name field, not a quit
+        await pilot.pause()
+        assert app.is_running and app.screen.query_one("#this-name", Input).value == "q"
+        await pilot.press("ctrl+q")
+        await pilot.pause()
+    assert not app.is_running
+    assert not (tmp_path / "config.toml").exists()
+
+
+async def test_q_quits_from_a_step(tmp_path):
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("q")
+        await pilot.pause()
+    assert not app.is_running

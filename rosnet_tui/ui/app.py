@@ -56,7 +56,7 @@ class RosnetApp(App[int]):
         Binding("a", "advisor", "Advisor"),
         Binding("s", "setup", "Set-up"),
         Binding("question_mark", "help", "Help", key_display="?"),
-        Binding("q", "quit", "Quit"),
+        Binding("q", "leave", "Quit"),
     ]
 
     def __init__(self, deps: AppDeps) -> None:
@@ -150,7 +150,8 @@ class RosnetApp(App[int]):
 
     # ------------------------------------------------------------------ navigation
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action in ("goto", "back", "next", "setup", "quit", "advisor"):
+        # Single letters act on the step screens only (elsewhere they are typed); Ctrl+Q always quits.
+        if action in ("goto", "back", "next", "setup", "leave", "advisor"):
             return isinstance(self.screen, StepScreen)
         return True
 
@@ -187,6 +188,9 @@ class RosnetApp(App[int]):
                 self.notify(f"Settings saved to {self.deps.config_path}", timeout=4)
 
         self.push_screen(SetupScreen(self.detected), done)
+
+    async def action_leave(self) -> None:
+        await self.action_quit()
 
     def action_advisor(self) -> None:
         from rosnet_tui.ui.advisor_screen import AdvisorScreen
