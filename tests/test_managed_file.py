@@ -432,3 +432,36 @@ def test_the_journal_keeps_only_the_most_recent_applies(tmp_path, monkeypatch):
         mf.apply_preview(mf.preview_block(f, [f"# {i}"]), state_dir=sd)
     assert [e.id for e in mf.journal_entries(sd)] == ["000003", "000004", "000005"]
     assert sorted(p.name for p in (sd / "backups").iterdir()) == ["000003", "000004", "000005"]
+
+
+class _Crash(BaseException):
+    """Stands for the process dying at that instant (nothing after it runs)."""
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("mount"),
+                    reason="bind mounts need root and mount(8)")
+def test_a_crash_inside_an_in_place_shrink_leaves_a_valid_file(tmp_path, monkeypatch):
+    """In place (a bind-mounted /etc/hosts) the write and the truncation are two steps: dying
+    between them must leave the new content plus blank lines, never a tail of old bytes."""
+    src, dst, sd = tmp_path / "netns-hosts", tmp_path / "hosts", tmp_path / "state"
+    src.write_bytes(b"127.0.0.1\tlocalhost\n# keep me\n")
+    dst.write_bytes(b"underneath\n")
+    _bind_mount(src, dst)
+    try:
+        long_body = [f"203.0.113.{i}  peer{i}" for i in range(1, 30)]
+        mf.apply_preview(mf.preview_block(dst, long_body, position="top"), state_dir=sd)
+        short = mf.preview_block(dst, ["203.0.113.7  peer7"], position="top")
+
+        def crash() -> None:
+            raise _Crash
+
+        monkeypatch.setattr(mf, "_before_truncate", crash)
+        with pytest.raises(_Crash):
+            mf.apply_preview(short, state_dir=sd)
+        left = src.read_bytes()
+        assert left.startswith(short.new)
+        assert set(left[len(short.new):]) <= {ord("\n")}  # only blank lines after it
+        assert mf.extract_block(left.decode()) == ["203.0.113.7  peer7"]
+        assert b"# keep me" in left and b"peer29" not in left
+    finally:
+        subprocess.run(["umount", str(dst)], timeout=10, check=False)

@@ -44,6 +44,8 @@ _TMP_RE = re.compile(r"^\.(?P<name>.+)\.rosnet-tui\.(?P<pid>\d+)\.[0-9a-f]+\.tmp
 
 # Test hook: called between the fsync of the temp file and the rename (crash tests set it).
 _before_rename: Callable[[], None] | None = None
+# Test hook: called between the in-place write and its truncation (crash tests set it).
+_before_truncate: Callable[[], None] | None = None
 
 
 # --------------------------------------------------------------------------- errors
@@ -406,11 +408,18 @@ def _write_in_place(real: Path, data: bytes) -> None:
     """Rewrite an existing file through its own inode (mount points, hard links, other owners).
 
     Not atomic: the caller has a backup. Read back to verify; on mismatch put the old bytes back.
+    New content shorter than the old is written padded with newlines to the old length first, so
+    a crash before the truncation leaves the new content and blank lines, never a tail of old
+    bytes after it.
     """
     old = real.read_bytes()
+    padded = data + b"\n" * (len(old) - len(data)) if len(data) < len(old) else data
     fd = os.open(real, os.O_WRONLY | os.O_NOFOLLOW)
     try:
-        _write_all(fd, data)
+        _write_all(fd, padded)
+        os.fsync(fd)
+        if _before_truncate is not None:
+            _before_truncate()
         os.ftruncate(fd, len(data))
         os.fsync(fd)
     finally:
