@@ -33,7 +33,7 @@ import dns.rdtypes.ANY.TXT
 import dns.tsig
 import dns.update
 
-from .records import Candidate, Record, RecordError, choose_best, parse_record
+from .records import Candidate, Record, RecordError, parse_record
 from .store import FetchResult, Refusal, StoreConfigError, StoreError
 
 TXT_TAG = b"rosnet-tui"
@@ -260,13 +260,7 @@ class DnsStore:
                         continue
                     if rec is not None:
                         cands.append(Candidate(rec, f"{qname} TXT"))
-            if n == own_name:
-                out.own_copies = cands
-                continue
-            best, notes = choose_best(cands)
-            out.notes += notes
-            if best is not None:
-                out.records[n] = best
+            out.add_copies(n, cands, own_name)
         self._serial, self._cache, self._cache_names, self._cache_at = serial, out, names_t, now
         return out
 

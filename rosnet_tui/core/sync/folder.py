@@ -19,7 +19,7 @@ from pathlib import Path
 
 from rosnet_tui.core.settings import atomic_write_text
 
-from .records import MAX_RECORD_BYTES, Candidate, Record, RecordError, choose_best, parse_record
+from .records import MAX_RECORD_BYTES, Candidate, Record, RecordError, parse_record
 from .store import FetchResult, Refusal, StoreError
 
 MAX_FILES = 2000        # entries of the folder looked at (a shared folder may hold other things)
@@ -179,11 +179,5 @@ class FolderStore:
             if path not in seen:
                 del self._cache[path]
         for n, cands in copies.items():
-            if n == own_name:
-                out.own_copies = cands
-                continue
-            best, notes = choose_best(cands)
-            out.notes += notes
-            if best is not None:
-                out.records[n] = best
+            out.add_copies(n, cands, own_name)
         return out

@@ -9,7 +9,7 @@ from typing import Protocol
 
 from rosnet_tui.core.settings import Settings
 
-from .records import Candidate, Record
+from .records import Candidate, Record, choose_best
 
 
 class StoreError(Exception):
@@ -38,6 +38,17 @@ class FetchResult:
     notes: list[str] = field(default_factory=list)
     # Every valid copy seen for our own name (to continue its seq, and to tidy up).
     own_copies: list[Candidate] = field(default_factory=list)
+
+
+    def add_copies(self, name: str, copies: list[Candidate], own_name: str) -> None:
+        """Keep the best of *name*'s valid copies (all of them for our own name)."""
+        if name == own_name:
+            self.own_copies = copies
+            return
+        best, notes = choose_best(copies)
+        self.notes += notes
+        if best is not None:
+            self.records[name] = best
 
 
 class RecordStore(Protocol):
