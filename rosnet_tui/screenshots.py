@@ -83,6 +83,13 @@ async def _shoot(out: Path, width: int, height: int) -> list[Path]:
                 path = out / f"step-{step.number}-{step.id}-{width}x{height}.svg"
                 app.save_screenshot(filename=path.name, path=str(out))
                 written.append(path)
+            await pilot.press("a")  # the advisor on the router step's results
+            await pilot.pause()
+            path = out / f"advisor-{width}x{height}.svg"
+            app.save_screenshot(filename=path.name, path=str(out))
+            written.append(path)
+            await pilot.press("escape")
+            await pilot.pause()
             await pilot.press("s")
             await pilot.pause()
             path = out / f"setup-{width}x{height}.svg"

@@ -57,12 +57,8 @@ class AdvisorScreen(Screen[str | None]):
     def on_mount(self) -> None:
         self.title = "rosnet-tui"
         self.sub_title = "advisor"
-        table = self.query_one(DataTable)
-        table.add_column("", key="mark", width=4)
-        table.add_column("Condition", key="condition")
-        table.add_column("Go to", key="step", width=9)
         self.refresh_rows()
-        table.focus()
+        self.query_one(DataTable).focus()
 
     def on_screen_resume(self) -> None:
         self.refresh_rows()
@@ -87,26 +83,31 @@ class AdvisorScreen(Screen[str | None]):
                        "first. t: every rule.")
         self.query_one("#advisor-caption", Static).update(caption)
         table = self.query_one(DataTable)
-        table.clear()
-        for i, (rid, sev, cond, _meaning, goto, hit, _action) in enumerate(self._rows):
+        table.clear(columns=True)
+        wide = self._wide()
+        # Table 1's columns: condition | meaning | action, when the terminal has the room.
+        text_cols = ("condition", "meaning", "action") if wide else ("condition",)
+        table.add_column("", key="mark", width=4)
+        free = max(20, (self.size.width or 80) - 4 - 9 - 12)
+        widths = {"condition": free // 3, "meaning": free // 3, "action": free - 2 * (free // 3)} \
+            if wide else {"condition": free}
+        for col in text_cols:
+            table.add_column(col.capitalize(), key=col, width=widths[col])
+        table.add_column("Go to", key="step", width=9)
+        for i, (rid, sev, cond, meaning, goto, hit, action) in enumerate(self._rows):
             mark = Text(">>" if (hit and self.show_all) else sev,
                         style="bold" if hit else "")
-            step = _short_step(goto)
-            table.add_row(mark, cond, step, key=f"{i}-{rid}")
-        self._fit()
+            cells = {"condition": cond, "meaning": meaning, "action": " ".join(action.split())}
+            table.add_row(mark, *(cells[c] for c in text_cols), _short_step(goto),
+                          key=f"{i}-{rid}")
         self._show_detail()
 
-    def _fit(self) -> None:
-        table = self.query_one(DataTable)
-        width = self.size.width or 80
-        col = table.columns.get("condition")  # type: ignore[call-overload]
-        if col is not None:
-            col.auto_width = False
-            col.width = max(20, width - 4 - 9 - 10)
-        table.refresh()
+    def _wide(self) -> bool:
+        return (self.size.width or 80) >= 110
 
     def on_resize(self) -> None:
-        self._fit()
+        if self.is_mounted and self._rows is not None:
+            self.refresh_rows()
 
     def _current(self):
         table = self.query_one(DataTable)

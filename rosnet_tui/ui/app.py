@@ -231,8 +231,10 @@ class RosnetApp(App[int]):
         """The router card as plain text *width* columns wide: values to type into the modem."""
         from rosnet_tui.core.router_card import build_router_card, render_router_card
 
-        card = build_router_card(self.runtime_settings(),
-                                 self.detected if self.detected.local_ip else None)
+        settings, net = self.runtime_settings(), self.detected
+        # This machine's interface facts (MAC, gateway) only when they are of the configured one.
+        same = net.local_ip and net.local_ip == settings.this.local_ip
+        card = build_router_card(settings, net if same else None)
         return render_router_card(card, markdown=False, width=max(40, width))
 
     def write_plan(self, step_id: str):
