@@ -1,0 +1,52 @@
+"""The real wizard, with the real checks, on the network lab: what a technician sees."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import pytest
+
+from tests.lab.lab import REPO
+
+pytestmark = pytest.mark.lab
+
+
+def run_wizard(lab, host: str, tmp_path) -> dict:
+    env = dict(lab.ros_env(host))
+    env["PYTHONPATH"] = str(REPO)
+    r = lab.run(host, [sys.executable, "-m", "tests.ui_support.drive_wizard",
+                       str(lab.config_path(host)), str(tmp_path / f"state-{host}")],
+                timeout=240, env=env)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-4000:]
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture
+def roscore_lab(lab):
+    lab.reset()
+    lab.start_roscore()
+    yield lab
+    lab.reset()
+
+
+def test_healthy_lab_every_check_passes_in_the_wizard(roscore_lab, tmp_path):
+    seen = run_wizard(roscore_lab, "laptop", tmp_path)
+    states = {cid: row["state"] for step in seen["steps"].values() for cid, row in step.items()}
+    assert len(states) == 18
+    assert {cid for cid, st in states.items() if st != "pass"} <= {"isp.cgnat"}, seen["steps"]
+    assert states["isp.cgnat"] in ("pass", "skip")
+    for step_id, label in seen["bar"].items():
+        assert "[ok]" in label, (step_id, label)
+    assert not [f for f in seen["findings"] if f["severity"] == "fail"]
+
+
+def test_no_forwarding_shows_table_1_in_the_wizard(roscore_lab, tmp_path):
+    with roscore_lab.variant("no_forwarding"):
+        seen = run_wizard(roscore_lab, "robot", tmp_path)
+    router = seen["steps"]["router"]
+    assert router["router.listener"]["state"] == "pass"
+    assert router["router.port_open"]["state"] == "fail"
+    assert "[x]" in seen["bar"]["router"]
+    rules = [f["rule"] for f in seen["findings"] if f["severity"] == "fail"]
+    assert any(r.startswith("table1.listener_up_closed") for r in rules), rules
