@@ -6,7 +6,7 @@ import asyncio
 from pathlib import Path
 
 import pytest
-from textual.widgets import DataTable, Input, Markdown
+from textual.widgets import DataTable, Input
 
 from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.netinfo import LocalNet
@@ -134,9 +134,11 @@ async def test_configuration_follows_the_settings(tmp_path):
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("4")
         await pilot.pause()
-        md = app.screen.query_one("#config-text", Markdown)
-        assert "ROS_MASTER_URI=http://turtlebot:11311" in md.source
-        assert "is the ROS master" in md.source
+        source = app.screen.config_source
+        assert "ROS_MASTER_URI=http://turtlebot:11311" in source
+        assert "is the ROS master" in source
+        assert "ROS_MASTER_URI=http://turtlebot:11311" in str(
+            app.screen.query_one("#config-text").render())
 
 
 async def wait_until(pilot, predicate, seconds: float) -> None:
@@ -413,8 +415,8 @@ async def test_ros_step_shows_the_sync_state(tmp_path):
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("4")
         await pilot.pause()
-        md = app.screen.query_one("#config-text", Markdown)
-        assert "Address sync" in md.source and "sync install-service" in md.source
+        source = app.screen.config_source
+        assert "Address sync" in source and "sync install-service" in source
 
     status = empty_status()
     now = time.time()
@@ -432,8 +434,8 @@ async def test_ros_step_shows_the_sync_state(tmp_path):
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("4")
         await pilot.pause()
-        md = app.screen.query_one("#config-text", Markdown)
-        assert "198.51.100.7" in md.source and "stopped" in md.source
+        source = app.screen.config_source
+        assert "198.51.100.7" in source and "stopped" in source
 
 
 async def test_ctrl_q_quits_from_the_first_run_setup(tmp_path):

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, cast
 
+from rich.markdown import CodeBlock
+from rich.markdown import Markdown as RichMarkdown
+from rich.syntax import Syntax
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Container, Vertical, VerticalScroll
 from textual.screen import Screen
-from textual.widgets import Footer, Header, Markdown, Static
+from textual.widgets import Footer, Header, Static
 
 from rosnet_tui.core.checks import CheckSpec, run_checks
 from rosnet_tui.core.steps import Step
@@ -19,15 +22,33 @@ if TYPE_CHECKING:
     from rosnet_tui.ui.app import RosnetApp
 
 
+class _CompactCode(CodeBlock):
+    """A code block without the blank lines around it: rows are scarce at 80x24."""
+
+    def __rich_console__(self, console, options):
+        yield Syntax(str(self.text).rstrip(), self.lexer_name, theme=self.theme, word_wrap=True,
+                     padding=(0, 1), background_color="default")
+
+
+class _Markdown(RichMarkdown):
+    elements = {**RichMarkdown.elements, "fence": _CompactCode, "code_block": _CompactCode}
+
+
+def _markdown(text: str) -> RichMarkdown:
+    """The configuration text as one renderable: drawn in a single frame, unlike a widget per
+    block, which keeps a step's first visit quick over a slow link (bench row 5)."""
+    return _Markdown(text, code_theme="ansi_dark", inline_code_lexer=None, hyperlinks=False)
+
+
 class StepScreen(Screen):
     """A step of the procedure, with its checks run live in a worker."""
 
     BINDINGS = [
-        Binding("r", "run_checks", "Run checks"),
+        Binding("r", "run_checks", "Run"),
         Binding("R", "run_one", "Re-run one", show=False),
         Binding("c", "cancel_checks", "Cancel", show=False),
         Binding("e", "toggle_evidence", "Evidence"),
-        Binding("w", "write", "Write config"),
+        Binding("w", "write", "Write"),
         Binding("u", "undo", "Undo write", show=False),
         Binding("k", "trust_key", "Review host key", show=False),
         Binding("g", "go_finding", "Go to cause", show=False),
@@ -38,6 +59,7 @@ class StepScreen(Screen):
         super().__init__(**kwargs)
         self.step = step
         self.specs = specs
+        self.config_source = ""  # the Markdown the Configuration pane shows
 
     @property
     def rosnet(self) -> RosnetApp:
@@ -56,8 +78,8 @@ class StepScreen(Screen):
                     if self.step.id == "router":  # the card: plain text, fit to the pane
                         yield Static("", id="router-card", markup=False)
                     else:
-                        yield Markdown(self.rosnet.configuration_text(self.step.id),
-                                       id="config-text")
+                        self.config_source = self.rosnet.configuration_text(self.step.id)
+                        yield Static(_markdown(self.config_source), id="config-text")
                 with Vertical(id="verify-pane", classes="pane") as verify:
                     verify.border_title = "Verification"
                     known = {s.id for s in self.specs}
@@ -88,8 +110,8 @@ class StepScreen(Screen):
         if self.step.id == "router":
             self._render_card()
         else:
-            self.query_one("#config-text", Markdown).update(
-                self.rosnet.configuration_text(self.step.id))
+            self.config_source = self.rosnet.configuration_text(self.step.id)
+            self.query_one("#config-text", Static).update(_markdown(self.config_source))
         self.refresh_subtitle()
 
     def _render_card(self) -> None:
