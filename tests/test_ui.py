@@ -137,8 +137,9 @@ async def test_configuration_follows_the_settings(tmp_path):
         source = app.screen.config_source
         assert "ROS_MASTER_URI=http://turtlebot:11311" in source
         assert "is the ROS master" in source
-        assert "ROS_MASTER_URI=http://turtlebot:11311" in str(
-            app.screen.query_one("#config-text").render())
+        pane = app.screen.query_one("#config-text")
+        drawn = "\n".join(strip.text for strip in pane.render_lines(Region(0, 0, *pane.size)))
+        assert "export ROS_MASTER_URI=http://turtlebot:11311" in drawn
 
 
 async def wait_until(pilot, predicate, seconds: float) -> None:
