@@ -6,6 +6,7 @@ import asyncio
 from pathlib import Path
 
 import pytest
+from textual.geometry import Region
 from textual.widgets import DataTable, Input
 
 from rosnet_tui.core.checks import CheckContext, CheckSpec
