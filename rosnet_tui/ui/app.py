@@ -17,7 +17,6 @@ from rosnet_tui.core.netinfo import LocalNet, detect_local_net, with_detected
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings, atomic_write_text, default_state_dir, save_settings
 from rosnet_tui.core.steps import STEPS
-from rosnet_tui.ui.help_screen import HelpScreen
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.widgets import NOT_RUN, StepBar, aggregate
@@ -282,5 +281,7 @@ class RosnetApp(App[int]):
         return None
 
     def action_help(self) -> None:
+        from rosnet_tui.ui.help_screen import HelpScreen
+
         if not isinstance(self.screen, HelpScreen):
             self.push_screen(HelpScreen())
