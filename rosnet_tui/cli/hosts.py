@@ -130,6 +130,22 @@ def confirm(args: argparse.Namespace, question: str) -> int | None:
     return EXIT_USAGE
 
 
+def run_as_root(cmd: list[str], doing: str, what: str) -> int:
+    """Run our own sudo command *cmd* in this terminal, saying so first; an exit code."""
+    line = privilege.format_command(cmd)
+    if not privilege.sudo_available():
+        err(f"rosnet-tui: {doing} needs root, and sudo is not installed; run this as root:\n"
+            f"  {line}")
+        return EXIT_FAIL
+    print(f"{doing[0].upper()}{doing[1:]} needs root; running:\n  {line}")
+    sys.stdout.flush()
+    rc = privilege.run_privileged(cmd, interactive=interactive())
+    if rc != 0:
+        err(f"rosnet-tui: the privileged {what} did not succeed (exit {rc})")
+        return EXIT_FAIL
+    return EXIT_OK
+
+
 def write_preview(args: argparse.Namespace, preview: mf.Preview, sudo_cmd: list[str] | None
                   ) -> int:
     """Write *preview* here, or through *sudo_cmd* when this user may not; say what happened."""
@@ -137,18 +153,7 @@ def write_preview(args: argparse.Namespace, preview: mf.Preview, sudo_cmd: list[
         if sudo_cmd is None:
             err(f"rosnet-tui: this user may not write {preview.path}; nothing was written")
             return EXIT_FAIL
-        line = privilege.format_command(sudo_cmd)
-        if not privilege.sudo_available():
-            err(f"rosnet-tui: writing {preview.path} needs root, and sudo is not installed; "
-                f"run this as root:\n  {line}")
-            return EXIT_FAIL
-        print(f"Writing {preview.path} needs root; running:\n  {line}")
-        sys.stdout.flush()
-        rc = privilege.run_privileged(sudo_cmd, interactive=interactive())
-        if rc != 0:
-            err(f"rosnet-tui: the privileged write did not succeed (exit {rc})")
-            return EXIT_FAIL
-        return EXIT_OK
+        return run_as_root(sudo_cmd, f"writing {preview.path}", "write")
     try:
         result = mf.apply_preview(preview, state_dir=state_dir_of(args))
     except mf.StalePreviewError as exc:

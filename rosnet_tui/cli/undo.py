@@ -11,8 +11,8 @@ from rosnet_tui.cli.hosts import (
     HOSTS_CHECKS,
     confirm,
     err,
-    interactive,
     rerun_checks,
+    run_as_root,
     state_dir_of,
 )
 from rosnet_tui.cli.ros import ROS_CHECKS
@@ -86,17 +86,9 @@ def run(args: argparse.Namespace) -> int:
             return stop
     if plan.needs_privilege:
         cmd = privilege.undo_command(entry_id=e.id, state_dir=sd, force=args.force)
-        line = privilege.format_command(cmd)
-        if not privilege.sudo_available():
-            err(f"rosnet-tui: restoring needs root, and sudo is not installed; run this as "
-                f"root:\n  {line}")
-            return EXIT_FAIL
-        print(f"Restoring needs root; running:\n  {line}")
-        sys.stdout.flush()
-        rc = privilege.run_privileged(cmd, interactive=interactive())
-        if rc != 0:
-            err(f"rosnet-tui: the privileged undo did not succeed (exit {rc})")
-            return EXIT_FAIL
+        rc = run_as_root(cmd, "restoring", "undo")
+        if rc != EXIT_OK:
+            return rc
     else:
         try:
             result = mf.apply_undo(plan, force=args.force)
