@@ -16,7 +16,7 @@ from rosnet_tui.core.checks import CheckContext, CheckSpec, checks_for
 from rosnet_tui.core.netinfo import LocalNet, detect_local_net, with_detected
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings, atomic_write_text, default_state_dir, save_settings
-from rosnet_tui.core.steps import STEPS
+from rosnet_tui.core.steps import STEP_BY_ID, STEPS
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.widgets import NOT_RUN, StepBar, aggregate
@@ -203,8 +203,6 @@ class RosnetApp(App[int]):
     # ------------------------------------------------------------------ writing configuration
     def configuration_text(self, step_id: str) -> str:
         """The Configuration pane's Markdown for *step_id*."""
-        from rosnet_tui.core.steps import STEP_BY_ID
-
         text = STEP_BY_ID[step_id].configure(self.runtime_settings())
         if step_id == "ros":
             text += "\n\n" + self.sync_text()

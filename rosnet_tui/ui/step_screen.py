@@ -16,7 +16,7 @@ from textual.widgets import Footer, Header, Static
 
 from rosnet_tui.core.checks import CheckSpec, run_checks
 from rosnet_tui.core.steps import Step
-from rosnet_tui.ui.widgets import NOT_RUN, RUNNING, CheckList, StepBar, aggregate
+from rosnet_tui.ui.widgets import NOT_RUN, RUNNING, CheckList, StepBar
 
 if TYPE_CHECKING:
     from rosnet_tui.ui.app import RosnetApp
@@ -273,10 +273,6 @@ class StepScreen(Screen):
             for cid in ids:  # cancelled before a verdict: back to "not run"
                 app.set_check_state(cid, NOT_RUN, None)
             self._sync_results()
-            app.record_step_progress()
         for name, _d in self.unknown_host_keys():
             self.notify(f"{name} has an SSH host key this machine does not know yet. Press k "
                         "to compare its fingerprint and decide.", severity="warning", timeout=12)
-
-    def step_state(self) -> str:
-        return aggregate(self.query_one(CheckList).states())

@@ -14,7 +14,7 @@ from textual.reactive import reactive
 from textual.widget import Widget
 from textual.widgets import DataTable, Input, Static
 
-from rosnet_tui.core.results import CheckResult, Status
+from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.steps import STEPS
 
 # The state words of a check in the UI: the four result statuses plus two of the UI's own.
@@ -161,11 +161,6 @@ class CheckList(Vertical):
     CheckList.-evidence > #evidence { display: block; }
     """
 
-    class Highlighted(Message):
-        def __init__(self, check_id: str | None) -> None:
-            self.check_id = check_id
-            super().__init__()
-
     class EvidenceToggled(Message):
         def __init__(self, shown: bool) -> None:
             self.shown = shown
@@ -236,9 +231,6 @@ class CheckList(Vertical):
         if self.highlighted_id == check_id:
             self._show_evidence()
 
-    def states(self) -> list[str]:
-        return [r.state for r in self.rows.values()]
-
     @property
     def highlighted_id(self) -> str | None:
         table = self.query_one(DataTable)
@@ -278,12 +270,7 @@ class CheckList(Vertical):
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
         event.stop()
         self._show_evidence()
-        self.post_message(self.Highlighted(self.highlighted_id))
 
     def on_data_table_row_selected(self, event: DataTable.RowSelected) -> None:
         event.stop()
         self.toggle_evidence()
-
-
-def status_state(status: Status) -> str:
-    return status.value
