@@ -74,7 +74,7 @@ async def _shoot(out: Path, width: int, height: int) -> list[Path]:
             for step in STEPS:
                 if step.id == "router":
                     for r in DEMO_RESULTS:
-                        app.set_check_state(r.id, r.status.value, r)
+                        app.session.set_check_state(r.id, r.status.value, r)
                 await pilot.press(str(step.number))
                 await pilot.pause()
                 if step.id == "router":

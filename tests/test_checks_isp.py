@@ -25,6 +25,7 @@ from rosnet_tui.core.checks.isp import (
 from rosnet_tui.core.probe_server import ProbeServer
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import ProbeSettings, Settings, ThisComponent
+from rosnet_tui.core.ssh import SshOptions
 from rosnet_tui.core.state import public_ip_history, record_public_ip
 
 load_builtin_checks()
@@ -117,7 +118,7 @@ def make_ctx(tmp_path: Path, urls: list[str], port_check_url: str = "http://127.
                  probe=ProbeSettings(port=free_port(), public_ip_urls=urls,
                                      port_check_url=port_check_url))
     return CheckContext(settings=s, timeout_s=timeout, state_dir=tmp_path / "state", upnp=False,
-                        ssh_agent=False, ssh_dir=tmp_path / "no-ssh")
+                        ssh_options=SshOptions(ssh_agent=False, ssh_dir=tmp_path / "no-ssh"))
 
 
 async def run(check_id: str, ctx: CheckContext):

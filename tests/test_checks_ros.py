@@ -22,6 +22,7 @@ from rosnet_tui.core import rosproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext, checks_for, run_check
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.ssh import SshOptions
 from tests.test_rosproto import RosCore, free_port, roscore  # noqa: F401 (session fixture)
 
 SSHD = Path("/usr/sbin/sshd")
@@ -90,8 +91,9 @@ def make_ctx(tmp_path: Path, settings: Settings, *, env: dict[str, str] | None =
     rc.write_text(bashrc)
     return CheckContext(settings=settings, timeout_s=timeout, bashrc_path=rc,
                         state_dir=tmp_path / "state", env=dict(env or {}),
-                        ssh_dir=ssh.client_dir if ssh else tmp_path / "no-ssh",
-                        ssh_agent=False)
+                        ssh_options=SshOptions(
+                            ssh_dir=ssh.client_dir if ssh else tmp_path / "no-ssh",
+                            ssh_agent=False))
 
 
 def loopback_settings(core_port: int, ssh: Sshd | None = None) -> Settings:

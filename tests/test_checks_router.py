@@ -22,6 +22,7 @@ from rosnet_tui.core.listener import GREETING, ListenerPool
 from rosnet_tui.core.netinfo import detect_local_net
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import ProbeSettings, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.ssh import SshOptions
 from tests.test_checks_isp import free_port, probe_server, web  # noqa: F401
 from tests.test_ssh import ssh_client, sshd  # noqa: F401
 
@@ -37,7 +38,7 @@ def ctx_for(tmp_path, *, port_check_url="http://127.0.0.1:9", peers=(), public_i
                  probe=ProbeSettings(port=free_port(), public_ip_urls=list(urls),
                                      port_check_url=port_check_url))
     kw.setdefault("upnp", False)
-    kw.setdefault("ssh_agent", False)
+    kw.setdefault("ssh_options", SshOptions(ssh_agent=False))
     return CheckContext(settings=s, timeout_s=timeout, state_dir=tmp_path / "state", **kw)
 
 
@@ -181,7 +182,8 @@ async def test_port_open_without_a_checker_cannot_tell(tmp_path):
 async def test_port_open_from_the_peer_over_ssh(ssh_client, web, tmp_path):  # noqa: F811
     web.routes["/ip"] = (200, "127.0.0.1\n")
     ctx = ctx_for(tmp_path, peers=[ssh_client.peer()], urls=[web.url("/ip")],
-                  ssh_dir=ssh_client.dir, known_hosts_files=[ssh_client.dir / "known_hosts"],
+                  ssh_options=SshOptions(ssh_dir=ssh_client.dir,
+                                         known_hosts_files=(ssh_client.dir / "known_hosts",)),
                   timeout=3.0)
     r = await run("router.port_open", ctx)
     assert r.status is Status.PASS, (r.summary, r.evidence)
@@ -195,7 +197,8 @@ async def test_port_open_falls_back_to_the_checker_when_ssh_fails(ssh_client, pr
     web.routes["/ip"] = (200, "127.0.0.1\n")
     peer = ssh_client.peer(ssh_port=free_port())
     ctx = ctx_for(tmp_path, peers=[peer], urls=[web.url("/ip")], port_check_url=probe_server.url,
-                  ssh_dir=ssh_client.dir, known_hosts_files=[ssh_client.dir / "known_hosts"])
+                  ssh_options=SshOptions(ssh_dir=ssh_client.dir,
+                                         known_hosts_files=(ssh_client.dir / "known_hosts",)))
     r = await run("router.port_open", ctx)
     assert r.status is Status.PASS and r.data["ports"][0]["via"] == "echoip"
     assert "asking the port checker instead" in r.evidence[0]

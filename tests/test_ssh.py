@@ -22,6 +22,7 @@ import pytest
 from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.settings import Peer, Settings, ThisComponent
 from rosnet_tui.core.ssh import (
+    SshOptions,
     SshResult,
     host_key_name,
     run_blocking,
@@ -116,10 +117,15 @@ class Client:
     pub: str
     sshd: Sshd
 
-    def ctx(self, settings: Settings | None = None, **kw) -> CheckContext:
+    def opts(self, **kw) -> SshOptions:
         kw.setdefault("ssh_dir", self.dir)
-        kw.setdefault("known_hosts_files", [self.dir / "known_hosts"])
+        kw.setdefault("known_hosts_files", (self.dir / "known_hosts",))
         kw.setdefault("ssh_agent", False)
+        return SshOptions(**kw)
+
+    def ctx(self, settings: Settings | None = None, **kw) -> CheckContext:
+        """A check context for this client (the checks' tests use it)."""
+        kw.setdefault("ssh_options", self.opts())
         kw.setdefault("upnp", False)
         return CheckContext(settings=settings or Settings(), **kw)
 
@@ -161,7 +167,7 @@ def settings_with(peer: Peer, **this) -> Settings:
 
 # --------------------------------------------------------------------------- tests
 async def test_runs_a_command_with_exit_status_and_both_streams(ssh_client, sshd):
-    res = await ssh_run(ssh_client.ctx(), ssh_client.peer(), "echo hi; echo oops >&2; exit 3",
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "echo hi; echo oops >&2; exit 3",
                         timeout=10)
     assert res.ok and res.failure is None
     assert res.exit_status == 3
@@ -171,7 +177,7 @@ async def test_runs_a_command_with_exit_status_and_both_streams(ssh_client, sshd
 
 
 async def test_stdin_reaches_the_command(ssh_client):
-    res = await ssh_run(ssh_client.ctx(), ssh_client.peer(), "cat", stdin=b"through ssh\n",
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "cat", stdin=b"through ssh\n",
                         timeout=10)
     assert res.ok and res.exit_status == 0 and res.stdout == "through ssh\n"
 
@@ -179,25 +185,25 @@ async def test_stdin_reaches_the_command(ssh_client):
 async def test_unknown_host_key_stops_before_login_and_can_then_be_trusted(ssh_client, sshd):
     (ssh_client.dir / "known_hosts").write_text("")
     before = sshd.log.read_text()
-    res = await ssh_run(ssh_client.ctx(), ssh_client.peer(), "echo should-not-run", timeout=10)
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "echo should-not-run", timeout=10)
     assert not res.ok and res.failure == "host_key_unknown"
     assert res.fingerprint == sshd.fingerprint and sshd.fingerprint in res.detail
     assert "ssh-keyscan" in res.detail and "ssh-keygen -lf" in res.detail
     time.sleep(0.2)
     assert "publickey" not in sshd.log.read_text()[len(before):]  # no login was even tried
-    path = trust_host_key(ssh_client.ctx(), "localhost", sshd.port, res.host_key)
+    path = trust_host_key(ssh_client.opts(), "localhost", sshd.port, res.host_key)
     assert path == ssh_client.dir / "known_hosts"
-    again = await ssh_run(ssh_client.ctx(), ssh_client.peer(), "echo now-ok", timeout=10)
+    again = await ssh_run(ssh_client.opts(), ssh_client.peer(), "echo now-ok", timeout=10)
     assert again.ok and again.stdout == "now-ok\n"
     with pytest.raises(ValueError):
-        trust_host_key(ssh_client.ctx(), "localhost", sshd.port, res.host_key)
+        trust_host_key(ssh_client.opts(), "localhost", sshd.port, res.host_key)
 
 
 async def test_changed_host_key_is_refused(ssh_client, sshd, tmp_path):
     other = keygen(tmp_path / "impostor").rsplit(" ", 1)[0]
     (ssh_client.dir / "known_hosts").write_text(f"[localhost]:{sshd.port} {other}\n")
     before = sshd.log.read_text()
-    res = await ssh_run(ssh_client.ctx(), ssh_client.peer(), "echo no", timeout=10)
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "echo no", timeout=10)
     assert not res.ok and res.failure == "host_key_changed"
     assert res.fingerprint == sshd.fingerprint and "CHANGED" in res.detail
     assert "ssh-keygen -R" in res.detail
@@ -208,30 +214,30 @@ async def test_changed_host_key_is_refused(ssh_client, sshd, tmp_path):
 async def test_known_key_of_another_type_counts_as_changed(ssh_client, sshd, tmp_path):
     other = keygen(tmp_path / "ecdsa", "ecdsa").rsplit(" ", 1)[0]
     (ssh_client.dir / "known_hosts").write_text(f"[localhost]:{sshd.port} {other}\n")
-    res = await ssh_run(ssh_client.ctx(), ssh_client.peer(), "true", timeout=10)
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "true", timeout=10)
     assert res.failure == "host_key_changed"
 
 
 async def test_a_refused_key_is_an_auth_failure(ssh_client, sshd):
     sshd.authorized.write_text("")
-    res = await ssh_run(ssh_client.ctx(), ssh_client.peer(), "true", timeout=10)
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "true", timeout=10)
     assert not res.ok and res.failure == "auth"
     assert "ssh-copy-id" in res.detail and res.fingerprint == sshd.fingerprint
 
 
 async def test_no_key_at_all_is_an_auth_failure(ssh_client, sshd):
     (ssh_client.dir / "id_ed25519").unlink()
-    res = await ssh_run(ssh_client.ctx(), ssh_client.peer(), "true", timeout=10)
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "true", timeout=10)
     assert res.failure == "auth" and "ssh-keygen" in res.detail
 
 
 async def test_nothing_listening_is_a_network_failure(ssh_client):
-    res = await ssh_run(ssh_client.ctx(), ssh_client.peer(ssh_port=free_port()), "true", timeout=5)
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(ssh_port=free_port()), "true", timeout=5)
     assert not res.ok and res.failure == "network" and "refused" in res.detail
 
 
 async def test_no_user_is_reported_without_connecting(ssh_client):
-    res = await ssh_run(ssh_client.ctx(), ssh_client.peer(ssh_user=""), "true", timeout=5)
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(ssh_user=""), "true", timeout=5)
     assert res.failure == "no_user"
 
 
@@ -280,7 +286,7 @@ class _FakeServer:
 async def test_a_service_that_is_not_sshd_is_an_sshd_failure(ssh_client):
     srv = _FakeServer(b"HTTP/1.1 400 Bad Request\r\n\r\n")
     try:
-        res = await ssh_run(ssh_client.ctx(), ssh_client.peer(ssh_port=srv.port), "true", timeout=3)
+        res = await ssh_run(ssh_client.opts(), ssh_client.peer(ssh_port=srv.port), "true", timeout=3)
     finally:
         srv.close()
     assert not res.ok and res.failure == "sshd"
@@ -290,7 +296,7 @@ async def test_a_silent_server_gives_a_verdict_within_the_timeout(ssh_client):
     srv = _FakeServer(None)
     try:
         t0 = time.monotonic()
-        res = await ssh_run(ssh_client.ctx(), ssh_client.peer(ssh_port=srv.port), "true", timeout=1.0)
+        res = await ssh_run(ssh_client.opts(), ssh_client.peer(ssh_port=srv.port), "true", timeout=1.0)
         took = time.monotonic() - t0
     finally:
         srv.close()
@@ -302,7 +308,7 @@ async def test_cancelling_closes_the_connection_at_once(ssh_client):
     srv = _FakeServer(None)
     try:
         with pytest.raises(asyncio.TimeoutError):
-            await asyncio.wait_for(ssh_run(ssh_client.ctx(), ssh_client.peer(ssh_port=srv.port),
+            await asyncio.wait_for(ssh_run(ssh_client.opts(), ssh_client.peer(ssh_port=srv.port),
                                            "true", timeout=30), 0.5)
         assert await run_blocking(srv.closed_by_client.wait, 3.0, timeout=4)
     finally:
@@ -311,14 +317,14 @@ async def test_cancelling_closes_the_connection_at_once(ssh_client):
 
 async def test_a_command_that_runs_too_long_times_out(ssh_client):
     t0 = time.monotonic()
-    res = await ssh_run(ssh_client.ctx(), ssh_client.peer(), "echo started; sleep 5", timeout=1.5)
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "echo started; sleep 5", timeout=1.5)
     assert res.failure == "timeout" and not res.ok
     assert res.stdout == "started\n"
     assert time.monotonic() - t0 < 3
 
 
 async def test_a_session_keeps_the_remote_side_running_while_we_act(ssh_client):
-    async with ssh_session(ssh_client.ctx(), ssh_client.peer(),
+    async with ssh_session(ssh_client.opts(), ssh_client.peer(),
                            "echo READY; read line; echo \"peer got $line\"", timeout=10) as s:
         assert s.ok
         out = await s.read_until("READY", 5)
@@ -330,7 +336,7 @@ async def test_a_session_keeps_the_remote_side_running_while_we_act(ssh_client):
 
 
 async def test_a_failed_session_says_why_and_is_inert(ssh_client):
-    async with ssh_session(ssh_client.ctx(), ssh_client.peer(ssh_port=free_port()), "true",
+    async with ssh_session(ssh_client.opts(), ssh_client.peer(ssh_port=free_port()), "true",
                            timeout=3) as s:
         assert not s.ok and s.result.failure == "network"
         assert await s.read_until("x", 0.1) is None

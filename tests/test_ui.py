@@ -13,6 +13,7 @@ from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.netinfo import LocalNet
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer, Settings, ThisComponent, load_settings
+from rosnet_tui.core.ssh import SshOptions
 from rosnet_tui.ui.app import AppDeps, RosnetApp
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
@@ -287,7 +288,7 @@ async def test_advisor_names_the_cause_and_jumps_to_its_step(tmp_path):
         await pilot.press("2", "r")
         rows = app.screen.query_one(CheckList).rows
         await wait_until(pilot, lambda: rows["router.port_open"].state == "fail", 5)
-        rules = [f.rule for f in app.findings]
+        rules = [f.rule for f in app.session.findings]
         assert any(r.startswith("table1.listener_up_closed") for r in rules)
         # the evidence of the failed check carries the advice
         await pilot.press("end", "e")
@@ -297,8 +298,8 @@ async def test_advisor_names_the_cause_and_jumps_to_its_step(tmp_path):
         await pilot.pause()
         assert type(app.screen).__name__ == "AdvisorScreen"
         n_findings = app.screen.query_one(DataTable).row_count
-        assert n_findings == len(app.findings) >= 3
-        first = app.findings[0]
+        assert n_findings == len(app.session.findings) >= 3
+        first = app.session.findings[0]
         detail = str(app.screen.query_one("#advisor-detail").render())
         assert first.meaning.split(".")[0][:40] in detail.replace("\n", " ")
         await pilot.press("t")  # every rule, the matching ones marked
@@ -306,7 +307,7 @@ async def test_advisor_names_the_cause_and_jumps_to_its_step(tmp_path):
         assert app.screen.query_one(DataTable).row_count > n_findings
         await pilot.press("t")
         await pilot.pause()
-        target = next(f.goto_step for f in app.findings if f.goto_step)
+        target = next(f.goto_step for f in app.session.findings if f.goto_step)
         await pilot.press("g")
         await pilot.pause()
         assert isinstance(app.screen, StepScreen) and app.screen.step.id == target
@@ -372,9 +373,10 @@ async def test_unknown_host_key_is_shown_and_trusted_only_on_request(tmp_path):
 
     specs = {"linux": [spec("linux.ssh", "linux", ssh_check)]}
     app = make_app(tmp_path, complete_settings(), specs=lambda step: specs.get(step, []),
-                   make_context=lambda s: CheckContext(settings=s, ssh_dir=ssh_dir))
+                   make_context=lambda s: CheckContext(
+                       settings=s, ssh_options=SshOptions(ssh_dir=ssh_dir)))
     async with app.run_test(size=(80, 24)) as pilot:
-        app.set_check_state("linux.ssh", "fail", result)
+        app.session.set_check_state("linux.ssh", "fail", result)
         await pilot.press("3", "k")
         await pilot.pause()
         assert type(app.screen).__name__ == "TrustKeyScreen"

@@ -7,14 +7,12 @@ so the output is the same however the concurrent checks happened to finish.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
-import os
 import sys
 from typing import Any
 
 from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, load_settings_or_say
-from rosnet_tui.core.checks import STEP_IDS
+from rosnet_tui.core.procedure import STEP_IDS
 
 _STYLES = {"pass": "green", "warn": "yellow", "fail": "bold red", "skip": "dim"}
 
@@ -77,24 +75,13 @@ def collect_results(settings: Any, steps: list[str] | None = None, *, timeout: f
     The one way the headless commands (check, report) run checks; *progress* prints each
     verdict to stderr as it lands.
     """
-    from rosnet_tui.core.checks import CheckContext, checks_for, run_checks
+    from rosnet_tui.core.checks.runner import RunOptions, run_now, select
 
-    specs = checks_for(steps)
-    ctx = CheckContext(settings=settings,
-                       timeout_s=float(timeout if timeout is not None else settings.checks.timeout_s),
-                       env=dict(os.environ), upnp=upnp)
-    total = len(specs)
+    def say(r: Any, done: int, total: int) -> None:
+        _err(f"[{done}/{total}] {r.status.label:<4} {r.id}: {r.summary}")
 
-    async def go() -> dict:
-        got = {}
-        async for r in run_checks(specs, ctx):
-            got[r.id] = r
-            if progress:
-                _err(f"[{len(got)}/{total}] {r.status.label:<4} {r.id}: {r.summary}")
-        return got
-
-    results = asyncio.run(go())
-    return [results[s.id] for s in specs if s.id in results]
+    return run_now(settings, select(steps), RunOptions(timeout_s=timeout, upnp=upnp),
+                   on_result=say if progress else None)
 
 
 def _advice(results: dict, settings: Any) -> list:

@@ -7,8 +7,6 @@ diff-and-ask flow, and re-running the affected checks after a write.
 from __future__ import annotations
 
 import argparse
-import asyncio
-import os
 import sys
 from collections.abc import Iterable
 from pathlib import Path
@@ -177,30 +175,17 @@ def rerun_checks(ids: Iterable[str], settings: Settings | None, *, hosts_path: P
     if settings is None or not ids:
         return
     try:
-        from rosnet_tui.core import checks as C
+        from rosnet_tui.core.checks.runner import RunOptions, run_now, select
 
-        C.load_builtin_checks()
-        specs = [C.REGISTRY[i] for i in ids if i in C.REGISTRY]
+        specs = select(ids=ids)
     except Exception as exc:  # a broken check module must not hide a successful write
         print(f"(the checks could not be loaded: {type(exc).__name__}: {exc})")
         return
     if not specs:
         print(f"(checks {', '.join(ids)} are not available in this version)")
         return
-    kw: dict = {"settings": settings, "timeout_s": settings.checks.timeout_s,
-                "env": dict(os.environ)}
-    if hosts_path is not None:
-        kw["hosts_path"] = hosts_path
-    if bashrc_path is not None:
-        kw["bashrc_path"] = bashrc_path
-    if state_dir is not None:
-        kw["state_dir"] = state_dir
-    ctx = C.CheckContext(**kw)
-
-    async def go() -> list:
-        return [r async for r in C.run_checks(specs, ctx)]
-
-    results = {r.id: r for r in asyncio.run(go())}
+    opts = RunOptions(hosts_path=hosts_path, bashrc_path=bashrc_path, state_dir=state_dir)
+    results = {r.id: r for r in run_now(settings, specs, opts)}
     print("Checks after the change:")
     for spec in specs:
         r = results.get(spec.id)

@@ -37,8 +37,6 @@ from rosnet_tui.core.settings import Peer
 if TYPE_CHECKING:
     import paramiko
 
-    from rosnet_tui.core.checks import CheckContext
-
 # paramiko logs handshake errors at ERROR level; without a handler Python would print them.
 logging.getLogger("paramiko").addHandler(logging.NullHandler())
 
@@ -116,17 +114,34 @@ async def resolve_ipv4(name: str, timeout: float) -> tuple[list[str], str | None
         return [], f"does not resolve ({exc.strerror or exc})"
 
 
+# --------------------------------------------------------------------------- options
+@dataclass(frozen=True)
+class SshOptions:
+    """What the SSH layer needs to know, and nothing more.
+
+    ``ssh_dir``: the folder with our keys and known_hosts (None: ``$HOME/.ssh``);
+    ``known_hosts_files``: the files to trust (None: that folder's known_hosts and
+    /etc/ssh/ssh_known_hosts); ``ssh_agent``: offer the agent's keys; ``timeout_s``: the default
+    connect budget.
+    """
+
+    ssh_dir: Path | None = None
+    known_hosts_files: tuple[Path, ...] | None = None
+    ssh_agent: bool = True
+    timeout_s: float = 3.0
+
+
 # --------------------------------------------------------------------------- host keys
-def ssh_dir(ctx: CheckContext | None) -> Path:
-    d = getattr(ctx, "ssh_dir", None) if ctx is not None else None
+def ssh_dir(opts: SshOptions | None) -> Path:
+    d = getattr(opts, "ssh_dir", None) if opts is not None else None
     return Path(d) if d else Path(os.path.expanduser("~")) / ".ssh"
 
 
-def known_hosts_files(ctx: CheckContext | None) -> list[Path]:
-    files = getattr(ctx, "known_hosts_files", None) if ctx is not None else None
+def known_hosts_files(opts: SshOptions | None) -> list[Path]:
+    files = getattr(opts, "known_hosts_files", None) if opts is not None else None
     if files:
         return [Path(f) for f in files]
-    return [ssh_dir(ctx) / "known_hosts", SYSTEM_KNOWN_HOSTS]
+    return [ssh_dir(opts) / "known_hosts", SYSTEM_KNOWN_HOSTS]
 
 
 def host_key_name(name: str, port: int) -> str:
@@ -151,7 +166,7 @@ def _known_keys(files: list[Path], lookup: str) -> dict[str, paramiko.PKey]:
     return found
 
 
-def trust_host_key(ctx: CheckContext | None, name: str, port: int, host_key: str) -> Path:
+def trust_host_key(opts: SshOptions | None, name: str, port: int, host_key: str) -> Path:
     """Append *host_key* ("<type> <base64>", as in SshResult.host_key) for *name* to known_hosts.
 
     Call this only after the user compared the fingerprint; it never replaces an existing entry
@@ -159,7 +174,7 @@ def trust_host_key(ctx: CheckContext | None, name: str, port: int, host_key: str
     """
     ktype, _, b64 = host_key.strip().partition(" ")
     base64.b64decode(b64.split()[0], validate=True)  # refuse garbage
-    path = ssh_dir(ctx) / "known_hosts"
+    path = ssh_dir(opts) / "known_hosts"
     if _known_keys([path], host_key_name(name, port)).get(ktype) is not None:
         raise ValueError(f"{path} already has a {ktype} key for {name}; remove it first "
                          f"(ssh-keygen -R {host_key_name(name, port)})")
@@ -220,18 +235,18 @@ def _fail(failure: str, detail: str, *, fingerprint: str | None = None,
     return _Conn(SshResult(False, None, "", "", failure, detail, fingerprint, host_key, address))
 
 
-def _load_keys(ctx: CheckContext | None) -> tuple[list[paramiko.PKey], list[str]]:
+def _load_keys(opts: SshOptions | None) -> tuple[list[paramiko.PKey], list[str]]:
     """Private keys to offer: the agent's, then ~/.ssh/id_* and IdentityFile from ~/.ssh/config."""
     import paramiko
 
     keys: list[paramiko.PKey] = []
     notes: list[str] = []
-    if getattr(ctx, "ssh_agent", True) and os.environ.get("SSH_AUTH_SOCK"):
+    if getattr(opts, "ssh_agent", True) and os.environ.get("SSH_AUTH_SOCK"):
         try:
             keys.extend(paramiko.Agent().get_keys())
         except Exception as exc:  # noqa: BLE001
             notes.append(f"ssh-agent unusable: {exc}")
-    d = ssh_dir(ctx)
+    d = ssh_dir(opts)
     paths = [d / n for n in KEY_FILES]
     cfg = d / "config"
     if cfg.is_file():
@@ -259,7 +274,7 @@ def _load_keys(ctx: CheckContext | None) -> tuple[list[paramiko.PKey], list[str]
 _ALGOS_FOR_TYPE = {"ssh-rsa": ("rsa-sha2-512", "rsa-sha2-256", "ssh-rsa")}
 
 
-def _connect_blocking(ctx: CheckContext | None, peer: Peer, deadline: float,
+def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
                       holder: _Holder) -> _Conn:
     import paramiko
 
@@ -292,7 +307,7 @@ def _connect_blocking(ctx: CheckContext | None, peer: Peer, deadline: float,
     if holder.cancelled:
         sock.close()
         return _fail("timeout", "cancelled", address=addr)
-    known = _known_keys(known_hosts_files(ctx), host_key_name(name, port))
+    known = _known_keys(known_hosts_files(opts), host_key_name(name, port))
     try:
         t = paramiko.Transport(sock)
         holder.transport = t
@@ -300,12 +315,12 @@ def _connect_blocking(ctx: CheckContext | None, peer: Peer, deadline: float,
         t.handshake_timeout = left()
         t.auth_timeout = left()
         if known:
-            opts = t.get_security_options()
+            sec = t.get_security_options()
             first: list[str] = []
             for ktype in known:
                 first.extend(_ALGOS_FOR_TYPE.get(ktype, (ktype,)))
-            avail = list(opts.key_types)
-            opts.key_types = [a for a in first if a in avail] + [a for a in avail if a not in first]
+            avail = list(sec.key_types)
+            sec.key_types = [a for a in first if a in avail] + [a for a in avail if a not in first]
         t.start_client(timeout=left())
     except Exception as exc:  # noqa: BLE001 - paramiko raises many kinds here
         sock.close()
@@ -344,7 +359,7 @@ def _connect_blocking(ctx: CheckContext | None, peer: Peer, deadline: float,
                      f"{host_key_name(name, port)} and verify the new one: "
                      + verify_commands(name, port, ktype, user),
                      fingerprint=fp, host_key=key_text, address=addr)
-    keys, notes = _load_keys(ctx)
+    keys, notes = _load_keys(opts)
     if not keys:
         t.close()
         return _fail("auth", f"no SSH key to log in to {name} with: create one (ssh-keygen -t "
@@ -379,11 +394,11 @@ def _connect_blocking(ctx: CheckContext | None, peer: Peer, deadline: float,
                  fingerprint=fp, host_key=key_text, address=addr)
 
 
-async def _connect(ctx: CheckContext | None, peer: Peer, timeout: float) -> _Conn:
+async def _connect(opts: SshOptions | None, peer: Peer, timeout: float) -> _Conn:
     holder = _Holder()
     deadline = time.monotonic() + timeout
     try:
-        return await run_blocking(_connect_blocking, ctx, peer, deadline, holder,
+        return await run_blocking(_connect_blocking, opts, peer, deadline, holder,
                                   timeout=timeout + 0.5)
     except asyncio.TimeoutError:
         holder.close()
@@ -522,7 +537,7 @@ class SshSession:
 
 
 @contextlib.asynccontextmanager
-async def ssh_session(ctx: CheckContext | None, peer: Peer, command: str, *,
+async def ssh_session(opts: SshOptions | None, peer: Peer, command: str, *,
                       timeout: float | None = None) -> AsyncIterator[SshSession]:
     """Start *command* on *peer* and keep it running for the ``async with`` body.
 
@@ -530,15 +545,15 @@ async def ssh_session(ctx: CheckContext | None, peer: Peer, command: str, *,
     the channel and connection are closed; the remote command must bound itself (sshd does not
     kill a command without a terminal when the channel closes). Usage::
 
-        async with ssh_session(ctx, peer, "python3 -c ...") as s:
+        async with ssh_session(opts, peer, "python3 -c ...") as s:
             if not s.ok:
                 return s.result            # failure says why (network, host key, auth, ...)
             await s.read_until("LISTENING")
             ...                            # act locally while the peer listens
             res = await s.wait(5)
     """
-    t = float(timeout if timeout is not None else (getattr(ctx, "timeout_s", 3.0) or 3.0))
-    conn = await _connect(ctx, peer, t)
+    t = float(timeout if timeout is not None else (getattr(opts, "timeout_s", 3.0) or 3.0))
+    conn = await _connect(opts, peer, t)
     session = SshSession(peer, conn, t)
     try:
         if conn.transport is not None:
@@ -554,7 +569,7 @@ async def ssh_session(ctx: CheckContext | None, peer: Peer, command: str, *,
         session.close()
 
 
-async def ssh_run(ctx: CheckContext | None, peer: Peer, command: str, *,
+async def ssh_run(opts: SshOptions | None, peer: Peer, command: str, *,
                   stdin: bytes | str | None = None, timeout: float | None = None,
                   connect_timeout: float | None = None) -> SshResult:
     """Run *command* on *peer* (by name, as ``peer.ssh_user``) within *timeout* seconds overall.
@@ -562,10 +577,10 @@ async def ssh_run(ctx: CheckContext | None, peer: Peer, command: str, *,
     *connect_timeout* (default: *timeout*) bounds reaching and logging in to the peer, so a
     caller can keep time for something else when the peer is unreachable.
     """
-    t = float(timeout if timeout is not None else (getattr(ctx, "timeout_s", 3.0) or 3.0))
+    t = float(timeout if timeout is not None else (getattr(opts, "timeout_s", 3.0) or 3.0))
     deadline = time.monotonic() + t
     ct = min(float(connect_timeout), t) if connect_timeout is not None else t
-    async with ssh_session(ctx, peer, command, timeout=ct) as s:
+    async with ssh_session(opts, peer, command, timeout=ct) as s:
         if not s.ok:
             return s.result
         if stdin:

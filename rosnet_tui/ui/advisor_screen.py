@@ -6,8 +6,6 @@ and ports filled in), and every rule (the troubleshooting reference), the matchi
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, cast
-
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -15,14 +13,12 @@ from textual.containers import Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Static
 
-from rosnet_tui.core.advisor import Finding, all_rules, step_title
+from rosnet_tui.core.advisor import Finding, all_rules
+from rosnet_tui.core.procedure import SEVERITY_WORDS as SEVERITY_WORD
+from rosnet_tui.core.procedure import step_title
+from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.steps import STEP_BY_ID
 from rosnet_tui.ui.widgets import RowTable
-
-if TYPE_CHECKING:
-    from rosnet_tui.ui.app import RosnetApp
-
-SEVERITY_WORD = {"fail": "FAIL", "warn": "WARN", "security": "SEC", "info": "INFO"}
 
 
 def _short_step(step_id: str | None) -> str:
@@ -37,14 +33,11 @@ class AdvisorScreen(Screen[str | None]):
         Binding("g", "go", "Go to its step"),
     ]
 
-    def __init__(self, **kwargs) -> None:
+    def __init__(self, session: WizardSession, **kwargs) -> None:
         super().__init__(**kwargs)
+        self.session = session
         self.show_all = False
         self._rows: list[tuple[str, str, str, str, str | None, bool, str]] = []
-
-    @property
-    def rosnet(self) -> RosnetApp:
-        return cast("RosnetApp", self.app)
 
     def compose(self) -> ComposeResult:
         yield Header(show_clock=False, icon="")
@@ -64,7 +57,7 @@ class AdvisorScreen(Screen[str | None]):
         self.refresh_rows()
 
     def refresh_rows(self) -> None:
-        findings: list[Finding] = self.rosnet.findings
+        findings: list[Finding] = self.session.findings
         fired = {f.rule for f in findings}
         self._rows = []
         if self.show_all:

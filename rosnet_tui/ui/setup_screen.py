@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING, cast
 
 from textual import on
 from textual.app import ComposeResult
@@ -14,11 +13,9 @@ from textual.validation import ValidationResult, Validator
 from textual.widgets import Button, Footer, Header, Input, Label, Select, Static
 
 from rosnet_tui.core import settings as S
-from rosnet_tui.core.netinfo import LocalNet
+from rosnet_tui.core.session import WizardSession
+from rosnet_tui.ui.messages import SettingsSaved
 from rosnet_tui.ui.widgets import OrderedInput
-
-if TYPE_CHECKING:
-    from rosnet_tui.ui.app import RosnetApp
 
 
 class CoreValidator(Validator):
@@ -85,17 +82,14 @@ class SetupScreen(Screen[bool]):
         Binding("ctrl+n", "add_peer", "Add peer"),
     ]
 
-    def __init__(self, detected: LocalNet, **kwargs) -> None:
+    def __init__(self, session: WizardSession, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.detected = detected
+        self.session = session
+        self.detected = session.detected
         self._next_peer = 0
 
-    @property
-    def rosnet(self) -> RosnetApp:
-        return cast("RosnetApp", self.app)
-
     def compose(self) -> ComposeResult:
-        s = self.rosnet.settings
+        s = self.session.settings
         t = s.this
         local_ip = t.local_ip or self.detected.local_ip
         yield Header(show_clock=False, icon="")
@@ -216,15 +210,16 @@ class SetupScreen(Screen[bool]):
             self._show_problem(key, why)
             return
         try:
-            self.rosnet.save_settings(settings)
+            self.session.save_settings(settings)
         except S.SettingsError as exc:
             self.notify(str(exc), title="Not saved", severity="error", timeout=10)
             return
+        self.app.post_message(SettingsSaved())
         self.dismiss(True)
 
     @on(Button.Pressed, "#cancel")
     def action_cancel(self) -> None:
-        if not self.rosnet.settings.complete:
+        if not self.session.settings.complete:
             self.notify("Fill in this component and save first (Ctrl+Q quits).",
                         severity="warning")
             return
@@ -232,7 +227,7 @@ class SetupScreen(Screen[bool]):
 
     # ------------------------------------------------------------------ form -> settings
     def read_form(self) -> tuple[S.Settings, list[tuple[str, str]]]:
-        old = self.rosnet.settings
+        old = self.session.settings
         val = lambda wid: self.query_one(f"#{wid}", Input).value.strip()  # noqa: E731
         role = str(self.query_one("#this-role", Select).value)
         this = replace(old.this, name=val("this-name"), role=role,

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, cast
-
 from rich.markdown import CodeBlock
 from rich.markdown import Markdown as RichMarkdown
 from rich.syntax import Syntax
@@ -14,12 +12,13 @@ from textual.containers import Container, Vertical, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import Footer, Header, Static
 
-from rosnet_tui.core.checks import CheckSpec, run_checks
+from rosnet_tui.core.checks import CheckSpec
+from rosnet_tui.core.checks.runner import stream
+from rosnet_tui.core.session import NOT_RUN, RUNNING, WizardSession
 from rosnet_tui.core.steps import Step
-from rosnet_tui.ui.widgets import NOT_RUN, RUNNING, CheckList, StepBar
-
-if TYPE_CHECKING:
-    from rosnet_tui.ui.app import RosnetApp
+from rosnet_tui.core.write_plans import UNDO_AFFECTS
+from rosnet_tui.ui.messages import Navigate
+from rosnet_tui.ui.widgets import CheckList, StepBar
 
 
 class _CompactCode(CodeBlock):
@@ -55,15 +54,13 @@ class StepScreen(Screen):
         Binding("z", "zoom", "Zoom pane", show=False),
     ]
 
-    def __init__(self, step: Step, specs: list[CheckSpec], **kwargs) -> None:
+    def __init__(self, step: Step, specs: list[CheckSpec], session: WizardSession,
+                 **kwargs) -> None:
         super().__init__(**kwargs)
         self.step = step
         self.specs = specs
+        self.session = session
         self.config_source = ""  # the Markdown the Configuration pane shows
-
-    @property
-    def rosnet(self) -> RosnetApp:
-        return cast("RosnetApp", self.app)
 
     def compose(self) -> ComposeResult:
         yield Header(show_clock=False, icon="")
@@ -78,14 +75,14 @@ class StepScreen(Screen):
                     if self.step.id == "router":  # the card: plain text, fit to the pane
                         yield Static("", id="router-card", markup=False)
                     else:
-                        self.config_source = self.rosnet.configuration_text(self.step.id)
+                        self.config_source = self.session.configuration_text(self.step.id)
                         yield Static(_markdown(self.config_source), id="config-text")
                 with Vertical(id="verify-pane", classes="pane") as verify:
                     verify.border_title = "Verification"
                     known = {s.id for s in self.specs}
                     rows = [(s.id, s.title) for s in self.specs]
                     rows += [(cid, cid) for cid in self.step.check_ids if cid not in known]
-                    yield CheckList(rows, advice=self.rosnet.findings_for, id="check-list")
+                    yield CheckList(rows, advice=self.session.findings_for, id="check-list")
         yield Footer()
 
     def on_mount(self) -> None:
@@ -102,7 +99,7 @@ class StepScreen(Screen):
         self.refresh_subtitle()
 
     def refresh_subtitle(self) -> None:
-        t = self.rosnet.settings.this
+        t = self.session.settings.this
         self.sub_title = f"{t.name or '?'} · {t.role} · {t.connection} · {t.profile}"
 
     def refresh_config(self) -> None:
@@ -110,14 +107,14 @@ class StepScreen(Screen):
         if self.step.id == "router":
             self._render_card()
         else:
-            self.config_source = self.rosnet.configuration_text(self.step.id)
+            self.config_source = self.session.configuration_text(self.step.id)
             self.query_one("#config-text", Static).update(_markdown(self.config_source))
         self.refresh_subtitle()
 
     def _render_card(self) -> None:
         pane = self.query_one("#config-pane")
         width = pane.scrollable_content_region.width or 76
-        self.query_one("#router-card", Static).update(self.rosnet.router_card_text(width - 3))
+        self.query_one("#router-card", Static).update(self.session.router_card_text(width - 3))
 
     def on_resize(self) -> None:
         if self.step.id == "router":
@@ -125,14 +122,14 @@ class StepScreen(Screen):
 
     def _sync_results(self) -> None:
         """Show the latest known state of every check and every step (shared through the app)."""
-        app = self.rosnet
+        session = self.session
         checks = self.query_one(CheckList)
         for cid in checks.rows:
-            state, result = app.check_state(cid)
+            state, result = session.check_state(cid)
             if checks.rows[cid].state != state or checks.rows[cid].result is not result:
                 checks.set_state(cid, state, result)
         bar = self.query_one(StepBar)
-        for step_id, state in app.step_states().items():
+        for step_id, state in session.step_states().items():
             bar.set_state(step_id, state)
 
     # ------------------------------------------------------------------ actions
@@ -159,7 +156,7 @@ class StepScreen(Screen):
     def action_write(self) -> None:
         from rosnet_tui.ui.write_screen import WriteScreen
 
-        plan = self.rosnet.write_plan(self.step.id)
+        plan = self.session.write_plan(self.step.id)
         if plan is None:
             return
 
@@ -167,18 +164,17 @@ class StepScreen(Screen):
             if written:
                 self.run_specs([s for s in self.specs if s.id in plan.after])
 
-        self.app.push_screen(WriteScreen(plan), done)
+        self.app.push_screen(WriteScreen(plan, self.session.state_dir), done)
 
     def unknown_host_keys(self) -> list[tuple[str, dict]]:
         """Peers whose SSH host key linux.ssh met but nobody has trusted yet."""
-        _state, result = self.rosnet.check_state("linux.ssh")
+        _state, result = self.session.check_state("linux.ssh")
         peers = (result.data.get("peers") or {}) if result is not None else {}
         return [(name, d) for name, d in peers.items()
                 if isinstance(d, dict) and d.get("failure") == "host_key_unknown"
                 and d.get("host_key")]
 
     def action_trust_key(self) -> None:
-        from rosnet_tui.core.ssh import trust_host_key
         from rosnet_tui.ui.trust_screen import TrustKeyScreen
 
         pending = self.unknown_host_keys()
@@ -187,7 +183,7 @@ class StepScreen(Screen):
                         timeout=4)
             return
         name, d = pending[0]
-        peer = self.rosnet.settings.peer(name)
+        peer = self.session.settings.peer(name)
         port = peer.ssh_port if peer else 22
 
         def done(trust: bool | None) -> None:
@@ -195,7 +191,7 @@ class StepScreen(Screen):
                 self.notify(f"Not trusted: SSH checks to {name} stay refused.", timeout=5)
                 return
             try:
-                path = trust_host_key(self.rosnet.make_context(), name, port, d["host_key"])
+                path = self.session.trust_host_key(name, port, d["host_key"])
             except (ValueError, OSError) as exc:
                 self.notify(f"Not written: {exc}", severity="error", timeout=8)
                 return
@@ -211,21 +207,20 @@ class StepScreen(Screen):
 
         def done(undone: bool | None) -> None:
             if undone:
-                self.run_specs([s for s in self.specs if s.id in
-                                ("linux.hosts", "linux.resolve", "ros.env")])
+                self.run_specs([s for s in self.specs if s.id in UNDO_AFFECTS])
 
-        self.app.push_screen(UndoScreen(), done)
+        self.app.push_screen(UndoScreen(self.session.state_dir), done)
 
     def action_go_finding(self) -> None:
         """Go back to the step that the highlighted check's first finding points to."""
         cid = self.query_one(CheckList).highlighted_id
-        for f in self.rosnet.findings_for(cid) if cid else []:
+        for f in self.session.findings_for(cid) if cid else []:
             if f.goto_step and f.severity in ("fail", "warn"):
                 if f.goto_step == self.step.id:
                     self.notify("The cause is on this step: see the configuration above.",
                                 timeout=4)
                 else:
-                    self.rosnet.action_goto(f.goto_step)
+                    self.post_message(Navigate(f.goto_step))
                 return
         self.notify("No finding points elsewhere for this check.", timeout=3)
 
@@ -253,25 +248,24 @@ class StepScreen(Screen):
         if not specs:
             self.notify("This step has no checks registered yet.", severity="warning")
             return
-        app = self.rosnet
         for s in specs:
-            app.set_check_state(s.id, RUNNING, None)
+            self.session.set_check_state(s.id, RUNNING, None)
         self._sync_results()
         self._run_worker(specs)
 
     @work(exclusive=True, exit_on_error=False, group="checks")
     async def _run_worker(self, specs: list[CheckSpec]) -> None:
-        app = self.rosnet
-        ctx = app.make_context()
+        session = self.session
+        ctx = session.make_context()
         ids = {s.id for s in specs}
         try:
-            async for result in run_checks(specs, ctx):
+            async for result in stream(specs, ctx):
                 ids.discard(result.id)
-                app.set_check_state(result.id, result.status.value, result)
+                session.set_check_state(result.id, result.status.value, result)
                 self._sync_results()
         finally:
             for cid in ids:  # cancelled before a verdict: back to "not run"
-                app.set_check_state(cid, NOT_RUN, None)
+                session.set_check_state(cid, NOT_RUN, None)
             self._sync_results()
         for name, _d in self.unknown_host_keys():
             self.notify(f"{name} has an SSH host key this machine does not know yet. Press k "

@@ -15,10 +15,10 @@ from textual.widget import Widget
 from textual.widgets import DataTable, Input, Static
 
 from rosnet_tui.core.results import CheckResult
+from rosnet_tui.core.session import NOT_RUN, RUNNING, aggregate  # noqa: F401 (re-exported)
 from rosnet_tui.core.steps import STEPS
 
-# The state words of a check in the UI: the four result statuses plus two of the UI's own.
-NOT_RUN, RUNNING = "not run", "running"
+# The state words of a check (the four result statuses plus the session's "not run"/"running").
 STATE_STYLE = {
     "pass": "$success",
     "warn": "$warning",
@@ -29,22 +29,6 @@ STATE_STYLE = {
 }
 STATE_LABEL = {"pass": "PASS", "warn": "WARN", "fail": "FAIL", "skip": "SKIP",
                RUNNING: " .. ", NOT_RUN: "  - "}
-
-
-def aggregate(states: list[str]) -> str:
-    """One state for a step from its checks' states: the worst one wins."""
-    if not states:
-        return NOT_RUN
-    if RUNNING in states:
-        return RUNNING
-    for s in ("fail", "warn"):
-        if s in states:
-            return s
-    if all(s == NOT_RUN for s in states):
-        return NOT_RUN
-    if any(s == NOT_RUN for s in states):
-        return "partial"
-    return "skip" if all(s == "skip" for s in states) else "pass"
 
 
 STEP_MARK = {"pass": "ok", "warn": "!", "fail": "x", "skip": "-", RUNNING: "..",

@@ -8,9 +8,7 @@ password in the terminal; the exact command is shown first.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, cast
+from pathlib import Path
 
 from rich.syntax import Syntax
 from textual import on
@@ -22,25 +20,7 @@ from textual.widgets import Button, Checkbox, Static
 
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import privilege
-
-if TYPE_CHECKING:
-    from rosnet_tui.ui.app import RosnetApp
-
-
-@dataclass
-class WritePlan:
-    """What the screen needs to preview and apply one write."""
-
-    title: str
-    explain: str
-    # Build the preview; the flag is the user's answer to the option (e.g. comment ROS_IP lines).
-    make_preview: Callable[[bool], mf.Preview]
-    option_label: str = ""            # empty: no option
-    option_count: Callable[[], int] = lambda: 0
-    # The sudo command for a preview that needs privilege (None: privilege cannot help).
-    sudo_command: Callable[[mf.Preview, bool], list[str]] | None = None
-    after: tuple[str, ...] = ()       # checks to re-run after a write
-    footnote: str = ""
+from rosnet_tui.core.write_plans import WritePlan
 
 
 class WriteScreen(ModalScreen[bool]):
@@ -48,15 +28,12 @@ class WriteScreen(ModalScreen[bool]):
 
     BINDINGS = [Binding("escape", "cancel", "Cancel"), Binding("y", "apply", "Apply", show=False)]
 
-    def __init__(self, plan: WritePlan, **kwargs) -> None:
+    def __init__(self, plan: WritePlan, state_dir: Path, **kwargs) -> None:
         super().__init__(**kwargs)
         self.plan = plan
+        self.state_dir = state_dir
         self.preview: mf.Preview | None = None
         self.option = False
-
-    @property
-    def rosnet(self) -> RosnetApp:
-        return cast("RosnetApp", self.app)
 
     def compose(self) -> ComposeResult:
         with Vertical(id="write-box"):
@@ -115,7 +92,7 @@ class WriteScreen(ModalScreen[bool]):
         p = self.preview
         if p is None or not p.changed:
             return
-        state_dir = self.rosnet.deps.state_dir
+        state_dir = self.state_dir
         try:
             if p.needs_privilege:
                 if self.plan.sudo_command is None:
@@ -148,13 +125,10 @@ class UndoScreen(ModalScreen[bool]):
 
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(self, **kwargs) -> None:
+    def __init__(self, state_dir: Path, **kwargs) -> None:
         super().__init__(**kwargs)
+        self.state_dir = state_dir
         self.plan: mf.UndoPlan | None = None
-
-    @property
-    def rosnet(self) -> RosnetApp:
-        return cast("RosnetApp", self.app)
 
     def compose(self) -> ComposeResult:
         with Vertical(id="write-box"):
@@ -169,7 +143,7 @@ class UndoScreen(ModalScreen[bool]):
     def on_mount(self) -> None:
         status = self.query_one("#write-status", Static)
         try:
-            self.plan = mf.plan_undo(self.rosnet.deps.state_dir)
+            self.plan = mf.plan_undo(self.state_dir)
         except mf.ManagedFileError as exc:
             status.update(str(exc))
             self.query_one("#write-apply", Button).disabled = True
@@ -190,7 +164,7 @@ class UndoScreen(ModalScreen[bool]):
     def _sudo_argv(self) -> list[str]:
         assert self.plan is not None
         return privilege.undo_command(entry_id=self.plan.entry.id,
-                                      state_dir=self.rosnet.deps.state_dir)
+                                      state_dir=self.state_dir)
 
     @on(Button.Pressed, "#write-cancel")
     def action_cancel(self) -> None:

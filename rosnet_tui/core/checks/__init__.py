@@ -10,20 +10,21 @@ from __future__ import annotations
 import asyncio
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
+from rosnet_tui.core.checks import data as data_decl
 from rosnet_tui.core.listener import ListenerPool
+from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult, Outcome, Status
 from rosnet_tui.core.settings import Settings, default_state_dir
-
-STEP_IDS = ("isp", "router", "linux", "ros")
+from rosnet_tui.core.ssh import SshOptions
 
 
 @dataclass
 class CheckContext:
-    """Everything a check may use; tests build one pointed at the network lab."""
+    """Everything a check may use in one round. Built by :mod:`rosnet_tui.core.checks.runner`
+    (the one door every caller goes through); tests build one pointed at the network lab."""
 
     settings: Settings
     timeout_s: float = 3.0
@@ -33,19 +34,21 @@ class CheckContext:
     env: dict[str, str] = field(default_factory=dict)
     # Results of checks that already ran in this round, by id (for checks that build on others).
     results: dict[str, CheckResult] = field(default_factory=dict)
-    extra: dict[str, Any] = field(default_factory=dict)
-    # SSH (rosnet_tui.core.ssh): the folder with our keys and known_hosts (None: $HOME/.ssh), the
-    # known_hosts files to trust (None: that folder's known_hosts + /etc/ssh/ssh_known_hosts), and
-    # whether to offer the ssh-agent's keys.
-    ssh_dir: Path | None = None
-    known_hosts_files: list[Path] | None = None
-    ssh_agent: bool = True
+    # What the SSH layer needs (keys folder, known_hosts files, agent); its timeout is ours.
+    ssh_options: SshOptions = field(default_factory=SshOptions)
     # isp.cgnat may ask the modem over UPnP (SSDP multicast on the LAN); tests outside the lab
     # turn it off so nothing leaves the machine.
     upnp: bool = True
     # Our own test-port listeners, shared by the checks of a round (router.*, linux.chat_in);
     # each is bound only while a check holds it.
     listeners: ListenerPool = field(default_factory=ListenerPool)
+
+    @property
+    def ssh(self) -> SshOptions:
+        """The SSH options with this round's timeout."""
+        if self.ssh_options.timeout_s == self.timeout_s:
+            return self.ssh_options
+        return replace(self.ssh_options, timeout_s=self.timeout_s)
 
 
 CheckFunc = Callable[[CheckContext], Awaitable[Outcome]]
@@ -110,6 +113,11 @@ async def run_check(spec: CheckSpec, ctx: CheckContext) -> CheckResult:
     except Exception as exc:  # a bug or an unexpected failure is a result, not a crash
         outcome = Outcome(Status.FAIL, f"the check failed unexpectedly: {type(exc).__name__}: {exc}",
                           [repr(exc)])
+    extra = data_decl.undeclared(spec.id, outcome.data)
+    if extra and data_decl.strict():
+        raise data_decl.UndeclaredKeyError(
+            f"{spec.id} reported keys its declaration lacks: {', '.join(extra)} "
+            "(declare them in rosnet_tui/core/checks/data.py)")
     return CheckResult(spec.id, spec.step, outcome.status, outcome.summary,
                        list(outcome.evidence), time.monotonic() - start, timeout,
                        dict(outcome.data))

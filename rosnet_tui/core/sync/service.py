@@ -12,7 +12,6 @@ keeps the last good state, backs off (bounded) and is logged once, with the reco
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import copy
 import fcntl
@@ -831,26 +830,15 @@ def run_affected_checks(settings: Settings, *, hosts_path: Path, bashrc_path: Pa
                         ) -> list[dict[str, Any]]:
     """Run the checks a hosts/ROS change affects (concurrently, each under its timeout):
     [{"id", "status", "summary"}] in *ids* order."""
-    from rosnet_tui.core import checks as C
+    from rosnet_tui.core.checks.runner import RunOptions, run_now, select
 
-    C.load_builtin_checks()
-    specs = [C.REGISTRY[i] for i in ids if i in C.REGISTRY]
+    specs = select(ids=ids)
     env = dict(os.environ)
     with contextlib.suppress(WriterSettingsError):
         env["ROS_MASTER_URI"] = master_uri(settings)
     for v in ("ROS_IP", "ROS_HOSTNAME"):
         env.pop(v, None)
-    kw: dict[str, Any] = {"settings": copy.deepcopy(settings),
-                          "timeout_s": float(settings.checks.timeout_s),
-                          "hosts_path": hosts_path, "state_dir": state_dir, "env": env,
-                          "upnp": False}
-    if bashrc_path is not None:
-        kw["bashrc_path"] = bashrc_path
-    ctx = C.CheckContext(**kw)
-
-    async def go() -> dict[str, Any]:
-        return {r.id: r async for r in C.run_checks(specs, ctx)}
-
-    got = asyncio.run(go())
-    return [{"id": s.id, "status": got[s.id].status.value, "summary": got[s.id].summary}
-            for s in specs if s.id in got]
+    opts = RunOptions(hosts_path=hosts_path, state_dir=state_dir, env=env, upnp=False,
+                      bashrc_path=bashrc_path)
+    got = run_now(copy.deepcopy(settings), specs, opts)
+    return [{"id": r.id, "status": r.status.value, "summary": r.summary} for r in got]

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import os
 import socket
 import struct
 from dataclasses import dataclass
@@ -110,16 +109,11 @@ class PublicLookup:
 
 
 async def _lookup(settings: Settings, state_dir: Path, timeout_s: float) -> PublicLookup:
-    from rosnet_tui.core.checks import (
-        REGISTRY,
-        CheckContext,
-        isp,  # noqa: F401  (registers isp.public_ip)
-        run_check,
-    )
+    from rosnet_tui.core.checks import run_check
+    from rosnet_tui.core.checks.runner import RunOptions, make_context, select
 
-    ctx = CheckContext(settings=settings, timeout_s=timeout_s, state_dir=state_dir,
-                       env=dict(os.environ), upnp=False)
-    res = await run_check(REGISTRY["isp.public_ip"], ctx)
+    ctx = make_context(settings, RunOptions(timeout_s=timeout_s, state_dir=state_dir, upnp=False))
+    res = await run_check(select(ids=["isp.public_ip"])[0], ctx)
     ip = res.data.get("public_ip") if isinstance(res.data, dict) else None
     return PublicLookup(str(ip) if ip else None, res.summary)
 

@@ -1,0 +1,384 @@
+"""What each check reports in its ``data``: declared per check id, the ``check --json`` contract.
+
+Checks produce plain dicts (their JSON form is unchanged); the declarations below say which keys
+each check id may carry and what they hold. Consumers (the advisor's rules, the UI, the report)
+read the data through :func:`view`, which refuses a key that no check declares: a renamed key
+fails the ordinary test run instead of silently switching a rule off. Producers are held to the
+same declarations by :func:`undeclared` (the check runner calls it in strict mode, which the
+test suite turns on).
+
+This module imports nothing but the standard library, so the advisor can depend on it without
+depending on any check module.
+"""
+
+from __future__ import annotations
+
+import os
+import types
+import typing
+from collections.abc import Iterator, Mapping
+from typing import Any, Literal, TypedDict
+
+STRICT_ENV = "ROSNET_TUI_STRICT_DATA"
+
+
+def strict() -> bool:
+    """True when undeclared keys must raise (the test suite sets ROSNET_TUI_STRICT_DATA=1)."""
+    return os.environ.get(STRICT_ENV, "") not in ("", "0")
+
+
+# --------------------------------------------------------------------------- declarations
+# One TypedDict per check id (total=False: a check sets the keys its verdict has evidence for; a
+# skip may carry only a few). Nested shapes (per-peer dicts, port rows) are TypedDicts too, and
+# :func:`view` and :func:`undeclared` follow them into lists and dict values. The comment on each
+# key is its documentation; README.md's table of the checks lists the top-level keys.
+# Values are JSON: str, int, bool, None, lists and dicts (dict keys are strings).
+
+# ---- step 1, ISP (rosnet_tui/core/checks/isp.py)
+class EndpointData(TypedDict, total=False):
+    dns_ok: bool | None   # the endpoint's host name resolved (None: an IP address, not asked)
+    http_ok: bool | None  # a GET answered with HTTP 2xx (None: not tried, the name did not resolve)
+
+
+class IspInternetData(TypedDict, total=False):
+    dns_ok: bool | None   # name resolution of `url` worked (None: not asked, or skipped)
+    http_ok: bool | None  # the GET of `url` answered with HTTP 2xx (None: not tried, or skipped)
+    failed_part: Literal["dns", "http"] | None  # what broke when not everything works
+    url: str              # the endpoint the verdict describes (the first failing one if some work)
+    endpoints: dict[str, EndpointData]  # every endpoint asked, by URL
+
+
+class PublicIpSeen(TypedDict, total=False):
+    ip: str          # a public address this component had
+    first_seen: str  # when it was first seen (ISO 8601, UTC)
+    last_seen: str   # when it was last seen (ISO 8601, UTC)
+
+
+class IspPublicIpData(TypedDict, total=False):
+    public_ip: str | None  # the address the internet sees (None: unknown, or the services disagree)
+    sources: dict[str, str]  # by service URL: the address it answered, or "error: <why>"
+    agree: bool              # every configured service answered the same address
+    settings_ip: str         # this.public_ip from the settings ("" when not set)
+    matches_settings: bool | None  # public_ip equals settings_ip (None: no address in the settings)
+    previous_ip: str | None  # the address recorded before this one (None: none yet)
+    changed: bool            # the address differs from the one recorded last time
+    history: list[PublicIpSeen]  # the addresses recorded so far, oldest first
+
+
+class IspCgnatData(TypedDict, total=False):
+    wan_ip: str | None   # the modem's internet-side address as it told over UPnP (None: not asked)
+    method: Literal["none", "upnp", "traceroute"]  # how the verdict was reached
+    cgnat: bool          # carrier-grade NAT (100.64.0.0/10) seen on the way out
+    double_nat: bool     # a second private NAT seen on the way out
+    hop: str | None      # the address that shows the NAT (None: no NAT seen)
+    hops: list[str | None]  # traceroute: the address answering at each TTL (None: no answer)
+    source: str          # traceroute: this machine's source address towards the target
+
+
+# ---- step 2, Router/modem (rosnet_tui/core/checks/router.py)
+class RouterLocalIpData(TypedDict, total=False):
+    local_ip: str     # the interface's IPv4 address ("" when the interface is down or has none)
+    interface: str    # the interface used (this.interface, else the default route's)
+    gateway: str      # the default gateway through that interface ("" when none)
+    expected_ip: str  # this.local_ip from the settings: where the modem forwards to ("" if unset)
+    differs: bool     # expected_ip is set and is not local_ip
+
+
+class RouterPortFreeData(TypedDict, total=False):
+    port: int            # the test port (probe.port)
+    in_use: bool         # another process holds it
+    process: str | None  # that process's command line (None: unknown or free)
+    pid: int | None      # its pid (None: free, or another user's process)
+
+
+class RouterListenerData(TypedDict, total=False):
+    port: int         # the test port (probe.port)
+    listening: bool   # our listener answered on it
+
+
+class PortRow(TypedDict, total=False):
+    port: int               # a TCP port tested from outside
+    reachable: bool | None  # open from outside (None: could not be tested)
+    listener: bool          # our own listener held it during the test (True for others' services)
+    via: str                # who tested: "peer:<name>" over SSH, or "echoip" (the port checker)
+
+
+class RouterPortOpenData(TypedDict, total=False):
+    ports: list[PortRow]    # the test port, two random ports, then 22 / the ROS port when in use
+    test_port: int          # the test port (probe.port)
+    test_port_open: bool | None  # the test port is open from outside (None: could not be tested)
+    public_ip: str | None   # the address tested (None: unknown)
+
+
+# ---- step 3, Linux (rosnet_tui/core/checks/linux.py)
+class HostsWrong(TypedDict, total=False):
+    name: str      # a name the hosts file maps to the wrong address
+    found: str     # the address found there
+    expected: str  # the address it should be
+
+
+class LinuxHostsData(TypedDict, total=False):
+    missing: list[str]        # names with no IPv4 entry in the hosts file
+    wrong: list[HostsWrong]   # names mapped to another (non-loopback) address
+    duplicates: list[str]     # names on several lines with different addresses
+    loopback: list[str]       # names mapped to a loopback address (127.x) that should not be
+
+
+class Resolved(TypedDict, total=False):
+    resolved: str | None  # the first IPv4 address the resolver gave (None: does not resolve)
+    expected: str         # the address the settings expect
+
+
+class LinuxResolveData(TypedDict, total=False):
+    names: dict[str, Resolved]  # every expected name, by name
+    wrong: list[str]            # names that do not resolve, or resolve to another address
+    loopback: list[str]         # names that resolve to a loopback address and should not
+
+
+class PingPeer(TypedDict, total=False):
+    icmp: bool | None   # answered ping by name (None: ping could not run here)
+    tcp22: bool         # accepted a TCP connection on its SSH port (the fallback when ICMP is filtered)
+
+
+class LinuxPingData(TypedDict, total=False):
+    peers: dict[str, PingPeer]  # by peer name
+
+
+class SshPeer(TypedDict, total=False):
+    ok: bool                # a command ran over SSH (key login, host key verified)
+    failure: str | None     # why not: network, resolve, host_key_unknown, host_key_changed,
+    #                         auth, sshd, timeout, no_user (no ssh_user in the settings)
+    fingerprint: str | None  # SHA256:... of the peer's host key, when seen
+    host_key: str | None    # "<type> <base64>" of that key (for trusting it after a comparison)
+    address: str | None     # the address the peer's name resolved to here
+    detail: str             # what happened, in words
+
+
+class LinuxSshData(TypedDict, total=False):
+    peers: dict[str, SshPeer]  # by peer name (every peer, those without an SSH user too)
+
+
+class ChatPeer(TypedDict, total=False):
+    ok: bool             # the message went both ways
+    failure: str | None  # where it broke: no_user, ssh:<SSH failure>, resolve, peer_resolve,
+    #                      connect, peer_listen, local_listen, wrong_peer, no_message
+
+
+class LinuxChatData(TypedDict, total=False):
+    peers: dict[str, ChatPeer]  # by peer name
+
+
+# ---- step 4, ROS (rosnet_tui/core/checks/ros.py)
+class RosEnvData(TypedDict, total=False):
+    env_uri: str | None      # ROS_MASTER_URI in the environment (None: not set)
+    bashrc_uri: str | None   # ROS_MASTER_URI exported in ~/.bashrc (None: not there)
+    expected_uri: str        # what it should be for this role ("" when no master is configured)
+    uri_ok: bool             # set, and right, in both places
+    ros_ip: str | None       # ROS_IP (environment first, then ~/.bashrc; None: not set)
+    ros_hostname: str | None  # ROS_HOSTNAME (likewise)
+
+
+class RosMasterData(TypedDict, total=False):
+    uri: str                 # the master URI asked ("" when no master is configured)
+    reachable: bool          # the master answered getSystemState
+    topics: list[list[str]]  # [name, type] of each topic (the probes of rosnet-tui left out)
+    nodes: list[str]         # the nodes the master knows (the probes of rosnet-tui left out)
+
+
+UnreachableNode = TypedDict("UnreachableNode", {
+    "node": str,    # the node's name
+    "uri": str,     # the URI it advertises
+    "host": str,    # the host part of that URI
+    "reason": str,  # why it cannot be reached (or could not be checked)
+    "from": str,    # where it was tested from: "here" or a peer's name
+}, total=False)
+
+RosNodeUrisData = TypedDict("RosNodeUrisData", {
+    "unreachable": list[UnreachableNode],  # nodes that cannot be reached, the user's own first
+    "checked": int,     # how many distinct nodes were checked
+    "from": list[str],  # where the nodes were tested from: "here", then peer names
+}, total=False)
+
+FailedHop = Literal["registration", "xmlrpc_callback", "tcpros", "no_message"]
+
+
+class PubsubPeer(TypedDict, total=False):
+    peer: str                 # the peer on the other side of the exchange
+    ok: bool                  # the message arrived
+    failed_hop: FailedHop | None  # where it broke (None: it did not, or the probe could not run)
+    node: str | None          # the node whose address failed, when known
+    uri: str | None           # the URI that failed (the node's, or the master's at registration)
+
+
+class RosPubsubData(PubsubPeer, total=False):
+    # The keys above describe the worst peer's exchange ("" as peer when none could run).
+    peers: dict[str, PubsubPeer]  # every peer's exchange, by peer name
+
+
+DATA: dict[str, type] = {
+    "isp.internet": IspInternetData,
+    "isp.public_ip": IspPublicIpData,
+    "isp.cgnat": IspCgnatData,
+    "router.local_ip": RouterLocalIpData,
+    "router.port_free": RouterPortFreeData,
+    "router.listener": RouterListenerData,
+    "router.port_open": RouterPortOpenData,
+    "linux.hosts": LinuxHostsData,
+    "linux.resolve": LinuxResolveData,
+    "linux.ping": LinuxPingData,
+    "linux.ssh": LinuxSshData,
+    "linux.chat_out": LinuxChatData,
+    "linux.chat_in": LinuxChatData,
+    "ros.env": RosEnvData,
+    "ros.master": RosMasterData,
+    "ros.node_uris": RosNodeUrisData,
+    "ros.pubsub_out": RosPubsubData,
+    "ros.pubsub_in": RosPubsubData,
+}
+
+
+# --------------------------------------------------------------------------- the mechanism
+class UndeclaredKeyError(Exception):
+    """A consumer read, or a producer wrote, a key that the check's declaration does not have.
+
+    Deliberately not a KeyError: ``Mapping.get`` would swallow that and return the default.
+    """
+
+
+def _is_typeddict(tp: Any) -> bool:
+    return typing.is_typeddict(tp)
+
+
+_HINTS: dict[type, dict[str, Any]] = {}
+
+
+def _hints(td: type) -> dict[str, Any]:
+    if td not in _HINTS:
+        _HINTS[td] = typing.get_type_hints(td)
+    return _HINTS[td]
+
+
+def declared_keys(check_id: str) -> frozenset[str]:
+    """The keys *check_id* may report (empty for an unknown id)."""
+    td = DATA.get(check_id)
+    return frozenset(_hints(td)) if td is not None else frozenset()
+
+
+def _strip(tp: Any) -> Any:
+    """``X | None`` -> X; NotRequired/Required[X] -> X."""
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(args) == 1:
+            return _strip(args[0])
+    return tp
+
+
+def _wrap(value: Any, tp: Any, where: str) -> Any:
+    """Wrap nested dicts whose declared type is a TypedDict (directly, in a list, as dict values)."""
+    tp = _strip(tp)
+    if _is_typeddict(tp) and isinstance(value, dict):
+        return CheckData(where, value, tp)
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (list, tuple) and args and isinstance(value, list):
+        inner = _strip(args[0])
+        if _is_typeddict(inner):
+            return [CheckData(f"{where}[]", v, inner) if isinstance(v, dict) else v
+                    for v in value]
+    if origin is dict and len(args) == 2 and isinstance(value, dict):
+        inner = _strip(args[1])
+        if _is_typeddict(inner):
+            return {k: CheckData(f"{where}[{k!r}]", v, inner) if isinstance(v, dict) else v
+                    for k, v in value.items()}
+    return value
+
+
+class CheckData(Mapping[str, Any]):
+    """A read-only view of one check's data that refuses keys its declaration lacks."""
+
+    __slots__ = ("_where", "_data", "_td")
+
+    def __init__(self, where: str, data: Mapping[str, Any] | None, td: type | None) -> None:
+        self._where = where
+        self._data = data if isinstance(data, Mapping) else {}
+        self._td = td
+
+    def _declared(self, key: str) -> Any:
+        if self._td is None:
+            raise UndeclaredKeyError(f"{self._where}: no data is declared for this check "
+                                     f"(reading {key!r}); add it to rosnet_tui/core/checks/data.py")
+        hints = _hints(self._td)
+        if key not in hints:
+            raise UndeclaredKeyError(f"{self._where}: {key!r} is not a declared key "
+                                     f"({self._td.__name__}); declared: {', '.join(sorted(hints))}")
+        return hints[key]
+
+    def __getitem__(self, key: str) -> Any:
+        tp = self._declared(key)
+        return _wrap(self._data[key], tp, f"{self._where}.{key}")
+
+    def get(self, key: str, default: Any = None) -> Any:
+        tp = self._declared(key)
+        if key not in self._data:
+            return default
+        return _wrap(self._data[key], tp, f"{self._where}.{key}")
+
+    def __contains__(self, key: object) -> bool:
+        if isinstance(key, str):
+            self._declared(key)
+        return key in self._data
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._data)
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def __bool__(self) -> bool:
+        return bool(self._data)
+
+    def __repr__(self) -> str:
+        return f"CheckData({self._where!r}, {dict(self._data)!r})"
+
+    def raw(self) -> dict[str, Any]:
+        """The plain dict underneath (for JSON output)."""
+        return dict(self._data)
+
+
+def view(check_id: str, data: Mapping[str, Any] | None) -> CheckData:
+    """*data* of *check_id* as a declared, read-only view."""
+    return CheckData(check_id, data, DATA.get(check_id))
+
+
+def undeclared(check_id: str, data: Mapping[str, Any] | None) -> list[str]:
+    """The keys (dotted paths for nested ones) in *data* that *check_id* does not declare."""
+    td = DATA.get(check_id)
+    if not data:
+        return []
+    if td is None:
+        return [f"{check_id}: (no declaration)"]
+    out: list[str] = []
+    _collect(data, td, check_id, out)
+    return out
+
+
+def _collect(data: Mapping[str, Any], td: type, where: str, out: list[str]) -> None:
+    hints = _hints(td)
+    for key, value in data.items():
+        if key not in hints:
+            out.append(f"{where}.{key}")
+            continue
+        tp = _strip(hints[key])
+        if _is_typeddict(tp) and isinstance(value, Mapping):
+            _collect(value, tp, f"{where}.{key}", out)
+            continue
+        origin, args = typing.get_origin(tp), typing.get_args(tp)
+        if origin in (list, tuple) and args and _is_typeddict(_strip(args[0])):
+            for v in value if isinstance(value, list) else []:
+                if isinstance(v, Mapping):
+                    _collect(v, _strip(args[0]), f"{where}.{key}[]", out)
+        elif origin is dict and len(args) == 2 and _is_typeddict(_strip(args[1])):
+            for k, v in (value.items() if isinstance(value, Mapping) else []):
+                if isinstance(v, Mapping):
+                    _collect(v, _strip(args[1]), f"{where}.{key}[{k!r}]", out)

@@ -1,0 +1,100 @@
+"""The one door to run checks: the wizard, every command and the sync service come through here.
+
+A caller says which checks (:func:`select`) and how (:class:`RunOptions`); the door builds the
+round's :class:`~rosnet_tui.core.checks.CheckContext` (settings, paths, environment, SSH options,
+the shared test-port listeners) and runs the checks concurrently, each under its timeout.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+from collections.abc import AsyncIterator, Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rosnet_tui.core.checks import (
+    REGISTRY,
+    CheckContext,
+    CheckSpec,
+    checks_for,
+    load_builtin_checks,
+    run_checks,
+)
+from rosnet_tui.core.results import CheckResult
+from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.ssh import SshOptions
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How to run a round of checks; every field has the everyday default."""
+
+    timeout_s: float | None = None          # None: [checks] timeout_s of the settings
+    hosts_path: Path | None = None          # None: /etc/hosts
+    bashrc_path: Path | None = None         # None: ~/.bashrc
+    state_dir: Path | None = None           # None: $XDG_STATE_HOME/rosnet-tui
+    env: Mapping[str, str] | None = None    # None: this process's environment
+    upnp: bool = True                       # isp.cgnat may ask the modem over UPnP
+    ssh: SshOptions = field(default_factory=SshOptions)
+
+
+def select(steps: Iterable[str] | None = None, ids: Iterable[str] | None = None
+           ) -> list[CheckSpec]:
+    """The checks of *steps* (every step when both are None), or exactly *ids* (unknown ids are
+    left out), in registry order."""
+    if ids is None:
+        return checks_for(steps)
+    load_builtin_checks()
+    wanted = set(ids)
+    return [s for s in checks_for(None) if s.id in wanted]
+
+
+def unknown_ids(ids: Iterable[str]) -> list[str]:
+    """The ids in *ids* that no check is registered under."""
+    load_builtin_checks()
+    return [i for i in ids if i not in REGISTRY]
+
+
+def make_context(settings: Settings, options: RunOptions | None = None) -> CheckContext:
+    """The context of one round (the only place the product builds one)."""
+    o = options or RunOptions()
+    timeout = float(o.timeout_s if o.timeout_s is not None else settings.checks.timeout_s)
+    kw: dict = {"settings": settings, "timeout_s": timeout,
+                "env": dict(os.environ if o.env is None else o.env),
+                "upnp": o.upnp, "ssh_options": o.ssh}
+    if o.hosts_path is not None:
+        kw["hosts_path"] = o.hosts_path
+    if o.bashrc_path is not None:
+        kw["bashrc_path"] = o.bashrc_path
+    if o.state_dir is not None:
+        kw["state_dir"] = o.state_dir
+    return CheckContext(**kw)
+
+
+async def stream(specs: Iterable[CheckSpec], ctx: CheckContext) -> AsyncIterator[CheckResult]:
+    """Run *specs* concurrently in *ctx*; yield each result as it lands (the wizard's way)."""
+    async for result in run_checks(list(specs), ctx):
+        yield result
+
+
+def run_now(settings: Settings, specs: Iterable[CheckSpec], options: RunOptions | None = None,
+            on_result: Callable[[CheckResult, int, int], None] | None = None
+            ) -> list[CheckResult]:
+    """Run *specs* to the end from synchronous code; results in *specs* order.
+
+    *on_result(result, done, total)* is called as each verdict lands (progress lines).
+    """
+    specs = list(specs)
+    ctx = make_context(settings, options)
+
+    async def go() -> dict[str, CheckResult]:
+        got: dict[str, CheckResult] = {}
+        async for r in run_checks(specs, ctx):
+            got[r.id] = r
+            if on_result is not None:
+                on_result(r, len(got), len(specs))
+        return got
+
+    got = asyncio.run(go())
+    return [got[s.id] for s in specs if s.id in got]

@@ -1,0 +1,181 @@
+"""One wizard session: what every screen needs, handed to it (no screen reaches into the app).
+
+The session holds the settings, the latest state of every check, the advisor's findings for
+them, the one door to run checks, and the write plans. It imports no Textual: the UI is a thin
+layer that shows it, and tests can build one without an app.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from rosnet_tui.core.checks import CheckContext, CheckSpec
+from rosnet_tui.core.netinfo import LocalNet, with_detected
+from rosnet_tui.core.procedure import STEP_IDS
+from rosnet_tui.core.results import CheckResult
+from rosnet_tui.core.settings import Settings, atomic_write_text, default_state_dir, save_settings
+from rosnet_tui.core.steps import STEP_BY_ID
+from rosnet_tui.core.write_plans import WritePaths, WritePlan, write_plan
+
+if TYPE_CHECKING:
+    from rosnet_tui.core.advisor import Finding
+
+# A check's state in the wizard: the four result statuses plus two of the wizard's own.
+NOT_RUN, RUNNING = "not run", "running"
+
+
+def aggregate(states: list[str]) -> str:
+    """One state for a step from its checks' states: the worst one wins."""
+    if not states:
+        return NOT_RUN
+    if RUNNING in states:
+        return RUNNING
+    for s in ("fail", "warn"):
+        if s in states:
+            return s
+    if all(s == NOT_RUN for s in states):
+        return NOT_RUN
+    if any(s == NOT_RUN for s in states):
+        return "partial"
+    return "skip" if all(s == "skip" for s in states) else "pass"
+
+
+def _default_specs(step: str) -> list[CheckSpec]:
+    from rosnet_tui.core.checks.runner import select
+
+    return select([step])
+
+
+@dataclass
+class WizardSession:
+    """The wizard's state and services; the app builds one, the screens are handed it."""
+
+    config_path: Path
+    settings: Settings
+    state_dir: Path = field(default_factory=default_state_dir)
+    hosts_path: Path = Path("/etc/hosts")
+    bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
+    specs_for: Callable[[str], list[CheckSpec]] = _default_specs
+    # Tests hand in their own context factory; None: the runner's everyday context.
+    context_factory: Callable[[Settings], CheckContext] | None = None
+    detected: LocalNet = field(default_factory=LocalNet)
+    findings: list[Finding] = field(default_factory=list)
+    _states: dict[str, tuple[str, CheckResult | None]] = field(default_factory=dict, init=False,
+                                                               repr=False)
+    _specs: dict[str, list[CheckSpec]] = field(default_factory=dict, init=False, repr=False)
+
+    # ------------------------------------------------------------------ settings
+    def runtime_settings(self) -> Settings:
+        """The saved settings, with what they leave blank filled in from this machine."""
+        return with_detected(self.settings, self.detected)
+
+    def save_settings(self, settings: Settings) -> None:
+        save_settings(settings, self.config_path)
+        self.settings = settings
+
+    # ------------------------------------------------------------------ checks
+    def specs(self, step: str) -> list[CheckSpec]:
+        if step not in self._specs:
+            self._specs[step] = self.specs_for(step)
+        return self._specs[step]
+
+    def make_context(self) -> CheckContext:
+        """The context of one round of checks (the one door: core.checks.runner)."""
+        settings = self.runtime_settings()
+        if self.context_factory is not None:
+            return self.context_factory(settings)
+        from rosnet_tui.core.checks.runner import RunOptions, make_context
+
+        return make_context(settings, RunOptions(state_dir=self.state_dir,
+                                                 hosts_path=self.hosts_path,
+                                                 bashrc_path=self.bashrc_path))
+
+    def check_state(self, check_id: str) -> tuple[str, CheckResult | None]:
+        return self._states.get(check_id, (NOT_RUN, None))
+
+    def set_check_state(self, check_id: str, state: str, result: CheckResult | None) -> None:
+        self._states[check_id] = (state, result)
+        if result is not None or state == NOT_RUN:
+            from rosnet_tui.core.advisor import advise  # loaded with the first result
+
+            self.findings = advise(self.latest_results(), self.runtime_settings())
+
+    def latest_results(self) -> dict[str, CheckResult]:
+        return {cid: r for cid, (_state, r) in self._states.items() if r is not None}
+
+    def findings_for(self, check_id: str) -> list[Finding]:
+        return [f for f in self.findings if check_id in f.check_ids]
+
+    def step_states(self) -> dict[str, str]:
+        return {s: aggregate([self.check_state(c.id)[0] for c in self.specs(s)])
+                for s in STEP_IDS}
+
+    # ------------------------------------------------------------------ configuration text
+    def configuration_text(self, step_id: str) -> str:
+        """The Configuration pane's Markdown for *step_id*."""
+        text = STEP_BY_ID[step_id].configure(self.runtime_settings())
+        if step_id == "ros":
+            text += "\n\n" + self.sync_text()
+        return text
+
+    def sync_text(self) -> str:
+        """The address-sync section of the ROS step: each component's last known addresses."""
+        from rosnet_tui.core.sync.status import load_status, render_status
+
+        status = load_status(self.state_dir)
+        head = "**Address sync.** "
+        if status is None:
+            return (head + "Not running on this machine. Public addresses change when a modem "
+                    "restarts; the sync service then rewrites the hosts entries and "
+                    "`ROS_MASTER_URI` on every component by itself. Set it up on each component "
+                    "(a `[sync]` table in the settings: a shared folder or a DNS zone), then:"
+                    "\n\n```\nrosnet-tui sync install-service\n```")
+        lines = "\n".join(render_status(status))
+        return head + "What the sync service knows (`rosnet-tui sync status`):\n\n" \
+            f"```\n{lines}\n```"
+
+    def router_card_text(self, width: int) -> str:
+        """The router card as plain text *width* columns wide: values to type into the modem."""
+        from rosnet_tui.core.router_card import build_router_card, render_router_card
+
+        settings, net = self.runtime_settings(), self.detected
+        # This machine's interface facts (MAC, gateway) only when they are of the configured one.
+        same = net.local_ip and net.local_ip == settings.this.local_ip
+        card = build_router_card(settings, net if same else None)
+        return render_router_card(card, markdown=False, width=max(40, width))
+
+    # ------------------------------------------------------------------ writing configuration
+    def write_paths(self) -> WritePaths:
+        return WritePaths(config_path=self.config_path, state_dir=self.state_dir,
+                          hosts_path=self.hosts_path, bashrc_path=self.bashrc_path)
+
+    def write_plan(self, step_id: str) -> WritePlan | None:
+        """What `w` writes on *step_id* (None: the step writes nothing)."""
+        return write_plan(step_id, self.runtime_settings(), self.write_paths())
+
+    def trust_host_key(self, name: str, port: int, host_key: str) -> Path:
+        from rosnet_tui.core.ssh import trust_host_key
+
+        return trust_host_key(self.make_context().ssh, name, port, host_key)
+
+    # ------------------------------------------------------------------ where the user was
+    def _ui_state_path(self) -> Path:
+        return self.state_dir / "ui.json"
+
+    def last_step(self) -> str:
+        try:
+            data = json.loads(self._ui_state_path().read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return STEP_IDS[0]
+        step = data.get("last_step") if isinstance(data, dict) else None
+        return step if step in STEP_IDS else STEP_IDS[0]
+
+    def record_step(self, step: str) -> None:
+        try:
+            atomic_write_text(self._ui_state_path(), json.dumps({"last_step": step}) + "\n")
+        except OSError:
+            pass  # remembering the step is a convenience, never a reason to fail

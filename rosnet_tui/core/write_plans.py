@@ -1,0 +1,101 @@
+"""What the wizard's ``w`` writes on a step: a preview, an option, the sudo path, the checks after.
+
+A :class:`WritePlan` is plain data built from the settings and the file paths; the UI only shows
+its preview and asks. Only the Linux step (the hosts set) and the ROS step (the ROS environment
+block of ~/.bashrc) write files.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core.settings import Settings
+
+
+@dataclass
+class WritePlan:
+    """What a write screen needs to preview and apply one write."""
+
+    title: str
+    explain: str
+    # Build the preview; the flag is the user's answer to the option (e.g. comment ROS_IP lines).
+    make_preview: Callable[[bool], mf.Preview]
+    option_label: str = ""            # empty: no option
+    option_count: Callable[[], int] = lambda: 0
+    # The sudo command for a preview that needs privilege (None: privilege cannot help).
+    sudo_command: Callable[[mf.Preview, bool], list[str]] | None = None
+    after: tuple[str, ...] = ()       # checks to re-run after a write
+    footnote: str = ""
+
+
+@dataclass(frozen=True)
+class WritePaths:
+    """Where the files are (tests point these into a temporary folder)."""
+
+    config_path: Path
+    state_dir: Path
+    hosts_path: Path = Path("/etc/hosts")
+    bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
+
+
+def _read(path: Path) -> str | None:
+    return path.read_text(errors="replace") if path.exists() else None
+
+
+def hosts_plan(settings: Settings, paths: WritePaths) -> WritePlan:
+    """Write this component's active hosts set (the Linux step)."""
+    from rosnet_tui.core import hosts, privilege
+
+    profile = settings.this.profile
+
+    def conflicts() -> int:
+        return len(hosts.find_hosts_conflicts(_read(paths.hosts_path), settings, profile))
+
+    return WritePlan(
+        title=f"Write the '{profile}' hosts set to {paths.hosts_path}",
+        explain="Our marked block only; every other line stays. Review the change:",
+        make_preview=lambda fix: hosts.preview_hosts(settings, profile, paths.hosts_path,
+                                                     fix_conflicts=fix),
+        option_label="also comment out other lines that give our names other addresses",
+        option_count=conflicts,
+        sudo_command=lambda p, fix: privilege.hosts_apply_command(
+            profile=profile, config=paths.config_path, digest=p.digest,
+            hosts_file=paths.hosts_path, state_dir=paths.state_dir, fix_conflicts=fix),
+        after=("linux.hosts", "linux.resolve"))
+
+
+def ros_plan(settings: Settings, paths: WritePaths) -> WritePlan:
+    """Write the ROS environment block of ~/.bashrc (the ROS step)."""
+    from rosnet_tui.core import bashrc
+
+    def ros_ip_lines() -> int:
+        return len(bashrc.find_ros_ip_lines(_read(paths.bashrc_path)))
+
+    return WritePlan(
+        title=f"Write ROS_MASTER_URI to {paths.bashrc_path}",
+        explain="A marked block at the end of the file; every other line stays:",
+        make_preview=lambda fix: bashrc.preview_bashrc(settings, paths.bashrc_path,
+                                                       comment_ros_ip=fix),
+        option_label="comment out ROS_IP / ROS_HOSTNAME lines (they break remote networks: a "
+                     "node then publishes but cannot subscribe, or the reverse)",
+        option_count=ros_ip_lines,
+        after=("ros.env",),
+        footnote=f"For the shell you are in now: {bashrc.export_line(settings)}")
+
+
+PLANS: dict[str, Callable[[Settings, WritePaths], WritePlan]] = {
+    "linux": hosts_plan,
+    "ros": ros_plan,
+}
+
+# The checks an undo may change.
+UNDO_AFFECTS = ("linux.hosts", "linux.resolve", "ros.env")
+
+
+def write_plan(step_id: str, settings: Settings, paths: WritePaths) -> WritePlan | None:
+    """The plan of *step_id*, or None when the step writes nothing."""
+    build = PLANS.get(step_id)
+    return build(settings, paths) if build is not None else None
