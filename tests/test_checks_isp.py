@@ -15,13 +15,8 @@ from pathlib import Path
 import pytest
 
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
-from rosnet_tui.core.checks.isp import (
-    Hop,
-    judge_path,
-    judge_wan,
-    parse_ip,
-    ttl_probe,
-)
+from rosnet_tui.core.checks.isp import Hop, judge_path, judge_wan, ttl_probe
+from rosnet_tui.core.checks.probes import parse_ip
 from rosnet_tui.core.probe_server import ProbeServer
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import ProbeSettings, Settings, ThisComponent

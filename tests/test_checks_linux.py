@@ -11,6 +11,7 @@ from rosnet_tui.core.checks import REGISTRY, CheckContext, linux, load_builtin_c
 from rosnet_tui.core.hosts import HostsEntry
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import Peer, ProbeSettings, Settings, ThisComponent
+from rosnet_tui.core.ssh import SshOptions
 from tests.test_checks_isp import free_port
 from tests.test_ssh import ssh_client, sshd  # noqa: F401
 
@@ -26,9 +27,9 @@ def settings(name="turtlebot", local_ip="10.10.10.1", peers=None, profile="remot
 
 def ctx(s: Settings, tmp_path, client=None, timeout=2.0, **kw) -> CheckContext:
     if client is not None:
-        kw.setdefault("ssh_dir", client.dir)
-        kw.setdefault("known_hosts_files", [client.dir / "known_hosts"])
-    kw.setdefault("ssh_agent", False)
+        kw.setdefault("ssh_options", SshOptions(ssh_dir=client.dir, ssh_agent=False,
+                                                known_hosts_files=(client.dir / "known_hosts",)))
+    kw.setdefault("ssh_options", SshOptions(ssh_agent=False))
     kw.setdefault("upnp", False)
     return CheckContext(settings=s, timeout_s=timeout, state_dir=tmp_path / "state", **kw)
 

@@ -16,26 +16,20 @@ import time
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any
-from urllib.parse import urljoin, urlsplit
+from urllib.parse import urlsplit
 
 import psutil
 
-from rosnet_tui import __version__
-from rosnet_tui.core.checks import REGISTRY, CheckContext, check
+from rosnet_tui.core.checks import CheckContext, check
+from rosnet_tui.core.checks.probes import budget, fetch_public_ip, http_get, parse_ip
 from rosnet_tui.core.netinfo import is_overlay
+from rosnet_tui.core.procedure import is_ip
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh import resolve_ipv4, run_blocking
 from rosnet_tui.core.state import PublicIpRecord, now_iso, record_public_ip
 
 CGNAT_NET = ipaddress.ip_network("100.64.0.0/10")
 RFC1918 = tuple(ipaddress.ip_network(n) for n in ("10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16"))
-MAX_BODY = 64 * 1024
-
-
-def budget(ctx: CheckContext, check_id: str) -> float:
-    """Seconds *check_id* may take under *ctx* (its timeout times its factor)."""
-    spec = REGISTRY.get(check_id)
-    return ctx.timeout_s * (spec.timeout_factor if spec else 1.0)
 
 
 def is_cgnat(ip: str) -> bool:
@@ -63,130 +57,12 @@ def is_public_v4(ip: str) -> bool:
             and not a.is_link_local and not a.is_unspecified and not a.is_multicast)
 
 
-# --------------------------------------------------------------------------- HTTP
-@dataclass
-class HttpAnswer:
-    url: str
-    ok: bool                 # a 2xx answer arrived
-    status: int | None
-    text: str
-    error: str | None        # why not, in a few words
-
-    def describe(self) -> str:
-        if self.ok:
-            return f"GET {self.url} -> HTTP {self.status}: {self.text.strip()[:80]!r}"
-        return f"GET {self.url} -> {self.error}"
-
-
-def _short_error(exc: BaseException) -> str:
-    import requests  # here, not at the top: the wizard lists the checks without loading it
-
-    text = str(exc)
-    if isinstance(exc, requests.exceptions.ConnectTimeout):
-        return "no answer (timed out connecting)"
-    if isinstance(exc, requests.exceptions.ReadTimeout):
-        return "connected, but no reply in time"
-    if isinstance(exc, requests.exceptions.SSLError):
-        return "TLS error (" + text[:120] + ")"
-    low = text.lower()
-    for needle, words in (("name or service not known", "the name does not resolve"),
-                          ("failed to resolve", "the name does not resolve"),
-                          ("temporary failure in name resolution", "the name does not resolve (DNS)"),
-                          ("connection refused", "connection refused"),
-                          ("no route to host", "no route to the host"),
-                          ("network is unreachable", "the network is unreachable"),
-                          ("timed out", "timed out")):
-        if needle in low:
-            return words
-    return text[:160] or type(exc).__name__
-
-
-def _http_get_blocking(url: str, timeout: float) -> HttpAnswer:
-    import requests
-
-    deadline = time.monotonic() + timeout
-    with requests.Session() as s:
-        s.trust_env = False  # no proxies from the environment: we want our own public address
-        current = url
-        for _ in range(4):
-            left = max(deadline - time.monotonic(), 0.05)
-            try:
-                r = s.get(current, timeout=(left, left), stream=True, allow_redirects=False,
-                          headers={"User-Agent": f"rosnet-tui/{__version__}",
-                                   "Accept": "text/plain, application/json;q=0.9, */*;q=0.5"})
-            except requests.RequestException as exc:
-                return HttpAnswer(url, False, None, "", _short_error(exc))
-            with r:
-                if r.is_redirect and r.headers.get("location"):
-                    nxt = urljoin(current, r.headers["location"])
-                    if urlsplit(nxt).hostname != urlsplit(url).hostname:
-                        return HttpAnswer(url, False, r.status_code, "",
-                                          f"HTTP {r.status_code}: redirected to another host ({nxt}); "
-                                          "not followed")
-                    current = nxt
-                    continue
-                try:
-                    body = r.raw.read(MAX_BODY, decode_content=True) or b""
-                except Exception as exc:  # noqa: BLE001
-                    return HttpAnswer(url, False, r.status_code, "", _short_error(exc))
-                text = body.decode(r.encoding or "utf-8", "replace")
-                if 200 <= r.status_code < 300:
-                    return HttpAnswer(url, True, r.status_code, text, None)
-                return HttpAnswer(url, False, r.status_code, text,
-                                  f"HTTP {r.status_code} {r.reason or ''}".strip())
-        return HttpAnswer(url, False, None, "", "too many redirects")
-
-
-async def http_get(url: str, timeout: float) -> HttpAnswer:
-    """GET *url* within *timeout* seconds overall; never raises for network trouble."""
-    try:
-        return await run_blocking(_http_get_blocking, url, timeout, timeout=timeout + 0.3)
-    except asyncio.TimeoutError:
-        return HttpAnswer(url, False, None, "", f"no answer within {timeout:.1f} s")
-
-
-def parse_ip(text: str) -> str | None:
-    """The IPv4 address a what-is-my-IP service answered (plain text, or JSON with "ip")."""
-    t = text.strip()
-    if t.startswith("{"):
-        import json
-
-        with contextlib.suppress(ValueError, AttributeError):
-            t = str(json.loads(t).get("ip", ""))
-    t = t.split()[0] if t.split() else ""
-    try:
-        a = ipaddress.ip_address(t)
-    except ValueError:
-        return None
-    return str(a) if a.version == 4 else None
-
-
-async def fetch_public_ip(ctx: CheckContext, timeout: float) -> str | None:
-    """This component's public IP: from this round's isp.public_ip if it ran, else one quick ask."""
-    res = ctx.results.get("isp.public_ip")
-    if res is not None and res.data.get("public_ip"):
-        return str(res.data["public_ip"])
-    for url in ctx.settings.probe.public_ip_urls[:1]:
-        ans = await http_get(url, timeout)
-        if ans.ok:
-            return parse_ip(ans.text)
-    return None
-
-
 # --------------------------------------------------------------------------- isp.internet
 def _endpoints(ctx: CheckContext) -> list[str]:
     urls = list(ctx.settings.probe.public_ip_urls)
     if ctx.settings.probe.port_check_url:
         urls.append(ctx.settings.probe.port_check_url)
     return list(dict.fromkeys(urls))
-
-
-def _is_ip_literal(host: str) -> bool:
-    try:
-        ipaddress.ip_address(host)
-        return True
-    except ValueError:
-        return False
 
 
 @check("isp.internet", "isp", "Internet: DNS and HTTP work", 1.0)
@@ -202,7 +78,7 @@ async def check_internet(ctx: CheckContext) -> Outcome:
         host = urlsplit(url).hostname or ""
         ev: list[str] = []
         dns_ok: bool | None = None
-        if host and not _is_ip_literal(host):
+        if host and not is_ip(host):
             addrs, err = await resolve_ipv4(host, total * 0.45)
             dns_ok = bool(addrs)
             ev.append(f"resolve {host} -> {', '.join(addrs)}" if addrs else f"resolve {host}: {err}")
@@ -477,7 +353,7 @@ async def check_cgnat(ctx: CheckContext) -> Outcome:
     host = urlsplit(urls[0]).hostname if urls else None
     target: str | None = None
     if host:
-        if _is_ip_literal(host):
+        if is_ip(host):
             target = host
         else:
             addrs, err = await resolve_ipv4(host, total * 0.3)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import ipaddress
 import re
 import secrets
 import shutil
@@ -18,20 +17,18 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.isp import budget
-from rosnet_tui.core.checks.router import python_command
+from rosnet_tui.core.checks.probes import budget, python_command, shq, ssh_peers
 from rosnet_tui.core.hosts import HostsEntry, hosts_entries
 from rosnet_tui.core.listener import ECHO, GREETING
+from rosnet_tui.core.procedure import is_ip, is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer
 from rosnet_tui.core.ssh import SshResult, resolve_ipv4, ssh_run, ssh_session
 
 
-def _is_loopback(ip: str) -> bool:
-    try:
-        return ipaddress.ip_address(ip).is_loopback
-    except ValueError:
-        return False
+def _is_loopback_ip(ip: str) -> bool:
+    """A loopback IP address (names such as localhost do not count: hosts files hold addresses)."""
+    return is_ip(ip) and is_loopback(ip)
 
 
 def _plural(n: int, word: str) -> str:
@@ -68,9 +65,9 @@ def audit_hosts(text: str, expected: list[HostsEntry]) -> dict[str, Any]:
         if len(distinct) > 1:
             # The resolver may return any of them (glibc even sorts 127.0.1.1 first).
             duplicates.append(e.name)
-        if any(_is_loopback(ip) for ip in distinct) and not _is_loopback(e.ip):
+        if any(_is_loopback_ip(ip) for ip in distinct) and not _is_loopback_ip(e.ip):
             loopback.append(e.name)
-        other = next((ip for ip in distinct if ip != e.ip and not _is_loopback(ip)), None)
+        other = next((ip for ip in distinct if ip != e.ip and not _is_loopback_ip(ip)), None)
         if other is not None:
             wrong.append({"name": e.name, "found": other, "expected": e.ip})
     return {"missing": missing, "wrong": wrong, "duplicates": duplicates, "loopback": loopback,
@@ -129,7 +126,7 @@ async def check_resolve(ctx: CheckContext) -> Outcome:
             evidence.append(f"{e.name}: {err} (expected {e.ip})")
             continue
         evidence.append(f"{e.name} -> {', '.join(addrs)} (expected {e.ip})")
-        if _is_loopback(resolved) and not _is_loopback(e.ip):
+        if _is_loopback_ip(resolved) and not _is_loopback_ip(e.ip):
             data["loopback"].append(e.name)
         elif resolved != e.ip:
             data["wrong"].append(e.name)
@@ -240,10 +237,6 @@ async def check_ping(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- linux.ssh
-def _ssh_peers(ctx: CheckContext) -> list[Peer]:
-    return [p for p in ctx.settings.peers if p.ssh_user]
-
-
 _NO_SSH = ("no peer has an SSH user in the settings (peer.ssh_user), so the peer's side cannot "
            "be run from here")
 
@@ -254,11 +247,11 @@ async def check_ssh(ctx: CheckContext) -> Outcome:
     for p in ctx.settings.peers:
         if not p.ssh_user:
             data["peers"][p.name] = {"ok": False, "failure": "no_user", "fingerprint": None}
-    peers = _ssh_peers(ctx)
+    peers = ssh_peers(ctx.settings)
     if not peers:
         return Outcome(Status.SKIP, _NO_SSH, data=data)
     t = budget(ctx, "linux.ssh") * 0.85
-    results = await asyncio.gather(*(ssh_run(ctx, p, "echo rosnet-tui-ssh-ok; hostname", timeout=t)
+    results = await asyncio.gather(*(ssh_run(ctx.ssh, p, "echo rosnet-tui-ssh-ok; hostname", timeout=t)
                                      for p in peers))
     evidence: list[str] = []
     good: list[str] = []
@@ -364,10 +357,6 @@ finally:
 """
 
 
-def _shq(s: str) -> str:
-    return "'" + s.replace("'", "'\\''") + "'"
-
-
 _IS_OPENBSD_NC = "nc -h 2>&1 | grep -q OpenBSD"
 
 
@@ -375,7 +364,7 @@ def listen_command(port: int, token: str, wait: float) -> str:
     """Peer side of chat_out: python3 when present, else ``nc -l`` (OpenBSD or traditional)."""
     py = python_command(_LISTEN_SCRIPT, str(port), token, f"{wait:.1f}", python=PYTHON)
     w = max(int(wait + 0.999), 1)
-    msg = _shq(f"{CHAT} {token}")
+    msg = shq(f"{CHAT} {token}")
     nc = (f"echo LISTENING {port}; echo NC; if {_IS_OPENBSD_NC}; then "
           f"echo {msg} | timeout {w} nc -N -l {port}; else "
           f"echo {msg} | timeout {w} nc -l -p {port}; fi")
@@ -386,10 +375,10 @@ def connect_command(name: str, port: int, token: str, t: float) -> str:
     """Peer side of chat_in: connect to *name* as the peer resolves it."""
     py = python_command(_CONNECT_SCRIPT, name, str(port), token, f"{t:.1f}", python=PYTHON)
     w = max(int(t + 0.999), 1)
-    msg = _shq(f"{CHAT} {token}")
-    nc = (f"echo NC; echo RESOLVED $(getent ahostsv4 {_shq(name)} | head -n1 | cut -d' ' -f1); "
-          f"if {_IS_OPENBSD_NC}; then echo {msg} | timeout {w} nc -N {_shq(name)} {port}; "
-          f"else echo {msg} | timeout {w} nc {_shq(name)} {port}; fi")
+    msg = shq(f"{CHAT} {token}")
+    nc = (f"echo NC; echo RESOLVED $(getent ahostsv4 {shq(name)} | head -n1 | cut -d' ' -f1); "
+          f"if {_IS_OPENBSD_NC}; then echo {msg} | timeout {w} nc -N {shq(name)} {port}; "
+          f"else echo {msg} | timeout {w} nc {shq(name)} {port}; fi")
     return f"if command -v {PYTHON} >/dev/null 2>&1; then {py}; else {nc}; fi"
 
 
@@ -397,7 +386,7 @@ async def _chat_per_peer(ctx: CheckContext, check_id: str,
                          one: Callable[[Peer, float], Awaitable[tuple[bool, str | None, list[str]]]],
                          what: str) -> Outcome:
     data: dict[str, Any] = {"peers": {}}
-    peers = _ssh_peers(ctx)
+    peers = ssh_peers(ctx.settings)
     for p in ctx.settings.peers:
         if not p.ssh_user:
             data["peers"][p.name] = {"ok": False, "failure": "no_user"}
@@ -436,7 +425,7 @@ async def check_chat_out(ctx: CheckContext) -> Outcome:
         my_token = secrets.token_hex(6)
         port = ctx.settings.probe.port
         ev: list[str] = []
-        async with ssh_session(ctx, peer, listen_command(port, peer_token, total * 0.6),
+        async with ssh_session(ctx.ssh, peer, listen_command(port, peer_token, total * 0.6),
                                timeout=total * 0.45) as sess:
             if not sess.ok:
                 return _ssh_failure(sess.result, peer)
@@ -523,7 +512,7 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
                                                f"{exc.strerror or exc} (see router.port_free)"]
             ev.append(f"we listen on TCP {port}")
             left = max(total - (time.monotonic() - start), 0.5)
-            res = await ssh_run(ctx, peer, connect_command(me, port, token, left * 0.45),
+            res = await ssh_run(ctx.ssh, peer, connect_command(me, port, token, left * 0.45),
                                 timeout=left * 0.95, connect_timeout=left * 0.45)
             if not res.ok and res.failure != "timeout" and not res.stdout:
                 return _ssh_failure(res, peer)

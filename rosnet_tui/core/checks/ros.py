@@ -9,8 +9,6 @@ rosnet-tui are needed there.
 from __future__ import annotations
 
 import asyncio
-import ipaddress
-import shlex
 import time
 from pathlib import Path
 from typing import Any
@@ -18,7 +16,14 @@ from urllib.parse import urlparse
 
 from rosnet_tui.core import rosproto
 from rosnet_tui.core.checks import CheckContext, check
+from rosnet_tui.core.checks.probes import (
+    peer_program_problem,
+    python_stdin_command,
+    ssh_peers,
+    stderr_tail,
+)
 from rosnet_tui.core.hosts import own_ip
+from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer, Settings
 from rosnet_tui.core.ssh import SshResult, run_blocking, ssh_run, ssh_session
@@ -42,18 +47,13 @@ def master_uri(ctx: CheckContext) -> tuple[str | None, str]:
                   "settings")
 
 
-def ssh_peers(s: Settings) -> list[Peer]:
+def _ssh_peers(s: Settings) -> list[Peer]:
     """Peers we can reach over SSH; the master first (it is usually the robot)."""
-    peers = [p for p in s.peers if p.ssh_user]
-    return sorted(peers, key=lambda p: p.name != s.ros.master)
+    return sorted(ssh_peers(s), key=lambda p: p.name != s.ros.master)
 
 
 def _budget(ctx: CheckContext, factor: float) -> float:
     return max(0.5, float(ctx.timeout_s) * factor)
-
-
-def _quote_cmd(*args: str) -> str:
-    return "python3 - " + " ".join(shlex.quote(a) for a in args)
 
 
 def _uri_parts(uri: str) -> tuple[str, int | None]:
@@ -66,31 +66,8 @@ def _uri_parts(uri: str) -> tuple[str, int | None]:
         return p.hostname.lower(), None
 
 
-def _is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-def _ssh_problem(res: SshResult, peer: Peer) -> str | None:
-    """Why the probe could not run on *peer* (None when it ran)."""
-    if res.failure:
-        return f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
-    if res.exit_status == 127:
-        return f"{peer.name} has no python3 to run the probe (exit status 127)"
-    return None
-
-
 def _remote_report(res: SshResult) -> dict[str, Any] | None:
     return rosproto.parse_report_line(res.stdout)
-
-
-def _stderr_tail(res: SshResult) -> str:
-    tail = (res.stderr or "").strip().splitlines()[-3:]
-    return " | ".join(tail)
 
 
 # --------------------------------------------------------------------------- ros.env
@@ -117,7 +94,7 @@ def _judge_uri(s: Settings, uri: str, hosts: set[str]) -> tuple[str, str | None]
         return "fail", f"port {port} differs from the master's port {s.ros.port}"
     if host in hosts:
         return "ok", None
-    if s.is_master and _is_loopback(host):
+    if s.is_master and is_loopback(host):
         return "warn", (f"{host} works only on this machine; use its name {s.this.name or ''} "
                         "(or local IP) as the procedure does")
     if s.is_master and host == (s.this.public_ip or "").lower():
@@ -182,7 +159,7 @@ async def check_env(ctx: CheckContext) -> Outcome:
         if value is None:
             continue
         evidence.append(f"{where}: {name}={value}")
-        if _is_loopback(value):
+        if is_loopback(value):
             warns.append(f"{name}={value} ({where}): nodes here then advertise a loopback "
                          "address that no other component can reach; remove it")
         elif s.this.profile == "remote":
@@ -338,13 +315,13 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
             await run_blocking(me.stop, timeout=2.0)
             return Outcome(Status.FAIL, f"cannot list the nodes: the master does not answer "
                                         f"({me.report.hops[-1].detail})", evidence, data)
-    peers = ssh_peers(ctx.settings)
+    peers = _ssh_peers(ctx.settings)
     local_t = max(0.3, min(budget * 0.5, deadline - time.monotonic()))
     remote_t = max(0.5, budget * 0.45)
     include = ["--include", me.caller_id] if registered else []
-    cmd = _quote_cmd("nodes", "--master", uri, "--timeout", f"{remote_t:.1f}", *include)
+    cmd = python_stdin_command("nodes", "--master", uri, "--timeout", f"{remote_t:.1f}", *include)
     ssh_t = max(0.5, deadline - time.monotonic())
-    remote_tasks = [asyncio.ensure_future(ssh_run(ctx, p, cmd, stdin=ROSPROTO_SOURCE,
+    remote_tasks = [asyncio.ensure_future(ssh_run(ctx.ssh, p, cmd, stdin=ROSPROTO_SOURCE,
                                                   timeout=ssh_t)) for p in peers]
     try:
         try:
@@ -384,11 +361,11 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
         if isinstance(res, BaseException):
             problems.append(f"{peer.name}: {type(res).__name__}")
             continue
-        why_not = _ssh_problem(res, peer)
+        why_not = peer_program_problem(res, peer)
         rep = _remote_report(res) if why_not is None else None
         if rep is None:
             problems.append(why_not or f"the probe on {peer.name} gave no report "
-                                       f"({_stderr_tail(res) or 'no output'})")
+                                       f"({stderr_tail(res) or 'no output'})")
             continue
         if rep.get("error"):
             problems.append(f"on {peer.name}: {rep['error']}")
@@ -473,9 +450,9 @@ async def _pubsub_out_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
         started = await _start_publisher(pub, ct)
         if started:
             remote_t = max(1.0, budget * 0.55)
-            cmd = _quote_cmd("sub", "--master", uri, "--topic", topic, "--timeout",
+            cmd = python_stdin_command("sub", "--master", uri, "--topic", topic, "--timeout",
                              f"{remote_t:.1f}")
-            res = await ssh_run(ctx, peer, cmd, stdin=ROSPROTO_SOURCE,
+            res = await ssh_run(ctx.ssh, peer, cmd, stdin=ROSPROTO_SOURCE,
                                 timeout=max(0.5, deadline - time.monotonic()))
     finally:
         local = await run_blocking(pub.stop, timeout=2.0)
@@ -484,11 +461,11 @@ async def _pubsub_out_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
         return (Status.FAIL, f"publishing here failed: {local.hops[-1].detail}", evidence,
                 _pubsub_data(peer.name, False, "registration", local.caller_id, uri))
     assert res is not None
-    why_not = _ssh_problem(res, peer)
+    why_not = peer_program_problem(res, peer)
     rdata = _remote_report(res) if why_not is None else None
     if rdata is None:
         why = why_not or (f"the probe on {peer.name} gave no report "
-                          f"({_stderr_tail(res) or 'no output'})")
+                          f"({stderr_tail(res) or 'no output'})")
         return (Status.SKIP, f"skipped: could not run the subscriber on {peer.name}: {why}",
                 evidence, _pubsub_data(peer.name, False))
     rep = rosproto.ProbeReport.from_json(rdata)
@@ -512,10 +489,10 @@ async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
     deadline = time.monotonic() + budget
     topic = f"{rosproto.PROBE_PREFIX}/{rosproto.new_probe_id()}"
     remote_t = max(1.5, budget * 0.7)
-    cmd = _quote_cmd("pub", "--master", uri, "--topic", topic, "--timeout", f"{remote_t:.1f}")
+    cmd = python_stdin_command("pub", "--master", uri, "--topic", topic, "--timeout", f"{remote_t:.1f}")
     evidence: list[str] = []
     local: rosproto.ProbeReport | None = None
-    async with ssh_session(ctx, peer, cmd, timeout=max(0.5, budget * 0.4)) as s:
+    async with ssh_session(ctx.ssh, peer, cmd, timeout=max(0.5, budget * 0.4)) as s:
         if not s.ok:
             return (Status.SKIP, f"skipped: could not run the publisher on {peer.name}: "
                                  f"SSH failed ({s.result.failure}): {s.result.detail}",
@@ -535,7 +512,7 @@ async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
         # bounded and unregisters itself), so after a failure we only wait briefly for its report.
         wait_t = deadline - time.monotonic() if local is None or local.ok else 0.5
         res = await s.wait(max(0.3, wait_t))
-    why_not = _ssh_problem(res, peer) if res.failure != "timeout" else None
+    why_not = peer_program_problem(res, peer) if res.failure != "timeout" else None
     rdata = _remote_report(res)
     remote = rosproto.ProbeReport.from_json(rdata) if rdata else None
     if remote is not None:
@@ -547,7 +524,7 @@ async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
                                  f"registering with the master: {last}", evidence,
                     _pubsub_data(peer.name, False, "registration", remote.caller_id, uri))
         why = why_not or (f"the probe on {peer.name} did not start "
-                          f"({_stderr_tail(res) or res.detail})")
+                          f"({stderr_tail(res) or res.detail})")
         return (Status.SKIP, f"skipped: could not run the publisher on {peer.name}: {why}",
                 evidence, _pubsub_data(peer.name, False))
     evidence.extend(local.evidence("here (subscriber)"))
@@ -576,7 +553,7 @@ async def _pubsub(ctx: CheckContext, direction: str) -> Outcome:
     uri, why = master_uri(ctx)
     if uri is None:
         return Outcome(Status.SKIP, f"skipped: {why}", [], _pubsub_data("", False))
-    peers = ssh_peers(ctx.settings)
+    peers = _ssh_peers(ctx.settings)
     if not peers:
         return Outcome(Status.SKIP, "skipped: no peer with an SSH user in the settings, so the "
                                     "other side of the exchange cannot be run from here",

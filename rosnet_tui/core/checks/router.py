@@ -9,7 +9,6 @@ so a port forwarded to the wrong machine is caught) or from the echoip service i
 from __future__ import annotations
 
 import asyncio
-import base64
 import contextlib
 import json
 import os
@@ -20,7 +19,14 @@ from typing import Any
 import psutil
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.isp import budget, fetch_public_ip, http_get
+from rosnet_tui.core.checks.probes import (
+    budget,
+    fetch_public_ip,
+    http_get,
+    python_command,
+    round_public_ip,
+    ssh_peers,
+)
 from rosnet_tui.core.listener import GREETING, TestListener
 from rosnet_tui.core.netinfo import detect_local_net, interface_ipv4
 from rosnet_tui.core.results import Outcome, Status
@@ -210,18 +216,6 @@ print("RESULT " + json.dumps(res))
 """
 
 
-def python_command(script: str, *args: str, python: str = "python3") -> str:
-    """A shell command running stdlib-only *script* with python3 on a peer (no install needed)."""
-    b64 = base64.b64encode(script.encode()).decode()
-    quoted = " ".join("'" + a.replace("'", "'\\''") + "'" for a in args)
-    return (f"{python} -c 'import base64;exec(base64.b64decode(\"{b64}\"))' {quoted}").strip()
-
-
-def ssh_peer(ctx: CheckContext) -> Peer | None:
-    """The first peer we can run commands on (one with an SSH user)."""
-    return next((p for p in ctx.settings.peers if p.ssh_user), None)
-
-
 def _pick_random_ports(n: int, avoid: set[int]) -> list[int]:
     rng = random.SystemRandom()
     out: list[int] = []
@@ -235,7 +229,7 @@ def _pick_random_ports(n: int, avoid: set[int]) -> list[int]:
 async def _probe_from_peer(ctx: CheckContext, peer: Peer, public_ip: str, ports: list[int],
                            t_connect: float, total: float) -> tuple[dict[int, tuple[str, str]] | None, str]:
     cmd = python_command(_PROBE_SCRIPT, public_ip, f"{t_connect:.2f}", ",".join(map(str, ports)))
-    res = await ssh_run(ctx, peer, cmd, timeout=total, connect_timeout=total * 0.45)
+    res = await ssh_run(ctx.ssh, peer, cmd, timeout=total, connect_timeout=total * 0.45)
     if not res.ok:
         return None, f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
     for line in res.stdout.splitlines():
@@ -314,7 +308,7 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
             if p not in services and await run_blocking(listening_locally, p, timeout=1.0):
                 services.append(p)
         ports = [test_port, *randoms, *services]
-        peer = ssh_peer(ctx) if s.this.profile == "remote" else None
+        peer = next(iter(ssh_peers(s)), None) if s.this.profile == "remote" else None
         via = "echoip"
         public_ip: str | None = None
         outcomes: dict[int, tuple[bool | None, str]] = {}
@@ -363,8 +357,7 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
             got = await asyncio.gather(*(_probe_echoip(ctx, p, t) for p in checkable))
             outcomes.update(zip(checkable, got, strict=True))
             if public_ip is None:
-                res = ctx.results.get("isp.public_ip")
-                public_ip = (res.data.get("public_ip") if res else None) or s.this.public_ip or None
+                public_ip = round_public_ip(ctx) or s.this.public_ip or None
     rows: list[dict[str, Any]] = []
     for p in ports:
         reachable, line = outcomes[p]

@@ -1,0 +1,188 @@
+"""What the checks of several steps share: time budgets, HTTP to the configured services, the
+public IP, and small stdlib-only programs run on a peer over SSH.
+
+The check modules (``isp``, ``router``, ``linux``, ``ros``) import from here and from the core,
+never from each other, so each step's checks can change without opening another step's file.
+HTTP ignores proxy variables: a proxy would answer with its own address.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import ipaddress
+import shlex
+import time
+from dataclasses import dataclass
+from urllib.parse import urljoin, urlsplit
+
+from rosnet_tui import __version__
+from rosnet_tui.core.checks import REGISTRY, CheckContext
+from rosnet_tui.core.checks.data import view
+from rosnet_tui.core.settings import Peer, Settings
+from rosnet_tui.core.ssh import SshResult, run_blocking
+
+MAX_BODY = 64 * 1024
+
+
+def budget(ctx: CheckContext, check_id: str) -> float:
+    """Seconds *check_id* may take under *ctx* (its timeout times its factor)."""
+    spec = REGISTRY.get(check_id)
+    return ctx.timeout_s * (spec.timeout_factor if spec else 1.0)
+
+
+# --------------------------------------------------------------------------- HTTP
+@dataclass
+class HttpAnswer:
+    url: str
+    ok: bool                 # a 2xx answer arrived
+    status: int | None
+    text: str
+    error: str | None        # why not, in a few words
+
+    def describe(self) -> str:
+        if self.ok:
+            return f"GET {self.url} -> HTTP {self.status}: {self.text.strip()[:80]!r}"
+        return f"GET {self.url} -> {self.error}"
+
+
+def _short_error(exc: BaseException) -> str:
+    import requests  # here, not at the top: the wizard lists the checks without loading it
+
+    text = str(exc)
+    if isinstance(exc, requests.exceptions.ConnectTimeout):
+        return "no answer (timed out connecting)"
+    if isinstance(exc, requests.exceptions.ReadTimeout):
+        return "connected, but no reply in time"
+    if isinstance(exc, requests.exceptions.SSLError):
+        return "TLS error (" + text[:120] + ")"
+    low = text.lower()
+    for needle, words in (("name or service not known", "the name does not resolve"),
+                          ("failed to resolve", "the name does not resolve"),
+                          ("temporary failure in name resolution", "the name does not resolve (DNS)"),
+                          ("connection refused", "connection refused"),
+                          ("no route to host", "no route to the host"),
+                          ("network is unreachable", "the network is unreachable"),
+                          ("timed out", "timed out")):
+        if needle in low:
+            return words
+    return text[:160] or type(exc).__name__
+
+
+def _http_get_blocking(url: str, timeout: float) -> HttpAnswer:
+    import requests
+
+    deadline = time.monotonic() + timeout
+    with requests.Session() as s:
+        s.trust_env = False  # no proxies from the environment: we want our own public address
+        current = url
+        for _ in range(4):
+            left = max(deadline - time.monotonic(), 0.05)
+            try:
+                r = s.get(current, timeout=(left, left), stream=True, allow_redirects=False,
+                          headers={"User-Agent": f"rosnet-tui/{__version__}",
+                                   "Accept": "text/plain, application/json;q=0.9, */*;q=0.5"})
+            except requests.RequestException as exc:
+                return HttpAnswer(url, False, None, "", _short_error(exc))
+            with r:
+                if r.is_redirect and r.headers.get("location"):
+                    nxt = urljoin(current, r.headers["location"])
+                    if urlsplit(nxt).hostname != urlsplit(url).hostname:
+                        return HttpAnswer(url, False, r.status_code, "",
+                                          f"HTTP {r.status_code}: redirected to another host ({nxt}); "
+                                          "not followed")
+                    current = nxt
+                    continue
+                try:
+                    body = r.raw.read(MAX_BODY, decode_content=True) or b""
+                except Exception as exc:  # noqa: BLE001
+                    return HttpAnswer(url, False, r.status_code, "", _short_error(exc))
+                text = body.decode(r.encoding or "utf-8", "replace")
+                if 200 <= r.status_code < 300:
+                    return HttpAnswer(url, True, r.status_code, text, None)
+                return HttpAnswer(url, False, r.status_code, text,
+                                  f"HTTP {r.status_code} {r.reason or ''}".strip())
+        return HttpAnswer(url, False, None, "", "too many redirects")
+
+
+async def http_get(url: str, timeout: float) -> HttpAnswer:
+    """GET *url* within *timeout* seconds overall; never raises for network trouble."""
+    try:
+        return await run_blocking(_http_get_blocking, url, timeout, timeout=timeout + 0.3)
+    except asyncio.TimeoutError:
+        return HttpAnswer(url, False, None, "", f"no answer within {timeout:.1f} s")
+
+
+def parse_ip(text: str) -> str | None:
+    """The IPv4 address a what-is-my-IP service answered (plain text, or JSON with "ip")."""
+    t = text.strip()
+    if t.startswith("{"):
+        import json
+
+        with contextlib.suppress(ValueError, AttributeError):
+            t = str(json.loads(t).get("ip", ""))
+    t = t.split()[0] if t.split() else ""
+    try:
+        a = ipaddress.ip_address(t)
+    except ValueError:
+        return None
+    return str(a) if a.version == 4 else None
+
+
+def round_public_ip(ctx: CheckContext) -> str | None:
+    """The public IP isp.public_ip found in this round (None: it did not run, or found none)."""
+    res = ctx.results.get("isp.public_ip")
+    if res is None:
+        return None
+    return view("isp.public_ip", res.data).get("public_ip")
+
+
+async def fetch_public_ip(ctx: CheckContext, timeout: float) -> str | None:
+    """This component's public IP: from this round's isp.public_ip if it ran, else one quick ask."""
+    found = round_public_ip(ctx)
+    if found:
+        return str(found)
+    for url in ctx.settings.probe.public_ip_urls[:1]:
+        ans = await http_get(url, timeout)
+        if ans.ok:
+            return parse_ip(ans.text)
+    return None
+
+
+# --------------------------------------------------------------------------- programs on a peer
+def ssh_peers(s: Settings) -> list[Peer]:
+    """The peers we can run commands on (those with an SSH user), in the settings' order."""
+    return [p for p in s.peers if p.ssh_user]
+
+
+def shq(s: str) -> str:
+    """*s* quoted for a POSIX shell (single quotes)."""
+    return "'" + s.replace("'", "'\\''") + "'"
+
+
+def python_command(script: str, *args: str, python: str = "python3") -> str:
+    """A shell command running stdlib-only *script* with python3 on a peer (no install needed)."""
+    b64 = base64.b64encode(script.encode()).decode()
+    quoted = " ".join(shq(a) for a in args)
+    return (f"{python} -c 'import base64;exec(base64.b64decode(\"{b64}\"))' {quoted}").strip()
+
+
+def python_stdin_command(*args: str) -> str:
+    """A shell command running the program fed on stdin with python3 on a peer (``python3 -``)."""
+    return "python3 - " + " ".join(shlex.quote(a) for a in args)
+
+
+def peer_program_problem(res: SshResult, peer: Peer) -> str | None:
+    """Why a program could not run on *peer* over SSH (None when it ran)."""
+    if res.failure:
+        return f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
+    if res.exit_status == 127:
+        return f"{peer.name} has no python3 to run the probe (exit status 127)"
+    return None
+
+
+def stderr_tail(res: SshResult) -> str:
+    """The last lines the peer's program wrote on stderr, on one line."""
+    tail = (res.stderr or "").strip().splitlines()[-3:]
+    return " | ".join(tail)

@@ -1,0 +1,206 @@
+"""The declared data of the checks (rosnet_tui/core/checks/data.py): the `check --json` contract.
+
+Every registered check id has a declaration and every declaration a check; each declared key is
+documented; README.md's table of the checks lists exactly the declared top-level keys; producers
+report no undeclared key (here for every check's early branches, with real sockets on loopback;
+the other check tests run under ROSNET_TUI_STRICT_DATA=1, where run_check refuses such a key).
+"""
+
+from __future__ import annotations
+
+import ast
+import asyncio
+import re
+import typing
+from pathlib import Path
+
+import pytest
+
+from rosnet_tui.core.checks import (
+    CheckContext,
+    CheckSpec,
+    checks_for,
+    data,
+    run_check,
+)
+from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.settings import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.ssh import SshOptions
+from tests.test_checks_isp import free_port
+
+ROOT = Path(__file__).resolve().parent.parent
+DATA_PY = ROOT / "rosnet_tui" / "core" / "checks" / "data.py"
+
+
+def _nested(tp: typing.Any) -> list[type]:
+    """The TypedDicts inside a declared type (directly, in lists, as dict values, in unions)."""
+    if typing.is_typeddict(tp):
+        return [tp]
+    return [t for a in typing.get_args(tp) for t in _nested(a)]
+
+
+def _all_declarations() -> set[type]:
+    seen: set[type] = set()
+    todo = list(data.DATA.values())
+    while todo:
+        td = todo.pop()
+        if td in seen:
+            continue
+        seen.add(td)
+        for tp in typing.get_type_hints(td).values():
+            todo.extend(_nested(tp))
+    return seen
+
+
+# --------------------------------------------------------------------------- ids
+def test_every_registered_check_has_a_declaration_and_every_declaration_a_check():
+    ids = [c.id for c in checks_for()]
+    assert len(ids) == 18
+    assert sorted(ids) == sorted(data.DATA)
+
+
+def test_declarations_are_optional_key_typeddicts_that_resolve():
+    for td in _all_declarations():
+        assert typing.is_typeddict(td), td
+        assert not td.__required_keys__, f"{td.__name__}: a check sets only what it has evidence for"
+        hints = typing.get_type_hints(td)  # every annotation resolves
+        assert hints, td
+
+
+def test_every_declared_key_has_a_comment_saying_what_it_holds():
+    """The comment on each key is its documentation (the `check --json` contract)."""
+    lines = DATA_PY.read_text().splitlines()
+    tree = ast.parse(DATA_PY.read_text())
+    names = {td.__name__ for td in _all_declarations()}
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ClassDef) and node.name in names:
+            found.add(node.name)
+            for item in node.body:
+                if isinstance(item, ast.AnnAssign):
+                    line = lines[item.lineno - 1]
+                    assert "#" in line, f"{node.name}: no comment on {line.strip()!r}"
+        # Functional syntax (for keys like "from"): Name = TypedDict("Name", {...}, total=False)
+        if (isinstance(node, ast.Call) and getattr(node.func, "id", "") == "TypedDict"
+                and isinstance(node.args[0], ast.Constant) and node.args[0].value in names):
+            found.add(node.args[0].value)
+            for key in node.args[1].keys:
+                line = lines[key.lineno - 1]
+                assert "#" in line, f"{node.args[0].value}: no comment on {line.strip()!r}"
+    assert found == names
+
+
+# --------------------------------------------------------------------------- README
+def readme_table() -> dict[str, list[str]]:
+    """README's table of the checks: check id -> the keys of its `data` column, in order."""
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("### The checks"):]
+    section = section[:section.index("\n###")]
+    rows = [ln for ln in section.splitlines() if ln.startswith("| `")]
+    out: dict[str, list[str]] = {}
+    for row in rows:
+        cells = [c.strip() for c in row.strip().strip("|").split(" | ")]
+        keys = re.findall(r"`([^`]+)`", cells[-1])
+        for cid in re.findall(r"`([a-z]+\.[a-z_]+)`", cells[0]):
+            assert cid not in out, f"{cid} twice in README's table"
+            out[cid] = keys
+    return out
+
+
+def expected_cell(check_id: str) -> str:
+    return ", ".join(f"`{k}`" for k in typing.get_type_hints(data.DATA[check_id]))
+
+
+def test_readme_table_lists_exactly_the_declared_top_level_keys():
+    table = readme_table()
+    assert sorted(table) == sorted(data.DATA), "README's table of the checks lists other ids"
+    for cid, keys in table.items():
+        declared = list(typing.get_type_hints(data.DATA[cid]))
+        assert keys == declared, (f"README's data column for {cid} drifted from data.py; "
+                                  f"it should read: {expected_cell(cid)}")
+        assert set(keys) == data.declared_keys(cid)
+
+
+# --------------------------------------------------------------------------- producers
+def _ctx(tmp_path: Path, settings: Settings, timeout: float = 1.0) -> CheckContext:
+    rc = tmp_path / "bashrc"
+    rc.write_text("")
+    return CheckContext(settings=settings, timeout_s=timeout, state_dir=tmp_path / "state",
+                        hosts_path=tmp_path / "hosts", bashrc_path=rc, upnp=False,
+                        ssh_options=SshOptions(ssh_agent=False, ssh_dir=tmp_path / "no-ssh"))
+
+
+async def _run_all(ctx: CheckContext) -> dict:
+    specs = checks_for()
+    results = await asyncio.gather(*(run_check(s, ctx) for s in specs))
+    return {r.id: r for r in results}
+
+
+async def test_every_check_reports_only_declared_keys_when_there_is_nothing_to_check(tmp_path):
+    """Empty settings: each check's skip or early-failure branch, nothing leaves the machine."""
+    s = Settings(probe=ProbeSettings(port=free_port(), public_ip_urls=[], port_check_url=""))
+    got = await _run_all(_ctx(tmp_path, s))
+    assert len(got) == 18
+    for cid, r in got.items():
+        assert not r.summary.startswith("the check failed unexpectedly"), (cid, r.summary)
+        assert data.undeclared(cid, r.data) == [], (cid, r.data)
+
+
+async def test_every_check_reports_only_declared_keys_against_dead_loopback_services(tmp_path):
+    """Settings that name a master, a peer and services, all on loopback ports nobody serves."""
+    dead = free_port()
+    s = Settings(this=ThisComponent(name="localhost", local_ip="127.0.0.1", role="master"),
+                 peers=[Peer(name="localhost", local_ip="127.0.0.1", public_ip="127.0.0.1",
+                             ssh_user="nobody", ssh_port=dead)],
+                 probe=ProbeSettings(port=free_port(),
+                                     public_ip_urls=[f"http://127.0.0.1:{dead}/ip"],
+                                     port_check_url=f"http://127.0.0.1:{dead}"),
+                 ros=RosSettings(master="localhost", port=dead))
+    (tmp_path / "hosts").write_text("127.0.0.1 localhost\n")
+    got = await _run_all(_ctx(tmp_path, s))
+    assert len(got) == 18
+    for cid, r in got.items():
+        assert not r.summary.startswith("the check failed unexpectedly"), (cid, r.summary)
+        assert data.undeclared(cid, r.data) == [], (cid, r.data)
+
+
+async def test_run_check_refuses_an_undeclared_key_in_strict_mode(monkeypatch, tmp_path):
+    async def renamed(ctx: CheckContext) -> Outcome:
+        return Outcome(Status.PASS, "ok", [], {"port": 1, "listenning": True})
+
+    spec = CheckSpec("router.listener", "router", "a check with a renamed key", renamed)
+    ctx = _ctx(tmp_path, Settings())
+    monkeypatch.setenv(data.STRICT_ENV, "1")
+    with pytest.raises(data.UndeclaredKeyError, match="listenning"):
+        await run_check(spec, ctx)
+    monkeypatch.setenv(data.STRICT_ENV, "0")
+    r = await run_check(spec, ctx)  # outside the tests: reported as it is, never a crash
+    assert r.data == {"port": 1, "listenning": True}
+
+
+# --------------------------------------------------------------------------- consumers
+def test_view_refuses_undeclared_keys_at_every_level():
+    raw = {"ports": [{"port": 5000, "reachable": True, "listener": True, "via": "echoip"}],
+           "test_port": 5000, "test_port_open": True, "public_ip": "203.0.113.9"}
+    v = data.view("router.port_open", raw)
+    assert v["test_port"] == 5000 and v.get("public_ip") == "203.0.113.9"
+    assert v["ports"][0]["via"] == "echoip"
+    with pytest.raises(data.UndeclaredKeyError):
+        v.get("test_port_opened")
+    with pytest.raises(data.UndeclaredKeyError):
+        v["ports"][0].get("open")
+    peers = data.view("linux.ssh", {"peers": {"sami": {"ok": True, "failure": None}}})["peers"]
+    assert peers["sami"]["ok"] is True and peers["sami"].get("fingerprint") is None
+    with pytest.raises(data.UndeclaredKeyError):
+        peers["sami"].get("fingerprints")
+    node = data.view("ros.node_uris", {"unreachable": [{"node": "/talker", "from": "here"}]})
+    assert node["unreachable"][0]["from"] == "here"
+
+
+def test_undeclared_names_nested_paths():
+    raw = {"peers": {"sami": {"ok": True, "failure": None, "extra": 1}}, "oops": 2}
+    assert data.undeclared("linux.chat_in", raw) == ["linux.chat_in.peers['sami'].extra",
+                                                     "linux.chat_in.oops"]
+    assert data.undeclared("ros.pubsub_in", {"peer": "", "ok": False,
+                                             "peers": {"sami": {"peer": "sami", "ok": True,
+                                                                "failed_hop": None}}}) == []
