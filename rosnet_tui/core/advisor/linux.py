@@ -1,0 +1,490 @@
+"""Step 3 (Linux): the rules that read the linux.* checks (names, hosts file, ping, SSH, chat)."""
+
+from __future__ import annotations
+
+from rosnet_tui.core.advisor.engine import Hit, rule
+from rosnet_tui.core.advisor.evidence import (
+    FORWARD_RANGE,
+    Evidence,
+    is_unreachable,
+    join_and,
+    linux_peers,
+    peer_state,
+)
+from rosnet_tui.core.results import Status
+from rosnet_tui.core.settings import PORT_MAX, PORT_MIN
+
+
+def _name_role(ev: Evidence, name: str) -> str:
+    if name == ev.s.this.name:
+        return "its own local IP"
+    if ev.remote:
+        return f"{name}'s public IP"
+    return f"{name}'s address on the {ev.s.this.profile} LAN"
+
+
+@rule("linux.name.loopback", "linux", ("linux.hosts", "linux.resolve"),
+      "a name maps to loopback (127.0.1.1)",
+      "A network name points at this machine's loopback (the 127.0.1.1 line installers write): "
+      "anything that derives an address from it talks to itself, and ROS nodes can end up "
+      "advertising an address no peer can use.",
+      "Remove the name from the 127.0.1.1 line of /etc/hosts and add the right address line.",
+      "linux", "fail")
+def _name_loopback(ev: Evidence) -> list[Hit]:
+    hd, rd = ev.data("linux.hosts"), ev.data("linux.resolve")
+    names = list(dict.fromkeys([*(hd.get("loopback") or []), *(rd.get("loopback") or [])]))
+    hits = []
+    for name in names:
+        exp = (rd.get("names") or {}).get(name, {}).get("expected") or ev.expected_ip(name) or "?"
+        found = (rd.get("names") or {}).get(name, {}).get("resolved") or "127.0.1.1"
+        ids = [c for c in ("linux.hosts", "linux.resolve")
+               if name in (ev.data(c).get("loopback") or [])]
+        hits.append(Hit(
+            f"{name} resolves to the loopback address {found} on {ev.me}, not to "
+            f"{exp} ({_name_role(ev, name)}): programs here that look the name up talk to "
+            "themselves, and ROS nodes can bind or advertise an address no peer reaches.",
+            [f"In /etc/hosts on {ev.me}, take {name} off the `{found} ...` line (delete the line "
+             f"if {name} is all it holds; keep `127.0.0.1 localhost`).",
+             f"Make sure the line `{exp} {name}` is there (`rosnet-tui hosts apply` writes "
+             "the right entries).",
+             f"Check with `getent hosts {name}`: it must print {exp}."],
+            check_ids=ids, severity="fail" if any(ev.is_fail(c) for c in ids) else "warn",
+            evidence=[f"{name} -> {found}"]))
+    return hits
+
+
+@rule("linux.name.wrong", "linux", ("linux.hosts", "linux.resolve"),
+      "a name resolves to the wrong address",
+      "A network name leads to an address that is not the component's (stale public IP, typo, "
+      "another line or a DNS record winning).",
+      "Correct the hosts line for that name (or find what else answers: nsswitch order, a "
+      "second line, DNS).",
+      "linux", "fail")
+def _name_wrong(ev: Evidence) -> list[Hit]:
+    hd, rd = ev.data("linux.hosts"), ev.data("linux.resolve")
+    loop = set(hd.get("loopback") or []) | set(rd.get("loopback") or [])
+    hosts_wrong = {w["name"]: w for w in hd.get("wrong") or [] if isinstance(w, dict)}
+    names = [n for n in dict.fromkeys([*(rd.get("wrong") or []), *hosts_wrong]) if n not in loop]
+    hits = []
+    for name in names:
+        info = (rd.get("names") or {}).get(name, {})
+        hw = hosts_wrong.get(name, {})
+        exp = info.get("expected") or hw.get("expected") or ev.expected_ip(name) or "?"
+        found = info.get("resolved") or hw.get("found")
+        ids = []
+        if name in hosts_wrong:
+            ids.append("linux.hosts")
+        if name in (rd.get("wrong") or []):
+            ids.append("linux.resolve")
+        if name in hosts_wrong:
+            old = hw.get("found") or found or "?"
+            acts = [f"In /etc/hosts on {ev.me}, change `{old} {name}` to `{exp} {name}` "
+                    "(`rosnet-tui hosts apply` writes the computed entries, with a preview)."]
+        elif found:
+            acts = [f"The hosts file of {ev.me} looks right, yet the system resolver answers "
+                    f"{found}: run `getent hosts {name}`, check that /etc/nsswitch.conf lists "
+                    "`files` before `dns` for hosts, and look for a DNS record or a second "
+                    f"hosts line for {name}."]
+        else:
+            acts = [f"{name} does not resolve on {ev.me}: add `{exp} {name}` to /etc/hosts "
+                    "(`rosnet-tui hosts apply`)."]
+        if name != ev.s.this.name and ev.remote:
+            acts.append(f"If {exp} is itself out of date, {name}'s public IP has moved: update "
+                        f"the settings (or let address sync do it: `rosnet-tui sync`).")
+        acts.append(f"Check with `getent hosts {name}`: it must print {exp}.")
+        if found:
+            meaning = (f"{name} resolves to {found} on {ev.me}, but it should be {exp} "
+                       f"({_name_role(ev, name)}): everything that uses the name goes to the "
+                       "wrong place.")
+        else:
+            meaning = (f"{name} does not resolve on {ev.me}; it should be {exp} "
+                       f"({_name_role(ev, name)}).")
+        hits.append(Hit(meaning, acts, check_ids=ids,
+                        severity="fail" if any(ev.is_fail(c) for c in ids) else "warn",
+                        evidence=[f"{name} -> {found or 'nothing'}, expected {exp}"]))
+    return hits
+
+
+@rule("linux.hosts.missing", "linux", ("linux.hosts",),
+      "a name is missing from the hosts file",
+      "The hosts file has no line for a component, so its name depends on DNS (if it resolves "
+      "at all).",
+      "Add the missing line(s) (`rosnet-tui hosts apply`).",
+      "linux", "warn")
+def _hosts_missing(ev: Evidence) -> list[Hit]:
+    hd, rd = ev.data("linux.hosts"), ev.data("linux.resolve")
+    missing = [n for n in hd.get("missing") or []
+               if n not in (rd.get("wrong") or []) and n not in (rd.get("loopback") or [])]
+    if not missing:
+        return []
+    lines = [f"`{ev.expected_ip(n) or '?'} {n}`" for n in missing]
+    return [Hit(f"/etc/hosts on {ev.me} has no line for {join_and(missing)}.",
+                [f"Add {join_and(lines)} to /etc/hosts on {ev.me} (`rosnet-tui hosts apply` "
+                 "writes them, with a preview and a backup)."],
+                severity=ev.sev("linux.hosts", "warn"),
+                evidence=[f"linux.hosts: missing {join_and(missing)}"])]
+
+
+@rule("linux.hosts.duplicates", "linux", ("linux.hosts",),
+      "a name appears on several hosts lines",
+      "The name has several addresses in the hosts file; which one a program gets is not "
+      "guaranteed.",
+      "Keep one line per name.",
+      "linux", "warn")
+def _hosts_dupes(ev: Evidence) -> list[Hit]:
+    dupes = ev.data("linux.hosts").get("duplicates") or []
+    if not dupes:
+        return []
+    keep = [f"`{ev.expected_ip(n) or '?'} {n}`" for n in dupes]
+    return [Hit(f"{join_and(dupes)} appear{'s' if len(dupes) == 1 else ''} on several lines of "
+                f"/etc/hosts on {ev.me} with different addresses: the resolver may pick any of "
+                "them (glibc even prefers 127.0.1.1).",
+                [f"Keep only {join_and(keep)} and delete the other lines for "
+                 f"{'that name' if len(dupes) == 1 else 'those names'}."],
+                severity=ev.sev("linux.hosts", "warn"),
+                evidence=[f"linux.hosts: duplicates {join_and(dupes)}"])]
+
+
+def _ssh_caused(ev: Evidence, name: str) -> list[str]:
+    """The chat checks that failed for *name* only because SSH to it failed."""
+    return [c for c in ("linux.chat_out", "linux.chat_in")
+            if str(((ev.data(c).get("peers") or {}).get(name) or {}).get("failure")
+                   or "").startswith("ssh:")]
+
+
+@rule("linux.ping.icmp_filtered", "linux", ("linux.ping",),
+      "ping fails, TCP to the peer works",
+      "ICMP is dropped on the way (many modems and carriers do), but TCP gets through: not a "
+      "problem, ROS uses TCP.",
+      "Nothing to fix; go on.",
+      None, "info")
+def _icmp_filtered(ev: Evidence) -> list[Hit]:
+    hits = []
+    for name, st in (ev.data("linux.ping").get("peers") or {}).items():
+        if isinstance(st, dict) and st.get("icmp") is False and st.get("tcp22") is True:
+            hits.append(Hit(
+                f"{name} does not answer ping, but a TCP connection to its port 22 works: ICMP "
+                "is filtered on the way (common with modems and mobile carriers). Not a "
+                "problem: ROS, SSH and the chat test all use TCP.",
+                ["Nothing to fix; go on with the SSH and chat checks."],
+                evidence=[f"linux.ping {name}: icmp no, tcp/22 yes"]))
+    return hits
+
+
+@rule("linux.peer.unreachable", "linux", ("linux.ping", "linux.ssh"),
+      "peer unreachable over TCP (ping may still answer)",
+      "No TCP connection gets through to the peer's public address. If the address answers "
+      "ping, its modem is online and does not forward to the peer (or the peer is off); if "
+      "nothing answers, the address is probably wrong (stale hosts entry, changed IP, carrier "
+      "NAT) or the modem is offline.",
+      "Ping answers: fix the forwarding on the peer's modem. Nothing answers: check our hosts "
+      "line for the peer and its current public IP, then that it is online.",
+      "router", "fail")
+def _peer_unreachable(ev: Evidence) -> list[Hit]:
+    hits = []
+    for name in linux_peers(ev):
+        if not is_unreachable(ev, name):
+            continue
+        st = peer_state(ev, name)
+        ip = (ev.data("linux.resolve").get("names") or {}).get(name, {}).get("resolved") \
+            or ev.expected_ip(name) or "?"
+        ids = [c for c in ("linux.ping", "linux.ssh", "linux.chat_out", "linux.chat_in")
+               if (ev.data(c).get("peers") or {}).get(name) is not None and ev.is_fail(c)]
+        local = ev.peer_local(name) or "its local IP"
+        pub = ev.peer_public(name) or "?"
+        forward = (f"Check that {name}'s modem forwards TCP 22 and {FORWARD_RANGE} to {local} "
+                   f"(the Router step on {name}: its port test must say Open).")
+        online = (f"Check that {name} is switched on, online and running sshd (the ISP step on "
+                  f"{name}).")
+        hosts = (f"Check our hosts line for {name}: `getent hosts {name}` must print its current "
+                 f"public IP ({pub} in the settings; the ISP step on {name} shows the address it "
+                 f"has now). If it moved, `rosnet-tui sync` keeps it current.")
+        if not ev.remote:
+            exp = ev.expected_ip(name) or "?"
+            meaning = (f"{name} ({ip}) does not accept TCP connections from {ev.me} on the "
+                       f"{ev.s.this.profile} LAN (port 22 and SSH fail).")
+            acts = [f"Check that {name} is on the same LAN as {ev.me}, switched on and running "
+                    "sshd.",
+                    f"Check our hosts line: `getent hosts {name}` must print {exp} (its address "
+                    f"on the {ev.s.this.profile} LAN)."]
+        elif st["icmp"] is True:
+            meaning = (f"{ip} answers ping, so {name}'s modem is online, but no TCP connection "
+                       f"gets through to {name} (port 22 and SSH fail): the modem does not "
+                       f"forward to {name}, or {name} itself is off.")
+            acts = [forward, online]
+        else:
+            meaning = (f"Nothing answers at {ip}, the address {ev.me} uses for {name}: neither "
+                       "ping nor a TCP connection to port 22. The address may be out of date "
+                       f"(a new public IP, or {name} behind carrier-grade NAT - its isp.cgnat "
+                       "check tells), or the modem is offline.")
+            acts = [hosts, online, forward]
+            if ip != pub and pub != "?":
+                meaning += f" The settings say {name} is at {pub}."
+        nd = ev.data("ros.node_uris")
+        if st["ssh_failure"] == "network" and ev.status("ros.node_uris") is Status.WARN \
+                and nd and not nd.get("unreachable"):
+            ids.append("ros.node_uris")      # could not check from the peer: same cause
+        hits.append(Hit(meaning, acts, check_ids=ids or ["linux.ping", "linux.ssh"],
+                        goto_step="router",
+                        evidence=[f"{name} ({ip}): icmp={st['icmp']}, tcp22={st['tcp22']}, "
+                                  f"ssh={st['ssh_failure'] or st['ssh_ok']}"]))
+    return hits
+
+
+@rule("linux.ssh.host_key_changed", "linux", ("linux.ssh",),
+      "SSH host key changed",
+      "The peer shows a different host key than the one recorded: a reinstall or new keys, or "
+      "someone in the middle. We refuse to connect.",
+      "Verify the new fingerprint out of band; only then `ssh-keygen -R NAME` and accept it.",
+      "linux", "fail")
+def _ssh_key_changed(ev: Evidence) -> list[Hit]:
+    hits = []
+    for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
+        if not isinstance(st, dict) or st.get("failure") != "host_key_changed":
+            continue
+        fp = st.get("fingerprint") or "(see the evidence)"
+        user = ev.ssh_user(name)
+        hits.append(Hit(
+            f"{name} presented a host key ({fp}) that differs from the one in "
+            f"~/.ssh/known_hosts: either {name} was reinstalled or its keys regenerated, or "
+            "someone is intercepting the connection. We refuse to connect until you verify.",
+            [f"Verify out of band (at {name}'s console, or by someone you trust there): "
+             f"`ssh-keygen -lf /etc/ssh/ssh_host_ed25519_key.pub` on {name} must print {fp}.",
+             f"If it matches: `ssh-keygen -R {name}` here (and `ssh-keygen -R ADDRESS` for its "
+             f"IP), then `ssh {user}@{name}` once and accept the verified key.",
+             "If it does not match: do not connect; treat it as an attack and tell whoever runs "
+             "the network."],
+            evidence=[f"linux.ssh {name}: host key changed, now {fp}"],
+            check_ids=["linux.ssh", *_ssh_caused(ev, name)]))
+    return hits
+
+
+@rule("linux.ssh.host_key_unknown", "linux", ("linux.ssh",),
+      "SSH host key not known yet",
+      "First contact: the peer's host key is not in known_hosts, and we never accept one "
+      "silently.",
+      "Compare the fingerprint with the peer's own key, then connect once and accept it.",
+      "linux", "warn")
+def _ssh_key_unknown(ev: Evidence) -> list[Hit]:
+    hits = []
+    for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
+        if not isinstance(st, dict) or st.get("failure") != "host_key_unknown":
+            continue
+        fp = st.get("fingerprint") or "(see the evidence)"
+        hits.append(Hit(
+            f"{name}'s host key ({fp}) is not in ~/.ssh/known_hosts yet; it is never accepted "
+            "silently.",
+            [f"On {name} (console or a trusted channel) run "
+             f"`ssh-keygen -lf /etc/ssh/ssh_host_ed25519_key.pub` and compare with {fp}.",
+             f"If they match: `ssh {ev.ssh_user(name)}@{name}` once and answer yes, then re-run "
+             "the Linux step."],
+            severity=ev.sev("linux.ssh", "warn"),
+            evidence=[f"linux.ssh {name}: unknown host key {fp}"],
+            check_ids=["linux.ssh", *_ssh_caused(ev, name)]))
+    return hits
+
+
+@rule("linux.ssh.auth", "linux", ("linux.ssh",),
+      "SSH: sshd answers, login refused",
+      "The network and sshd are fine; the login is refused: wrong user name or no key "
+      "installed for it.",
+      "Check ssh_user; install the key with `ssh-copy-id USER@NAME` (easier on a LAN first).",
+      "linux", "fail")
+def _ssh_auth(ev: Evidence) -> list[Hit]:
+    hits = []
+    for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
+        if not isinstance(st, dict) or st.get("failure") != "auth":
+            continue
+        user = ev.ssh_user(name)
+        hits.append(Hit(
+            f"{name}'s SSH server answered but refused {user}'s login: the network and sshd "
+            "work; the user name or the key is the problem.",
+            [f"Check that ssh_user = \"{user}\" under the [[peer]] {name} is an account on "
+             f"{name}.",
+             f"Install your public key there: `ssh-copy-id {user}@{name}` (or append "
+             f"~/.ssh/id_ed25519.pub to ~{user}/.ssh/authorized_keys on {name}; that file "
+             "mode 600, the folder 700).",
+             "Problems that are not network problems are easier to fix on a LAN first."],
+            evidence=[f"linux.ssh {name}: authentication failed"],
+            check_ids=["linux.ssh", *_ssh_caused(ev, name)]))
+    return hits
+
+
+@rule("linux.ssh.sshd", "linux", ("linux.ssh",),
+      "SSH: peer reachable, no SSH server answers",
+      "The peer is reachable but nothing speaking SSH answers on its SSH port: sshd is not "
+      "installed/running, or the port is not forwarded.",
+      "Install and start openssh-server on the peer; forward its SSH port on the peer's modem.",
+      "linux", "fail")
+def _ssh_sshd(ev: Evidence) -> list[Hit]:
+    hits = []
+    for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
+        if not isinstance(st, dict) or st.get("failure") != "sshd":
+            continue
+        p = ev.s.peer(name)
+        port = p.ssh_port if p else 22
+        hits.append(Hit(
+            f"{name} is reachable, but no SSH server answered on port {port}.",
+            [f"On {name}: `sudo apt install openssh-server`, then "
+             "`sudo systemctl enable --now ssh`.",
+             f"On {name}'s modem: forward TCP {port} to {ev.peer_local(name) or 'its local IP'}"
+             + (f" ({port} is outside {FORWARD_RANGE}, so it needs its own rule)."
+                if port < PORT_MIN else "."),
+             f"Try `ssh {ev.ssh_user(name)}@{name}` on {name}'s own LAN first."],
+            evidence=[f"linux.ssh {name}: no SSH server"],
+            check_ids=["linux.ssh", *_ssh_caused(ev, name)]))
+    return hits
+
+
+@rule("linux.ssh.resolve", "linux", ("linux.ssh",),
+      "SSH: the peer's name does not resolve",
+      "The peer's name has no address here, so nothing can connect to it by name.",
+      "Add the peer's hosts line (`rosnet-tui hosts apply`).",
+      "linux", "fail", superseded_by=("linux.name.wrong", "linux.hosts.missing"))
+def _ssh_resolve(ev: Evidence) -> list[Hit]:
+    hits = []
+    for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
+        if isinstance(st, dict) and st.get("failure") == "resolve":
+            exp = ev.expected_ip(name) or "?"
+            hits.append(Hit(f"{name} does not resolve on {ev.me}, so SSH cannot find it.",
+                            [f"Add `{exp} {name}` to /etc/hosts on {ev.me} "
+                             "(`rosnet-tui hosts apply`)."],
+                            evidence=[f"linux.ssh {name}: name does not resolve"]))
+    return hits
+
+
+@rule("linux.ssh.no_user", "linux", ("linux.ssh",),
+      "no SSH user set for a peer",
+      "Without an SSH user the checks from the peer's side (chat in, pub/sub in, port test from "
+      "the peer) cannot run.",
+      "Set ssh_user under that [[peer]] in the settings.",
+      "linux", "info")
+def _ssh_no_user(ev: Evidence) -> list[Hit]:
+    hits = []
+    for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
+        if isinstance(st, dict) and st.get("failure") == "no_user":
+            hits.append(Hit(f"No SSH user is set for {name}, so the checks that run on "
+                            f"{name}'s side are skipped.",
+                            [f"Set ssh_user = \"...\" under the [[peer]] named {name} in the "
+                             "settings (an account on it that accepts your key)."],
+                            evidence=[f"linux.ssh {name}: no ssh_user"]))
+    return hits
+
+
+def _chat_ids(ev: Evidence, name: str) -> list[str]:
+    return [c for c in ("linux.chat_out", "linux.chat_in")
+            if (ev.data(c).get("peers") or {}).get(name) is not None]
+
+
+@rule("linux.chat.in_fails", "linux", ("linux.chat_out", "linux.chat_in"),
+      "chat works out, fails in",
+      "We reach the peer, but the peer cannot reach us: incoming connections to this component "
+      "are blocked (our modem's forwarding, our firewall), or the peer's hosts entry for us is "
+      "wrong.",
+      "Fix this component's forwarding (Router step here) and local firewall; check the peer's "
+      "hosts line for us.",
+      "router", "fail")
+def _chat_in_fails(ev: Evidence) -> list[Hit]:
+    hits = []
+    me, pub = ev.me, ev.my_public_ip()
+    for name in linux_peers(ev):
+        st = peer_state(ev, name)
+        if not (st["out"] is True and st["in"] is False) or is_unreachable(ev, name):
+            continue
+        why = st["in_failure"]
+        fix_fw = [f"On {me}'s modem: forward TCP {FORWARD_RANGE} to {ev.my_local_ip()} (Router "
+                  f"step on {me}: its port test must say Open).",
+                  f"On {me}: check that the local firewall lets those ports in "
+                  "(`sudo ufw status`, `sudo iptables -S INPUT`)."]
+        fix_name = [f"On {name}: `getent hosts {me}` must print {me}'s public IP ({pub}); fix "
+                    f"the line `{pub} {me}` in /etc/hosts there."]
+        if why == "peer_resolve":
+            meaning = (f"{me} reached {name}, but {name} cannot even resolve the name {me}: its "
+                       f"hosts file has no line for {me}.")
+            acts = [f"On {name}: add `{pub} {me}` to /etc/hosts (`rosnet-tui hosts apply` "
+                    f"there)."]
+        elif why == "wrong_peer":
+            meaning = (f"{me} reached {name}, but when {name} connects to {me} another machine "
+                       f"answers: {name}'s hosts entry for {me} is stale, or {me}'s modem "
+                       "forwards the port to another local address.")
+            acts = fix_name + [f"On {me}'s modem: the forwarding (or DMZ host) must point at "
+                               f"{ev.my_local_ip()}."]
+        elif why == "local_listen":
+            meaning = (f"{me} could not listen on its test port for {name} to connect: another "
+                       "program holds it.")
+            acts = [f"Choose another test port (port = N under [probe], 1024-{PORT_MAX}) or "
+                    "stop the program holding it (see router.port_free)."]
+        else:
+            meaning = (f"{me} reached {name}'s listener, but {name} could not connect back to "
+                       f"{me}: connections into {me} are blocked (our modem's forwarding, or a "
+                       f"firewall here), or {name} uses an old address for {me}.")
+            acts = fix_fw + fix_name
+        hits.append(Hit(meaning, acts, check_ids=_chat_ids(ev, name),
+                        evidence=[f"chat to {name} ok; from {name}: {why or 'failed'}"]))
+    return hits
+
+
+@rule("linux.chat.out_fails", "linux", ("linux.chat_out", "linux.chat_in"),
+      "chat works in, fails out",
+      "The peer reaches us, but we cannot reach the peer's listener: the peer's modem does not "
+      "forward the port, its firewall blocks it, or our hosts entry for it is wrong.",
+      "Fix the peer's forwarding (Router step on the peer) and its firewall; check our hosts "
+      "line for it.",
+      "router", "fail")
+def _chat_out_fails(ev: Evidence) -> list[Hit]:
+    hits = []
+    me = ev.me
+    for name in linux_peers(ev):
+        st = peer_state(ev, name)
+        if not (st["in"] is True and st["out"] is False) or is_unreachable(ev, name):
+            continue
+        why = st["out_failure"]
+        exp = ev.expected_ip(name) or ev.peer_public(name) or "?"
+        local = ev.peer_local(name) or "its local IP"
+        if why == "resolve":
+            meaning = f"{name} reached {me}, but {me} cannot resolve the name {name}."
+            acts = [f"On {me}: add `{exp} {name}` to /etc/hosts (`rosnet-tui hosts apply`)."]
+        elif why == "wrong_peer":
+            meaning = (f"{name} reached {me}, but when {me} connects to {name} another machine "
+                       f"answers: our hosts entry for {name} is stale, or {name}'s modem "
+                       "forwards the port to the wrong local address.")
+            acts = [f"Here: `getent hosts {name}` must print {exp}.",
+                    f"On {name}'s modem: the forwarding (or DMZ host) must point at {local}."]
+        elif why == "peer_listen":
+            meaning = f"{name} could not start a listener on the test port for {me} to connect."
+            acts = [f"On {name}: another program may hold the test port "
+                    f"({ev.s.probe.port}); choose another test port in the settings."]
+        else:
+            meaning = (f"{name} reached {me}, but {me} could not connect to {name}'s listener: "
+                       f"connections into {name} are blocked ({name}'s modem forwarding, or its "
+                       "firewall), or our hosts line sends us to an old address.")
+            acts = [f"On {name}'s modem: forward TCP {FORWARD_RANGE} to {local} (Router step on "
+                    f"{name}).",
+                    f"On {name}: check its firewall (`sudo ufw status`).",
+                    f"Here: `getent hosts {name}` must print {exp}."]
+        hits.append(Hit(meaning, acts, check_ids=_chat_ids(ev, name),
+                        evidence=[f"chat from {name} ok; to {name}: {why or 'failed'}"]))
+    return hits
+
+
+@rule("linux.chat.both_fail", "linux", ("linux.chat_out", "linux.chat_in"),
+      "SSH works, chat fails both ways",
+      "Port 22 gets through but the high ports do not, in either direction: the forwarded range "
+      "is missing on both modems, or firewalls allow SSH only.",
+      f"Forward {FORWARD_RANGE} on both modems; check both firewalls.",
+      "router", "fail")
+def _chat_both(ev: Evidence) -> list[Hit]:
+    hits = []
+    for name in linux_peers(ev):
+        st = peer_state(ev, name)
+        if st["in"] is False and st["out"] is False and not is_unreachable(ev, name):
+            hits.append(Hit(
+                f"The chat between {ev.me} and {name} fails in both directions, while {name} "
+                "itself is reachable: the high ports are blocked on both sides.",
+                [f"Forward TCP {FORWARD_RANGE} on both modems ({ev.me} -> "
+                 f"{ev.my_local_ip()}, {name} -> {ev.peer_local(name) or 'its local IP'}).",
+                 "Check both firewalls (`sudo ufw status`): SSH alone being allowed is not "
+                 "enough for ROS."],
+                check_ids=_chat_ids(ev, name),
+                evidence=[f"chat with {name}: out {st['out_failure']}, in {st['in_failure']}"]))
+    return hits

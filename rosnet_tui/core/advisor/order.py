@@ -1,0 +1,69 @@
+"""The order the advisor lists its rules in: one list, in one place.
+
+:data:`RULE_ORDER` decides, for findings of the same severity and the same step, which comes
+first (Table 1's three causes share the place of the first and are ranked by the evidence); it
+is also the order of docs/TROUBLESHOOTING.md's tables and of ``python -m rosnet_tui.core.advisor
+--ids`` (the catch-alls follow it). It does not decide which rule is *evaluated* first: a rule
+that reads another's firing says so with ``after=(...)`` (see the engine).
+
+The engine refuses a declared rule missing from this list, or a listed one never declared. A new
+rule goes here next to the rules it should be read with; the order of the step modules, or of
+the rules inside them, carries no meaning.
+"""
+
+from __future__ import annotations
+
+RULE_ORDER: tuple[str, ...] = (
+    # the link, then step 1 (ISP)
+    "router.local_ip.no_link",              # symptom in step 1; reads router.local_ip
+    "isp.no_internet.dns",
+    "isp.no_internet.http",
+    "isp.public_ip.unknown",
+    "isp.public_ip.disagree",
+    "isp.public_ip.changed",
+    "isp.public_ip.differs",
+    # step 2: Table 1 (the port test)
+    "table1.open",
+    "table1.no_listener",
+    "table1.no_listener_open",
+    "table1.listener_up_closed.port_in_use",  # cause (a) }
+    "table1.listener_up_closed.isp",          # cause (b) } one group: ranked by the evidence
+    "table1.listener_up_closed.forwarding",   # cause (c) }
+    # step 1 again: carrier NAT on its own (after Table 1, whose cause (b) supersedes it)
+    "isp.cgnat",
+    # step 2: the router's other checks
+    "router.local_ip.differs",
+    "router.port_in_use",
+    "router.port_open.partial",
+    "router.port_open.no_verdict",
+    # step 3: Linux
+    "linux.name.loopback",
+    "linux.name.wrong",
+    "linux.hosts.missing",
+    "linux.hosts.duplicates",
+    "linux.ping.icmp_filtered",
+    "linux.peer.unreachable",
+    "linux.ssh.host_key_changed",
+    "linux.ssh.host_key_unknown",
+    "linux.ssh.auth",
+    "linux.ssh.sshd",
+    "linux.ssh.resolve",
+    "linux.ssh.no_user",
+    "linux.chat.in_fails",
+    "linux.chat.out_fails",
+    "linux.chat.both_fail",
+    # step 4: ROS
+    "ros.env.master_uri",
+    "ros.env.ros_ip",
+    "ros.master.unreachable",
+    "ros.master.peer_cannot_register",
+    "ros.node_uri.local_ip",
+    "ros.node_uri.loopback",
+    "ros.node_uri.unknown_host",
+    "ros.node_uri.unreachable",
+    "ros.pubsub.out_fails",
+    "ros.pubsub.in_fails",
+    "ros.pubsub.both_fail",
+    # security (step 2: what the forwarding exposes)
+    "security.exposed",
+)
