@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui import __version__
-from rosnet_tui.core.advisor import Finding, advice_by_check, advise, step_title
+from rosnet_tui.core.advisor import Finding, advice_by_check, advise
+from rosnet_tui.core.procedure import STEP_IDS, STEP_TITLES, step_title
 from rosnet_tui.core.results import CheckResult, Status
 from rosnet_tui.core.settings import (
     CheckSettings,
@@ -35,8 +36,8 @@ from rosnet_tui.core.settings import (
 )
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
-STEPS = ("isp", "router", "linux", "ros")
-STEP_NAMES = {"isp": "ISP", "router": "Router/modem", "linux": "Linux", "ros": "ROS"}
+STEPS = STEP_IDS
+STEP_NAMES = STEP_TITLES
 # Settings keys that could hold or point at secrets never go into a report.
 _SECRET_KEY = re.compile(r"key|secret|passw|token|tsig|credential", re.IGNORECASE)
 WIDTH = 100

@@ -11,17 +11,24 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from rosnet_tui.core.hosts import hosts_entries
+from rosnet_tui.core.procedure import STEP_IDS, STEP_TITLES, step_number
 from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
 
 
 @dataclass(frozen=True)
 class Step:
     id: str
-    number: int
-    title: str
     expected: str
     configure: Callable[[Settings], str]
     check_ids: tuple[str, ...]
+
+    @property
+    def number(self) -> int:
+        return step_number(self.id)
+
+    @property
+    def title(self) -> str:
+        return STEP_TITLES[self.id]
 
 
 def _this_ip(s: Settings) -> str:
@@ -154,22 +161,22 @@ def configure_ros(s: Settings) -> str:
 
 
 STEPS: tuple[Step, ...] = (
-    Step("isp", 1, "ISP",
+    Step("isp",
          "Your provider allows port forwarding on every port of this connection, and the modem "
          "has a public IP address that the other components can reach.",
          configure_isp, ("isp.internet", "isp.public_ip", "isp.cgnat")),
-    Step("router", 2, "Router/modem",
+    Step("router",
          "A port tested from outside the modem is reported Open: the modem forwards it to "
          "this component.",
          configure_router,
          ("router.local_ip", "router.port_free", "router.listener", "router.port_open")),
-    Step("linux", 3, "Linux",
+    Step("linux",
          "The components ping each other by name, open SSH sessions by name, and exchange "
          "messages over TCP by name, whichever side starts.",
          configure_linux,
          ("linux.hosts", "linux.resolve", "linux.ping", "linux.ssh", "linux.chat_out",
           "linux.chat_in")),
-    Step("ros", 4, "ROS",
+    Step("ros",
          "Every component registers with the one ROS master, and each can both publish and "
          "subscribe.",
          configure_ros,
@@ -177,3 +184,4 @@ STEPS: tuple[Step, ...] = (
 )
 
 STEP_BY_ID = {s.id: s for s in STEPS}
+assert tuple(STEP_BY_ID) == STEP_IDS, "the steps are listed in the procedure's order"
