@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from urllib.parse import urlsplit
 
+from rosnet_tui.core.checks.data import CheckData, view
 from rosnet_tui.core.hosts import hosts_entries
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import CheckResult, Status
@@ -62,9 +63,14 @@ class Evidence:
             return None
         return r
 
-    def data(self, cid: str) -> dict:
+    def data(self, cid: str) -> CheckData:
+        """*cid*'s data as declared in checks.data (empty when the check is absent or skipped).
+
+        Reading a key the check does not declare raises UndeclaredKeyError, also on an empty
+        view: a rule that reads a renamed key fails the tests instead of going quiet.
+        """
         r = self.get(cid)
-        return r.data if r is not None and isinstance(r.data, dict) else {}
+        return view(cid, r.data if r is not None and isinstance(r.data, dict) else None)
 
     def status(self, cid: str) -> Status | None:
         r = self.get(cid)
@@ -217,7 +223,7 @@ def peer_state(ev: Evidence, name: str) -> dict[str, object]:
             "in_failure": ci.get("failure")}
 
 
-def chat_ok(d: dict) -> bool | None:
+def chat_ok(d: Mapping) -> bool | None:
     """A chat's verdict, or None when the chat itself did not happen (no SSH to run the peer's
     side: failure "no_user" or "ssh:...")."""
     f = str(d.get("failure") or "")

@@ -6,6 +6,8 @@ as a cause of a closed port is Table 1's cause (b), also there.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import (
     Evidence,
@@ -93,7 +95,7 @@ def _public_unknown(ev: Evidence) -> list[Hit]:
                 evidence=errs or ["isp.public_ip: no address"])]
 
 
-def _ip_answers(d: dict) -> dict[str, str]:
+def _ip_answers(d: Mapping) -> dict[str, str]:
     return {u: v for u, v in (d.get("sources") or {}).items()
             if isinstance(v, str) and is_ip(v.strip())}
 

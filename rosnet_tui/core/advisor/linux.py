@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import (
     FORWARD_RANGE,
@@ -63,7 +65,7 @@ def _name_loopback(ev: Evidence) -> list[Hit]:
 def _name_wrong(ev: Evidence) -> list[Hit]:
     hd, rd = ev.data("linux.hosts"), ev.data("linux.resolve")
     loop = set(hd.get("loopback") or []) | set(rd.get("loopback") or [])
-    hosts_wrong = {w["name"]: w for w in hd.get("wrong") or [] if isinstance(w, dict)}
+    hosts_wrong = {w["name"]: w for w in hd.get("wrong") or [] if isinstance(w, Mapping)}
     names = [n for n in dict.fromkeys([*(rd.get("wrong") or []), *hosts_wrong]) if n not in loop]
     hits = []
     for name in names:
@@ -161,7 +163,7 @@ def _ssh_caused(ev: Evidence, name: str) -> list[str]:
 def _icmp_filtered(ev: Evidence) -> list[Hit]:
     hits = []
     for name, st in (ev.data("linux.ping").get("peers") or {}).items():
-        if isinstance(st, dict) and st.get("icmp") is False and st.get("tcp22") is True:
+        if isinstance(st, Mapping) and st.get("icmp") is False and st.get("tcp22") is True:
             hits.append(Hit(
                 f"{name} does not answer ping, but a TCP connection to its port 22 works: ICMP "
                 "is filtered on the way (common with modems and mobile carriers). Not a "
@@ -240,7 +242,7 @@ def _peer_unreachable(ev: Evidence) -> list[Hit]:
 def _ssh_key_changed(ev: Evidence) -> list[Hit]:
     hits = []
     for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
-        if not isinstance(st, dict) or st.get("failure") != "host_key_changed":
+        if not isinstance(st, Mapping) or st.get("failure") != "host_key_changed":
             continue
         fp = st.get("fingerprint") or "(see the evidence)"
         user = ev.ssh_user(name)
@@ -268,7 +270,7 @@ def _ssh_key_changed(ev: Evidence) -> list[Hit]:
 def _ssh_key_unknown(ev: Evidence) -> list[Hit]:
     hits = []
     for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
-        if not isinstance(st, dict) or st.get("failure") != "host_key_unknown":
+        if not isinstance(st, Mapping) or st.get("failure") != "host_key_unknown":
             continue
         fp = st.get("fingerprint") or "(see the evidence)"
         hits.append(Hit(
@@ -293,7 +295,7 @@ def _ssh_key_unknown(ev: Evidence) -> list[Hit]:
 def _ssh_auth(ev: Evidence) -> list[Hit]:
     hits = []
     for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
-        if not isinstance(st, dict) or st.get("failure") != "auth":
+        if not isinstance(st, Mapping) or st.get("failure") != "auth":
             continue
         user = ev.ssh_user(name)
         hits.append(Hit(
@@ -319,7 +321,7 @@ def _ssh_auth(ev: Evidence) -> list[Hit]:
 def _ssh_sshd(ev: Evidence) -> list[Hit]:
     hits = []
     for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
-        if not isinstance(st, dict) or st.get("failure") != "sshd":
+        if not isinstance(st, Mapping) or st.get("failure") != "sshd":
             continue
         p = ev.s.peer(name)
         port = p.ssh_port if p else 22
@@ -344,7 +346,7 @@ def _ssh_sshd(ev: Evidence) -> list[Hit]:
 def _ssh_resolve(ev: Evidence) -> list[Hit]:
     hits = []
     for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
-        if isinstance(st, dict) and st.get("failure") == "resolve":
+        if isinstance(st, Mapping) and st.get("failure") == "resolve":
             exp = ev.expected_ip(name) or "?"
             hits.append(Hit(f"{name} does not resolve on {ev.me}, so SSH cannot find it.",
                             [f"Add `{exp} {name}` to /etc/hosts on {ev.me} "
@@ -362,7 +364,7 @@ def _ssh_resolve(ev: Evidence) -> list[Hit]:
 def _ssh_no_user(ev: Evidence) -> list[Hit]:
     hits = []
     for name, st in (ev.data("linux.ssh").get("peers") or {}).items():
-        if isinstance(st, dict) and st.get("failure") == "no_user":
+        if isinstance(st, Mapping) and st.get("failure") == "no_user":
             hits.append(Hit(f"No SSH user is set for {name}, so the checks that run on "
                             f"{name}'s side are skipped.",
                             [f"Set ssh_user = \"...\" under the [[peer]] named {name} in the "

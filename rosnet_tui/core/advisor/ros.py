@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from urllib.parse import urlsplit
 
 from rosnet_tui.core.advisor.engine import Hit, rule
@@ -186,7 +187,7 @@ def _uri_problems(ev: Evidence) -> list[dict]:
     """Unreachable advertised URIs, from ros.node_uris and from the pub/sub hops that failed."""
     out: list[dict] = []
     for u in ev.data("ros.node_uris").get("unreachable") or []:
-        if isinstance(u, dict) and u.get("uri"):
+        if isinstance(u, Mapping) and u.get("uri"):
             seat = u.get("from") or "here"
             out.append({"node": u.get("node") or "?", "uri": u["uri"],
                         "host": u.get("host") or uri_host(u["uri"]),

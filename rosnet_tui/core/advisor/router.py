@@ -7,6 +7,8 @@ and security.exposed (what an open port exposes).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import (
     FORWARD_RANGE,
@@ -77,7 +79,7 @@ def _other_open_ports(ev: Evidence) -> list[int]:
     pd = ev.data("router.port_open")
     tp = _t1_port(ev)
     return [p["port"] for p in pd.get("ports") or []
-            if isinstance(p, dict) and p.get("reachable") and p.get("port") != tp]
+            if isinstance(p, Mapping) and p.get("reachable") and p.get("port") != tp]
 
 
 def _cgnat_passed(ev: Evidence) -> bool:
@@ -378,7 +380,7 @@ def _port_partial(ev: Evidence) -> list[Hit]:
     if d.get("test_port_open") is not True:
         return []
     closed = [p["port"] for p in d.get("ports") or []
-              if isinstance(p, dict) and p.get("listener") and p.get("reachable") is False]
+              if isinstance(p, Mapping) and p.get("listener") and p.get("reachable") is False]
     if not closed:
         return []
     local = ev.my_local_ip()
@@ -427,7 +429,7 @@ def _port_no_verdict(ev: Evidence) -> list[Hit]:
       "router", "security")
 def _exposed(ev: Evidence) -> list[Hit]:
     d = ev.data("router.port_open")
-    reach = [p["port"] for p in d.get("ports") or [] if isinstance(p, dict) and p.get("reachable")]
+    reach = [p["port"] for p in d.get("ports") or [] if isinstance(p, Mapping) and p.get("reachable")]
     if d.get("test_port_open") is True and d.get("test_port") and d["test_port"] not in reach:
         reach.append(d["test_port"])
     if not reach:
