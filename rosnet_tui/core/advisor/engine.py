@@ -34,6 +34,7 @@ from rosnet_tui.core.settings import Settings
 __all__ = ["CATCH_ALL_IDS", "CATCH_ALL_RULES", "RULES", "Finding", "Hit", "Rule", "RuleOrderError",
            "advice_by_check", "advise", "all_rules", "first_failure", "rule", "rule_by_id", "seal"]
 
+
 @dataclass
 class Finding:
     rule: str                  # stable rule id, e.g. "table1.listener_up_closed.forwarding"
@@ -289,7 +290,7 @@ def first_failure(findings: Iterable[Finding]) -> Finding | None:
 
 
 def all_rules() -> list[Rule]:
-    """Every rule, in procedure order, catch-alls last (the TUI's full-table view)."""
+    """Every rule, in RULE_ORDER, catch-alls last (the TUI's full-table view, --ids)."""
     return [*RULES, *CATCH_ALL_RULES]
 
 
