@@ -404,8 +404,9 @@ class Lab:
             (hdir / "ip.batch").write_text("\n".join(topology.ip_batch(h)) + "\n")
             script = [topology.sysctl_script(h), f"ip -batch {hdir / 'ip.batch'}",
                       topology.sysctl_script(h)]  # again: rp_filter of the new interfaces
-            if h in ("robot_modem", "laptop_modem", "carrier"):
+            if h in ("robot_modem", "laptop_modem", "carrier", "travel_router"):
                 rules = (topology.carrier_ruleset() if h == "carrier"
+                         else topology.modem_ruleset(None) if h == "travel_router"
                          else topology.modem_ruleset("robot" if h == "robot_modem" else "laptop"))
                 (hdir / "rules.v4").write_text(rules)
                 script.append(f"iptables-restore {hdir / 'rules.v4'}")
@@ -587,7 +588,8 @@ class Lab:
     def _reset_state(self) -> None:
         self._state = {"variant": "healthy", "forward": {"robot": "healthy", "laptop": "healthy"},
                        "cgnat": False, "robot_wan": ADDR.ROBOT_PUBLIC, "lossy": False,
-                       "unplugged": False, "ros_extra": {}, "files_dirty": False}
+                       "unplugged": False, "ros_extra": {}, "files_dirty": False,
+                       "stale_dhcp": False, "double_nat": False, "sshd_port": False}
 
     @property
     def current_variant(self) -> str:
@@ -598,8 +600,16 @@ class Lab:
         """Switch to a variant for the ``with`` block, then back to healthy (always).
 
         Options: no_forwarding / wrong_forward take ``side="robot"|"laptop"|"both"`` (default
-        robot); lossy takes ``loss`` (0..1, default 0.05), ``delay_ms`` (100) and ``rate``
-        ("2mbit"; used when the kernel has no netem).
+        robot); no_forwarding also ``refuse=True`` (the modem answers every TCP connection with a
+        reset instead of dropping it); lossy takes ``loss`` (0..1, default 0.05), ``delay_ms``
+        (100) and ``rate`` ("2mbit"; used when the kernel has no netem); unplugged takes
+        ``side="laptop"|"robot"`` (default laptop) and ``silent=True`` (its modem drops what it
+        would forward to it, so no ICMP error comes back either).
+
+        More variants: stale_dhcp (the robot got a new local IP, 10.10.10.5, from DHCP; its
+        modem still forwards to 10.10.10.1), double_nat (a travel router of the user's own
+        between the robot and its modem, which forwards correctly to the travel router; the
+        travel router forwards nothing), sshd_port (the robot's sshd listens on 2222, not 22).
         """
         if name not in VARIANTS:
             raise ValueError(f"unknown variant {name!r} (known: {', '.join(VARIANTS)})")
@@ -617,13 +627,14 @@ class Lab:
             raise ValueError("side must be 'robot', 'laptop' or 'both'")
         return ["robot", "laptop"] if side == "both" else [side]
 
-    def _apply(self, name: str, side: str = "robot", loss: float = 0.05, delay_ms: int = 100,
-               rate: str = "2mbit") -> None:
+    def _apply(self, name: str, side: str | None = None, loss: float = 0.05, delay_ms: int = 100,
+               rate: str = "2mbit", refuse: bool = False, silent: bool = False) -> None:
         if name == "healthy":
             return
         if name in ("no_forwarding", "wrong_forward"):
-            for s in self._sides(side):
-                self._set_forwarding(s, "none" if name == "no_forwarding" else "wrong")
+            mode = ("refuse" if refuse else "none") if name == "no_forwarding" else "wrong"
+            for s in self._sides(side or "robot"):
+                self._set_forwarding(s, mode)
         elif name == "cgnat":
             self._set_cgnat(True)
         elif name == "ros_ip_laptop":
@@ -638,8 +649,21 @@ class Lab:
         elif name == "lossy":
             self._set_lossy(True, loss=loss, delay_ms=delay_ms, rate=rate)
         elif name == "unplugged":
-            self._state["unplugged"] = True
-            self._ip("laptop", ["link set eth0 down"])
+            who = side or "laptop"
+            if who not in ("robot", "laptop"):
+                raise ValueError("unplugged: side must be 'robot' or 'laptop'")
+            self._state["unplugged"] = who
+            if silent:
+                self._unplug_rule(MODEM[who], True)
+            self._ip(who, ["link set eth0 down"])
+        elif name == "stale_dhcp":
+            self._state["stale_dhcp"] = True
+            self._ip("robot", ["addr flush dev eth0", f"addr add {ADDR.ROBOT_NEW_LOCAL}/24 dev eth0",
+                               f"route replace default via {ADDR.ROBOT_GW}"])
+        elif name == "double_nat":
+            self._set_double_nat(True)
+        elif name == "sshd_port":
+            self._restart_sshd("robot", int(ADDR.ROBOT_SSHD_PORT))
 
     def reset(self) -> None:
         """Back to the healthy network: forwarding, addresses, links, files, ROS variables."""
@@ -656,7 +680,17 @@ class Lab:
         if st["lossy"]:
             self._set_lossy(False)
         if st["unplugged"]:
-            self._ip("laptop", ["link set eth0 up", f"route replace default via {ADDR.LAPTOP_GW}"])
+            who = st["unplugged"]
+            self._ip(who, ["link set eth0 up",
+                           f"route replace default via {topology.GATEWAY[who]}"])
+            self._unplug_rule(MODEM[who], False)
+        if st["stale_dhcp"]:
+            self._ip("robot", ["addr flush dev eth0", f"addr add {ADDR.ROBOT_LOCAL}/24 dev eth0",
+                               f"route replace default via {ADDR.ROBOT_GW}"])
+        if st["double_nat"]:
+            self._set_double_nat(False)
+        if st["sshd_port"]:
+            self._restart_sshd("robot", 22)
         for h in COMPUTERS:
             if self.hosts_path(h).read_text() != topology.hosts_text(h):
                 self.write_hosts(h, topology.hosts_text(h))
@@ -682,13 +716,73 @@ class Lab:
         return r
 
     def _set_forwarding(self, side: str, mode: str) -> None:
-        """Port forwarding of *side*'s modem: 'healthy', 'none' or 'wrong' (the wrong local IP)."""
-        rules = "\n".join(["*nat", "-F RNL_PF", *topology.forward_rules(side, mode), "COMMIT", ""])
+        """Port forwarding of *side*'s modem: 'healthy', 'none', 'refuse' (none, and a reset for
+        every TCP connection), 'wrong' (the wrong local IP) or 'travel' (double_nat)."""
+        refuse = topology.refuse_rules() if mode == "refuse" else []
+        rules = "\n".join(["*nat", "-F RNL_PF", *topology.forward_rules(side, mode), "COMMIT",
+                           "*filter", "-F RNL_REFUSE", *refuse, "COMMIT", ""])
         r = subprocess.run(["ip", "netns", "exec", self.ns(MODEM[side]), "iptables-restore",
                             "--noflush"], input=rules, text=True, capture_output=True, timeout=10)
         if r.returncode != 0:
             raise RuntimeError(f"forwarding on {MODEM[side]}: {r.stderr.strip()}")
         self._state["forward"][side] = mode
+
+    def _unplug_rule(self, modem: str, on: bool) -> None:
+        """The modem drops what it would forward to its LAN (a computer that is gone, silently)."""
+        rules = "\n".join(["*filter", "-F RNL_UNPLUG",
+                           *(["-A RNL_UNPLUG -o lan0 -j DROP"] if on else []), "COMMIT", ""])
+        r = subprocess.run(["ip", "netns", "exec", self.ns(modem), "iptables-restore",
+                            "--noflush"], input=rules, text=True, capture_output=True, timeout=10)
+        if r.returncode != 0:
+            raise RuntimeError(f"unplug rule on {modem}: {r.stderr.strip()}")
+
+    def _set_double_nat(self, on: bool) -> None:
+        """Put the travel router between the robot and its modem (or take it out again).
+
+        The robot's cable (the robot modem's lan0) moves to the travel router; a new link joins
+        the travel router's wan0 to the robot modem's new lan0 (192.168.0.0/24); the robot modem
+        forwards to the travel router, which forwards nothing.
+        """
+        travel, modem = self.ns("travel_router"), self.ns("robot_modem")
+        if on:
+            self._ip("robot_modem", [f"link set lan0 netns {travel}"])
+            self._ip("robot_modem", [f"link add name lan0 type veth peer name wan0 netns {travel}",
+                                     f"addr add {ADDR.OUTER_LAN_GW}/24 dev lan0",
+                                     "link set lan0 up"])
+            self._ip("travel_router", [f"addr add {ADDR.ROBOT_GW}/24 dev lan0", "link set lan0 up",
+                                       f"addr add {ADDR.TRAVEL_WAN}/24 dev wan0",
+                                       "link set wan0 up",
+                                       f"route add default via {ADDR.OUTER_LAN_GW}"])
+            self._state["double_nat"] = True
+            self._set_forwarding("robot", "travel")
+        else:
+            self._ip("robot_modem", ["link del lan0"])
+            self._ip("travel_router", [f"link set lan0 netns {modem}"])
+            self._ip("robot_modem", [f"addr add {ADDR.ROBOT_GW}/24 dev lan0", "link set lan0 up"])
+            self._state["double_nat"] = False
+            self._set_forwarding("robot", "healthy")
+        self._ip("robot", [f"route replace default via {ADDR.ROBOT_GW}"])
+
+    def _restart_sshd(self, host: str, port: int) -> None:
+        """Restart *host*'s sshd listening on *port* (22 is the lab's normal)."""
+        name = f"sshd-{host}"
+        old = self._services.get(name)
+        if old is not None:
+            self.kill(old, grace=1.0)
+        hdir = self._hostdir(host)
+        conf = hdir / "etc" / ("sshd_config" if port == 22 else f"sshd_config.{port}")
+        if port != 22:
+            path = os.pathsep.join([str(Path(sys.executable).parent), "/usr/local/sbin",
+                                    "/usr/local/bin", "/usr/sbin", "/usr/bin", "/sbin", "/bin"])
+            conf.write_text(topology.sshd_config(str(hdir / "etc" / "ssh_host_ed25519_key"),
+                                                 str(hdir / "home"), path, str(REPO), port))
+        with open(self.log_path(name), "a") as log:
+            proc = self.spawn(host, [SSHD, "-D", "-e", "-f", str(conf)], stdout=log,
+                              stderr=subprocess.STDOUT)
+        self._services[name] = proc
+        if not self.wait_listening(host, port, "tcp", 10.0, proc=proc):
+            raise RuntimeError(f"{name} did not start on port {port}")
+        self._state["sshd_port"] = port != 22
 
     def _set_cgnat(self, on: bool) -> None:
         """Move the robot modem's WAN link behind the carrier's NAT (or back to the internet)."""

@@ -8,6 +8,9 @@ plus the private LANs of the procedure and 100.64.0.0/10 behind the carrier in t
                                  carrier 203.0.113.3 (cgnat only) --'            198.51.100.1
     laptop 192.168.1.10 - laptop_modem 192.168.1.254 | 198.51.100.2 ---  services 192.0.2.10/.53
       (sami)
+
+In the double_nat variant a travel router of the user's own sits between the robot and its modem:
+robot 10.10.10.1 - travel_router 10.10.10.254 | 192.168.0.2 - robot_modem 192.168.0.1 | public.
 """
 
 from __future__ import annotations
@@ -34,6 +37,10 @@ class Addresses:
     STALE_ROBOT_PUBLIC: str = "203.0.113.99"     # nothing answers there (stale_hosts)
     ROBOT_WRONG_FORWARD: str = "10.10.10.2"      # nobody lives there (wrong_forward)
     LAPTOP_WRONG_FORWARD: str = "192.168.1.11"
+    ROBOT_NEW_LOCAL: str = "10.10.10.5"          # the robot's new DHCP lease (stale_dhcp)
+    OUTER_LAN_GW: str = "192.168.0.1"            # the robot modem's LAN side (double_nat)
+    TRAVEL_WAN: str = "192.168.0.2"              # the travel router's WAN side (double_nat)
+    ROBOT_SSHD_PORT: str = "2222"                # where the robot's sshd listens (sshd_port)
     PROBE_NAME: str = "probe.lab.test"
     PROBE_URL: str = "http://probe.lab.test"
     PUBLIC_IP_URL: str = "http://probe.lab.test/ip"
@@ -44,10 +51,11 @@ class Addresses:
 
 ADDR = Addresses()
 
-HOSTS = ("robot", "laptop", "robot_modem", "laptop_modem", "internet", "carrier")
+HOSTS = ("robot", "laptop", "robot_modem", "laptop_modem", "internet", "carrier", "travel_router")
 COMPUTERS = ("robot", "laptop")          # the hosts with a name, sshd, HOME and ROS
 HOSTNAMES = {"robot": ADDR.ROBOT_NAME, "laptop": ADDR.LAPTOP_NAME, "robot_modem": "robot-modem",
-             "laptop_modem": "laptop-modem", "internet": "internet", "carrier": "carrier"}
+             "laptop_modem": "laptop-modem", "internet": "internet", "carrier": "carrier",
+             "travel_router": "travel-router"}
 PEER = {"robot": "laptop", "laptop": "robot"}
 MODEM = {"robot": "robot_modem", "laptop": "laptop_modem"}
 LOCAL_IP = {"robot": ADDR.ROBOT_LOCAL, "laptop": ADDR.LAPTOP_LOCAL}
@@ -57,7 +65,7 @@ WRONG_FORWARD = {"robot": ADDR.ROBOT_WRONG_FORWARD, "laptop": ADDR.LAPTOP_WRONG_
 UPSTREAM = {"robot_modem": ADDR.INTERNET_ROBOT_SIDE, "laptop_modem": ADDR.INTERNET_LAPTOP_SIDE}
 
 VARIANTS = ("healthy", "no_forwarding", "wrong_forward", "cgnat", "ros_ip_laptop", "stale_hosts",
-            "lossy", "unplugged")
+            "lossy", "unplugged", "stale_dhcp", "double_nat", "sshd_port")
 
 # veth pairs: (host A, interface in A, host B, interface in B)
 LINKS = (
@@ -68,7 +76,7 @@ LINKS = (
     ("carrier", "wan0", "internet", "c-wan"),
 )
 
-ROUTERS = ("robot_modem", "laptop_modem", "internet", "carrier")
+ROUTERS = ("robot_modem", "laptop_modem", "internet", "carrier", "travel_router")
 
 
 def ip_batch(host: str, robot_wan: str = ADDR.ROBOT_PUBLIC) -> list[str]:
@@ -110,31 +118,47 @@ def sysctl_script(host: str) -> str:
 
 
 def forward_rules(side: str, mode: str) -> list[str]:
-    """The modem's port-forwarding (DNAT) rules, for chain RNL_PF of the nat table."""
-    if mode == "none":
+    """The modem's port-forwarding (DNAT) rules, for chain RNL_PF of the nat table.
+
+    *mode*: "healthy" (to the computer), "none", "wrong" (to a local IP where nobody is),
+    "refuse" (none, and the modem answers every TCP connection with a reset), "travel" (to the
+    travel router's WAN address, double_nat).
+    """
+    if mode in ("none", "refuse"):
         return []
-    target = LOCAL_IP[side] if mode == "healthy" else WRONG_FORWARD[side]
+    target = {"healthy": LOCAL_IP[side], "travel": ADDR.TRAVEL_WAN}.get(mode, WRONG_FORWARD[side])
     return [f"-A RNL_PF -p tcp --dport 22 -j DNAT --to-destination {target}",
             f"-A RNL_PF -p tcp --dport 1024:65000 -j DNAT --to-destination {target}",
             f"-A RNL_PF -p udp --dport 1024:65000 -j DNAT --to-destination {target}"]
 
 
-def modem_ruleset(side: str) -> str:
-    """A consumer modem: masquerade, port forwarding, stateful firewall (iptables-restore)."""
+def refuse_rules() -> list[str]:
+    """Chain RNL_REFUSE of the filter table: a modem that answers unforwarded TCP with a reset."""
+    return ["-A RNL_REFUSE -i wan0 -p tcp -j REJECT --reject-with tcp-reset"]
+
+
+def modem_ruleset(side: str | None) -> str:
+    """A consumer modem: masquerade, port forwarding, stateful firewall (iptables-restore).
+
+    *side* None: a router of the user's own that forwards nothing (the travel router).
+    """
     return "\n".join([
         "*nat",
         ":PREROUTING ACCEPT [0:0]", ":INPUT ACCEPT [0:0]", ":OUTPUT ACCEPT [0:0]",
         ":POSTROUTING ACCEPT [0:0]", ":RNL_PF - [0:0]",
         "-A PREROUTING -i wan0 -j RNL_PF",
         "-A POSTROUTING -o wan0 -j MASQUERADE",
-        *forward_rules(side, "healthy"),
+        *(forward_rules(side, "healthy") if side else []),
         "COMMIT",
         "*filter",
-        ":INPUT DROP [0:0]", ":FORWARD DROP [0:0]", ":OUTPUT ACCEPT [0:0]",
+        ":INPUT DROP [0:0]", ":FORWARD DROP [0:0]", ":OUTPUT ACCEPT [0:0]", ":RNL_REFUSE - [0:0]",
+        ":RNL_UNPLUG - [0:0]",
         "-A INPUT -i lo -j ACCEPT",
         "-A INPUT -m conntrack --ctstate ESTABLISHED,RELATED -j ACCEPT",
         "-A INPUT -i lan0 -j ACCEPT",
         "-A INPUT -p icmp --icmp-type echo-request -j ACCEPT",
+        "-A INPUT -j RNL_REFUSE",
+        "-A FORWARD -j RNL_UNPLUG",
         "-A FORWARD -m conntrack --ctstate ESTABLISHED,RELATED -j ACCEPT",
         "-A FORWARD -i lan0 -o wan0 -j ACCEPT",
         "-A FORWARD -i wan0 -o lan0 -m conntrack --ctstate DNAT -j ACCEPT",
@@ -190,9 +214,9 @@ def bashrc_text(host: str, *, ros_ip: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def sshd_config(host_key: str, home: str, path: str, pythonpath: str) -> str:
+def sshd_config(host_key: str, home: str, path: str, pythonpath: str, port: int = 22) -> str:
     return "\n".join([
-        "Port 22",
+        f"Port {port}",
         "ListenAddress 0.0.0.0",
         f"HostKey {host_key}",
         "PidFile none",
