@@ -113,7 +113,10 @@ async def test_ping_by_name_with_the_tcp_fallback_reported(tmp_path):
     s = settings(peers=[Peer(name="localhost", public_ip="127.0.0.1", ssh_port=free_port())])
     r = await run("linux.ping", ctx(s, tmp_path))
     assert r.status is Status.PASS, r.evidence
-    assert r.data["peers"]["localhost"] == {"icmp": True, "tcp22": False}
+    port = s.peers[0].ssh_port
+    # nothing listens on that port: the kernel refuses, and the kind of failure is reported
+    assert r.data["peers"]["localhost"] == {"icmp": True, "tcp22": False, "tcp": "refused",
+                                            "port": port}
     assert any("ping localhost (127.0.0.1): reply" in e for e in r.evidence)
 
 
@@ -152,7 +155,7 @@ async def test_ssh_skips_without_an_ssh_user(tmp_path):
 async def test_chat_out_by_name(ssh_client, tmp_path):  # noqa: F811
     r = await run("linux.chat_out", ctx(settings(peers=[ssh_client.peer()]), tmp_path, ssh_client))
     assert r.status is Status.PASS, r.evidence
-    assert r.data["peers"]["localhost"] == {"ok": True, "failure": None}
+    assert r.data["peers"]["localhost"] == {"ok": True, "failure": None, "tcp": "connected"}
     assert any("python3" in e for e in r.evidence)
 
 
@@ -161,7 +164,7 @@ async def test_chat_in_by_name(ssh_client, tmp_path):  # noqa: F811
             tmp_path, ssh_client)
     r = await run("linux.chat_in", c)
     assert r.status is Status.PASS, r.evidence
-    assert r.data["peers"]["localhost"] == {"ok": True, "failure": None}
+    assert r.data["peers"]["localhost"] == {"ok": True, "failure": None, "tcp": "connected"}
     assert any("localhost resolves localhost -> 127.0.0.1" in e for e in r.evidence)
     assert not c.listeners.holds(c.settings.probe.port)
 

@@ -63,8 +63,32 @@ async def test_local_ip_matches_this_machine(tmp_path):
         pytest.skip("this machine has no default route")
     r = await run("router.local_ip", ctx_for(tmp_path, local_ip=net.local_ip))
     assert r.status is Status.PASS, r.summary
-    assert r.data == {"local_ip": net.local_ip, "interface": net.interface, "gateway": net.gateway,
-                      "expected_ip": net.local_ip, "differs": False}
+    base = {k: r.data[k] for k in ("local_ip", "interface", "gateway", "expected_ip", "differs")}
+    assert base == {"local_ip": net.local_ip, "interface": net.interface, "gateway": net.gateway,
+                    "expected_ip": net.local_ip, "differs": False}
+    # recorded, like the public IP: the first run has nothing before it
+    assert r.data["previous_ip"] is None and r.data["changed"] is False
+    assert [h["ip"] for h in r.data["history"]] == [net.local_ip]
+
+
+async def test_local_ip_history_shows_a_new_dhcp_lease_without_local_ip_in_the_settings(tmp_path):
+    """The documented settings have no local_ip: the history is what tells a new lease."""
+    from rosnet_tui.core.state import record_local_ip
+
+    net = detect_local_net()
+    if not net.local_ip or not net.gateway:
+        pytest.skip("this machine has no default route")
+    record_local_ip(tmp_path / "state", "10.99.99.98", when="2026-01-01T00:00:00+00:00")
+    ctx = ctx_for(tmp_path, local_ip=net.local_ip)
+    ctx.settings.this.local_ip = ""        # as with_detected leaves it when nothing is detected
+    r = await run("router.local_ip", ctx)
+    assert r.status is Status.WARN, r.summary
+    assert r.data["changed"] is True and r.data["previous_ip"] == "10.99.99.98"
+    assert r.data["differs"] is False
+    assert "10.99.99.98 on the last run" in r.summary
+    assert [h["ip"] for h in r.data["history"]] == ["10.99.99.98", net.local_ip]
+    again = await run("router.local_ip", ctx)        # the next run: nothing new
+    assert again.status is Status.PASS and again.data["changed"] is False
 
 
 async def test_local_ip_warns_after_a_dhcp_change(tmp_path):

@@ -28,10 +28,11 @@ import socket
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from rosnet_tui.core.connect import tcp_failure_kind
 from rosnet_tui.core.settings import Peer
 
 if TYPE_CHECKING:
@@ -60,6 +61,9 @@ class SshResult:
     fingerprint: str | None  # SHA256:... of the server's host key when seen
     host_key: str | None = None  # "<type> <base64>" of the server's key, for trust_host_key()
     address: str | None = None   # the address the peer's name resolved to here
+    # How the TCP connection to the SSH port went: "connected", "refused", "timeout",
+    # "unreachable", "error" (None: not tried, e.g. the name did not resolve).
+    tcp: str | None = None
 
 
 # --------------------------------------------------------------------------- blocking helpers
@@ -122,13 +126,15 @@ class SshOptions:
     ``ssh_dir``: the folder with our keys and known_hosts (None: ``$HOME/.ssh``);
     ``known_hosts_files``: the files to trust (None: that folder's known_hosts and
     /etc/ssh/ssh_known_hosts); ``ssh_agent``: offer the agent's keys; ``timeout_s``: the default
-    connect budget.
+    connect budget; ``pool``: an :class:`~rosnet_tui.core.ssh_pool.SshPool` whose connections
+    the sessions share (None: one connection per session).
     """
 
     ssh_dir: Path | None = None
     known_hosts_files: tuple[Path, ...] | None = None
     ssh_agent: bool = True
     timeout_s: float = 3.0
+    pool: Any = field(default=None, compare=False)
 
 
 # --------------------------------------------------------------------------- host keys
@@ -231,8 +237,10 @@ class _Conn:
 
 
 def _fail(failure: str, detail: str, *, fingerprint: str | None = None,
-          host_key: str | None = None, address: str | None = None) -> _Conn:
-    return _Conn(SshResult(False, None, "", "", failure, detail, fingerprint, host_key, address))
+          host_key: str | None = None, address: str | None = None,
+          tcp: str | None = "connected") -> _Conn:
+    return _Conn(SshResult(False, None, "", "", failure, detail, fingerprint, host_key, address,
+                           tcp))
 
 
 def _load_keys(opts: SshOptions | None) -> tuple[list[paramiko.PKey], list[str]]:
@@ -275,7 +283,7 @@ _ALGOS_FOR_TYPE = {"ssh-rsa": ("rsa-sha2-512", "rsa-sha2-256", "ssh-rsa")}
 
 
 def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
-                      holder: _Holder) -> _Conn:
+                      holder: _Holder, tcp_deadline: float | None = None) -> _Conn:
     import paramiko
 
     name, port, user = peer.name, int(peer.ssh_port or 22), peer.ssh_user
@@ -284,25 +292,33 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
         return max(deadline - time.monotonic(), 0.05)
 
     if not user:
-        return _fail("no_user", f"no SSH user is set for {name} in the settings")
+        return _fail("no_user", f"no SSH user is set for {name} in the settings", tcp=None)
     try:
         addrs = _getaddrinfo_v4(name, port)
     except OSError as exc:
-        return _fail("resolve", f"{name} does not resolve here ({getattr(exc, 'strerror', None) or exc})")
+        return _fail("resolve", f"{name} does not resolve here "
+                                f"({getattr(exc, 'strerror', None) or exc})", tcp=None)
     if not addrs:
-        return _fail("resolve", f"{name} has no IPv4 address here")
+        return _fail("resolve", f"{name} has no IPv4 address here", tcp=None)
     addr = addrs[0]
+    tcp_left = left() if tcp_deadline is None else \
+        max(min(tcp_deadline, deadline) - time.monotonic(), 0.05)
     try:
-        sock = socket.create_connection((addr, port), timeout=left())
+        sock = socket.create_connection((addr, port), timeout=tcp_left)
     except TimeoutError:
-        return _fail("network", f"no answer from {name} ({addr}) on TCP {port} within the timeout "
-                                "(no route, a firewall, or no port forwarding)", address=addr)
+        return _fail("network", f"no answer from {name} ({addr}) on TCP {port} within "
+                                f"{tcp_left:.1f} s: the packets are dropped (no port forwarding, "
+                                "a firewall, or nobody at that address)", address=addr,
+                     tcp="timeout")
     except OSError as exc:
-        why = {errno.ECONNREFUSED: "connection refused: nothing listens there (sshd not running, "
-                                   "or the modem does not forward the port)",
+        why = {errno.ECONNREFUSED: f"connection refused: something at {addr} answers and "
+                                   f"rejects port {port} (sshd does not listen on it - it may "
+                                   "listen on another port, see ssh_port - or the modem does "
+                                   "not forward it)",
                errno.EHOSTUNREACH: "no route to the host",
                errno.ENETUNREACH: "the network is unreachable"}.get(exc.errno or 0, str(exc))
-        return _fail("network", f"cannot reach {name} ({addr}) on TCP {port}: {why}", address=addr)
+        return _fail("network", f"cannot reach {name} ({addr}) on TCP {port}: {why}", address=addr,
+                     tcp=tcp_failure_kind(exc))
     holder.sock = sock
     if holder.cancelled:
         sock.close()
@@ -384,7 +400,7 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
         if t.is_authenticated():
             return _Conn(SshResult(True, None, "", "", None,
                                    f"logged in to {name} ({addr}) as {user} with a key",
-                                   fp, key_text, addr), t)
+                                   fp, key_text, addr, "connected"), t)
     t.close()
     if holder.cancelled or time.monotonic() >= deadline:
         return _fail("timeout", f"no login to {name} within the timeout", fingerprint=fp,
@@ -394,15 +410,19 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
                  fingerprint=fp, host_key=key_text, address=addr)
 
 
-async def _connect(opts: SshOptions | None, peer: Peer, timeout: float) -> _Conn:
+async def _connect(opts: SshOptions | None, peer: Peer, timeout: float,
+                   tcp_timeout: float | None = None) -> _Conn:
     holder = _Holder()
-    deadline = time.monotonic() + timeout
+    now = time.monotonic()
+    deadline = now + timeout
+    tcp_deadline = None if tcp_timeout is None else now + min(tcp_timeout, timeout)
     try:
-        return await run_blocking(_connect_blocking, opts, peer, deadline, holder,
+        return await run_blocking(_connect_blocking, opts, peer, deadline, holder, tcp_deadline,
                                   timeout=timeout + 0.5)
     except asyncio.TimeoutError:
         holder.close()
-        return _fail("timeout", f"no SSH connection to {peer.name} within {timeout:.1f} s")
+        return _fail("timeout", f"no SSH connection to {peer.name} within {timeout:.1f} s",
+                     tcp=None if holder.sock is None else "connected")
     except Exception as exc:  # noqa: BLE001 - a failure is a result, never an exception
         holder.close()
         return _fail("sshd", f"the SSH connection to {peer.name} broke: "
@@ -420,11 +440,11 @@ class SshSession:
     no-ops. Reads never block the event loop: the channel is polled.
     """
 
-    def __init__(self, peer: Peer, conn: _Conn, timeout: float) -> None:
-
+    def __init__(self, peer: Peer, conn: _Conn, timeout: float, *, shared: bool = False) -> None:
         self.peer = peer
         self.result = conn.result
         self.timeout = timeout
+        self._shared = shared          # the connection belongs to a pool: close only our channel
         self._transport = conn.transport
         self._chan: paramiko.Channel | None = None
         self._out = bytearray()
@@ -518,30 +538,36 @@ class SshSession:
             if time.monotonic() > deadline:
                 return SshResult(False, None, self.stdout, self.stderr, "timeout",
                                  f"the command on {self.peer.name} did not finish in time",
-                                 self.result.fingerprint, self.result.host_key, self.result.address)
+                                 self.result.fingerprint, self.result.host_key, self.result.address,
+                                 self.result.tcp)
             await asyncio.sleep(_POLL_S)
         status = self._chan.recv_exit_status() if self._chan.exit_status_ready() else None
         detail = (f"ran on {self.peer.name} as {self.peer.ssh_user}, exit status {status}"
                   if status is not None else f"the session with {self.peer.name} closed")
         return SshResult(status is not None, status, self.stdout, self.stderr,
                          None if status is not None else "sshd", detail,
-                         self.result.fingerprint, self.result.host_key, self.result.address)
+                         self.result.fingerprint, self.result.host_key, self.result.address,
+                         self.result.tcp)
 
     def close(self) -> None:
         if self._chan is not None:
             with contextlib.suppress(Exception):
                 self._chan.close()
-        if self._transport is not None:
+        if self._transport is not None and not self._shared:
             with contextlib.suppress(Exception):
                 self._transport.close()
 
 
 @contextlib.asynccontextmanager
 async def ssh_session(opts: SshOptions | None, peer: Peer, command: str, *,
-                      timeout: float | None = None) -> AsyncIterator[SshSession]:
+                      timeout: float | None = None,
+                      tcp_timeout: float | None = None) -> AsyncIterator[SshSession]:
     """Start *command* on *peer* and keep it running for the ``async with`` body.
 
-    ``timeout`` bounds the connection (and is the default for reads/waits). On leaving the block
+    ``timeout`` bounds the connection (and is the default for reads/waits); ``tcp_timeout``
+    bounds its first part, the TCP connection (an unreachable peer is told by then: only a peer
+    that answered may use the rest of ``timeout`` for the SSH handshake). With a pool in *opts*
+    the session opens a channel on the round's connection to *peer*. On leaving the block
     the channel and connection are closed; the remote command must bound itself (sshd does not
     kill a command without a terminal when the channel closes). Usage::
 
@@ -552,18 +578,11 @@ async def ssh_session(opts: SshOptions | None, peer: Peer, command: str, *,
             ...                            # act locally while the peer listens
             res = await s.wait(5)
     """
+    from rosnet_tui.core.ssh_pool import open_session
+
     t = float(timeout if timeout is not None else (getattr(opts, "timeout_s", 3.0) or 3.0))
-    conn = await _connect(opts, peer, t)
-    session = SshSession(peer, conn, t)
+    session = await open_session(opts, peer, command, t, tcp_timeout)
     try:
-        if conn.transport is not None:
-            try:
-                session._start(command)
-            except Exception as exc:  # noqa: BLE001
-                session.result = SshResult(False, None, "", "", "sshd",
-                                           f"{peer.name} did not run the command: {exc}",
-                                           conn.result.fingerprint, conn.result.host_key,
-                                           conn.result.address)
         yield session
     finally:
         session.close()
@@ -571,16 +590,18 @@ async def ssh_session(opts: SshOptions | None, peer: Peer, command: str, *,
 
 async def ssh_run(opts: SshOptions | None, peer: Peer, command: str, *,
                   stdin: bytes | str | None = None, timeout: float | None = None,
-                  connect_timeout: float | None = None) -> SshResult:
+                  connect_timeout: float | None = None,
+                  tcp_timeout: float | None = None) -> SshResult:
     """Run *command* on *peer* (by name, as ``peer.ssh_user``) within *timeout* seconds overall.
 
     *connect_timeout* (default: *timeout*) bounds reaching and logging in to the peer, so a
-    caller can keep time for something else when the peer is unreachable.
+    caller can keep time for something else when the peer is unreachable; *tcp_timeout* bounds
+    the TCP connection within it (see :func:`ssh_session`).
     """
     t = float(timeout if timeout is not None else (getattr(opts, "timeout_s", 3.0) or 3.0))
     deadline = time.monotonic() + t
     ct = min(float(connect_timeout), t) if connect_timeout is not None else t
-    async with ssh_session(opts, peer, command, timeout=ct) as s:
+    async with ssh_session(opts, peer, command, timeout=ct, tcp_timeout=tcp_timeout) as s:
         if not s.ok:
             return s.result
         if stdin:

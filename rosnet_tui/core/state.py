@@ -2,7 +2,8 @@
 
 Plain JSON files, written atomically (temp file + rename) under an advisory lock, so two
 ``rosnet-tui`` processes never leave a half-written file. Today: the history of this component's
-public IP, which tells the user whether their address is fixed or changes.
+public IP, which tells the user whether their address is fixed or changes, and of its local IP
+(a new DHCP lease leaves the modem's forwarding pointing at the old one).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from typing import Any
 from rosnet_tui.core.settings import atomic_write_text
 
 PUBLIC_IP_FILE = "public_ip.json"
+LOCAL_IP_FILE = "local_ip.json"
 MAX_HISTORY = 100
 
 
@@ -94,8 +96,18 @@ def public_ip_history(state_dir: Path) -> list[dict[str, str]]:
 
 def record_public_ip(state_dir: Path, ip: str, *, when: str | None = None) -> PublicIpRecord:
     """Add *ip* to the history (a new entry when it differs from the last one seen)."""
+    return _record(state_dir, PUBLIC_IP_FILE, ip, when)
+
+
+def record_local_ip(state_dir: Path, ip: str, *, when: str | None = None) -> PublicIpRecord:
+    """Add this component's local IP to its own history (as :func:`record_public_ip` does):
+    a changed local IP is the classic reason a modem's forwarding stops working."""
+    return _record(state_dir, LOCAL_IP_FILE, ip, when)
+
+
+def _record(state_dir: Path, name: str, ip: str, when: str | None) -> PublicIpRecord:
     when = when or now_iso()
-    path = state_dir / PUBLIC_IP_FILE
+    path = state_dir / name
     with locked(state_dir):
         data = read_json(path)
         history = _clean_history(data.get("history") if isinstance(data, dict) else None)

@@ -12,6 +12,7 @@ import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from rosnet_tui.core.checks import data as data_decl
 from rosnet_tui.core.listener import ListenerPool
@@ -42,13 +43,17 @@ class CheckContext:
     # Our own test-port listeners, shared by the checks of a round (router.*, linux.chat_in);
     # each is bound only while a check holds it.
     listeners: ListenerPool = field(default_factory=ListenerPool)
+    # One SSH connection per peer for the round (an SshPool; None: one per session). The runner
+    # gives every round one; run_checks closes it when the round ends.
+    ssh_pool: Any = None
 
     @property
     def ssh(self) -> SshOptions:
-        """The SSH options with this round's timeout."""
-        if self.ssh_options.timeout_s == self.timeout_s:
-            return self.ssh_options
-        return replace(self.ssh_options, timeout_s=self.timeout_s)
+        """The SSH options with this round's timeout (and its shared connections)."""
+        o = self.ssh_options
+        if o.timeout_s == self.timeout_s and o.pool is self.ssh_pool:
+            return o
+        return replace(o, timeout_s=self.timeout_s, pool=self.ssh_pool)
 
 
 CheckFunc = Callable[[CheckContext], Awaitable[Outcome]]
@@ -135,3 +140,6 @@ async def run_checks(specs: Iterable[CheckSpec], ctx: CheckContext) -> AsyncIter
         for t in tasks:
             t.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
+        if ctx.ssh_pool is not None:       # the round's shared SSH connections end with it
+            ctx.ssh_pool.close()
+            ctx.ssh_pool = type(ctx.ssh_pool)()

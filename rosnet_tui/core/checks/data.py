@@ -34,6 +34,13 @@ def strict() -> bool:
 # key is its documentation; README.md's table of the checks lists the top-level keys.
 # Values are JSON: str, int, bool, None, lists and dicts (dict keys are strings).
 
+# How a TCP connection attempt went (rosnet_tui/core/connect.py): "connected"; "refused" (something
+# at the address answered with a reset: online, rejecting the port); "timeout" (nothing answered:
+# dropped); "unreachable" (an ICMP error: no route, or no machine where a modem forwards to);
+# "error" (anything else).
+TcpKind = Literal["connected", "refused", "timeout", "unreachable", "error"]
+
+
 # ---- step 1, ISP (rosnet_tui/core/checks/isp.py)
 class EndpointData(TypedDict, total=False):
     dns_ok: bool | None   # the endpoint's host name resolved (None: an IP address, not asked)
@@ -82,6 +89,9 @@ class RouterLocalIpData(TypedDict, total=False):
     gateway: str      # the default gateway through that interface ("" when none)
     expected_ip: str  # this.local_ip from the settings: where the modem forwards to ("" if unset)
     differs: bool     # expected_ip is set and is not local_ip
+    previous_ip: str | None  # the local IP recorded on the run before (None: none yet)
+    changed: bool     # the local IP differs from the one recorded on the run before
+    history: list[PublicIpSeen]  # the local IPs recorded so far, oldest first
 
 
 class RouterPortFreeData(TypedDict, total=False):
@@ -96,11 +106,19 @@ class RouterListenerData(TypedDict, total=False):
     listening: bool   # our listener answered on it
 
 
+# How a port answered the peer's test: "token" (our listener, its token read), "other" (accepted,
+# but another program answered: forwarded elsewhere), or how the connection failed ("refused",
+# "timeout", "unreachable", "error"; see TcpKind).
+PortAnswer = Literal["token", "other", "refused", "timeout", "unreachable", "error"]
+
+
 class PortRow(TypedDict, total=False):
     port: int               # a TCP port tested from outside
     reachable: bool | None  # open from outside (None: could not be tested)
     listener: bool          # our own listener held it during the test (True for others' services)
     via: str                # who tested: "peer:<name>" over SSH, or "echoip" (the port checker)
+    answer: PortAnswer | None  # how it answered the peer (None: the port checker tells only
+    #                            open or closed; see PortAnswer)
 
 
 class RouterPortOpenData(TypedDict, total=False):
@@ -108,6 +126,7 @@ class RouterPortOpenData(TypedDict, total=False):
     test_port: int          # the test port (probe.port)
     test_port_open: bool | None  # the test port is open from outside (None: could not be tested)
     public_ip: str | None   # the address tested (None: unknown)
+    public_ip_ping: bool | None  # the peer's ping of public_ip was answered (None: not asked)
 
 
 # ---- step 3, Linux (rosnet_tui/core/checks/linux.py)
@@ -138,6 +157,8 @@ class LinuxResolveData(TypedDict, total=False):
 class PingPeer(TypedDict, total=False):
     icmp: bool | None   # answered ping by name (None: ping could not run here)
     tcp22: bool         # accepted a TCP connection on its SSH port (the fallback when ICMP is filtered)
+    tcp: TcpKind | Literal["resolve"]  # how that TCP connection went ("resolve": no address)
+    port: int           # the SSH port tried (ssh_port of the peer)
 
 
 class LinuxPingData(TypedDict, total=False):
@@ -152,6 +173,8 @@ class SshPeer(TypedDict, total=False):
     host_key: str | None    # "<type> <base64>" of that key (for trusting it after a comparison)
     address: str | None     # the address the peer's name resolved to here
     detail: str             # what happened, in words
+    tcp: TcpKind | None     # how the TCP connection to its SSH port went (None: not tried)
+    port: int               # the SSH port tried (ssh_port of the peer)
 
 
 class LinuxSshData(TypedDict, total=False):
@@ -162,6 +185,7 @@ class ChatPeer(TypedDict, total=False):
     ok: bool             # the message went both ways
     failure: str | None  # where it broke: no_user, ssh:<SSH failure>, resolve, peer_resolve,
     #                      connect, peer_listen, local_listen, wrong_peer, no_message
+    tcp: TcpKind         # how the chat's own TCP connection went (absent: it was not tried)
 
 
 class LinuxChatData(TypedDict, total=False):
@@ -183,6 +207,7 @@ class RosMasterData(TypedDict, total=False):
     reachable: bool          # the master answered getSystemState
     topics: list[list[str]]  # [name, type] of each topic (the probes of rosnet-tui left out)
     nodes: list[str]         # the nodes the master knows (the probes of rosnet-tui left out)
+    tcp: TcpKind             # how the connection to the master went (absent: not tried)
 
 
 UnreachableNode = TypedDict("UnreachableNode", {

@@ -11,6 +11,7 @@ import contextlib
 import re
 import secrets
 import shutil
+import socket
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -18,6 +19,7 @@ from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import budget, python_command, shq, ssh_peers
+from rosnet_tui.core.connect import kind_from_text, tcp_failure_kind
 from rosnet_tui.core.hosts import HostsEntry, hosts_entries
 from rosnet_tui.core.listener import ECHO, GREETING
 from rosnet_tui.core.procedure import is_ip, is_loopback
@@ -185,16 +187,21 @@ async def ping_name(name: str, timeout: float) -> tuple[bool | None, str]:
     return None, f"ping {name}: {last or f'exit status {code}'}"
 
 
-async def tcp_connect(host: str, port: int, timeout: float) -> tuple[bool, str]:
+async def tcp_connect(host: str, port: int, timeout: float) -> tuple[str, str]:
+    """(kind, what was seen) of a TCP connection to *host*:*port*; kind as in core.connect."""
     writer = None
     try:
         _r, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
         peer = writer.get_extra_info("peername")
-        return True, f"TCP {host}:{port} ({peer[0] if peer else '?'}): connected"
+        return "connected", f"TCP {host}:{port} ({peer[0] if peer else '?'}): connected"
     except asyncio.TimeoutError:
-        return False, f"TCP {host}:{port}: no answer within {timeout:.1f} s"
+        return "timeout", f"TCP {host}:{port}: no answer within {timeout:.1f} s (dropped)"
     except OSError as exc:
-        return False, f"TCP {host}:{port}: {exc.strerror or exc}"
+        kind = tcp_failure_kind(exc)
+        if isinstance(exc, socket.gaierror):
+            kind = "resolve"
+        return kind, f"TCP {host}:{port}: {exc.strerror or exc}" + (
+            " (something there answers and rejects the port)" if kind == "refused" else "")
     finally:
         if writer is not None:
             writer.close()
@@ -210,18 +217,20 @@ async def check_ping(ctx: CheckContext) -> Outcome:
         return Outcome(Status.SKIP, "no peers in the settings", data=data)
     t = budget(ctx, "linux.ping") * 0.8
 
-    async def one(p: Peer) -> tuple[bool | None, bool | None, list[str]]:
-        (icmp, line), (tcp, tline) = await asyncio.gather(ping_name(p.name, t),
-                                                          tcp_connect(p.name, p.ssh_port or 22, t))
-        return icmp, tcp, [line, tline]
+    async def one(p: Peer) -> tuple[bool | None, str, list[str]]:
+        (icmp, line), (kind, tline) = await asyncio.gather(
+            ping_name(p.name, t), tcp_connect(p.name, p.ssh_port or 22, min(t, ctx.timeout_s)))
+        return icmp, kind, [line, tline]
 
     got = await asyncio.gather(*(one(p) for p in peers))
     evidence: list[str] = []
     ok: list[str] = []
     tcp_only: list[str] = []
     down: list[str] = []
-    for p, (icmp, tcp, lines) in zip(peers, got, strict=True):
-        data["peers"][p.name] = {"icmp": icmp, "tcp22": tcp}
+    for p, (icmp, kind, lines) in zip(peers, got, strict=True):
+        tcp = kind == "connected"
+        data["peers"][p.name] = {"icmp": icmp, "tcp22": tcp, "tcp": kind,
+                                 "port": p.ssh_port or 22}
         evidence.extend(lines)
         (ok if icmp else tcp_only if tcp else down).append(p.name)
     if down:
@@ -251,7 +260,9 @@ async def check_ssh(ctx: CheckContext) -> Outcome:
     if not peers:
         return Outcome(Status.SKIP, _NO_SSH, data=data)
     t = budget(ctx, "linux.ssh") * 0.85
-    results = await asyncio.gather(*(ssh_run(ctx.ssh, p, "echo rosnet-tui-ssh-ok; hostname", timeout=t)
+    # The TCP connection is bounded by the round's timeout: an unreachable peer is told by then.
+    results = await asyncio.gather(*(ssh_run(ctx.ssh, p, "echo rosnet-tui-ssh-ok; hostname",
+                                             timeout=t, tcp_timeout=ctx.timeout_s)
                                      for p in peers))
     evidence: list[str] = []
     good: list[str] = []
@@ -263,7 +274,7 @@ async def check_ssh(ctx: CheckContext) -> Outcome:
             failure = "sshd"
         data["peers"][p.name] = {"ok": ran, "failure": failure, "fingerprint": r.fingerprint,
                                  "host_key": r.host_key, "address": r.address,
-                                 "detail": r.detail}
+                                 "detail": r.detail, "tcp": r.tcp, "port": p.ssh_port or 22}
         where = f"{p.ssh_user}@{p.name}" + (f":{p.ssh_port}" if p.ssh_port != 22 else "")
         if ran:
             host = r.stdout.replace("rosnet-tui-ssh-ok", "").strip()
@@ -273,12 +284,18 @@ async def check_ssh(ctx: CheckContext) -> Outcome:
         else:
             evidence.append(f"ssh {where}: {failure}: {r.detail}"
                             + (f" [{r.stderr.strip()[:120]}]" if r.stderr.strip() else ""))
-            bad.append((p.name, failure))
+            bad.append((p.name, f"refused:{p.ssh_port or 22}" if r.tcp == "refused"
+                        else failure))
     if bad:
         words = {"network": "not reachable", "resolve": "name does not resolve",
                  "host_key_unknown": "host key not yet trusted (compare the fingerprint)",
                  "host_key_changed": "HOST KEY CHANGED, refused", "auth": "key login refused",
                  "sshd": "sshd problem", "timeout": "timed out"}
+        for _, f in bad:
+            if f and f.startswith("refused:"):
+                words[f] = (f"port {f[8:]} refused: sshd does not listen there (it may listen "
+                            "on another port: ssh_port under its [[peer]]), or its modem "
+                            f"rejects {f[8:]}")
         return Outcome(Status.FAIL, "; ".join(f"{n}: {words.get(f or '', f)}" for n, f in bad),
                        evidence, data)
     return Outcome(Status.PASS, f"SSH works to {', '.join(good)} (host key verified, key login)",
@@ -384,7 +401,7 @@ def connect_command(name: str, port: int, token: str, t: float) -> str:
 
 async def _chat_per_peer(ctx: CheckContext, check_id: str,
                          one: Callable[[Peer, float], Awaitable[tuple[bool, str | None, list[str]]]],
-                         what: str) -> Outcome:
+                         what: str, kinds: dict[str, str] | None = None) -> Outcome:
     data: dict[str, Any] = {"peers": {}}
     peers = ssh_peers(ctx.settings)
     for p in ctx.settings.peers:
@@ -399,6 +416,8 @@ async def _chat_per_peer(ctx: CheckContext, check_id: str,
     bad: list[str] = []
     for p, (ok, failure, lines) in zip(peers, got, strict=True):
         data["peers"][p.name] = {"ok": ok, "failure": failure}
+        if kinds and p.name in kinds:
+            data["peers"][p.name]["tcp"] = kinds[p.name]
         evidence.extend(lines)
         (good if ok else bad).append(f"{p.name}" if ok else f"{p.name} ({failure})")
     if bad:
@@ -414,6 +433,7 @@ def _ssh_failure(res: SshResult, peer: Peer) -> tuple[bool, str, list[str]]:
 @check("linux.chat_out", "linux", "Chat by name: we connect to the peer", 3.0)
 async def check_chat_out(ctx: CheckContext) -> Outcome:
     me = ctx.settings.this.name or "this component"
+    kinds: dict[str, str] = {}      # how our TCP connection to each peer's listener went
 
     async def one(peer: Peer, total: float) -> tuple[bool, str | None, list[str]]:
         start = time.monotonic()
@@ -426,7 +446,7 @@ async def check_chat_out(ctx: CheckContext) -> Outcome:
         port = ctx.settings.probe.port
         ev: list[str] = []
         async with ssh_session(ctx.ssh, peer, listen_command(port, peer_token, total * 0.6),
-                               timeout=total * 0.45) as sess:
+                               timeout=total * 0.45, tcp_timeout=ctx.timeout_s) as sess:
             if not sess.ok:
                 return _ssh_failure(sess.result, peer)
             out = await sess.read_until("LISTENING", left() * 0.6)
@@ -448,9 +468,12 @@ async def check_chat_out(ctx: CheckContext) -> Outcome:
             for _ in range(8 if use_nc else 1):
                 try:
                     reader, writer = await asyncio.wait_for(
-                        asyncio.open_connection(addrs[0], rport), left() * 0.5)
+                        asyncio.open_connection(addrs[0], rport),
+                        min(left() * 0.5, ctx.timeout_s))
+                    kinds[peer.name] = "connected"
                     break
                 except (OSError, asyncio.TimeoutError) as exc:
+                    kinds[peer.name] = tcp_failure_kind(exc)
                     connect_err = str(exc) or "no answer (timed out)"
                     if not use_nc:
                         break
@@ -489,7 +512,7 @@ async def check_chat_out(ctx: CheckContext) -> Outcome:
                   + (f" from {src}" if src else ""))
         return True, None, ev
 
-    return await _chat_per_peer(ctx, "linux.chat_out", one, f"chat from {me} to the peer")
+    return await _chat_per_peer(ctx, "linux.chat_out", one, f"chat from {me} to the peer", kinds)
 
 
 @check("linux.chat_in", "linux", "Chat by name: the peer connects to us", 3.0)
@@ -498,6 +521,7 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
     if not me:
         return Outcome(Status.SKIP, "this component has no name in the settings yet",
                        data={"peers": {}})
+    kinds: dict[str, str] = {}      # how the peer's TCP connection to our listener went
 
     async def one(peer: Peer, total: float) -> tuple[bool, str | None, list[str]]:
         start = time.monotonic()
@@ -512,8 +536,10 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
                                                f"{exc.strerror or exc} (see router.port_free)"]
             ev.append(f"we listen on TCP {port}")
             left = max(total - (time.monotonic() - start), 0.5)
-            res = await ssh_run(ctx.ssh, peer, connect_command(me, port, token, left * 0.45),
-                                timeout=left * 0.95, connect_timeout=left * 0.45)
+            res = await ssh_run(ctx.ssh, peer,
+                                connect_command(me, port, token, min(left * 0.45, ctx.timeout_s)),
+                                timeout=left * 0.95, connect_timeout=left * 0.45,
+                                tcp_timeout=ctx.timeout_s)
             if not res.ok and res.failure != "timeout" and not res.stdout:
                 return _ssh_failure(res, peer)
             seen = await lst.wait_for_line(token, 0.3)
@@ -525,6 +551,10 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
         for ln in out.splitlines():
             if ln.startswith(("RESOLVE-ERROR", "CONNECT-ERROR", "ERROR")):
                 ev.append(f"on {peer.name}: {ln}")
+            if ln.startswith("CONNECT-ERROR"):
+                kinds[peer.name] = kind_from_text(ln)
+            elif ln.startswith("HELLO ") or ln.startswith(GREETING):
+                kinds[peer.name] = "connected"
         if resolved is not None and not resolved.strip():
             resolved = None
         if resolved is None:
@@ -546,4 +576,4 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
                   + (f"; {peer.name} got our reply" if ECHO in echo else ""))
         return True, None, ev
 
-    return await _chat_per_peer(ctx, "linux.chat_in", one, f"chat from the peer to {me}")
+    return await _chat_per_peer(ctx, "linux.chat_in", one, f"chat from the peer to {me}", kinds)

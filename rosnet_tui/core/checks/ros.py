@@ -221,11 +221,14 @@ async def check_master(ctx: CheckContext) -> Outcome:
     try:
         state = await run_blocking(client.get_system_state, timeout=call_t + 0.1)
     except asyncio.TimeoutError:
+        data["tcp"] = "timeout"
         return Outcome(Status.FAIL, f"the master at {uri} ({ip}) gave no answer within "
                                     f"{call_t:.1f} s (timed out)",
                        evidence + [f"getSystemState sent to {ip}:{port}: no answer"], data)
     except Exception as exc:
         kind, words = rosproto.describe_error(exc, call_t)
+        data["tcp"] = kind if kind in ("refused", "timeout", "unreachable") else \
+            "connected" if kind in ("http", "fault", "protocol", "master", "reset") else "error"
         hint = {"refused": f": is roscore running on {host}, and is port {port} forwarded?",
                 "timeout": ": no reply (a firewall, no forwarding, or the wrong address)",
                 "unreachable": ": no route to that address"}.get(kind, "")
@@ -244,7 +247,7 @@ async def check_master(ctx: CheckContext) -> Outcome:
     ours = rosproto.PROBE_PREFIX
     topics = [[t, types.get(t, "?")] for t in state.topics if not t.startswith(ours)]
     nodes = [n for n in state.nodes if not n.startswith(ours)]
-    data.update(reachable=True, topics=topics, nodes=nodes)
+    data.update(reachable=True, topics=topics, nodes=nodes, tcp="connected")
     evidence.append(f"getSystemState answered in {took:.2f} s")
     hidden = len(state.nodes) - len(nodes)
     if hidden:
@@ -322,7 +325,8 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
     cmd = python_stdin_command("nodes", "--master", uri, "--timeout", f"{remote_t:.1f}", *include)
     ssh_t = max(0.5, deadline - time.monotonic())
     remote_tasks = [asyncio.ensure_future(ssh_run(ctx.ssh, p, cmd, stdin=ROSPROTO_SOURCE,
-                                                  timeout=ssh_t)) for p in peers]
+                                                  timeout=ssh_t, tcp_timeout=ctx.timeout_s))
+                    for p in peers]
     try:
         try:
             local: Any = await run_blocking(_local_nodes, uri, local_t,
@@ -453,7 +457,8 @@ async def _pubsub_out_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
             cmd = python_stdin_command("sub", "--master", uri, "--topic", topic, "--timeout",
                              f"{remote_t:.1f}")
             res = await ssh_run(ctx.ssh, peer, cmd, stdin=ROSPROTO_SOURCE,
-                                timeout=max(0.5, deadline - time.monotonic()))
+                                timeout=max(0.5, deadline - time.monotonic()),
+                                tcp_timeout=ctx.timeout_s)
     finally:
         local = await run_blocking(pub.stop, timeout=2.0)
     evidence.extend(local.evidence("here (publisher)"))
@@ -492,7 +497,8 @@ async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
     cmd = python_stdin_command("pub", "--master", uri, "--topic", topic, "--timeout", f"{remote_t:.1f}")
     evidence: list[str] = []
     local: rosproto.ProbeReport | None = None
-    async with ssh_session(ctx.ssh, peer, cmd, timeout=max(0.5, budget * 0.4)) as s:
+    async with ssh_session(ctx.ssh, peer, cmd, timeout=max(0.5, budget * 0.4),
+                           tcp_timeout=ctx.timeout_s) as s:
         if not s.ok:
             return (Status.SKIP, f"skipped: could not run the publisher on {peer.name}: "
                                  f"SSH failed ({s.result.failure}): {s.result.detail}",

@@ -27,11 +27,13 @@ from rosnet_tui.core.checks.probes import (
     round_public_ip,
     ssh_peers,
 )
+from rosnet_tui.core.connect import kind_from_text
 from rosnet_tui.core.listener import GREETING, TestListener
 from rosnet_tui.core.netinfo import detect_local_net, interface_ipv4
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Peer
 from rosnet_tui.core.ssh import run_blocking, ssh_run
+from rosnet_tui.core.state import record_local_ip
 
 
 # --------------------------------------------------------------------------- router.local_ip
@@ -56,8 +58,18 @@ async def check_local_ip(ctx: CheckContext) -> Outcome:
     addrs_here = {a.address for addrs in psutil.net_if_addrs().values() for a in addrs
                   if a.family == socket.AF_INET}
     differs = bool(expected) and expected != local_ip
-    data = {"local_ip": local_ip if up else "", "interface": interface, "gateway": gateway,
-            "expected_ip": expected, "differs": differs}
+    data: dict[str, Any] = {"local_ip": local_ip if up else "", "interface": interface,
+                            "gateway": gateway, "expected_ip": expected, "differs": differs}
+    if up and local_ip:
+        try:
+            rec = record_local_ip(ctx.state_dir, local_ip)
+            data.update(previous_ip=rec.previous_ip, changed=rec.changed, history=rec.history)
+            if rec.changed:
+                evidence.append(f"the local IP was {rec.previous_ip} on the last run: a modem "
+                                f"that forwards to {rec.previous_ip} no longer reaches this machine")
+        except OSError as exc:   # an unwritable state folder must not hide the address
+            evidence.append(f"could not record the local IP in {ctx.state_dir}: "
+                            f"{exc.strerror or exc}")
     if not interface:
         return Outcome(Status.FAIL, "no network interface with an IPv4 address: this machine is not "
                                     "on a network", evidence, data)
@@ -69,6 +81,12 @@ async def check_local_ip(ctx: CheckContext) -> Outcome:
                        evidence, data)
     if not local_ip:
         return Outcome(Status.FAIL, f"{interface} has no IPv4 address (no DHCP lease?)",
+                       evidence, data)
+    if data.get("changed") and not differs:
+        return Outcome(Status.WARN, f"local IP is {local_ip} on {interface}, but it was "
+                                    f"{data['previous_ip']} on the last run (a new DHCP lease): "
+                                    "forwarding set up for the old address points nowhere; "
+                                    "reserve the address in the modem or update the forwarding",
                        evidence, data)
     if differs:
         also = " (it is on another interface here)" if expected in addrs_here else ""
@@ -160,7 +178,12 @@ async def check_listener(ctx: CheckContext) -> Outcome:
         async with ctx.listeners.hold(port) as lst:
             evidence = [f"listening on 0.0.0.0:{port} (like nc -l {port})"]
             targets = ["127.0.0.1"]
-            local = ctx.settings.this.local_ip
+            local = await run_blocking(_address_here, ctx.settings.this.interface,
+                                       ctx.settings.this.local_ip, timeout=t)
+            stale = ctx.settings.this.local_ip
+            if stale and stale != local:
+                evidence.append(f"the settings' local IP {stale} is not an address of this "
+                                "machine now (see router.local_ip): not tested")
             if local and local != "127.0.0.1":
                 targets.append(local)
             results = await asyncio.gather(*(_talk_to(ip, port, t) for ip in targets))
@@ -207,11 +230,24 @@ def probe(p):
         pass
     s.close()
     res[p] = ["open", b.decode("utf-8", "replace").strip()[:160]]
+def icmp():
+    import shutil, subprocess
+    exe = shutil.which("ping")
+    if exe:
+        try:
+            r = subprocess.run([exe, "-c", "1", "-W", str(max(1, int(t))), ip], timeout=t + 1,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            res["ping"] = r.returncode == 0
+        except Exception:
+            pass
 th = [threading.Thread(target=probe, args=(p,)) for p in ports]
+th.append(threading.Thread(target=icmp))
 for x in th:
     x.daemon = True; x.start()
 for x in th:
     x.join(t + 2)
+ping = res.pop("ping", None)
+print("PING " + json.dumps(ping))
 print("RESULT " + json.dumps(res))
 """
 
@@ -227,22 +263,31 @@ def _pick_random_ports(n: int, avoid: set[int]) -> list[int]:
 
 
 async def _probe_from_peer(ctx: CheckContext, peer: Peer, public_ip: str, ports: list[int],
-                           t_connect: float, total: float) -> tuple[dict[int, tuple[str, str]] | None, str]:
+                           t_connect: float, total: float, patience: float
+                           ) -> tuple[dict[int, tuple[str, str]] | None, bool | None, str]:
+    """The peer's view of *ports* at *public_ip*, whether it answers ping, and why not.
+
+    *patience* bounds the wait for the SSH connection: an unreachable peer leaves the rest of
+    the budget to the port checker.
+    """
     cmd = python_command(_PROBE_SCRIPT, public_ip, f"{t_connect:.2f}", ",".join(map(str, ports)))
-    res = await ssh_run(ctx.ssh, peer, cmd, timeout=total, connect_timeout=total * 0.45)
+    res = await ssh_run(ctx.ssh, peer, cmd, timeout=total, connect_timeout=min(patience, total),
+                        tcp_timeout=patience)
     if not res.ok:
-        return None, f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
+        return None, None, f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
+    ping = next((json.loads(ln[5:]) for ln in res.stdout.splitlines()
+                 if ln.startswith("PING ") and ln[5:].strip() in ("true", "false", "null")), None)
     for line in res.stdout.splitlines():
         if line.startswith("RESULT "):
             try:
                 raw = json.loads(line[7:])
-                return {int(k): (v[0], v[1]) for k, v in raw.items()}, ""
+                return {int(k): (v[0], v[1]) for k, v in raw.items()}, ping, ""
             except (ValueError, KeyError, IndexError, TypeError):
                 break
     why = (res.stderr.strip().splitlines() or ["no output"])[-1]
     if "python3" in res.stderr and ("not found" in res.stderr or "No such file" in res.stderr):
         why = "python3 is not installed there"
-    return None, f"the probe on {peer.name} did not run: {why}"
+    return None, ping, f"the probe on {peer.name} did not run: {why}"
 
 
 def _explain_connect_error(text: str) -> str:
@@ -275,9 +320,30 @@ async def _probe_echoip(ctx: CheckContext, port: int, timeout: float) -> tuple[b
                        + (f" (tested {ip})" if ip else ""))
 
 
+def _address_here(interface: str, wanted: str) -> str:
+    """*wanted* when this machine has it, else the address of *interface* (or the default
+    route's): the address our listener can really be reached on."""
+    here = {a.address for addrs in psutil.net_if_addrs().values() for a in addrs
+            if a.family == socket.AF_INET}
+    if wanted and wanted in here:
+        return wanted
+    if interface:
+        return interface_ipv4(interface)[0]
+    return detect_local_net().local_ip
+
+
+LAN_SKIP = ("on the {profile} LAN profile every component is on the same LAN, so nothing needs "
+            "forwarding, and a phone hotspot cannot forward at all; the Linux step tests the "
+            "LAN itself")
+
+
 @check("router.port_open", "router", "Ports are open from outside (port forwarding works)", 3.0)
 async def check_port_open(ctx: CheckContext) -> Outcome:
     s = ctx.settings
+    if s.this.profile != "remote":      # LAN profiles (office, portable): nothing to forward
+        return Outcome(Status.SKIP, "skipped: " + LAN_SKIP.format(profile=s.this.profile), [],
+                       {"ports": [], "test_port": s.probe.port, "test_port_open": None,
+                        "public_ip": None})
     total = budget(ctx, "router.port_open") * 0.9
     loop = asyncio.get_running_loop()
     start = loop.time()
@@ -308,10 +374,12 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
             if p not in services and await run_blocking(listening_locally, p, timeout=1.0):
                 services.append(p)
         ports = [test_port, *randoms, *services]
-        peer = next(iter(ssh_peers(s)), None) if s.this.profile == "remote" else None
+        peer = next(iter(ssh_peers(s)), None)
         via = "echoip"
         public_ip: str | None = None
         outcomes: dict[int, tuple[bool | None, str]] = {}
+        answers: dict[int, str | None] = {}     # how each port answered (peer test only)
+        ping: bool | None = None
         if peer is not None:
             public_ip = await fetch_public_ip(ctx, min(left() * 0.25, 3.0)) or s.this.public_ip or None
             if public_ip and s.this.public_ip and public_ip != s.this.public_ip:
@@ -319,9 +387,12 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
             if not public_ip:
                 evidence.append("the public IP is unknown, so the peer cannot be asked")
             else:
-                raw, why = await _probe_from_peer(ctx, peer, public_ip, ports,
-                                                  t_connect=min(max(left() * 0.35, 0.5), 3.0),
-                                                  total=left() * 0.9)
+                raw, ping, why = await _probe_from_peer(
+                    ctx, peer, public_ip, ports, t_connect=min(max(left() * 0.35, 0.5), 3.0),
+                    total=left() * 0.9, patience=max(ctx.timeout_s * 0.6, 0.3))
+                if ping is not None:
+                    evidence.append(f"{peer.name} -> ping {public_ip}: "
+                                    + ("reply (the address is online)" if ping else "no reply"))
                 if raw is None:
                     evidence.append(why + "; asking the port checker instead")
                 else:
@@ -329,6 +400,9 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
                     for p in ports:
                         state, text = raw.get(p, ("error", "no result"))
                         lst = ours.get(p)
+                        answers[p] = ("other" if lst is not None and lst.token not in text
+                                      else "token") if state == "open" else \
+                            "timeout" if state == "timeout" else kind_from_text(text)
                         if state == "open":
                             if lst is not None and lst.token not in text:
                                 outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: accepted, but "
@@ -362,11 +436,12 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
     for p in ports:
         reachable, line = outcomes[p]
         listener = ours.get(p) is not None if p in ours else True
-        rows.append({"port": p, "reachable": reachable, "listener": listener, "via": via})
+        rows.append({"port": p, "reachable": reachable, "listener": listener, "via": via,
+                     "answer": answers.get(p) if via != "echoip" else None})
         evidence.append(line)
     test_open = outcomes[test_port][0]
     data = {"ports": rows, "test_port": test_port, "test_port_open": test_open,
-            "public_ip": public_ip}
+            "public_ip": public_ip, "public_ip_ping": ping}
     exposed = [p for p in services if outcomes[p][0]]
     if exposed:
         evidence.append("open to the whole internet: " + ", ".join(

@@ -24,6 +24,7 @@ from rosnet_tui.core.checks import (
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings
 from rosnet_tui.core.ssh import SshOptions
+from rosnet_tui.core.ssh_pool import SshPool
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,7 @@ def make_context(settings: Settings, options: RunOptions | None = None) -> Check
     timeout = float(o.timeout_s if o.timeout_s is not None else settings.checks.timeout_s)
     kw: dict = {"settings": settings, "timeout_s": timeout,
                 "env": dict(os.environ if o.env is None else o.env),
-                "upnp": o.upnp, "ssh_options": o.ssh}
+                "upnp": o.upnp, "ssh_options": o.ssh, "ssh_pool": SshPool()}
     if o.hosts_path is not None:
         kw["hosts_path"] = o.hosts_path
     if o.bashrc_path is not None:
