@@ -193,20 +193,24 @@ def test_table1_listener_down_open_means_another_program():
     assert "nginx" in f.meaning and f.severity == "warn"
 
 
-def test_table1_listener_up_closed_three_causes_in_the_procedures_order():
+def test_table1_listener_up_closed_three_causes_the_connection_type_breaks_the_tie():
     r = t1(True, False)
     del r["isp.cgnat"], r["router.port_free"]          # no evidence at all
-    fs = run(r)
+    fs = run(r)                                        # sami: a home connection
     causes = [f for f in fs if f.rule.startswith(advisor.T1)]
-    assert ids(causes) == [f"{advisor.T1}.port_in_use", f"{advisor.T1}.isp",
-                           f"{advisor.T1}.forwarding"]
+    assert ids(causes) == [f"{advisor.T1}.forwarding", f"{advisor.T1}.isp",
+                           f"{advisor.T1}.port_in_use"]
     assert [f.order for f in causes] == [0, 1, 2]
     assert [f.goto_step for f in causes] == ["router", "isp", "router"]
     assert all(f.severity == "fail" for f in causes)
-    assert "another port between 1024 and 65000" in text(causes[0])
-    assert "forward TCP (and UDP if needed) 1024-65000 to 192.168.1.10" in text(causes[2])
+    assert "another port between 1024 and 65000" in text(causes[2])
+    assert "forward TCP (and UDP if needed) 1024-65000 to 192.168.1.10" in text(causes[0])
     # the first failure of the whole list is Table 1's first cause
     assert first_failure(fs) is causes[0]
+    # a carrier's line: the carrier first, when nothing else was seen
+    causes = [f for f in run(r, laptop_settings(connection="telecom"))
+              if f.rule.startswith(advisor.T1)]
+    assert ids(causes)[:2] == [f"{advisor.T1}.isp", f"{advisor.T1}.forwarding"]
 
 
 def test_table1_port_in_use_cause_names_the_process_and_comes_first():
@@ -245,11 +249,25 @@ def test_table1_cgnat_beats_a_changed_local_ip():
     assert first_failure(run(r)).rule == f"{advisor.T1}.isp"
 
 
-def test_table1_double_nat_makes_isp_first():
+def test_table1_double_nat_behind_our_own_router_puts_the_inner_router_first():
     r = t1(True, False)
-    put(r, "isp.cgnat", "warn", double_nat=True, wan_ip="192.168.0.2", method="upnp")
+    put(r, "isp.cgnat", "warn", double_nat=True, wan_ip="192.168.0.2", method="upnp",
+        hop="192.168.0.2")
+    fs = run(r)
+    f = first_failure(fs)
+    assert f.rule == f"{advisor.T1}.forwarding" and f.goto_step == "router"
+    assert "inner router (192.168.1.254" in f.actions[0] and "bridge" in f.actions[0]
+    assert "WAN address (192.168.0.2)" in f.actions[1]
+    second = [x for x in fs if x.rule.startswith(advisor.T1)][1]
+    assert second.rule == f"{advisor.T1}.isp" and "provider" in second.meaning
+
+
+def test_table1_private_nat_far_up_the_provider_puts_isp_first():
+    r = t1(True, False)
+    put(r, "isp.cgnat", "warn", double_nat=True, method="traceroute", hop="10.20.30.1",
+        hops=["192.168.1.254", "198.51.100.1", "10.20.30.1"])
     f = first_failure(run(r))
-    assert f.rule == f"{advisor.T1}.isp"
+    assert f.rule == f"{advisor.T1}.isp" and f.goto_step == "isp"
     assert "Double NAT" in f.meaning and "bridge mode" in text(f)
 
 
@@ -423,6 +441,23 @@ def _unreachable():
     return r, laptop_settings()
 
 
+def _ssh_refused():
+    r = healthy_laptop()
+    put(r, "linux.ping", "pass", peers={"turtlebot": {"icmp": True, "tcp22": False,
+                                                      "tcp": "refused", "port": 22}})
+    put(r, "linux.ssh", "fail", peers={"turtlebot": {"ok": False, "failure": "network",
+                                                     "fingerprint": None, "tcp": "refused",
+                                                     "port": 22}})
+    no_ssh(r, "network")
+    return r, laptop_settings()
+
+
+def _bashrc():
+    r = healthy_laptop()
+    put(r, "ros.env", "warn", bashrc_uri=None, uri_ok=True)
+    return r, laptop_settings()
+
+
 def no_ssh(r: dict[str, CheckResult], failure: str) -> None:
     """The chats, as the checks report them when SSH to the peer failed (or is not set up)."""
     f = "no_user" if failure == "no_user" else f"ssh:{failure}"
@@ -546,6 +581,7 @@ CASES: dict[str, Case] = {
     "linux.hosts.duplicates": _dupes,
     "linux.ping.icmp_filtered": _icmp_filtered,
     "linux.peer.unreachable": _unreachable,
+    "linux.ssh.refused": _ssh_refused,
     "linux.ssh.host_key_changed": _ssh("host_key_changed"),
     "linux.ssh.host_key_unknown": _ssh("host_key_unknown", "warn"),
     "linux.ssh.auth": _ssh("auth"),
@@ -556,6 +592,7 @@ CASES: dict[str, Case] = {
     "linux.chat.out_fails": _chat(False, True),
     "linux.chat.both_fail": _chat(False, False),
     "ros.env.master_uri": _master_uri,
+    "ros.env.bashrc": _bashrc,
     "ros.env.ros_ip": _ros_ip,
     "ros.master.unreachable": _master_down,
     "ros.master.peer_cannot_register": _peer_cannot_register,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from rosnet_tui.core.advisor.engine import CATCH_ALL_RULES, RULES
+from rosnet_tui.core.advisor.ranking import EVIDENCE
 from rosnet_tui.core.procedure import STEP_IDS, STEP_TITLES, step_number, step_title
 
 
@@ -44,13 +45,18 @@ def render_rules_markdown() -> str:
                      f"{_cell(step_title(r.goto_step))} |")
     lines += [
         "",
-        "When the listener is up and the checker says Closed, the three causes are listed in "
-        "the procedure's order - (a) port in use, (b) ISP or administrator, (c) modem "
-        "forwarding - unless the evidence says otherwise: carrier-grade or double NAT "
-        "(`isp.cgnat`) puts the ISP first, a local IP that differs from the forwarded one "
-        "(`router.local_ip`) or other ports that do get through put the forwarding first, a "
-        "process on the port puts (a) first; a free port, or a modem that holds the public "
-        "address itself, moves (a) or (b) down.",
+        "## How competing causes are ranked",
+        "",
+        "When a symptom has several possible causes - Table 1's listener up and Closed, a peer "
+        "that takes no connection (`linux.peer.unreachable`, `linux.ssh.refused`), a chat that "
+        "fails one way, a master that does not answer - the advisor lists every cause and puts "
+        "first the one the evidence supports most; `g` goes to the step of that first cause. "
+        "Each finding says what was observed (\"Seen: ...\", \"Less likely here: ...\"). "
+        "The evidence, strongest first:",
+        "",
+        "| Observed | Effect on the ranking |",
+        "|---|---|",
+        *[f"| {_cell(what)} | {_cell(effect)} |" for what, effect in EVIDENCE],
         "",
     ]
     for step in STEP_IDS:

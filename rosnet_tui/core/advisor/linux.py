@@ -13,7 +13,14 @@ from rosnet_tui.core.advisor.evidence import (
     linux_peers,
     peer_state,
 )
-from rosnet_tui.core.results import Status
+from rosnet_tui.core.advisor.ranking import (
+    Cause,
+    chat_causes,
+    peer_causes,
+    peer_check_ids,
+    peer_tcp,
+    ssh_refused_first,
+)
 from rosnet_tui.core.settings import PORT_MAX, PORT_MIN
 
 
@@ -173,6 +180,54 @@ def _icmp_filtered(ev: Evidence) -> list[Hit]:
     return hits
 
 
+def _peer_actions(ev: Evidence, name: str, causes: list[Cause], port: int) -> list[str]:
+    """One action per cause, in the evidence's order."""
+    local = ev.peer_local(name) or "its local IP"
+    pub = ev.peer_public(name) or "?"
+    ports = f"TCP {port} and {FORWARD_RANGE}" if port < PORT_MIN else f"TCP {FORWARD_RANGE}"
+    words = {
+        "forwarding": f"Check that {name}'s modem forwards {ports} to {local} (the Router step "
+                      f"on {name}: its port test must say Open)"
+                      + (f"; port {port} is outside {FORWARD_RANGE} and needs a rule of its own."
+                         if port < PORT_MIN else "."),
+        "sshd": f"On {name}: sshd may listen on another port than {port}, or not run at all: "
+                f"`sudo ss -tlnp | grep sshd` there shows its port; set ssh_port = N under the "
+                f"[[peer]] named {name} in the settings, or start it (`sudo systemctl enable "
+                "--now ssh`).",
+        "offline": f"Check that {name} is switched on, online and running sshd (the ISP step "
+                   f"on {name}).",
+        "address": f"Check our hosts line for {name}: `getent hosts {name}` must print its "
+                   f"current public IP ({pub} in the settings; the ISP step on {name} shows the "
+                   f"address it has now). If it moved, `rosnet-tui sync` keeps it current.",
+    }
+    return [words[c.key] for c in causes]
+
+
+_LEAD = {
+    "forwarding": "most likely {name}'s modem does not forward port {port} to {name}",
+    "sshd": "most likely sshd on {name} does not listen on port {port} (it may listen on "
+            "another one: ssh_port in the settings)",
+    "offline": "most likely {name} itself is off or off-line",
+    "address": "most likely {ip} is not {name}'s address any more (a new public IP, or "
+               "carrier-grade NAT on {name}'s side: its isp.cgnat check tells)",
+}
+
+
+def _peer_hit(ev: Evidence, name: str, meaning: str) -> Hit:
+    causes = peer_causes(ev, name)
+    st = peer_state(ev, name)
+    ssh = (ev.data("linux.ssh").get("peers") or {}).get(name) or {}
+    port = int(ssh.get("port") or 22)
+    ip = ssh.get("address") or ev.expected_ip(name) or "?"
+    first = causes[0]
+    meaning += (" Causes, most likely first: "
+                + _LEAD[first.key].format(name=name, port=port, ip=ip) + ". " + first.sentence())
+    return Hit(meaning.strip(), _peer_actions(ev, name, causes, port),
+               check_ids=peer_check_ids(ev, name), goto_step=first.step,
+               evidence=[f"{name} ({ip}): icmp={st['icmp']}, tcp={peer_tcp(ev, name)}, "
+                         f"ssh={st['ssh_failure'] or st['ssh_ok']}", *first.evidence()])
+
+
 @rule("linux.peer.unreachable", "linux", ("linux.ping", "linux.ssh"),
       "peer unreachable over TCP (ping may still answer)",
       "No TCP connection gets through to the peer's public address. If the address answers "
@@ -180,56 +235,72 @@ def _icmp_filtered(ev: Evidence) -> list[Hit]:
       "nothing answers, the address is probably wrong (stale hosts entry, changed IP, carrier "
       "NAT) or the modem is offline.",
       "Ping answers: fix the forwarding on the peer's modem. Nothing answers: check our hosts "
-      "line for the peer and its current public IP, then that it is online.",
+      "line for the peer and its current public IP, then that it is online. The first cause "
+      "is the one the evidence supports most.",
       "router", "fail")
 def _peer_unreachable(ev: Evidence) -> list[Hit]:
     hits = []
     for name in linux_peers(ev):
-        if not is_unreachable(ev, name):
+        if not is_unreachable(ev, name) or (ev.remote and ssh_refused_first(ev, name)):
             continue
         st = peer_state(ev, name)
         ip = (ev.data("linux.resolve").get("names") or {}).get(name, {}).get("resolved") \
             or ev.expected_ip(name) or "?"
-        ids = [c for c in ("linux.ping", "linux.ssh", "linux.chat_out", "linux.chat_in")
-               if (ev.data(c).get("peers") or {}).get(name) is not None and ev.is_fail(c)]
-        local = ev.peer_local(name) or "its local IP"
-        pub = ev.peer_public(name) or "?"
-        forward = (f"Check that {name}'s modem forwards TCP 22 and {FORWARD_RANGE} to {local} "
-                   f"(the Router step on {name}: its port test must say Open).")
-        online = (f"Check that {name} is switched on, online and running sshd (the ISP step on "
-                  f"{name}).")
-        hosts = (f"Check our hosts line for {name}: `getent hosts {name}` must print its current "
-                 f"public IP ({pub} in the settings; the ISP step on {name} shows the address it "
-                 f"has now). If it moved, `rosnet-tui sync` keeps it current.")
         if not ev.remote:
             exp = ev.expected_ip(name) or "?"
-            meaning = (f"{name} ({ip}) does not accept TCP connections from {ev.me} on the "
-                       f"{ev.s.this.profile} LAN (port 22 and SSH fail).")
-            acts = [f"Check that {name} is on the same LAN as {ev.me}, switched on and running "
-                    "sshd.",
-                    f"Check our hosts line: `getent hosts {name}` must print {exp} (its address "
-                    f"on the {ev.s.this.profile} LAN)."]
-        elif st["icmp"] is True:
+            hits.append(Hit(
+                f"{name} ({ip}) does not accept TCP connections from {ev.me} on the "
+                f"{ev.s.this.profile} LAN (port 22 and SSH fail).",
+                [f"Check that {name} is on the same LAN as {ev.me}, switched on and running "
+                 "sshd.",
+                 f"Check our hosts line: `getent hosts {name}` must print {exp} (its address "
+                 f"on the {ev.s.this.profile} LAN)."],
+                check_ids=peer_check_ids(ev, name), goto_step="linux",
+                evidence=[f"{name} ({ip}): icmp={st['icmp']}, tcp22={st['tcp22']}, "
+                          f"ssh={st['ssh_failure'] or st['ssh_ok']}"]))
+            continue
+        pub = ev.peer_public(name) or "?"
+        if st["icmp"] is True:
             meaning = (f"{ip} answers ping, so {name}'s modem is online, but no TCP connection "
-                       f"gets through to {name} (port 22 and SSH fail): the modem does not "
-                       f"forward to {name}, or {name} itself is off.")
-            acts = [forward, online]
+                       f"gets through to {name} (port 22 and SSH fail).")
         else:
             meaning = (f"Nothing answers at {ip}, the address {ev.me} uses for {name}: neither "
-                       "ping nor a TCP connection to port 22. The address may be out of date "
-                       f"(a new public IP, or {name} behind carrier-grade NAT - its isp.cgnat "
-                       "check tells), or the modem is offline.")
-            acts = [hosts, online, forward]
+                       "ping nor a TCP connection to port 22.")
             if ip != pub and pub != "?":
                 meaning += f" The settings say {name} is at {pub}."
-        nd = ev.data("ros.node_uris")
-        if st["ssh_failure"] == "network" and ev.status("ros.node_uris") is Status.WARN \
-                and nd and not nd.get("unreachable"):
-            ids.append("ros.node_uris")      # could not check from the peer: same cause
-        hits.append(Hit(meaning, acts, check_ids=ids or ["linux.ping", "linux.ssh"],
-                        goto_step="router",
-                        evidence=[f"{name} ({ip}): icmp={st['icmp']}, tcp22={st['tcp22']}, "
-                                  f"ssh={st['ssh_failure'] or st['ssh_ok']}"]))
+        hits.append(_peer_hit(ev, name, meaning))
+    return hits
+
+
+@rule("linux.ssh.refused", "linux", ("linux.ssh", "linux.ping"),
+      "the peer's SSH port refuses the connection",
+      "Something at the peer's address answers and rejects its SSH port: the address is right "
+      "and online. Either sshd does not listen on that port (another port, or not running) or "
+      "the peer's modem rejects the port instead of forwarding it.",
+      "Find sshd's port on the peer (`sudo ss -tlnp | grep sshd`) and set ssh_port for it, or "
+      "start sshd; else forward the port on the peer's modem. The first cause is the one the "
+      "evidence supports most.",
+      "linux", "fail")
+def _ssh_refused(ev: Evidence) -> list[Hit]:
+    hits = []
+    for name in linux_peers(ev):
+        if not ssh_refused_first(ev, name):
+            continue
+        ssh = (ev.data("linux.ssh").get("peers") or {}).get(name) or {}
+        port = int(ssh.get("port") or 22)
+        ip = ssh.get("address") or ev.expected_ip(name) or "?"
+        icmp = peer_state(ev, name)["icmp"]
+        meaning = (f"{ip} refused {ev.me}'s connection to {name}'s SSH port {port}: something "
+                   f"there is online and rejects the port"
+                   + (" (and the address answers ping)." if icmp else "."))
+        if not ev.remote:
+            hits.append(Hit(meaning + f" On the {ev.s.this.profile} LAN nothing is forwarded: "
+                                      f"sshd on {name} does not listen on {port}.",
+                            _peer_actions(ev, name, [Cause("sshd", "linux")], port),
+                            check_ids=peer_check_ids(ev, name), goto_step="linux",
+                            evidence=[f"{name} ({ip}): port {port} refused"]))
+            continue
+        hits.append(_peer_hit(ev, name, meaning))
     return hits
 
 
@@ -417,11 +488,20 @@ def _chat_in_fails(ev: Evidence) -> list[Hit]:
             acts = [f"Choose another test port (port = N under [probe], 1024-{PORT_MAX}) or "
                     "stop the program holding it (see router.port_free)."]
         else:
+            causes = chat_causes(ev, name, inbound=True)
             meaning = (f"{me} reached {name}'s listener, but {name} could not connect back to "
                        f"{me}: connections into {me} are blocked (our modem's forwarding, or a "
-                       f"firewall here), or {name} uses an old address for {me}.")
-            acts = fix_fw + fix_name
-        hits.append(Hit(meaning, acts, check_ids=_chat_ids(ev, name),
+                       f"firewall here), or {name} uses an old address for {me}. "
+                       + causes[0].sentence())
+            fixes = {"forwarding": fix_fw[0], "firewall": fix_fw[1], "hosts": fix_name[0]}
+            acts = [fixes[c.key] for c in causes if c.score > -50]
+            hits.append(Hit(meaning.strip(), acts, check_ids=_chat_ids(ev, name),
+                            goto_step=causes[0].step, evidence=[
+                                f"chat to {name} ok; from {name}: {why or 'failed'}",
+                                *causes[0].evidence()]))
+            continue
+        goto = {"local_listen": "router"}.get(why or "", "linux")
+        hits.append(Hit(meaning, acts, check_ids=_chat_ids(ev, name), goto_step=goto,
                         evidence=[f"chat to {name} ok; from {name}: {why or 'failed'}"]))
     return hits
 
@@ -457,14 +537,21 @@ def _chat_out_fails(ev: Evidence) -> list[Hit]:
             acts = [f"On {name}: another program may hold the test port "
                     f"({ev.s.probe.port}); choose another test port in the settings."]
         else:
+            causes = chat_causes(ev, name, inbound=False)
             meaning = (f"{name} reached {me}, but {me} could not connect to {name}'s listener: "
                        f"connections into {name} are blocked ({name}'s modem forwarding, or its "
-                       "firewall), or our hosts line sends us to an old address.")
-            acts = [f"On {name}'s modem: forward TCP {FORWARD_RANGE} to {local} (Router step on "
-                    f"{name}).",
-                    f"On {name}: check its firewall (`sudo ufw status`).",
-                    f"Here: `getent hosts {name}` must print {exp}."]
-        hits.append(Hit(meaning, acts, check_ids=_chat_ids(ev, name),
+                       "firewall), or our hosts line sends us to an old address. "
+                       + causes[0].sentence())
+            fixes = {"forwarding": f"On {name}'s modem: forward TCP {FORWARD_RANGE} to {local} "
+                                   f"(Router step on {name}).",
+                     "firewall": f"On {name}: check its firewall (`sudo ufw status`).",
+                     "hosts": f"Here: `getent hosts {name}` must print {exp}."}
+            hits.append(Hit(meaning.strip(), [fixes[c.key] for c in causes if c.score > -50],
+                            check_ids=_chat_ids(ev, name), goto_step=causes[0].step,
+                            evidence=[f"chat from {name} ok; to {name}: {why or 'failed'}",
+                                      *causes[0].evidence()]))
+            continue
+        hits.append(Hit(meaning, acts, check_ids=_chat_ids(ev, name), goto_step="linux",
                         evidence=[f"chat from {name} ok; to {name}: {why or 'failed'}"]))
     return hits
 
@@ -479,7 +566,17 @@ def _chat_both(ev: Evidence) -> list[Hit]:
     hits = []
     for name in linux_peers(ev):
         st = peer_state(ev, name)
-        if st["in"] is False and st["out"] is False and not is_unreachable(ev, name):
+        if st["in"] is False and st["out"] is False and not is_unreachable(ev, name) \
+                and not ev.remote:
+            hits.append(Hit(
+                f"The chat between {ev.me} and {name} fails in both directions on the "
+                f"{ev.s.this.profile} LAN, while {name} itself is reachable: firewalls on both "
+                "sides let SSH in and block the high ports (nothing is forwarded on a LAN).",
+                [f"Check both firewalls (`sudo ufw status` on {ev.me} and on {name}): TCP "
+                 f"{FORWARD_RANGE} must be allowed in, not only SSH."],
+                check_ids=_chat_ids(ev, name), goto_step="linux",
+                evidence=[f"chat with {name}: out {st['out_failure']}, in {st['in_failure']}"]))
+        elif st["in"] is False and st["out"] is False and not is_unreachable(ev, name):
             hits.append(Hit(
                 f"The chat between {ev.me} and {name} fails in both directions, while {name} "
                 "itself is reachable: the high ports are blocked on both sides.",

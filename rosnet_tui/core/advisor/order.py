@@ -43,6 +43,7 @@ RULE_ORDER: tuple[str, ...] = (
     "linux.hosts.duplicates",
     "linux.ping.icmp_filtered",
     "linux.peer.unreachable",
+    "linux.ssh.refused",
     "linux.ssh.host_key_changed",
     "linux.ssh.host_key_unknown",
     "linux.ssh.auth",
@@ -54,6 +55,7 @@ RULE_ORDER: tuple[str, ...] = (
     "linux.chat.both_fail",
     # step 4: ROS
     "ros.env.master_uri",
+    "ros.env.bashrc",
     "ros.env.ros_ip",
     "ros.master.unreachable",
     "ros.master.peer_cannot_register",

@@ -14,6 +14,7 @@ from rosnet_tui.core.advisor.evidence import (
     linux_peers,
     uri_host,
 )
+from rosnet_tui.core.advisor.ranking import master_causes
 from rosnet_tui.core.procedure import is_ip
 from rosnet_tui.core.results import Status
 
@@ -55,6 +56,39 @@ def _master_uri(ev: Evidence) -> list[Hit]:
             "restart the nodes started with the old value."]
     return [Hit(meaning, acts, severity=ev.sev("ros.env", "fail"),
                 evidence=[f"ros.env: env {env_uri}, ~/.bashrc {rc_uri}, expected {exp}"])]
+
+
+@rule("ros.env.bashrc", "ros", ("ros.env",),
+      "ROS_MASTER_URI in this shell only, or in ~/.bashrc only",
+      "The value is right where it is set, but only in one place: without the line in "
+      "~/.bashrc new terminals (and nodes started over SSH or at boot) look for the master on "
+      "localhost; with it only in ~/.bashrc, this shell was opened before it was written.",
+      "Write it into ~/.bashrc with `rosnet-tui ros apply`, or open a new terminal "
+      "(`source ~/.bashrc`).",
+      "ros", "warn", superseded_by=("ros.env.master_uri",))
+def _bashrc(ev: Evidence) -> list[Hit]:
+    d = ev.data("ros.env")
+    if not d or d.get("uri_ok") is False or ev.status("ros.env") is not Status.WARN:
+        return []
+    env_uri, rc_uri = d.get("env_uri"), d.get("bashrc_uri")
+    exp = d.get("expected_uri") or env_uri or rc_uri
+    if env_uri and not rc_uri:
+        return [Hit(f"ROS_MASTER_URI={env_uri} is set in this shell on {ev.me}, but not in "
+                    "~/.bashrc: new terminals, and nodes started over SSH or at boot, will not "
+                    "have it and look for a master on localhost.",
+                    [f"Write it into ~/.bashrc on {ev.me}: `rosnet-tui ros apply` (it shows the "
+                     "change first, writes a marked block with a backup; `rosnet-tui undo` "
+                     "takes it back).",
+                     f"Or add the line `export ROS_MASTER_URI={exp}` to ~/.bashrc by hand."],
+                    evidence=[f"ros.env: environment {env_uri}, ~/.bashrc none"])]
+    if rc_uri and not env_uri:
+        return [Hit(f"~/.bashrc on {ev.me} sets ROS_MASTER_URI={rc_uri}, but this shell does "
+                    "not have it: it was opened before the line was written.",
+                    ["Open a new terminal, or run `source ~/.bashrc` (or "
+                     "`eval \"$(rosnet-tui ros export)\"`) in this one; then restart the "
+                     "nodes started from it."],
+                    evidence=[f"ros.env: environment none, ~/.bashrc {rc_uri}"])]
+    return []
 
 
 @rule("ros.env.ros_ip", "ros", ("ros.env",),
@@ -134,27 +168,37 @@ def _master_down(ev: Evidence) -> list[Hit]:
     port = urlsplit(uri).port or ev.s.ros.port
     master = ev.s.master_name or host or "the master"
     ids = ["ros.master", *_node_list_failed(ev), *_registration_failed(ev)]
-    evid = [f"ros.master: {uri} did not answer"]
+    evid = [f"ros.master: {uri} did not answer" + (f" ({d.get('tcp')})" if d.get("tcp") else "")]
+    causes = master_causes(ev, master)
+    said = causes[0].sentence()
     if ev.s.is_master:
-        return [Hit(f"No ROS master answers at {uri}: roscore is not running on {ev.me} (this "
-                    "component is the master).",
-                    [f"Start it on {ev.me}: `roscore` (in its own terminal, or as a service).",
-                     "If roscore runs, ROS_MASTER_URI here does not point at it (see ros.env)."],
-                    check_ids=ids, evidence=evid)]
+        here = ev.data("router.local_ip").get("local_ip") or ev.my_local_ip()
+        acts = {"roscore": f"Start it on {ev.me}: `roscore` (in its own terminal, or as a "
+                           "service). If roscore runs, ROS_MASTER_URI here does not point at "
+                           "it (see ros.env).",
+                "address": f"Map {ev.me} to this machine's address: `getent hosts {ev.me}` must "
+                           f"print {here} (`rosnet-tui hosts apply` after setting local_ip = "
+                           f"\"{here}\" under [this]).",
+                "forwarding": "", "peer": ""}
+        return [Hit(f"No ROS master answers at {uri} on {ev.me} (this component is the master): "
+                    + ("roscore is not running here, or the name leads elsewhere. " + said).strip(),
+                    [acts[c.key] for c in causes if acts[c.key]], check_ids=ids,
+                    goto_step=causes[0].step, evidence=evid + causes[0].evidence())]
     local = ev.peer_local(master) or "its local IP"
     pub = ev.expected_ip(master) or ev.peer_public(master) or "?"
-    acts = [f"Is roscore running on {master}? Start `roscore` there; `rostopic list` on "
-            f"{master} itself must work.",
-            f"Is TCP {port} forwarded on {master}'s modem to {local}? (The Router step on "
-            f"{master} tests {port} from outside when roscore listens.)",
-            f"Does {host or master} lead to the master here? `getent hosts "
-            f"{host or master}` must print {pub}."]
+    acts = {"roscore": f"Is roscore running on {master}? Start `roscore` there; `rostopic list` "
+                       f"on {master} itself must work.",
+            "forwarding": f"Is TCP {port} forwarded on {master}'s modem to {local}? (The Router "
+                          f"step on {master} tests {port} from outside when roscore listens.)",
+            "address": f"Does {host or master} lead to the master here? `getent hosts "
+                       f"{host or master}` must print {pub}.",
+            "peer": f"Reach {master} first (the Linux step): the master follows."}
     meaning = f"The master {master} does not answer at {uri} from {ev.me}."
     if master in linux_peers(ev) and is_unreachable(ev, master):
         meaning += (f" {master} itself cannot be reached from here (see the Linux step), so "
                     "fix that first: the master follows.")
-        acts = acts[2:] + acts[:2]
-    return [Hit(meaning, acts, check_ids=ids, evidence=evid)]
+    return [Hit((meaning + " " + said).strip(), [acts[c.key] for c in causes], check_ids=ids,
+                goto_step=causes[0].step, evidence=evid + causes[0].evidence())]
 
 
 @rule("ros.master.peer_cannot_register", "ros", ("ros.pubsub_out", "ros.pubsub_in"),

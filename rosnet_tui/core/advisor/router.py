@@ -17,6 +17,7 @@ from rosnet_tui.core.advisor.evidence import (
     join_and,
     offline_ids,
 )
+from rosnet_tui.core.advisor.ranking import Cause, local_ip_moved, nat_seen, table1_causes
 from rosnet_tui.core.settings import PORT_MAX
 
 
@@ -82,55 +83,20 @@ def _other_open_ports(ev: Evidence) -> list[int]:
             if isinstance(p, Mapping) and p.get("reachable") and p.get("port") != tp]
 
 
-def _cgnat_passed(ev: Evidence) -> bool:
-    d = ev.data("isp.cgnat")
-    return (bool(d) and d.get("cgnat") is False and d.get("double_nat") is False
-            and d.get("method") not in (None, "none"))
+def _causes(ev: Evidence) -> dict[str, tuple[int, Cause]]:
+    """Table 1's causes by key: (rank, the cause with its observations)."""
+    return {c.key: (i, c) for i, c in enumerate(table1_causes(ev))}
 
 
-def _table1_ranking(ev: Evidence) -> dict[str, tuple[int, list[str]]]:
-    """Rank Table 1's three causes by the evidence: {cause: (score, reasons)}, lower first.
-
-    The procedure's order (port in use, ISP, modem forwarding) is the default; evidence moves a
-    cause up (carrier NAT -> ISP; a changed local IP or other ports open -> forwarding; a
-    process on the port -> port in use) or down (port free; the modem holds the public IP).
-    """
-    score = {"port_in_use": 10, "isp": 20, "forwarding": 30}
-    why: dict[str, list[str]] = {k: [] for k in score}
-    pf = ev.data("router.port_free")
-    if pf.get("in_use"):
-        score["port_in_use"] = 5
-        why["port_in_use"].append(f"router.port_free: port {pf.get('port')} is held by "
-                                  f"{pf.get('process') or 'another process'}")
-    elif pf.get("in_use") is False:
-        score["port_in_use"] = 40
-        why["port_in_use"].append("router.port_free found the port free on this machine")
-    cg = ev.data("isp.cgnat")
-    if cg.get("cgnat"):
-        score["isp"] = 1
-        why["isp"].append("isp.cgnat: carrier-grade NAT")
-    elif cg.get("double_nat"):
-        score["isp"] = 3
-        why["isp"].append("isp.cgnat: double NAT")
-    elif _cgnat_passed(ev) and ev.s.this.connection != "corporate":
-        score["isp"] = 35
-        why["isp"].append("isp.cgnat: the modem holds the public address (no carrier NAT)")
-    li = ev.data("router.local_ip")
-    if li.get("differs"):
-        score["forwarding"] = 2
-        why["forwarding"].append(f"router.local_ip: local IP is {li.get('local_ip')}, "
-                                 f"forwarded IP is {li.get('expected_ip')}")
-    elif _other_open_ports(ev):
-        score["forwarding"] = 4
-        why["forwarding"].append("router.port_open: other ports are reachable, this one is not")
-    return {k: (score[k], why[k]) for k in score}
-
-
-def _t1_order(ev: Evidence, cause: str) -> int:
-    ranking = _table1_ranking(ev)
-    ranked = sorted(ranking, key=lambda k: (ranking[k][0], ("port_in_use", "isp",
-                                                            "forwarding").index(k)))
-    return ranked.index(cause)
+def _t1_hit(ev: Evidence, key: str, meaning: str, acts: list[str], ids: list[str],
+            more: list[str] | None = None) -> Hit:
+    """One cause's finding: the observations appended to its meaning, its rank as order."""
+    order, cause = _causes(ev)[key]
+    said = cause.sentence()
+    return Hit(meaning + (" " + said if said else ""), acts, check_ids=ids, order=order,
+               goto_step=cause.step,
+               evidence=["router.listener: listening", "router.port_open: Closed",
+                         *cause.evidence(), *(more or [])])
 
 
 def _listener_up_closed(ev: Evidence) -> bool:
@@ -219,7 +185,6 @@ def _t1_cause_port(ev: Evidence) -> list[Hit]:
         return []
     port = _t1_port(ev)
     pf = ev.data("router.port_free")
-    why = _table1_ranking(ev)["port_in_use"][1]
     ids = list(_T1_CHECKS)
     if pf.get("in_use"):
         proc = pf.get("process") or "another program"
@@ -234,12 +199,11 @@ def _t1_cause_port(ev: Evidence) -> list[Hit]:
         meaning = (f"Port {port} may be used by another service, on this machine or on the "
                    "modem itself (its web page, VPN or remote-management port), so the test "
                    "does not reach our listener.")
-        if pf.get("in_use") is False:
-            meaning += " Least likely here: nothing else listens on it on this machine."
+        if pf.get("in_use") is False and _causes(ev)["port_in_use"][0] == 2:
+            meaning += " Least likely here."
         acts = [f"Try another port between 1024 and {PORT_MAX}: set port = N under [probe] "
                 "and re-run the Router step; try two or three ports."]
-    return [Hit(meaning, acts, check_ids=ids, order=_t1_order(ev, "port_in_use"),
-                evidence=["router.listener: listening", "router.port_open: Closed", *why])]
+    return [_t1_hit(ev, "port_in_use", meaning, acts, ids)]
 
 
 @rule(f"{T1}.isp", "router", _T1_CHECKS,
@@ -252,12 +216,21 @@ def _t1_cause_port(ev: Evidence) -> list[Hit]:
 def _t1_cause_isp(ev: Evidence) -> list[Hit]:
     if not _listener_up_closed(ev):
         return []
-    cg = ev.data("isp.cgnat")
-    why = _table1_ranking(ev)["isp"][1]
+    nat = nat_seen(ev)
     ids = list(_T1_CHECKS)
-    if cg.get("cgnat") or cg.get("double_nat"):
+    more: list[str] = []
+    if nat.kind == "inner":
+        outer = nat.hop or "the outer router"
+        meaning = (f"The outer router ({outer}) may belong to the provider: then only the "
+                   "provider can forward through it (or give this line a public IP, or switch "
+                   "their box to bridge mode).")
+        acts = [f"If you cannot log in to {outer}, ask the provider to forward TCP "
+                f"{FORWARD_RANGE} to your router's WAN address{f' ({nat.wan_ip})' if nat.wan_ip else ''}"
+                ", to make it the DMZ host, or to put their box in bridge mode.",
+                "Back to step 1 (ISP) once they answer."]
+        ids.append("isp.cgnat")
+    elif nat.kind:
         meaning, acts, more = cgnat_text(ev)
-        why = why + more
         ids.append("isp.cgnat")
     else:
         c = ev.s.this.connection
@@ -265,8 +238,6 @@ def _t1_cause_isp(ev: Evidence) -> list[Hit]:
                "home": "the provider"}.get(c, "the provider")
         meaning = (f"{who[0].upper() + who[1:]} may block incoming connections before they reach "
                    "the modem, whatever the modem is set to.")
-        if _cgnat_passed(ev):
-            meaning += " Less likely here: the modem holds the public address itself."
         if c == "corporate":
             acts = [f"Ask the network administrator to allow incoming TCP (and UDP) "
                     f"{FORWARD_RANGE} to {ev.my_local_ip()} on their firewall, or to set it as "
@@ -279,8 +250,7 @@ def _t1_cause_isp(ev: Evidence) -> list[Hit]:
             acts = ["Ask the provider whether incoming connections are blocked on this line, "
                     "and how to lift it (some need a setting in the customer portal)."]
         acts.append("Back to step 1 (ISP) once they answer.")
-    return [Hit(meaning, acts, check_ids=ids, order=_t1_order(ev, "isp"),
-                evidence=["router.listener: listening", "router.port_open: Closed", *why])]
+    return [_t1_hit(ev, "isp", meaning, acts, ids, more)]
 
 
 @rule(f"{T1}.forwarding", "router", _T1_CHECKS,
@@ -294,10 +264,13 @@ def _t1_cause_forwarding(ev: Evidence) -> list[Hit]:
         return []
     li = ev.data("router.local_ip")
     local = ev.my_local_ip()
-    why = _table1_ranking(ev)["forwarding"][1]
     ids = list(_T1_CHECKS)
-    if li.get("differs"):
-        old = li.get("expected_ip") or "the old address"
+    moved = local_ip_moved(ev)
+    nat = nat_seen(ev)
+    answer = next((p.get("answer") for p in ev.data("router.port_open").get("ports") or []
+                   if isinstance(p, Mapping) and p.get("port") == _t1_port(ev)), None)
+    if moved:
+        old, local = moved
         meaning = (f"The modem forwards to {old}, but {ev.me}'s local IP is now {local} "
                    f"(on {li.get('interface') or 'its interface'}): the forwarding points at the "
                    "old address, so connections from outside go nowhere.")
@@ -308,9 +281,33 @@ def _t1_cause_forwarding(ev: Evidence) -> list[Hit]:
                 f"Set local_ip = \"{local}\" under [this] in the settings, then re-run the "
                 "Router step."]
         ids.append("router.local_ip")
+    elif nat.kind == "inner":
+        gw = li.get("gateway") or "the router this component is plugged into"
+        outer = nat.hop or "the outer router"
+        wan = f" ({nat.wan_ip})" if nat.wan_ip else ""
+        meaning = (f"Two routers of your own: {ev.me}'s router ({gw}, e.g. a travel router) is "
+                   f"plugged into another router ({outer}). Connections from outside that the "
+                   f"outer router forwards stop at the inner one, which does not forward them "
+                   f"on to {ev.me}.")
+        acts = [f"On the inner router ({gw}, {ev.me}'s gateway): forward TCP (and UDP) "
+                f"{FORWARD_RANGE} to {local}, or make {local} its DMZ host - or switch it to "
+                f"bridge / access-point mode, so that {ev.me} sits directly on the outer "
+                "router's network.",
+                f"On the outer router ({outer}): forward the same range to the inner router's "
+                f"WAN address{wan} (or make it the DMZ host); after bridge mode, to {ev.me}'s "
+                "new local IP instead.",
+                f"Reserve {local} for {ev.me} by DHCP, then re-run the Router step."]
+        ids.append("isp.cgnat")
     else:
         meaning = (f"The modem does not forward port {_t1_port(ev)} to {ev.me} ({local}): the "
                    "forwarding is missing, covers other ports, or points at another address.")
+        if answer == "other":
+            meaning = (f"Port {_t1_port(ev)} is forwarded, but to another machine or service "
+                       f"than {ev.me} ({local}).")
+        elif answer == "unreachable":
+            meaning = (f"The modem forwards port {_t1_port(ev)} to a local address where no "
+                       f"machine answers, not to {ev.me} ({local}): an old address of "
+                       f"{ev.me}, or a typo.")
         others = _other_open_ports(ev)
         if others:
             meaning += (f" Ports {join_and(map(str, others))} do get through, so the path to the "
@@ -319,8 +316,7 @@ def _t1_cause_forwarding(ev: Evidence) -> list[Hit]:
                 f"UDP if needed) {FORWARD_RANGE} to {local}, or set the DMZ host to {local}.",
                 f"Reserve {local} for {ev.me} by DHCP so the forwarding keeps pointing at it.",
                 "Save, restart the modem if it asks, and re-run the Router step."]
-    return [Hit(meaning, acts, check_ids=ids, order=_t1_order(ev, "forwarding"),
-                evidence=["router.listener: listening", "router.port_open: Closed", *why])]
+    return [_t1_hit(ev, "forwarding", meaning, acts, ids)]
 
 
 # ---- the router's other checks ---------------------------------------------------------------
@@ -333,11 +329,13 @@ def _t1_cause_forwarding(ev: Evidence) -> list[Hit]:
       "router", "warn", superseded_by=(f"{T1}.forwarding",))
 def _local_differs(ev: Evidence) -> list[Hit]:
     d = ev.data("router.local_ip")
-    if not d.get("differs"):
+    moved = local_ip_moved(ev) if d.get("differs") or d.get("changed") else None
+    if not moved:
         return []
-    now, old = d.get("local_ip") or "?", d.get("expected_ip") or "?"
+    old, now = moved
+    was = "as in the settings" if d.get("differs") else "as on the last run"
     return [Hit(f"{ev.me}'s local IP is now {now} (on {d.get('interface') or '?'}, gateway "
-                f"{d.get('gateway') or '?'}), not {old} as in the settings: a forwarding or DMZ "
+                f"{d.get('gateway') or '?'}), not {old} {was}: a forwarding or DMZ "
                 f"entry for {old} no longer reaches it.",
                 [f"In the modem's web page, change the forwarding (or DMZ host) from {old} to "
                  f"{now}.",
