@@ -45,6 +45,7 @@ class RouterCard:
     connection_notes: list[str]
     exposure_warning: list[str]
     warnings: list[str] = field(default_factory=list)   # e.g. the settings and the machine disagree
+    profile: str = "remote"   # a LAN profile (office, portable) forwards nothing
     missing: list[str] = field(default_factory=list)    # what we could not find, and how to
     verify: list[str] = field(default_factory=list)
 
@@ -133,6 +134,19 @@ def build_router_card(settings: Settings, net: LocalNet | None = None) -> Router
         ForwardRule("TCP", "22", to, "22", False, "SSH from the peers (keys only)"),
     ]
     role = "ROS master" if settings.is_master else "ROS member"
+    if t.profile != "remote":             # a LAN profile: nothing to forward, nothing exposed
+        return RouterCard(
+            component=t.name, role=role, connection=t.connection,
+            interface=net.interface or t.interface, local_ip=ip, mac=net.mac,
+            gateway=net.gateway, modem_page=page, forwards=[], dmz_host="", reservation_ip=to,
+            reservation_mac=net.mac or "(MAC, see below)",
+            connection_notes=[
+                f"{t.profile.capitalize()} profile: every component is on the same LAN, so "
+                "nothing needs forwarding and nothing is exposed to the internet. A phone "
+                "hotspot cannot forward at all; here it does not need to."],
+            exposure_warning=[], warnings=warnings, missing=missing, profile=t.profile,
+            verify=["The outside port test is skipped on this profile; the Linux step tests "
+                    "the LAN (ping, SSH and a chat by name, both ways)."])
     return RouterCard(
         component=t.name, role=role, connection=t.connection, interface=net.interface or t.interface,
         local_ip=ip, mac=net.mac, gateway=net.gateway, modem_page=page, forwards=forwards,
@@ -171,6 +185,11 @@ def _render_text(card: RouterCard, width: int) -> str:
     for w in card.warnings:
         out.append("")
         out += _wrap("WARNING: " + w, width)
+    if not card.forwards:
+        out += ["", f"1. Port forwarding: none on the {card.profile} LAN"]
+        out += _wrap("Nothing to forward: the components reach each other on the LAN.", width,
+                     "   ")
+        return _render_text_tail(card, width, out)
     out += ["", "1. Port forwarding (firewall / NAT / virtual servers)"]
     head = f"   {'Proto':<6}{'Outside ports':<15}{'To local IP':<17}{'Ports':<12}"
     out.append(head.rstrip())
@@ -181,6 +200,10 @@ def _render_text(card: RouterCard, width: int) -> str:
         out += _wrap(r.note, width, " " * 9)
     out += _wrap(f"Or, instead of these rules: DMZ host = {card.dmz_host} (forwards every "
                  "port, below 1024 too).", width, "   ")
+    return _render_text_tail(card, width, out)
+
+
+def _render_text_tail(card: RouterCard, width: int, out: list[str]) -> str:
     out += ["", "2. DHCP reservation (LAN / DHCP settings)"]
     out += _wrap(f"Reserve IP {card.reservation_ip} for MAC {card.reservation_mac}"
                  f"{f' ({card.component})' if card.component else ''}. Without it the "
@@ -189,7 +212,8 @@ def _render_text(card: RouterCard, width: int) -> str:
     out += ["", f"3. Your connection ({card.connection})"]
     for n in card.connection_notes:
         out += _wrap(n, width, "   ")
-    out += ["", "!! Exposure"]
+    if card.exposure_warning:
+        out += ["", "!! Exposure"]
     for n in card.exposure_warning:
         out += _wrap(n, width, "   ")
     if card.missing:
@@ -215,22 +239,27 @@ def _render_markdown(card: RouterCard, width: int) -> str:
     for w in card.warnings:
         out.append("")
         out += _wrap(f"**Warning:** {w}", width)
-    out += ["", "### 1. Port forwarding", "",
-            "| Proto | Outside ports | To local IP | Ports | Need |", "|---|---|---|---|---|"]
-    for r in card.forwards:
-        need = "required" if r.required else "optional"
-        out.append(f"| {r.protocol} | {r.external_ports} | {r.internal_ip} | "
-                   f"{r.internal_ports} | {need} |")
-    out.append("")
-    out += _wrap(f"Or, instead of these rules: DMZ host = {card.dmz_host} (forwards every port, "
-                 "below 1024 too).", width)
+    if card.forwards:
+        out += ["", "### 1. Port forwarding", "",
+                "| Proto | Outside ports | To local IP | Ports | Need |", "|---|---|---|---|---|"]
+        for r in card.forwards:
+            need = "required" if r.required else "optional"
+            out.append(f"| {r.protocol} | {r.external_ports} | {r.internal_ip} | "
+                       f"{r.internal_ports} | {need} |")
+        out.append("")
+        out += _wrap(f"Or, instead of these rules: DMZ host = {card.dmz_host} (forwards every "
+                     "port, below 1024 too).", width)
+    else:
+        out += ["", f"### 1. Port forwarding: none on the {card.profile} LAN", ""]
+        out += _wrap("Nothing to forward: the components reach each other on the LAN.", width)
     out += ["", "### 2. DHCP reservation", ""]
     out += _wrap(f"Reserve IP {card.reservation_ip} for MAC {card.reservation_mac}. Without it "
                  "the forwarding breaks when the modem hands this machine another address.", width)
     out += ["", f"### 3. Your connection ({card.connection})", ""]
     for n in card.connection_notes:
         out += _wrap(n, width)
-    out += ["", "### Exposure", ""]
+    if card.exposure_warning:
+        out += ["", "### Exposure", ""]
     for n in card.exposure_warning:
         out += _wrap(n, width)
     if card.missing:

@@ -85,7 +85,28 @@ def configure_isp(s: Settings) -> str:
 
 
 # --------------------------------------------------------------------------- step 2: router
+def configure_lan_router(s: Settings) -> str:
+    """The Router step on a LAN profile (office, portable): nothing is forwarded."""
+    lan = {"office": "the office LAN",
+           "portable": "the portable hotspot's LAN"}.get(s.this.profile, "one LAN")
+    return "\n\n".join([
+        f"**Nothing to forward on {lan}** (profile *{s.this.profile}*). Every component is on "
+        "the same LAN and reaches the others directly at their LAN addresses: no port "
+        "forwarding, no DMZ, and no exposure to the internet. A phone hotspot cannot forward "
+        "ports at all, and here it does not need to.",
+        f"What still matters:\n\n"
+        f"1. Keep **{_this_ip(s)}** for this machine (a DHCP reservation, where the router "
+        "or hotspot allows it): the hosts entries of the others use it.\n"
+        f"2. Keep the test port **{s.probe.port}** free for the Linux step's chat test.",
+        "**To verify:** the outside port test is skipped on this profile; the Linux step tests "
+        "the LAN itself (ping, SSH and a chat by name, both ways). Switch to the *remote* "
+        "profile (`rosnet-tui hosts use remote`) before the robot leaves this LAN.",
+    ])
+
+
 def configure_router(s: Settings) -> str:
+    if s.this.profile != "remote":      # a LAN profile: nothing needs forwarding
+        return configure_lan_router(s)
     ip = _this_ip(s)
     parts: list[str] = []
     if s.this.connection == "corporate":
