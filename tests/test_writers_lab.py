@@ -105,16 +105,20 @@ def test_stale_entry_outside_the_block_is_fixed_on_request(lab):
         cfg = str(lab.config_path("laptop"))
         assert resolve(lab, "laptop", ADDR.ROBOT_NAME) == ADDR.STALE_ROBOT_PUBLIC
         before = lab.hosts_path("laptop").read_bytes()
-        r = rosnet(lab, "laptop", "hosts", "apply", "--yes", "--config", cfg)
+        r = rosnet(lab, "laptop", "hosts", "apply", "--dry-run", "--config", cfg)
         assert r.returncode == 0 and "--comment-conflicts" in r.stdout
-        r = rosnet(lab, "laptop", "hosts", "apply", "--yes", "--comment-conflicts",
-                   "--config", cfg)
+        # --yes answers the question a terminal would be asked: fix the conflicting line too
+        r = rosnet(lab, "laptop", "hosts", "apply", "--yes", "--config", cfg)
         assert r.returncode == 0, r.stdout + r.stderr
         assert resolve(lab, "laptop", ADDR.ROBOT_NAME) == ADDR.ROBOT_PUBLIC
         assert f"# rosnet-tui: {ADDR.STALE_ROBOT_PUBLIC}".encode() in \
             lab.hosts_path("laptop").read_bytes()
-        for _ in range(2):
-            assert rosnet(lab, "laptop", "undo", "--yes").returncode == 0
+        assert rosnet(lab, "laptop", "undo", "--yes").returncode == 0
+        assert lab.hosts_path("laptop").read_bytes() == before
+        r = rosnet(lab, "laptop", "hosts", "apply", "--yes", "--comment-conflicts",
+                   "--config", cfg)
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert rosnet(lab, "laptop", "undo", "--yes").returncode == 0
         assert lab.hosts_path("laptop").read_bytes() == before
 
 

@@ -36,6 +36,7 @@ from rosnet_tui.core.settings import (
     Settings,
     SettingsError,
     default_state_dir,
+    load_settings,
     save_settings,
 )
 
@@ -66,8 +67,21 @@ def ask(question: str) -> bool:
 
 
 def load_settings_for(args: argparse.Namespace) -> Settings | None:
-    """The settings, or None after saying why (the caller exits 2)."""
-    return load_settings_or_say(args)
+    """The settings, or None after saying why (the caller exits 2).
+
+    A blank local IP (and interface) is filled in from this machine for this run, as `check`
+    and the wizard do: the documented settings leave local_ip out. Nothing is saved.
+    """
+    from rosnet_tui.core.netinfo import with_detected
+
+    settings = load_settings_or_say(args)
+    return with_detected(settings) if settings is not None else None
+
+
+def yes_to_all(args: argparse.Namespace) -> bool:
+    """--yes answers every question the command would ask, unless the command replays an exact
+    preview (--expect-digest, the privileged re-run): then only the flags decide."""
+    return bool(args.yes) and not getattr(args, "expect_digest", None)
 
 
 def report_settings_problems(exc: WriterSettingsError) -> int:
@@ -86,7 +100,8 @@ def add_writer_options(p: argparse.ArgumentParser, *, file_help: str) -> None:
     add_config_option(p)
     p.add_argument("--dry-run", action="store_true", help="show the diff, write nothing")
     p.add_argument("--yes", "-y", action="store_true",
-                   help="write without asking (needed where there is no terminal)")
+                   help="answer yes to every question the command would ask: write, and fix "
+                        "what it would offer to fix (needed where there is no terminal)")
     p.add_argument("--file", metavar="PATH", type=Path, default=None, help=file_help)
     p.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
                    help="where backups and the undo journal live "
@@ -234,7 +249,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _decide_conflicts(args: argparse.Namespace, settings: Settings, profile: str,
                       path: Path) -> bool | int:
     """Whether to fix conflicting lines: the flag, or the user's answer on a terminal."""
-    if args.comment_conflicts:
+    if args.comment_conflicts or yes_to_all(args):
         return True
     if args.yes or args.dry_run or not interactive():
         return False
@@ -302,9 +317,11 @@ def run_use(args: argparse.Namespace) -> int:
     if rc != EXIT_OK or settings is None or args.dry_run:
         return rc
     if settings.this.profile != args.profile:
-        settings.this.profile = args.profile
         try:
-            save_settings(settings, config_path(args))
+            # The file's own values, not this run's (the local IP filled in from this machine).
+            saved = load_settings(config_path(args)) or settings
+            saved.this.profile = args.profile
+            save_settings(saved, config_path(args))
         except (SettingsError, OSError) as exc:
             err(f"rosnet-tui: the hosts file was written, but the settings were not saved: {exc}")
             return EXIT_FAIL

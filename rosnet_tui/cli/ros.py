@@ -21,6 +21,7 @@ from rosnet_tui.cli.hosts import (
     show_preview,
     state_dir_of,
     write_preview,
+    yes_to_all,
 )
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core.bashrc import (
@@ -46,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_writer_options(a, file_help="shell file to write (default: ~/.bashrc)")
     a.add_argument("--comment-ros-ip", action="store_true",
                    help="also comment out ROS_IP / ROS_HOSTNAME lines (they break remote "
-                        "networks)")
+                        "networks); --yes does it too")
     a.set_defaults(func=run_apply)
 
     e = rs.add_parser("export", help="print the lines that set up the current shell "
@@ -56,7 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _decide_comment(args: argparse.Namespace, path: Path) -> bool:
-    if args.comment_ros_ip:
+    if args.comment_ros_ip or yes_to_all(args):   # --yes: yes to this question too
         return True
     if args.yes or args.dry_run or not interactive():
         return False
