@@ -215,7 +215,6 @@ def table1_causes(ev: Evidence) -> list[Cause]:
         c.up(40, f"{who}'s connection to {where} was refused: something at that address "
                  "answers and rejects it, so the modem is online and does not forward the port")
         b.down(20, "a refusal comes from the modem itself, not from a carrier that blocks")
-        a.down(10, "a service holding the port would have answered it, not refused it")
     elif answer == "unreachable":
         c.up(50, f"{who}'s connection to {where} came back unreachable: the modem forwards it "
                  "to a local address where no machine answers")
@@ -226,7 +225,9 @@ def table1_causes(ev: Evidence) -> list[Cause]:
         else:
             c.up(50, f"{where} was answered by another program, not our listener: the port is "
                      "forwarded to another machine")
-    elif answer == "timeout":
+    if answer in ("refused", "unreachable", "timeout"):
+        a.down(10, "a service holding the port would have accepted the connection")
+    if answer == "timeout":
         ping = pd.get("public_ip_ping")
         if ping is True:
             c.up(10, f"{who}'s connection to {where} got no answer while {pub} answers ping: "
