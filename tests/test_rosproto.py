@@ -325,7 +325,7 @@ def test_tcpros_hop_failure_is_named(roscore: RosCore):
 def test_silent_publisher_gives_no_message(roscore: RosCore):
     topic = unique_topic()
     pub = rosproto.ProbePublisher(roscore.uri, topic, env=LOOPBACK_ENV, call_timeout=1.0,
-                                  period=60.0)
+                                  period=60.0, prompt=False)
     assert pub.start()
     try:
         rep = rosproto.run_subscriber(roscore.uri, topic, 1.5, env=LOOPBACK_ENV)

@@ -75,13 +75,14 @@ def collect_results(settings: Any, steps: list[str] | None = None, *, timeout: f
     The one way the headless commands (check, report) run checks; *progress* prints each
     verdict to stderr as it lands.
     """
-    from rosnet_tui.core.checks.runner import RunOptions, run_now, select
+    from rosnet_tui.core.checks.runner import RunOptions, prestart_ssh, run_now, select
 
     def say(r: Any, done: int, total: int) -> None:
         _err(f"[{done}/{total}] {r.status.label:<4} {r.id}: {r.summary}")
 
-    return run_now(settings, select(steps), RunOptions(timeout_s=timeout, upnp=upnp),
-                   on_result=say if progress else None)
+    # The SSH connections to the peers start now, while the checks are being imported.
+    options = prestart_ssh(settings, RunOptions(timeout_s=timeout, upnp=upnp), steps)
+    return run_now(settings, select(steps), options, on_result=say if progress else None)
 
 
 def _advice(results: dict, settings: Any) -> list:

@@ -579,7 +579,7 @@ class ProbeNode:
         port = server.server_address[1]
         self.uri = f"http://{self.host}:{port}/"
         self.report.advertised_uri = self.uri
-        self._thread(server.serve_forever, 0.1)
+        self._thread(server.serve_forever, 0.02)   # stop_server waits at most this long
 
     def stop_server(self) -> None:
         self.stopping.set()
@@ -616,6 +616,7 @@ class ProbePublisher(ProbeNode):
 
     def __init__(self, master_uri: str, topic: str, **kw: Any) -> None:
         self.period = kw.pop("period", 0.1)
+        self.prompt = kw.pop("prompt", True)     # the first message right after the handshake
         super().__init__(master_uri, topic, "pub", **kw)
         self._tcp: Optional[socket.socket] = None
         self._conns: List[Tuple[socket.socket, str]] = []
@@ -624,6 +625,7 @@ class ProbePublisher(ProbeNode):
         self.master_error: Optional[str] = None  # describe_error kind when the master failed
         self._stopped = False
         self.served_closed = threading.Event()  # a subscriber got messages, then hung up
+        self._sent = 0                           # messages numbered across subscribers
 
     def _request_topic(self, caller_id: str, topic: str, protocols: Any) -> List[Any]:
         who = self._who(caller_id)
@@ -721,31 +723,49 @@ class ProbePublisher(ProbeNode):
             self.report.add("tcpros", True, f"TCPROS connection from {caller} at {where}: "
                                             "handshake done")
             self._conns.append((conn, caller))
+        if self.prompt:
+            try:   # the first message at once; then every period
+                self._send(conn, caller)
+            except OSError:
+                pass    # the publish loop notices the hang-up
+
+    def _send(self, conn: socket.socket, caller: str) -> None:
+        with self._lock:
+            self._sent += 1
+            frame = encode_string(f"rosnet-tui probe {self._sent} from {self.caller_id}")
+        conn.sendall(frame)
+        with self._lock:
+            self.report.sent += 1
+            self._per_conn[caller] = self._per_conn.get(caller, 0) + 1
 
     def _publish_loop(self) -> None:
-        n = 0
-        while not self.stopping.wait(self.period):
+        while not self.stopping.is_set():
             with self._lock:
                 conns = list(self._conns)
             if not conns:
+                self.stopping.wait(min(self.period, 0.02))
                 continue
-            n += 1
-            frame = encode_string(f"rosnet-tui probe {n} from {self.caller_id}")
+            # Sleep a period, but wake at once when a subscriber hangs up (its socket becomes
+            # readable at EOF): a served subscriber ends the probe without waiting.
+            try:
+                readable, _, _ = select.select([c for c, _ in conns], [], [], self.period)
+            except (OSError, ValueError):
+                readable = [c for c, _ in conns]
+            if self.stopping.is_set():
+                return
             for conn, caller in conns:
                 gone = False
                 try:
-                    readable, _, _ = select.select([conn], [], [], 0)
-                    if readable and not conn.recv(1):
-                        gone = True
+                    if conn in readable:
+                        gone = not conn.recv(1)
                     else:
-                        conn.sendall(frame)
-                        self.report.sent += 1
-                        self._per_conn[caller] = self._per_conn.get(caller, 0) + 1
+                        self._send(conn, caller)
                 except OSError:
                     gone = True
                 if gone:
                     with self._lock:
-                        self._conns.remove((conn, caller))
+                        if (conn, caller) in self._conns:
+                            self._conns.remove((conn, caller))
                     conn.close()
                     got = self._per_conn.get(caller, 0)
                     self.report.add("info", True,
@@ -763,6 +783,10 @@ class ProbePublisher(ProbeNode):
                 self.report.served += 1
             conn.close()
         if self._tcp is not None:
+            try:     # wakes the accept loop at once (a plain close would not)
+                self._tcp.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
             self._tcp.close()
         self.stop_server()
 

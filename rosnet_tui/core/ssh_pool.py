@@ -7,14 +7,21 @@ TCP handshakes, key exchanges and logins at once, and as many ``sshd`` processes
 sessions over one connection, as ``ssh -o ControlMaster`` does). A failed connection is shared
 too: every check waiting on an unreachable peer gets the same verdict at the same moment.
 
-The pool lives as long as its round (:func:`rosnet_tui.core.checks.run_checks` closes it).
+Connections are made in threads (paramiko blocks), so a pool can start them before the event
+loop runs: :meth:`SshPool.prestart` lets ``rosnet-tui check`` connect while it still imports the
+checks. The pool lives as long as its round (:func:`rosnet_tui.core.checks.run_checks` closes
+it).
 """
 
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import contextlib
-from typing import TYPE_CHECKING
+import threading
+import time
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
 
 from rosnet_tui.core.settings import Peer
 
@@ -22,69 +29,110 @@ if TYPE_CHECKING:
     from rosnet_tui.core.ssh import SshOptions, SshSession, _Conn
 
 
+def _key(peer: Peer) -> tuple[str, int, str]:
+    return peer.name, int(peer.ssh_port or 22), peer.ssh_user
+
+
 class SshPool:
     """Shared SSH connections of one round, by (name, port, user)."""
 
     def __init__(self) -> None:
-        self._conns: dict[tuple[str, int, str], asyncio.Future[_Conn]] = {}
+        self._conns: dict[tuple[str, int, str], tuple[concurrent.futures.Future, Any]] = {}
+        self._lock = threading.Lock()
         self.closed = False
+
+    def start(self, opts: SshOptions | None, peer: Peer, timeout: float | None = None,
+              tcp_timeout: float | None = None) -> concurrent.futures.Future:
+        """The connection attempt to *peer* (a running or finished one is reused, unless its
+        connection died). *timeout* bounds it (default: twice the round's timeout, the SSH
+        check's own budget), *tcp_timeout* its TCP part (default: the round's timeout)."""
+        from rosnet_tui.core.ssh import _connect_blocking, _fail, _Holder
+
+        base = float(getattr(opts, "timeout_s", 3.0) or 3.0)
+        with self._lock:
+            old = self._conns.get(_key(peer))
+            if old is not None:
+                fut = old[0]
+                if not fut.done():
+                    return fut
+                if not fut.cancelled():
+                    t = fut.result().transport
+                    if t is None or t.is_active():
+                        return fut
+            fut = concurrent.futures.Future()
+            holder = _Holder()
+            now = time.monotonic()
+            total = max(timeout or 0.0, 2 * base)
+            deadline, tcp_deadline = now + total, now + min(tcp_timeout or base, total)
+
+            def connect() -> None:
+                try:
+                    conn = _connect_blocking(opts, peer, deadline, holder, tcp_deadline)
+                except Exception as exc:  # noqa: BLE001 - a failure is a result
+                    conn = _fail("sshd", f"the SSH connection to {peer.name} broke: "
+                                         f"{type(exc).__name__}: {exc}", tcp=None)
+                try:
+                    fut.set_result(conn)
+                except concurrent.futures.InvalidStateError:
+                    pass                          # cancelled: the round ended meanwhile
+                if fut.cancelled() and conn.transport is not None:
+                    conn.transport.close()
+
+            if not self.closed:
+                self._conns[_key(peer)] = (fut, holder)
+            threading.Thread(target=connect, daemon=True, name=f"rosnet-ssh-{peer.name}").start()
+            return fut
+
+    def prestart(self, opts: SshOptions | None, peers: Iterable[Peer]) -> None:
+        """Start connecting to *peers* now (before the checks that will use them run)."""
+        for p in peers:
+            if p.ssh_user:
+                self.start(opts, p)
 
     async def connect(self, opts: SshOptions | None, peer: Peer, timeout: float,
                       tcp_timeout: float | None = None) -> tuple[_Conn, bool]:
         """(the connection, shared?) to *peer*, waiting at most *timeout* for it.
 
-        The first caller starts the connection; its budget is the longer of *timeout* and twice
-        the round's timeout (the SSH check's own), its TCP phase bounded by *tcp_timeout* (else
-        the round's timeout). Later callers wait on the same attempt, each for its own
-        *timeout*. A connection that died is made again.
+        The first caller starts the attempt (see :meth:`start`). *tcp_timeout* bounds this
+        caller's wait for the TCP connection: once that is made (the peer answered), the caller
+        may wait the rest of *timeout* for the SSH handshake.
         """
-        from rosnet_tui.core.ssh import _connect
+        from rosnet_tui.core.ssh import _fail
 
-        key = (peer.name, int(peer.ssh_port or 22), peer.ssh_user)
-        fut = self._conns.get(key)
-        if fut is not None and fut.done() and not fut.cancelled() and fut.exception() is None:
-            t = fut.result().transport
-            if t is not None and not t.is_active():
-                fut = None
-        if fut is None or self.closed:
-            base = float(getattr(opts, "timeout_s", 3.0) or 3.0)
-            tcp = tcp_timeout if tcp_timeout is not None else base
-            fut = asyncio.ensure_future(_connect(opts, peer, max(timeout, 2 * base), tcp))
-            if self.closed:   # after close(): a private connection, the caller closes it
-                conn = await _wait(fut, timeout, peer)
-                return conn, False
-            self._conns[key] = fut
-        return await _wait(fut, timeout, peer), True
+        fut = self.start(opts, peer, timeout)
+        holder = self._conns.get(_key(peer), (None, None))[1]
+        loop = asyncio.get_running_loop()
+        end = loop.time() + timeout
+        first = min(timeout, tcp_timeout) if tcp_timeout is not None else timeout
+        try:
+            conn = await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(fut)), first + 0.05)
+        except asyncio.TimeoutError:
+            connected = holder is not None and getattr(holder, "sock", None) is not None
+            try:
+                if not connected:
+                    raise
+                conn = await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(fut)),
+                                              max(end - loop.time(), 0.05) + 0.5)
+            except asyncio.TimeoutError:
+                return _fail("timeout", f"no SSH connection to {peer.name} within "
+                                        f"{first if not connected else timeout:.1f} s",
+                             tcp="connected" if connected else None), False
+        return conn, not self.closed
 
     def close(self) -> None:
         """Close every connection of the round (running attempts close theirs when done)."""
-        self.closed = True
-        conns, self._conns = list(self._conns.values()), {}
-        for fut in conns:
+        with self._lock:
+            self.closed = True
+            conns, self._conns = list(self._conns.values()), {}
+        for fut, holder in conns:
             if fut.done():
                 with contextlib.suppress(Exception):
                     t = fut.result().transport
                     if t is not None:
                         t.close()
-            else:
-                fut.add_done_callback(_close_when_done)
-
-
-def _close_when_done(fut: asyncio.Future) -> None:
-    with contextlib.suppress(Exception):
-        t = fut.result().transport
-        if t is not None:
-            t.close()
-
-
-async def _wait(fut: asyncio.Future, timeout: float, peer: Peer) -> _Conn:
-    from rosnet_tui.core.ssh import _fail
-
-    try:
-        return await asyncio.wait_for(asyncio.shield(fut), timeout + 0.5)
-    except asyncio.TimeoutError:
-        return _fail("timeout", f"no SSH connection to {peer.name} within {timeout:.1f} s",
-                     tcp=None)
+            else:     # its waiters are told now, while their event loop still runs
+                holder.close()
+                fut.cancel()
 
 
 async def open_session(opts: SshOptions | None, peer: Peer, command: str, timeout: float,

@@ -367,6 +367,7 @@ async def check_cgnat(ctx: CheckContext) -> Outcome:
             evidence.append("UPnP: not asked (turned off for this run)")
             return None
         location = await ssdp_find_igd(min(0.8, total * 0.25))
+        answered.set()
         if location is None:
             evidence.append("UPnP: no internet gateway answered on the LAN")
             return None
@@ -408,7 +409,26 @@ async def check_cgnat(ctx: CheckContext) -> Outcome:
             f"{h.ttl}:{h.ip or '*'}" for h in hops))
         return hops
 
-    wan_ip, hops = await asyncio.gather(upnp(), trace())
+    # The path probe usually ends within tens of milliseconds. When it already shows public
+    # hops beyond the modem and no gateway has answered the UPnP search after SSDP_GRACE_S, a
+    # gateway is unlikely to answer later: stop waiting for it (it could add only the WAN
+    # address the path already vouches for).
+    answered = asyncio.Event()
+    up_task = asyncio.ensure_future(upnp())
+    hops = await trace()
+    wan_ip = None
+    if hops is not None and not answered.is_set() and _public_beyond_modem(hops, target):
+        done, _ = await asyncio.wait([up_task], timeout=SSDP_GRACE_S)
+        if not done:
+            up_task.cancel()
+            await asyncio.gather(up_task, return_exceptions=True)
+            evidence.append(f"UPnP: no gateway answered within {SSDP_GRACE_S:g} s; not waited "
+                            "for longer, since the path probe shows public hops beyond the "
+                            "modem")
+        else:
+            wan_ip = up_task.result()
+    else:
+        wan_ip = await up_task
     if wan_ip:
         data.update(wan_ip=wan_ip, method="upnp")
         public_ip = None
@@ -433,6 +453,17 @@ async def check_cgnat(ctx: CheckContext) -> Outcome:
     status, summary, updates = judge_path(hops, target or "", data.get("source"))
     data.update(updates)
     return Outcome(status, summary, evidence, data)
+
+
+SSDP_GRACE_S = 0.3
+
+
+def _public_beyond_modem(hops: list[Hop], target: str | None) -> bool:
+    """The path probe is conclusive: the first hop after the modem answered and is public, or
+    the target itself answered right behind the modem."""
+    if len(hops) < 2 or not hops[1].ip:
+        return False
+    return hops[1].reached or hops[1].ip == target or is_public_v4(hops[1].ip)
 
 
 def judge_wan(wan_ip: str, public_ip: str | None) -> tuple[Status, str, dict]:

@@ -162,15 +162,21 @@ def shq(s: str) -> str:
 
 
 def python_command(script: str, *args: str, python: str = "python3") -> str:
-    """A shell command running stdlib-only *script* with python3 on a peer (no install needed)."""
+    """A shell command running stdlib-only *script* with python3 on a peer (no install needed).
+
+    ``-S``: the probes need the standard library only, so the peer skips site (its
+    site-packages, .pth files): a faster start, and nothing of the peer's can shadow a module.
+    """
     b64 = base64.b64encode(script.encode()).decode()
     quoted = " ".join(shq(a) for a in args)
-    return (f"{python} -c 'import base64;exec(base64.b64decode(\"{b64}\"))' {quoted}").strip()
+    return (f"{python} -S -c 'import base64;exec(base64.b64decode(\"{b64}\"))' "
+            f"{quoted}").strip()
 
 
 def python_stdin_command(*args: str) -> str:
-    """A shell command running the program fed on stdin with python3 on a peer (``python3 -``)."""
-    return "python3 - " + " ".join(shlex.quote(a) for a in args)
+    """A shell command running the program fed on stdin with python3 on a peer (``python3 -``,
+    without site, as :func:`python_command`)."""
+    return "python3 -S - " + " ".join(shlex.quote(a) for a in args)
 
 
 def peer_program_problem(res: SshResult, peer: Peer) -> str | None:

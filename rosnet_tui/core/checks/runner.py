@@ -10,7 +10,7 @@ from __future__ import annotations
 import asyncio
 import os
 from collections.abc import AsyncIterator, Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from rosnet_tui.core.checks import (
@@ -38,6 +38,7 @@ class RunOptions:
     env: Mapping[str, str] | None = None    # None: this process's environment
     upnp: bool = True                       # isp.cgnat may ask the modem over UPnP
     ssh: SshOptions = field(default_factory=SshOptions)
+    ssh_pool: SshPool | None = None         # None: a new pool for the round (see prestart_ssh)
 
 
 def select(steps: Iterable[str] | None = None, ids: Iterable[str] | None = None
@@ -63,7 +64,7 @@ def make_context(settings: Settings, options: RunOptions | None = None) -> Check
     timeout = float(o.timeout_s if o.timeout_s is not None else settings.checks.timeout_s)
     kw: dict = {"settings": settings, "timeout_s": timeout,
                 "env": dict(os.environ if o.env is None else o.env),
-                "upnp": o.upnp, "ssh_options": o.ssh, "ssh_pool": SshPool()}
+                "upnp": o.upnp, "ssh_options": o.ssh, "ssh_pool": o.ssh_pool or SshPool()}
     if o.hosts_path is not None:
         kw["hosts_path"] = o.hosts_path
     if o.bashrc_path is not None:
@@ -71,6 +72,20 @@ def make_context(settings: Settings, options: RunOptions | None = None) -> Check
     if o.state_dir is not None:
         kw["state_dir"] = o.state_dir
     return CheckContext(**kw)
+
+
+def prestart_ssh(settings: Settings, options: RunOptions | None = None,
+                 steps: Iterable[str] | None = None) -> RunOptions:
+    """*options* with the round's SSH connections already being made, when the checks of
+    *steps* (every step when None) use the peers: the handshakes overlap whatever the caller
+    still does before the round starts (``rosnet-tui check`` imports the checks)."""
+    o = options or RunOptions()
+    if steps is not None and not set(steps) & {"router", "linux", "ros"}:
+        return o
+    timeout = float(o.timeout_s if o.timeout_s is not None else settings.checks.timeout_s)
+    pool = o.ssh_pool or SshPool()
+    pool.prestart(replace(o.ssh, timeout_s=timeout), [p for p in settings.peers if p.ssh_user])
+    return replace(o, ssh_pool=pool)
 
 
 async def stream(specs: Iterable[CheckSpec], ctx: CheckContext) -> AsyncIterator[CheckResult]:

@@ -1,0 +1,138 @@
+"""One SSH connection per peer per round (core/ssh_pool), against a real sshd on loopback."""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import socket
+import time
+
+import pytest
+
+from rosnet_tui.core.ssh import ssh_run
+from rosnet_tui.core.ssh_pool import SshPool
+from tests.test_ssh import Sshd, free_port, ssh_client, sshd  # noqa: F401
+
+
+def logins(d: Sshd) -> int:
+    return d.log.read_text().count("Accepted publickey") if d.log.exists() else 0
+
+
+def pooled(client, pool: SshPool, **kw):
+    return dataclasses.replace(client.opts(**kw), pool=pool)
+
+
+async def test_concurrent_sessions_share_one_login(ssh_client, sshd):  # noqa: F811
+    pool = SshPool()
+    before = logins(sshd)
+    opts = pooled(ssh_client, pool)
+    try:
+        got = await asyncio.gather(*(ssh_run(opts, ssh_client.peer(), f"echo {i}", timeout=10)
+                                     for i in range(5)))
+    finally:
+        pool.close()
+    assert [r.stdout.strip() for r in got] == [str(i) for i in range(5)]
+    assert all(r.ok and r.tcp == "connected" for r in got)
+    deadline = time.monotonic() + 5
+    while logins(sshd) < before + 1 and time.monotonic() < deadline:
+        await asyncio.sleep(0.05)
+    assert logins(sshd) == before + 1
+
+
+async def test_prestarted_connection_is_used_by_the_round(ssh_client, sshd):  # noqa: F811
+    pool = SshPool()
+    before = logins(sshd)
+    opts = pooled(ssh_client, pool)
+    pool.prestart(opts, [ssh_client.peer()])
+    try:
+        a, b = await asyncio.gather(ssh_run(opts, ssh_client.peer(), "echo a", timeout=10),
+                                    ssh_run(opts, ssh_client.peer(), "echo b", timeout=10))
+    finally:
+        pool.close()
+    assert a.ok and b.ok
+    await asyncio.sleep(0.2)
+    assert logins(sshd) == before + 1
+
+
+async def test_sessions_beyond_maxsessions_get_their_own_connection(ssh_client, tmp_path):  # noqa: F811
+    d = Sshd(tmp_path / "sshd2")
+    d.config.write_text(d.config.read_text() + "MaxSessions 2\n")
+    d.authorized.write_text(ssh_client.pub + "\n")
+    d.start()
+    try:
+        client = dataclasses.replace(ssh_client, sshd=d)
+        client.trust()
+        pool = SshPool()
+        opts = pooled(client, pool)
+        try:
+            got = await asyncio.gather(*(ssh_run(opts, client.peer(), f"sleep 0.5; echo {i}",
+                                                 timeout=10) for i in range(5)))
+        finally:
+            pool.close()
+        assert [r.stdout.strip() for r in got] == [str(i) for i in range(5)], got
+    finally:
+        d.stop()
+
+
+async def test_a_refusing_peer_is_one_shared_verdict(ssh_client):  # noqa: F811
+    pool = SshPool()
+    opts = pooled(ssh_client, pool, timeout_s=2.0)
+    peer = ssh_client.peer(ssh_port=free_port())          # nothing listens there
+    t0 = time.monotonic()
+    try:
+        got = await asyncio.gather(*(ssh_run(opts, peer, "true", timeout=5) for _ in range(4)))
+    finally:
+        pool.close()
+    assert time.monotonic() - t0 < 1.0
+    assert all(r.failure == "network" and r.tcp == "refused" for r in got)
+    assert all("it may listen on another port" in r.detail for r in got)
+
+
+async def test_a_peer_that_answered_may_use_the_longer_budget(ssh_client):  # noqa: F811
+    """The TCP connection is made (the kernel accepts), but no SSH banner ever comes: the caller
+    waits past its TCP bound, up to its own timeout, and the verdict says it connected."""
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen(8)
+    peer = ssh_client.peer(ssh_port=silent.getsockname()[1])
+    pool = SshPool()
+    opts = pooled(ssh_client, pool, timeout_s=0.3)
+    t0 = time.monotonic()
+    try:
+        r = await ssh_run(opts, peer, "true", timeout=1.5, tcp_timeout=0.3)
+    finally:
+        pool.close()
+        silent.close()
+    took = time.monotonic() - t0
+    assert not r.ok and r.tcp == "connected", r
+    assert 0.5 < took < 2.6, took
+
+
+def test_close_ends_the_connections_and_later_sessions_still_work(ssh_client):  # noqa: F811
+    async def go():
+        pool = SshPool()
+        opts = pooled(ssh_client, pool)
+        r = await ssh_run(opts, ssh_client.peer(), "echo one", timeout=10)
+        fut = pool.start(opts, ssh_client.peer())
+        transport = fut.result().transport
+        pool.close()
+        assert not transport.is_active()
+        again = await ssh_run(opts, ssh_client.peer(), "echo two", timeout=10)
+        return r, again
+
+    r, again = asyncio.run(go())
+    assert r.stdout.strip() == "one" and again.stdout.strip() == "two"
+
+
+@pytest.mark.parametrize("steps, started", [(None, True), (["isp"], False), (["ros"], True)])
+def test_prestart_ssh_only_when_the_steps_use_the_peers(ssh_client, steps, started):  # noqa: F811
+    from rosnet_tui.core.checks.runner import RunOptions, prestart_ssh
+    from tests.test_ssh import settings_with
+
+    s = settings_with(ssh_client.peer())
+    o = prestart_ssh(s, RunOptions(ssh=ssh_client.opts(), timeout_s=2.0), steps)
+    assert (o.ssh_pool is not None) == started
+    if o.ssh_pool is not None:
+        fut = o.ssh_pool.start(ssh_client.opts(timeout_s=2.0), ssh_client.peer())
+        assert fut.result(timeout=10).result.ok
+        o.ssh_pool.close()
