@@ -28,7 +28,14 @@ TITLES = {2: "Full verification on the lab's healthy network",
 
 
 def rosnet_check(lab: Any, host: str, state: Path, *extra: str) -> dict[str, Any]:
-    """`rosnet-tui check --json` on *host* (all steps, both directions): wall time and verdicts."""
+    """`rosnet-tui check --json` on *host* (all steps, both directions): wall time and verdicts.
+
+    A verdict's margin is its duration minus the round's timeout_s (the lab's settings, or
+    --timeout in *extra*): bad news must come within timeout_s + 0.5 s whatever the check's
+    own, longer budget for a peer that answers.
+    """
+    base = float(extra[extra.index("--timeout") + 1]) if "--timeout" in extra else \
+        float(lab.settings(host).checks.timeout_s)
     config = lab.config_path(host)  # written before the clock starts
     env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
     t0 = time.monotonic()
@@ -40,8 +47,7 @@ def rosnet_check(lab: Any, host: str, state: Path, *extra: str) -> dict[str, Any
     except (ValueError, KeyError) as exc:
         raise BenchError(f"rosnet-tui check on {host} gave no JSON (exit {r.returncode}): "
                          f"{r.stderr[-500:]}") from exc
-    margins = [(c["duration_s"] - c["timeout_s"], c["id"], c["duration_s"], c["timeout_s"])
-               for c in checks]
+    margins = [(c["duration_s"] - base, c["id"], c["duration_s"], base) for c in checks]
     worst = max(margins)
     return {"wall_s": wall, "exit": r.returncode,
             "all_pass": r.returncode == 0 and all(c["status"] == "pass" for c in checks),
@@ -127,6 +133,13 @@ def _scenarios(lab: Any) -> list[dict[str, Any]]:
          "master": True,
          "tools": [("ssh", [*ssh, f"root@{laptop}", "true"]),
                    ("nc -z (test port)", ["nc", "-z", laptop, "12345"])]},
+        {"name": "the robot unplugged, its modem dropping what it forwards (no ICMP error "
+                 "either), seen from the laptop", "short": "Robot unplugged (silent)",
+         "host": "laptop", "variant": "unplugged", "options": {"side": "robot", "silent": True},
+         "master": True,
+         "tools": [("ssh", [*ssh, f"root@{robot}", "true"]),
+                   ("nc -z (test port)", ["nc", "-z", robot, "12345"]),
+                   ("rostopic list", ["rostopic", "list"])]},
     ]
 
 
@@ -153,7 +166,8 @@ def row3_bad_news(lab: Any, opts: Options, state: Path) -> RowResult:
             lab.start_roscore()
         else:
             lab.stop_roscore()
-        ctx = lab.variant(sc["variant"]) if sc["variant"] else _nothing()
+        ctx = lab.variant(sc["variant"], **sc.get("options", {})) if sc["variant"] \
+            else _nothing()
         with ctx:
             runs = [rosnet_check(lab, sc["host"], state / sc["host"], *extra)
                     for _ in range(opts.reps)]
@@ -169,7 +183,7 @@ def row3_bad_news(lab: Any, opts: Options, state: Path) -> RowResult:
         ln = Line(3, f"{sc['short']}: every verdict", "s",
                   [r["wall_s"] for r in runs], per_rep,
                   baseline="standard tools with default settings, one after another",
-                  goal="<= timeout+0.5 s")
+                  goal="<= timeout_s+0.5 s")
         ln.met = all(r["worst_margin_s"] <= 0.5 for r in runs)
         ln.note = (f"{sc['name']}; worst margin {worst['worst_margin_s']:+.2f} s ({worst['worst_check']}); "
                    f"tools: " + ", ".join(f"{k} {v}" for k, v in by_tool.items())
@@ -181,8 +195,9 @@ def row3_bad_news(lab: Any, opts: Options, state: Path) -> RowResult:
     lab.start_roscore()
     w = Line(3, "Worst verdict margin", "s", [max(margins)] if margins else [], [],
              goal="<= +0.5 s",
-             note=f"a check's duration minus its timeout: the worst of {len(margins)} runs "
-                  "(all scenarios and repetitions); negative = before the timeout")
+             note=f"a check's duration minus timeout_s (the round's, not the check's longer "
+                  f"budget): the worst of {len(margins)} runs (all scenarios and "
+                  "repetitions); negative = before the timeout")
     w.met = bool(margins) and max(margins) <= 0.5
     res.lines.append(w)
     res.details = {"scenarios": details, "worst_margins_s": margins}
