@@ -197,7 +197,8 @@ def _master_down(ev: Evidence) -> list[Hit]:
     if master in linux_peers(ev) and is_unreachable(ev, master):
         meaning += (f" {master} itself cannot be reached from here (see the Linux step), so "
                     "fix that first: the master follows.")
-    return [Hit((meaning + " " + said).strip(), [acts[c.key] for c in causes], check_ids=ids,
+    return [Hit((meaning + " " + said).strip(),
+                [acts[c.key] for c in causes if c.key != "peer" or c.score > 0], check_ids=ids,
                 goto_step=causes[0].step, evidence=evid + causes[0].evidence())]
 
 
