@@ -252,3 +252,17 @@ def test_master_uri_only_in_this_shell_says_how_to_write_it():
     put(r, "ros.env", "warn", env_uri=None, uri_ok=True)
     f = next(f for f in run(r) if f.rule == "ros.env.bashrc")
     assert "source ~/.bashrc" in f.actions[0]
+
+
+def test_peer_cannot_register_follows_the_port_test():
+    """On the master: the peer's nodes cannot register. The port test of this round tells
+    whether the forwarding is the cause."""
+    from tests.test_advisor import _peer_cannot_register
+
+    r, s = _peer_cannot_register()                     # 11311 open from outside
+    f = next(f for f in run(r, s) if f.rule == "ros.master.peer_cannot_register")
+    assert f.goto_step == "linux" and f.actions[0].startswith("On sami: `getent hosts turtlebot`")
+    assert "11311 open from outside" in f.meaning
+    closed_port(r, "timeout")                          # the test port closed (Table 1)
+    f = next(f for f in run(r, s) if f.rule == "ros.master.peer_cannot_register")
+    assert f.goto_step == "router" and f.actions[0].startswith("On turtlebot's modem")

@@ -142,6 +142,19 @@ async def test_listener_answers_and_is_closed_after_the_check(tmp_path):
     assert can_bind(port) and not ctx.listeners.holds(port)
 
 
+async def test_listener_tests_the_address_this_machine_has_not_a_stale_one(tmp_path):
+    """After a new DHCP lease the settings still name the old local IP: our listener is up
+    all the same (Table 1 must read "listener up"), and the evidence says what was skipped."""
+    net = detect_local_net()
+    if not net.local_ip:
+        pytest.skip("this machine has no LAN address")
+    ctx = ctx_for(tmp_path, local_ip="10.99.99.99")
+    r = await run("router.listener", ctx)
+    assert r.status is Status.PASS and r.data["listening"] is True, r.evidence
+    assert net.local_ip in r.summary and "10.99.99.99" not in r.summary
+    assert any("10.99.99.99 is not an address of this machine now" in e for e in r.evidence)
+
+
 async def test_listener_fails_when_the_port_is_taken(tmp_path):
     ctx = ctx_for(tmp_path)
     with socket.socket() as s:
@@ -214,6 +227,9 @@ async def test_port_open_from_the_peer_over_ssh(ssh_client, web, tmp_path):  # n
     assert all(p["via"] == "peer:localhost" and p["reachable"] for p in r.data["ports"])
     assert r.data["public_ip"] == "127.0.0.1"
     assert any(ctx.listeners.token in e for e in r.evidence)  # the peer read OUR listener
+    # the evidence the advisor ranks by: our token read on every port, the address pings
+    assert all(p["answer"] == "token" for p in r.data["ports"]), r.data["ports"]
+    assert r.data["public_ip_ping"] is True
 
 
 async def test_port_open_falls_back_to_the_checker_when_ssh_fails(ssh_client, probe_server,  # noqa: F811

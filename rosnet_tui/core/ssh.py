@@ -61,9 +61,7 @@ class SshResult:
     fingerprint: str | None  # SHA256:... of the server's host key when seen
     host_key: str | None = None  # "<type> <base64>" of the server's key, for trust_host_key()
     address: str | None = None   # the address the peer's name resolved to here
-    # How the TCP connection to the SSH port went: "connected", "refused", "timeout",
-    # "unreachable", "error" (None: not tried, e.g. the name did not resolve).
-    tcp: str | None = None
+    tcp: str | None = None       # TCP to the SSH port: core.connect's kind (None: not tried)
 
 
 # --------------------------------------------------------------------------- blocking helpers
@@ -311,10 +309,9 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
                                 "a firewall, or nobody at that address)", address=addr,
                      tcp="timeout")
     except OSError as exc:
-        why = {errno.ECONNREFUSED: f"connection refused: something at {addr} answers and "
-                                   f"rejects port {port} (sshd does not listen on it - it may "
-                                   "listen on another port, see ssh_port - or the modem does "
-                                   "not forward it)",
+        why = {errno.ECONNREFUSED: f"connection refused: {addr} answers and rejects port {port}"
+                                   " (sshd does not listen there - it may listen on another "
+                                   "port, see ssh_port - or the modem does not forward it)",
                errno.EHOSTUNREACH: "no route to the host",
                errno.ENETUNREACH: "the network is unreachable"}.get(exc.errno or 0, str(exc))
         return _fail("network", f"cannot reach {name} ({addr}) on TCP {port}: {why}", address=addr,
@@ -564,10 +561,9 @@ async def ssh_session(opts: SshOptions | None, peer: Peer, command: str, *,
                       tcp_timeout: float | None = None) -> AsyncIterator[SshSession]:
     """Start *command* on *peer* and keep it running for the ``async with`` body.
 
-    ``timeout`` bounds the connection (and is the default for reads/waits); ``tcp_timeout``
-    bounds its first part, the TCP connection (an unreachable peer is told by then: only a peer
-    that answered may use the rest of ``timeout`` for the SSH handshake). With a pool in *opts*
-    the session opens a channel on the round's connection to *peer*. On leaving the block
+    ``timeout`` bounds the connection (and is the default for reads/waits), ``tcp_timeout`` its
+    TCP part (only a peer that answered may use the rest); with a pool in *opts* the session is a
+    channel on the round's connection to *peer*. On leaving the block
     the channel and connection are closed; the remote command must bound itself (sshd does not
     kill a command without a terminal when the channel closes). Usage::
 

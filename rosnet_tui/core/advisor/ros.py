@@ -217,14 +217,25 @@ def _peer_cannot_register(ev: Evidence) -> list[Hit]:
     peer = _pubsub_peer(ev)
     me, port = ev.me, ev.s.ros.port
     pub = ev.my_public_ip()
-    return [Hit(f"The master answers on {me} itself, but {peer}'s nodes cannot register with it: "
-                f"connections from outside do not reach {me}'s port {port}.",
-                [f"On {me}'s modem: forward TCP {FORWARD_RANGE} (11311 included) to "
-                 f"{ev.my_local_ip()} (the Router step here: its port test must say Open).",
-                 f"On {me}: the firewall must let TCP {port} in (`sudo ufw status`).",
-                 f"On {peer}: `getent hosts {me}` must print {pub}, and ROS_MASTER_URI must be "
-                 f"http://{me}:{port}."],
-                check_ids=[*failed, *_node_list_failed(ev)],
+    acts = [f"On {me}'s modem: forward TCP {FORWARD_RANGE} (11311 included) to "
+            f"{ev.my_local_ip()} (the Router step here: its port test must say Open).",
+            f"On {me}: the firewall must let TCP {port} in (`sudo ufw status`).",
+            f"On {peer}: `getent hosts {me}` must print {pub}, and ROS_MASTER_URI must be "
+            f"http://{me}:{port}."]
+    meaning = (f"The master answers on {me} itself, but {peer}'s nodes cannot register with "
+               f"it: connections from outside do not reach {me}'s port {port}.")
+    goto = "router"
+    rows = [r for r in ev.data("router.port_open").get("ports") or []
+            if isinstance(r, Mapping) and r.get("port") == port]
+    if rows and rows[0].get("reachable") is True:      # the forwarding is not it
+        meaning = (f"The master answers on {me} itself, and the port test reached port {port} "
+                   f"from outside, yet {peer}'s nodes cannot register with it: {peer} looks for "
+                   f"the master at the wrong address, or a firewall here lets only some in. "
+                   f"Seen: router.port_open: {port} open from outside.")
+        acts, goto = [acts[2], acts[1], acts[0]], "linux"
+    elif ev.data("router.port_open").get("test_port_open") is False:
+        meaning += " Seen: router.port_open: the test port is closed from outside (Table 1)."
+    return [Hit(meaning, acts, check_ids=[*failed, *_node_list_failed(ev)], goto_step=goto,
                 evidence=[f"{c}: {peer} failed at registration" for c in failed])]
 
 
