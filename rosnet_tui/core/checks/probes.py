@@ -11,8 +11,10 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
+import errno
 import ipaddress
 import shlex
+import socket
 import time
 from dataclasses import dataclass
 from urllib.parse import urljoin, urlsplit
@@ -47,63 +49,99 @@ class HttpAnswer:
         return f"GET {self.url} -> {self.error}"
 
 
-def _short_error(exc: BaseException) -> str:
-    import requests  # here, not at the top: the wizard lists the checks without loading it
+def _short_error(exc: BaseException, connected: bool = False) -> str:
+    """A failed GET in a few words (*connected*: the TCP connection was made)."""
+    import ssl
 
     text = str(exc)
-    if isinstance(exc, requests.exceptions.ConnectTimeout):
-        return "no answer (timed out connecting)"
-    if isinstance(exc, requests.exceptions.ReadTimeout):
-        return "connected, but no reply in time"
-    if isinstance(exc, requests.exceptions.SSLError):
+    if isinstance(exc, ssl.SSLError) or isinstance(exc, ssl.CertificateError):
         return "TLS error (" + text[:120] + ")"
-    low = text.lower()
-    for needle, words in (("name or service not known", "the name does not resolve"),
-                          ("failed to resolve", "the name does not resolve"),
-                          ("temporary failure in name resolution", "the name does not resolve (DNS)"),
-                          ("connection refused", "connection refused"),
-                          ("no route to host", "no route to the host"),
-                          ("network is unreachable", "the network is unreachable"),
-                          ("timed out", "timed out")):
-        if needle in low:
-            return words
+    if isinstance(exc, (TimeoutError, socket.timeout)):
+        return "connected, but no reply in time" if connected else \
+            "no answer (timed out connecting)"
+    if isinstance(exc, socket.gaierror):
+        return ("the name does not resolve (DNS)" if exc.errno == socket.EAI_AGAIN
+                else "the name does not resolve")
+    if isinstance(exc, ConnectionRefusedError):
+        return "connection refused"
+    if isinstance(exc, OSError) and exc.errno == errno.EHOSTUNREACH:
+        return "no route to the host"
+    if isinstance(exc, OSError) and exc.errno == errno.ENETUNREACH:
+        return "the network is unreachable"
     return text[:160] or type(exc).__name__
 
 
+_TLS: list = []
+
+
+def _tls_context():  # -> ssl.SSLContext
+    """The system's trusted CAs (certifi's bundle when the system has none), made once."""
+    import ssl
+
+    if not _TLS:
+        ctx = ssl.create_default_context()
+        if not ctx.cert_store_stats().get("x509_ca"):
+            with contextlib.suppress(Exception):
+                import certifi
+
+                ctx = ssl.create_default_context(cafile=certifi.where())
+        _TLS.append(ctx)
+    return _TLS[0]
+
+
 def _http_get_blocking(url: str, timeout: float) -> HttpAnswer:
-    import requests
+    """GET *url* with the standard library (no proxies from the environment: a proxy would
+    answer with its own address); redirects are followed on the same host only."""
+    import http.client
 
     deadline = time.monotonic() + timeout
-    with requests.Session() as s:
-        s.trust_env = False  # no proxies from the environment: we want our own public address
-        current = url
-        for _ in range(4):
-            left = max(deadline - time.monotonic(), 0.05)
+    current = url
+    for _ in range(4):
+        parts = urlsplit(current)
+        if parts.scheme not in ("http", "https") or not parts.hostname:
+            return HttpAnswer(url, False, None, "", f"not an http(s) URL: {current}")
+        left = max(deadline - time.monotonic(), 0.05)
+        try:
+            port = parts.port
+        except ValueError:
+            return HttpAnswer(url, False, None, "", f"bad port in {current}")
+        conn = (http.client.HTTPSConnection(parts.hostname, port, timeout=left,
+                                            context=_tls_context())
+                if parts.scheme == "https" else
+                http.client.HTTPConnection(parts.hostname, port, timeout=left))
+        path = (parts.path or "/") + (f"?{parts.query}" if parts.query else "")
+        try:
             try:
-                r = s.get(current, timeout=(left, left), stream=True, allow_redirects=False,
-                          headers={"User-Agent": f"rosnet-tui/{__version__}",
-                                   "Accept": "text/plain, application/json;q=0.9, */*;q=0.5"})
-            except requests.RequestException as exc:
-                return HttpAnswer(url, False, None, "", _short_error(exc))
-            with r:
-                if r.is_redirect and r.headers.get("location"):
-                    nxt = urljoin(current, r.headers["location"])
+                conn.request("GET", path, headers={
+                    "User-Agent": f"rosnet-tui/{__version__}",
+                    "Accept": "text/plain, application/json;q=0.9, */*;q=0.5"})
+                if conn.sock is not None:
+                    conn.sock.settimeout(max(deadline - time.monotonic(), 0.05))
+                r = conn.getresponse()
+                location = r.getheader("location")
+                if r.status in (301, 302, 303, 307, 308) and location:
+                    nxt = urljoin(current, location)
                     if urlsplit(nxt).hostname != urlsplit(url).hostname:
-                        return HttpAnswer(url, False, r.status_code, "",
-                                          f"HTTP {r.status_code}: redirected to another host ({nxt}); "
+                        return HttpAnswer(url, False, r.status, "",
+                                          f"HTTP {r.status}: redirected to another host ({nxt}); "
                                           "not followed")
                     current = nxt
                     continue
-                try:
-                    body = r.raw.read(MAX_BODY, decode_content=True) or b""
-                except Exception as exc:  # noqa: BLE001
-                    return HttpAnswer(url, False, r.status_code, "", _short_error(exc))
-                text = body.decode(r.encoding or "utf-8", "replace")
-                if 200 <= r.status_code < 300:
-                    return HttpAnswer(url, True, r.status_code, text, None)
-                return HttpAnswer(url, False, r.status_code, text,
-                                  f"HTTP {r.status_code} {r.reason or ''}".strip())
-        return HttpAnswer(url, False, None, "", "too many redirects")
+                body = r.read(MAX_BODY) or b""
+            except (OSError, http.client.HTTPException) as exc:
+                return HttpAnswer(url, False, None, "",
+                                  _short_error(exc, connected=conn.sock is not None))
+            charset = r.headers.get_content_charset() or "utf-8"
+            try:
+                text = body.decode(charset, "replace")
+            except LookupError:
+                text = body.decode("utf-8", "replace")
+            if 200 <= r.status < 300:
+                return HttpAnswer(url, True, r.status, text, None)
+            return HttpAnswer(url, False, r.status, text, f"HTTP {r.status} {r.reason or ''}".strip())
+        finally:
+            conn.close()
+    return HttpAnswer(url, False, None, "", "too many redirects")
 
 
 async def http_get(url: str, timeout: float) -> HttpAnswer:
