@@ -551,7 +551,8 @@ def _chat_out_fails(ev: Evidence) -> list[Hit]:
                             evidence=[f"chat from {name} ok; to {name}: {why or 'failed'}",
                                       *causes[0].evidence()]))
             continue
-        hits.append(Hit(meaning, acts, check_ids=_chat_ids(ev, name), goto_step="linux",
+        hits.append(Hit(meaning, acts, check_ids=_chat_ids(ev, name),
+                        goto_step="router" if why == "peer_listen" else "linux",
                         evidence=[f"chat from {name} ok; to {name}: {why or 'failed'}"]))
     return hits
 
