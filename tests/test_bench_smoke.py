@@ -84,6 +84,6 @@ def test_lab_rows(tmp_path):
     assert full["status"] == "measured", full["note"]  # both sides said "all good"
     assert full["app_median"] > 0 and full["base_median"] > 0
     assert rows[3]["status"] == "measured", rows[3]
-    assert len(rows[3]["lines"]) == 4  # three scenarios and the worst margin
+    assert len(rows[3]["lines"]) == 5  # four scenarios and the worst margin
     assert rows[6]["status"] in ("measured", "not available yet"), rows[6]
     assert "Bad news" in md or "every verdict" in md
