@@ -110,11 +110,11 @@ def test_the_sudo_command_runs_without_the_users_path(tmp_path):
     assert r.returncode == 0 and r.stdout.strip() == VERSION_LINE, r.stderr
 
 
-def _unit_for(tmp_path: Path, *extra: str) -> tuple[list[str], dict[str, str]]:
+def _unit_for(tmp_path: Path) -> tuple[list[str], dict[str, str]]:
+    """(ExecStart's words, the Environment= variables) of the system unit for a settings file."""
     cfg = tmp_path / "config.toml"
     cfg.write_text(CONFIG)
-    args = build_parser(["sync"]).parse_args(
-        ["sync", "install-service", "--config", str(cfg), *extra])
+    args = build_parser(["sync"]).parse_args(["sync", "install-service", "--config", str(cfg)])
     text, _ = sync_cli.unit_text(args, user=False)
     (exec_line,) = [x for x in text.splitlines() if x.startswith("ExecStart=")]
     env = dict(shlex.split(x.partition("=")[2])[0].split("=", 1)
@@ -149,11 +149,10 @@ def test_the_sudo_line_for_the_unit_names_the_users_settings(tmp_path, monkeypat
     assert argv[:4] == ["sudo", sys.executable, "-m", "rosnet_tui"]
     assert argv[4:6] == ["--config", str(cfg)]
     assert argv[argv.index("--unit-dir") + 1] == str(units) and "--yes" in argv
-    # What root runs: another HOME, as sudo sets it.
+    # What root runs: sudo's environment (another HOME, secure_path), from where sudo runs it.
     root_home = tmp_path / "roothome"
     root_home.mkdir()
-    r = subprocess.run(argv[1:], env={"PATH": SECURE_PATH, "HOME": str(root_home),
-                                      "PYTHONPATH": os.environ.get("PYTHONPATH", "")},
+    r = subprocess.run(argv[1:], env={"PATH": SECURE_PATH, "HOME": str(root_home)},
                        cwd=privilege._package_root(), capture_output=True, text=True,
                        timeout=60, stdin=subprocess.DEVNULL)
     assert r.returncode == 0, r.stderr
@@ -395,11 +394,20 @@ def _lowest_claimed() -> tuple[int, int]:
 
 
 def _find_python(major: int, minor: int) -> str | None:
+    """An interpreter of exactly that version that runs (a pyenv build, or python3.X on PATH)."""
     name = f"python{major}.{minor}"
-    found = [shutil.which(name)]
     pyenv = Path(os.environ.get("PYENV_ROOT", Path.home() / ".pyenv")) / "versions"
-    found += [str(p) for p in sorted(pyenv.glob(f"{major}.{minor}.*/bin/{name}"), reverse=True)]
-    return next((p for p in found if p and os.access(p, os.X_OK)), None)
+    found = [str(p) for p in sorted(pyenv.glob(f"{major}.{minor}.*/bin/{name}"), reverse=True)]
+    found.append(shutil.which(name))
+    for p in filter(None, found):
+        try:
+            r = subprocess.run([p, "-c", "import sys; print(*sys.version_info[:2])"],
+                               capture_output=True, text=True, timeout=20)
+        except (OSError, subprocess.TimeoutExpired):
+            continue
+        if r.returncode == 0 and r.stdout.split() == [str(major), str(minor)]:
+            return p
+    return None
 
 
 def test_requires_python_and_classifiers_agree():
