@@ -13,13 +13,13 @@ import json
 import logging
 import os
 import pwd
-import shlex
 import sys
 import time
 from pathlib import Path
 
 import rosnet_tui
 from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, config_path
+from rosnet_tui.core import privilege
 
 UNIT_NAME = "rosnet-tui-sync.service"
 
@@ -207,7 +207,8 @@ def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
     """The unit file's text and the notes to show with it."""
     cfg = config_path(args).expanduser().absolute()
     notes: list[str] = []
-    argv = [sys.executable, "-m", "rosnet_tui", "--config", str(cfg), "sync"]
+    # This very install by its absolute path: systemd starts it with a clean environment.
+    argv = privilege.self_argv(["--config", str(cfg), "sync"])
     if args.state_dir:
         argv += ["--state-dir", str(_state_dir(args))]
     elif not user:
@@ -258,6 +259,30 @@ def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
         lines.append("Environment=" + _systemd_quote(f"PYTHONPATH={root}"))
     lines += ["", "[Install]", f"WantedBy={'default.target' if user else 'multi-user.target'}", ""]
     return "\n".join(lines), notes
+
+
+def sudo_install_argv(args: argparse.Namespace) -> list[str]:
+    """The sudo command that writes this same unit as root.
+
+    Everything that depends on who runs it is spelled out: this install's interpreter by its
+    absolute path (sudo's secure_path has no ~/.local/bin) and the settings file (under sudo ~ is
+    root's home); the state dir and the shell file follow the settings file's owner, as here.
+    """
+    a = ["--config", str(config_path(args).expanduser().absolute()), "sync", "install-service"]
+    if args.unit_dir:
+        a += ["--unit-dir", str(_unit_dir(args))]
+    if args.state_dir:
+        a += ["--state-dir", str(_state_dir(args))]
+    if args.hosts_file:
+        a += ["--hosts-file", str(Path(args.hosts_file).expanduser().absolute())]
+    if args.no_bashrc:
+        a.append("--no-bashrc")
+    elif args.bashrc:
+        a += ["--bashrc", str(Path(args.bashrc).expanduser().absolute())]
+    for flag in ("no_checks", "no_save_settings", "yes"):
+        if getattr(args, flag):
+            a.append("--" + flag.replace("_", "-"))
+    return privilege.sudo_argv(a)
 
 
 def _unit_dir(args: argparse.Namespace) -> Path:
@@ -316,8 +341,11 @@ def run_install(args: argparse.Namespace) -> int:
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, text, mode=0o644)
     except PermissionError:
-        _err(f"rosnet-tui: this user may not write {path}; run it with sudo: "
-             f"sudo {shlex.join([sys.executable, '-m', 'rosnet_tui', *sys.argv[1:]])}")
+        if args.user:
+            _err(f"rosnet-tui: this user may not write {path}")
+        else:
+            _err(f"rosnet-tui: this user may not write {path}; run it with sudo: "
+                 f"{privilege.format_command(sudo_install_argv(args))}")
         return EXIT_FAIL
     except OSError as exc:
         _err(f"rosnet-tui: cannot write {path}: {exc.strerror}")
