@@ -18,6 +18,7 @@ import copy
 import fcntl
 import logging
 import os
+import select
 import selectors
 import signal
 import time
@@ -37,6 +38,7 @@ from rosnet_tui.core.hosts import (
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings, save_settings
 
 from .backoff import Backoff, backoff_cap
+from .folder_watch import StoreWatch
 from .plan import Plan, PlanError, check_complete, plan_hosts
 from .records import (
     Candidate,
@@ -66,6 +68,7 @@ RECHECK_AFTER_S = (5.0, 15.0, 45.0)   # re-run failing checks after a change, th
 DEBOUNCE_S = 0.3             # netlink: wait for the burst of messages of one change to end
 FORCED_GAP_S = 2.0           # a network change asks for the public IP at most this often
 MAX_WAIT_S = 5.0
+FOLDER_SETTLE_S = 0.05       # a watched folder: its events are taken at most this often
 
 log = logging.getLogger("rosnet_tui.sync")
 
@@ -75,7 +78,8 @@ class SyncError(Exception):
 
 
 def read_period(interval_s: float) -> float:
-    """How often peers' records are read: a quarter of the poll interval, 0.25 .. 1 s."""
+    """How often peers' records are read: a quarter of the poll interval, 0.25 .. 1 s (a
+    watched folder is read when a record changes, and every interval_s besides)."""
     return min(1.0, max(0.25, float(interval_s) / 4))
 
 
@@ -136,7 +140,8 @@ class SyncService:
                  store: RecordStore | None = None,
                  local_source: Callable[[Settings], LocalAddress] = observe_local,
                  public_source: Callable[[Settings], PublicLookup] | None = None,
-                 save_learned: bool = True, netlink: bool = True) -> None:
+                 save_learned: bool = True, netlink: bool = True,
+                 watch_folder: bool = True) -> None:
         self.config_path = Path(config_path)
         self.state_dir = Path(state_dir)
         self.hosts_path = Path(hosts_path)
@@ -148,6 +153,8 @@ class SyncService:
             lambda s: lookup_public_ip(s, self.state_dir, max(1.0, float(s.checks.timeout_s))))
         self.save_learned = save_learned
         self.use_netlink = netlink
+        self.use_folder_watch = watch_folder
+        self._folder_watched = False             # the loop watches the store's folder now
         self._store_fixed = store is not None
         self.store: RecordStore | None = store
         self._store_key: Any = None
@@ -399,7 +406,7 @@ class SyncService:
             return
         self.backoff["store"].succeed()
         self._clear_error("store", f"the store answers again ({self.store.describe()})")
-        self.next_fetch = mono + read_period(self.interval_s)
+        self.next_fetch = mono + self._read_period()
         now = time.time()
         for r in res.refused:
             if not self._remember(("refused", r.source, r.why)):
@@ -420,6 +427,13 @@ class SyncService:
                            "(%s)", name, self.peers[name].record.describe())
         self._take_own(res.own_copies)
         self._fetched_once = True
+
+    def _read_period(self) -> float:
+        """A watched folder wakes the loop when a record changes: read it every interval_s
+        besides (a safety net); other stores every read_period()."""
+        if self._folder_watched:
+            return max(read_period(self.interval_s), self.interval_s)
+        return read_period(self.interval_s)
 
     def _take_peer(self, name: str, cand: Candidate, now: float) -> None:
         old = self.peers.get(name)
@@ -771,6 +785,7 @@ class SyncService:
         sel.register(self._wake_r, selectors.EVENT_READ, "wake")
         if monitor is not None:
             sel.register(monitor.fileno(), selectors.EVENT_READ, "netlink")
+        folder_watch = StoreWatch(self.use_folder_watch)
         force_public = True
         try:
             while not self._stop:
@@ -787,19 +802,10 @@ class SyncService:
                 force_public = False
                 if self._stop:
                     break
-                timeout = min(MAX_WAIT_S, max(0.02, self._next_wake() - time.monotonic()))
-                for key, _ in sel.select(timeout):
-                    if key.data == "wake":
-                        with contextlib.suppress(OSError):
-                            os.read(self._wake_r, 64)
-                    elif monitor is not None and monitor.drain():
-                        deadline = time.monotonic() + DEBOUNCE_S
-                        while time.monotonic() < deadline and not self._stop:
-                            if sel.select(max(0.0, deadline - time.monotonic())):
-                                monitor.drain()
-                        log.info("the kernel reports a link, address or route change")
-                        force_public = True
+                self._follow_folder(folder_watch, sel)
+                force_public = self._wait(sel, monitor, folder_watch)
         finally:
+            folder_watch.close(sel)
             sel.close()
             if monitor is not None:
                 monitor.close()
@@ -807,6 +813,57 @@ class SyncService:
             self._finish(lock)
             self.close()
         return 0
+
+    def _wait(self, sel: selectors.BaseSelector, monitor: NetlinkMonitor | None,
+              watch: StoreWatch) -> bool:
+        """Sleep until something is due, :meth:`stop`, a network change (True) or a peer's
+        record completed in the watched folder. Folder events that change no record (a sync
+        tool's temporary files) go on waiting; folder events are taken at most every
+        FOLDER_SETTLE_S, so a storm of them costs a bounded number of reads."""
+        period = read_period(self.interval_s)
+        while not self._stop:
+            timeout = min(MAX_WAIT_S, max(0.02, self._next_wake() - time.monotonic()))
+            ready = sel.select(timeout)
+            if not ready:
+                return False
+            for key, _ in ready:
+                if key.data == "wake":
+                    with contextlib.suppress(OSError):
+                        os.read(self._wake_r, 64)
+                    return False
+                if key.data == "netlink" and monitor is not None and monitor.drain():
+                    deadline = time.monotonic() + DEBOUNCE_S
+                    while time.monotonic() < deadline and not self._stop:
+                        # netlink only: other ready descriptors would make this spin
+                        if select.select([monitor.fileno()], [], [],
+                                         max(0.0, deadline - time.monotonic()))[0]:
+                            monitor.drain()
+                    log.info("the kernel reports a link, address or route change")
+                    return True
+                if key.data == StoreWatch.SELECTOR_KEY:
+                    changed = watch.drain(sel, period)
+                    # the rest of the burst (a sync tool completes several files) comes in
+                    # meanwhile; only stop() cuts this pause short
+                    select.select([self._wake_r], [], [], FOLDER_SETTLE_S)
+                    changed = watch.drain(sel, period) or changed
+                    if changed:
+                        self.next_fetch = min(self.next_fetch, time.monotonic())
+                        return False
+            if time.monotonic() >= self._next_wake():
+                return False
+        return False
+
+    def _follow_folder(self, watch: StoreWatch, sel: selectors.BaseSelector) -> None:
+        """Keep the watch on the store's folder (a folder store): started, kept or ended."""
+        if self.store is None:
+            return
+        started_or_ended = watch.follow(self.store, sel, read_period(self.interval_s))
+        if started_or_ended or watch.active != self._folder_watched:
+            self.next_fetch = min(self.next_fetch, time.monotonic())  # a change may be unseen
+        self._folder_watched = watch.active
+        if self.status.get("folder_watch") != watch.describe():
+            self.status["folder_watch"] = watch.describe()
+            self._status_dirty = True
 
     def close(self) -> None:
         for fd in (self._wake_r, self._wake_w):
