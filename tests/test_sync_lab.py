@@ -147,8 +147,9 @@ def test_dns_store_recovers_from_a_dead_server_and_follows_a_modem_restart(rig_l
             assert lab.wait_output(rig.procs[h], r"store: cannot read the records", WAIT), rig.log(h)
         assert wait_for(lambda: hosts_entry(lab, "laptop", "turtlebot") == ADDR.ROBOT_PUBLIC,
                         WAIT)                                       # from the settings
-        st = rig.status("laptop")
-        assert "store" in st["errors"] and "did not answer" in st["errors"]["store"]["message"]
+        # (the status is saved a moment after the hosts file: the settings are written between)
+        st = rig.wait_status("laptop", lambda s: "store" in s["errors"], WAIT)
+        assert st is not None and "did not answer" in st["errors"]["store"]["message"], st
         server = start_bind(lab, bind_dir, secret=secret)
         # ... and recover by themselves.
         for h in ("robot", "laptop"):
@@ -303,4 +304,52 @@ def test_the_service_asks_for_its_public_ip_at_once_when_the_network_changes(rig
         assert st is not None and st["own"]["public_checked_at"] - t0 < 3.0
     finally:
         lab.run("laptop", ["ip", "addr", "del", "10.99.0.9/32", "dev", "lo"])
+        rig.stop()
+
+
+def test_a_record_change_while_the_checks_wait_is_applied_at_once(rig_lab, tmp_path):
+    """Issue 17: the affected checks can wait seconds on a peer that does not answer; a newer
+    record meanwhile is applied at once all the same (the checks do not hold the loop), and the
+    verdicts recorded are those of the current address."""
+    lab = rig_lab
+    folder = tmp_path / "shared"
+    folder.mkdir()
+    robot = FolderStore(folder)            # the test writes the robot's records itself
+
+    def publish(public_ip: str, seq: int) -> None:
+        robot.publish(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip=public_ip,
+                                 role="master", seq=seq))
+
+    publish(ADDR.ROBOT_PUBLIC, 1)
+    rig = SyncRig(lab, tmp_path, "folder", folder=folder)
+    rig.start("laptop")
+    try:
+        assert wait_for(lambda: hosts_entry(lab, "laptop", "turtlebot") == ADDR.ROBOT_PUBLIC,
+                        WAIT), rig.log("laptop")
+        assert rig.wait_status("laptop", lambda st: st["last_change"].get("checked_at"), WAIT)
+        # Nothing answers at this address: linux.ssh and ros.master wait for their timeouts.
+        publish(ADDR.STALE_ROBOT_PUBLIC, 2)
+        assert wait_for(lambda: hosts_entry(lab, "laptop", "turtlebot") ==
+                        ADDR.STALE_ROBOT_PUBLIC, WAIT), rig.log("laptop")
+        time.sleep(0.3)                    # the checks are waiting now
+        t_wall = time.time()
+        publish(ADDR.ROBOT_PUBLIC, 3)
+        t0 = time.monotonic()
+        assert wait_for(lambda: hosts_entry(lab, "laptop", "turtlebot") == ADDR.ROBOT_PUBLIC,
+                        WAIT, step=0.01), rig.log("laptop")
+        took = time.monotonic() - t0
+        assert took <= 0.5, (took, rig.log("laptop")[-3000:])
+        st = rig.followed(ADDR.ROBOT_PUBLIC, WAIT, since=t_wall)
+        assert st is not None, rig.log("laptop")[-3000:]
+        assert checks_of(st) == {c: "pass" for c in AFFECTED_PASS}, (st["last_change"],
+                                                                      rig.log("laptop")[-3000:])
+        # Stopping while checks wait on a silent peer is quick and clean all the same.
+        publish(ADDR.STALE_ROBOT_PUBLIC, 4)
+        assert wait_for(lambda: hosts_entry(lab, "laptop", "turtlebot") ==
+                        ADDR.STALE_ROBOT_PUBLIC, WAIT), rig.log("laptop")
+        time.sleep(0.3)
+        t0 = time.monotonic()
+        codes = rig.stop()
+        assert codes == {"laptop": 0} and time.monotonic() - t0 < 5.0, (codes, rig.log("laptop"))
+    finally:
         rig.stop()

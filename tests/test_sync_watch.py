@@ -35,7 +35,7 @@ from rosnet_tui.core.settings import (
 )
 from rosnet_tui.core.sync import FolderStore, SyncService, load_status, new_record
 from rosnet_tui.core.sync import folder_watch as fw
-from rosnet_tui.core.sync.folder_watch import FolderWatch, StoreWatch, WatchUnavailable
+from rosnet_tui.core.sync.folder_watch import FolderWatch, WatchUnavailable
 from rosnet_tui.core.sync.service import read_period
 from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
 
@@ -218,23 +218,24 @@ def test_the_file_system_of_a_real_folder_is_found(tmp_path):
     assert fstype and not fw.is_remote_fs(fstype)   # tmp is local here: it can be watched
 
 
-def test_a_network_file_system_is_not_watched_but_read(tmp_path, caplog):
+def test_a_network_file_system_is_not_watched_but_read(tmp_path, caplog, monkeypatch):
     """A watch on NFS or SMB is accepted and never hears of other machines' writes: the
-    service polls instead (here the mount table says the folder is on nfs4)."""
+    service reads the folder on its timer instead (the mount table given here says nfs4)."""
     folder = tmp_path / "shared"
     folder.mkdir()
     table = f"22 1 8:1 / / rw - ext4 /dev/sda1 rw\n30 22 0:26 / {folder} rw - nfs4 nas:/x rw\n"
-    with pytest.raises(WatchUnavailable, match="on nfs4"):
-        _open_with_table(folder, table)
-
-
-def _open_with_table(folder: Path, table: str) -> FolderWatch:
     real = fw.mount_fs_type
-    fw.mount_fs_type = lambda p, mountinfo=None: real(p, table)  # type: ignore[assignment]
-    try:
-        return FolderWatch.open(folder)
-    finally:
-        fw.mount_fs_type = real  # type: ignore[assignment]
+    monkeypatch.setattr(fw, "mount_fs_type", lambda p, mountinfo=None: real(p, table))
+    with pytest.raises(WatchUnavailable, match="on nfs4"):
+        FolderWatch.open(folder)
+    caplog.set_level(logging.INFO, logger="rosnet_tui.sync")
+    with Member(tmp_path, interval_s=2) as m:
+        took = [m.follow(f"203.0.113.{70 + i}") for i in range(2)]
+        assert all(t is not None and t <= read_period(2) + 0.3 for t in took), took
+        assert not load_status(m.state)["folder_watch"]["watching"]
+    assert "cannot watch the shared folder" in log_text(caplog)
+    assert "on nfs4, where a watch never hears of changes made by other machines" in \
+        log_text(caplog)
 
 
 # =========================================================================== the service
@@ -345,7 +346,7 @@ def test_a_storm_of_events_is_bounded(tmp_path):
             (m.folder / f".tmp{i % 50}").write_text("x")
             i += 1
         storm_rounds = len(m.rounds) - rounds
-        assert i > 500
+        assert i > 100                       # hundreds of events (fewer on a busy machine)
         assert storm_rounds <= 1.0 / 0.05 + 10, (storm_rounds, i)
         took = m.follow("203.0.113.11")
         assert took is not None and took <= APPLY_S

@@ -21,6 +21,7 @@ import os
 import select
 import selectors
 import signal
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -68,6 +69,7 @@ RECHECK_AFTER_S = (5.0, 15.0, 45.0)   # re-run failing checks after a change, th
 DEBOUNCE_S = 0.3             # netlink: wait for the burst of messages of one change to end
 FORCED_GAP_S = 2.0           # a network change asks for the public IP at most this often
 MAX_WAIT_S = 5.0
+CHECKS_STOP_S = 2.0          # stopping waits this long at most for checks under way
 FOLDER_SETTLE_S = 0.05       # a watched folder: its events are taken at most this often
 
 log = logging.getLogger("rosnet_tui.sync")
@@ -131,6 +133,68 @@ class _ServiceLock:
             self.fd = None
 
 
+class _CheckRunner:
+    """The affected checks on their own thread while the service runs, so reading records and
+    writing the hosts file never wait on a slow check (a peer that does not answer holds ssh and
+    ros.master for their whole timeouts). One run at a time; a newer request replaces one not
+    started yet; verdicts come back through :meth:`collect`, and *wake* rouses the loop."""
+
+    def __init__(self, run: Callable[[Plan], list[dict[str, Any]]],
+                 wake: Callable[[], None]) -> None:
+        self._run = run
+        self._wake = wake
+        self._cond = threading.Condition()
+        self._pending: tuple[Any, Plan] | None = None
+        self._done: list[tuple[Any, list[dict[str, Any]] | None]] = []
+        self._closed = False
+        self._thread: threading.Thread | None = None
+
+    def submit(self, tag: Any, plan: Plan) -> None:
+        with self._cond:
+            if self._closed:
+                return
+            self._pending = (tag, plan)
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._work, name="rosnet-sync-checks",
+                                                daemon=True)
+                self._thread.start()
+            self._cond.notify()
+
+    def _work(self) -> None:
+        while True:
+            with self._cond:
+                while self._pending is None and not self._closed:
+                    self._cond.wait(1.0)
+                if self._closed:
+                    return
+                tag, plan = self._pending
+                self._pending = None
+            try:
+                results: list[dict[str, Any]] | None = self._run(plan)
+            except Exception:  # a bug in a check must not end the checks thread
+                log.exception("the affected checks failed unexpectedly")
+                results = None
+            with self._cond:           # closed: the loop is gone (and its wake pipe with it)
+                if self._closed:
+                    return
+                self._done.append((tag, results))
+                self._wake()
+
+    def collect(self) -> list[tuple[Any, list[dict[str, Any]] | None]]:
+        with self._cond:
+            done, self._done = self._done, []
+        return done
+
+    def close(self, timeout_s: float) -> None:
+        """No more runs; wait (bounded) for one under way. Its verdicts are dropped."""
+        with self._cond:
+            self._closed = True
+            self._pending = None
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+
+
 class SyncService:
     """See the module docstring. Build it, then :meth:`run` (a service) or :meth:`run_once`."""
 
@@ -179,6 +243,7 @@ class SyncService:
         self.next_verify = now
         self.recheck_at: float | None = None
         self._recheck_left: list[float] = []
+        self._checks: _CheckRunner | None = None    # the checks thread while run() runs
         self._last_plan: Plan | None = None
         self.backoff = {k: Backoff() for k in ("settings", "public_ip", "store", "apply",
                                                "round")}
@@ -607,9 +672,9 @@ class SyncService:
         self._save_learned(plan)
         self._save_status()
         if self.do_checks:
-            self._run_checks(plan)
             self._recheck_left = list(RECHECK_AFTER_S)
-            self._schedule_recheck()
+            self.recheck_at = None
+            self._run_checks(plan)
         return True
 
     def _summary(self, plan: Plan, old_text: str | None) -> str:
@@ -691,18 +756,38 @@ class SyncService:
 
     # ------------------------------------------------------------------ checks
     def _run_checks(self, plan: Plan) -> None:
-        results = run_affected_checks(plan.settings, hosts_path=self.hosts_path,
-                                      bashrc_path=self.bashrc_path, state_dir=self.state_dir)
+        """The affected checks for *plan*: on the checks thread while the service runs (records
+        are read and applied meanwhile), here and now otherwise (--once, tests)."""
+        tag = (self.status.get("last_change") or {}).get("journal")
+        if self._checks is not None:
+            self._checks.submit(tag, copy.deepcopy(plan))
+            return
+        self._take_checks(tag, self._affected_checks(plan))
+
+    def _affected_checks(self, plan: Plan) -> list[dict[str, Any]]:
+        return run_affected_checks(plan.settings, hosts_path=self.hosts_path,
+                                   bashrc_path=self.bashrc_path, state_dir=self.state_dir)
+
+    def _take_checks(self, tag: Any, results: list[dict[str, Any]] | None) -> None:
+        """Keep the verdicts of the checks run for the change *tag* (its journal entry), unless
+        a newer change came meanwhile (its own checks follow); then plan the re-checks."""
+        change = self.status.get("last_change")
+        if results is None:
+            return
+        if change is not None and change.get("journal") != tag:
+            log.debug("the checks of an earlier change ended after a newer change: not kept")
+            return
         bad = [r for r in results if r["status"] == "fail"]
         for r in results:
             level = logging.WARNING if r["status"] == "fail" else logging.INFO
             log.log(level, "check %-4s %s: %s", r["status"].upper(), r["id"], r["summary"])
-        if self.status.get("last_change") is not None:
-            self.status["last_change"]["checks"] = results
-            self.status["last_change"]["checked_at"] = time.time()
+        if change is not None:
+            change["checks"] = results
+            change["checked_at"] = time.time()
         if not bad:
             self._recheck_left = []
         self._status_dirty = True
+        self._schedule_recheck()
 
     def _schedule_recheck(self) -> None:
         changes = self.status.get("last_change") or {}
@@ -718,7 +803,6 @@ class SyncService:
             return
         log.info("running the failing checks again")
         self._run_checks(self._last_plan)
-        self._schedule_recheck()
 
     # ------------------------------------------------------------------ status
     def _save_status(self, force: bool = False) -> None:
@@ -738,6 +822,9 @@ class SyncService:
     def stop(self) -> None:
         """Ask the loop to stop (safe from a signal handler or another thread)."""
         self._stop = True
+        self._wake_loop()
+
+    def _wake_loop(self) -> None:
         with contextlib.suppress(OSError):
             os.write(self._wake_w, b"x")
 
@@ -786,10 +873,15 @@ class SyncService:
         if monitor is not None:
             sel.register(monitor.fileno(), selectors.EVENT_READ, "netlink")
         folder_watch = StoreWatch(self.use_folder_watch)
+        if self.do_checks:
+            self._checks = _CheckRunner(self._affected_checks, self._wake_loop)
         force_public = True
         try:
             while not self._stop:
                 try:
+                    if self._checks is not None:
+                        for tag, results in self._checks.collect():
+                            self._take_checks(tag, results)
                     self.round(force_public=force_public)
                 except Exception:  # a bug must not kill the service: log it, keep going
                     log.exception("unexpected error in a sync round; going on")
@@ -805,6 +897,9 @@ class SyncService:
                 self._follow_folder(folder_watch, sel)
                 force_public = self._wait(sel, monitor, folder_watch)
         finally:
+            if self._checks is not None:
+                self._checks.close(CHECKS_STOP_S)
+                self._checks = None
             folder_watch.close(sel)
             sel.close()
             if monitor is not None:
