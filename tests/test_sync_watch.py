@@ -73,10 +73,12 @@ def hosts_entry(hosts: Path, name: str) -> str | None:
 
 class Member:
     """The laptop's sync service running in a thread: a shared folder, a hosts file and the
-    state in *root*; its own addresses given (no network needed)."""
+    state in *root*; its own addresses given (no network needed; *lookup_s*: how long each
+    public-IP lookup takes)."""
 
     def __init__(self, root: Path, *, interval_s: float = 60, folder: Path | None = None,
-                 make_folder: bool = True, **kw: Any) -> None:
+                 make_folder: bool = True, lookup_s: float = 0.0,
+                 public_ip: str = "198.51.100.2", **kw: Any) -> None:
         self.root = root
         self.folder = folder or root / "shared"
         if make_folder:
@@ -93,10 +95,19 @@ class Member:
             self.config, state_dir=self.state, hosts_path=self.hosts, bashrc_path=None,
             run_checks=False, save_learned=False, netlink=False,
             local_source=lambda s: LocalAddress("eth0", "192.168.1.10", "192.168.1.254"),
-            public_source=lambda s: PublicLookup("198.51.100.2", "test answer"), **kw)
+            public_source=self._lookup, **kw)
+        self.lookup_s = lookup_s
+        self.public_ip = public_ip
+        self.lookups: list[tuple[float, float]] = []
         real_round = self.svc.round
         self.svc.round = lambda **k: self.rounds.append(time.monotonic()) or real_round(**k)
         self.thread = threading.Thread(target=self.svc.run, daemon=True)
+
+    def _lookup(self, s: Settings) -> PublicLookup:
+        t0 = time.monotonic()
+        time.sleep(self.lookup_s)             # a what-is-my-IP service taking its time
+        self.lookups.append((t0, time.monotonic()))
+        return PublicLookup(self.public_ip, "test answer")
 
     def __enter__(self) -> Member:
         self.thread.start()
@@ -350,6 +361,38 @@ def test_a_storm_of_events_is_bounded(tmp_path):
         assert storm_rounds <= 1.0 / 0.05 + 10, (storm_rounds, i)
         took = m.follow("203.0.113.11")
         assert took is not None and took <= APPLY_S
+
+
+# =========================================================================== slow work
+def test_a_slow_public_ip_lookup_does_not_hold_back_a_record(tmp_path):
+    """Each of the member's own lookups takes 1.5 s of every 2 s: records are applied at once
+    all the same, and the loop sleeps meanwhile (no spinning while the lookup is under way)."""
+    rng = random.Random()
+    with Member(tmp_path, interval_s=2, lookup_s=1.5) as m:
+        assert m.follow("203.0.113.10") is not None
+        took = []
+        for i in range(5):
+            time.sleep(rng.uniform(0.0, 2.0))
+            took.append(m.follow(f"203.0.113.{80 + i}"))
+        assert all(t is not None and t <= APPLY_S for t in took), took
+        rounds_before = len(m.rounds)
+        time.sleep(2.0)
+        assert len(m.rounds) - rounds_before <= 8, m.rounds[rounds_before:]
+        assert len(m.lookups) >= 3          # still asked every interval_s
+        gaps = [b[0] - a[0] for a, b in zip(m.lookups, m.lookups[1:], strict=False)]
+        assert all(1.9 <= g <= 2.6 for g in gaps[1:]), gaps
+
+
+def test_the_first_record_waits_for_the_first_lookup(tmp_path):
+    """The settings say 198.51.100.2, the lookup (1 s) says 198.51.100.9: the first record
+    published already has the looked-up address (no stale record for peers to apply)."""
+    with Member(tmp_path, interval_s=2, lookup_s=1.0, public_ip="198.51.100.9") as m:
+        own = m.folder / "sami.json"
+        assert wait_for(own.exists, 5)
+        first = own.read_text()
+        time.sleep(0.3)
+    assert '"public_ip": "198.51.100.9"' in first and '"seq": 1' in first, first
+    assert own.read_text() == first
 
 
 # =========================================================================== the kernel refuses

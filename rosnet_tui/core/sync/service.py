@@ -17,6 +17,7 @@ import contextlib
 import copy
 import fcntl
 import logging
+import math
 import os
 import select
 import selectors
@@ -69,7 +70,7 @@ RECHECK_AFTER_S = (5.0, 15.0, 45.0)   # re-run failing checks after a change, th
 DEBOUNCE_S = 0.3             # netlink: wait for the burst of messages of one change to end
 FORCED_GAP_S = 2.0           # a network change asks for the public IP at most this often
 MAX_WAIT_S = 5.0
-CHECKS_STOP_S = 2.0          # stopping waits this long at most for checks under way
+WORKER_STOP_S = 2.0          # stopping waits this long at most for a check or lookup under way
 FOLDER_SETTLE_S = 0.05       # a watched folder: its events are taken at most this often
 
 log = logging.getLogger("rosnet_tui.sync")
@@ -133,30 +134,32 @@ class _ServiceLock:
             self.fd = None
 
 
-class _CheckRunner:
-    """The affected checks on their own thread while the service runs, so reading records and
-    writing the hosts file never wait on a slow check (a peer that does not answer holds ssh and
-    ros.master for their whole timeouts). One run at a time; a newer request replaces one not
-    started yet; verdicts come back through :meth:`collect`, and *wake* rouses the loop."""
+class _Worker:
+    """Slow work of the service on its own thread while the service runs (the affected checks;
+    the public-IP lookup), so reading records and writing the hosts file never wait on it: a
+    peer that does not answer holds ssh and ros.master for their whole timeouts, a silent
+    what-is-my-IP service the lookup. One job at a time; a newer job replaces one not started
+    yet; results come back through :meth:`collect` (None: the job failed, logged), and *wake*
+    rouses the loop."""
 
-    def __init__(self, run: Callable[[Plan], list[dict[str, Any]]],
-                 wake: Callable[[], None]) -> None:
-        self._run = run
+    def __init__(self, name: str, job: Callable[[Any], Any], wake: Callable[[], None]) -> None:
+        self.name = name
+        self._job = job
         self._wake = wake
         self._cond = threading.Condition()
-        self._pending: tuple[Any, Plan] | None = None
-        self._done: list[tuple[Any, list[dict[str, Any]] | None]] = []
+        self._pending: tuple[Any, Any] | None = None
+        self._done: list[tuple[Any, Any]] = []
         self._closed = False
         self._thread: threading.Thread | None = None
 
-    def submit(self, tag: Any, plan: Plan) -> None:
+    def submit(self, tag: Any, arg: Any) -> None:
         with self._cond:
             if self._closed:
                 return
-            self._pending = (tag, plan)
+            self._pending = (tag, arg)
             if self._thread is None:
-                self._thread = threading.Thread(target=self._work, name="rosnet-sync-checks",
-                                                daemon=True)
+                self._thread = threading.Thread(target=self._work, daemon=True,
+                                                name=f"rosnet-sync-{self.name}")
                 self._thread.start()
             self._cond.notify()
 
@@ -165,28 +168,28 @@ class _CheckRunner:
             with self._cond:
                 while self._pending is None and not self._closed:
                     self._cond.wait(1.0)
-                if self._closed:
+                if self._closed or self._pending is None:
                     return
-                tag, plan = self._pending
+                tag, arg = self._pending
                 self._pending = None
             try:
-                results: list[dict[str, Any]] | None = self._run(plan)
-            except Exception:  # a bug in a check must not end the checks thread
-                log.exception("the affected checks failed unexpectedly")
-                results = None
+                result = self._job(arg)
+            except Exception:  # a bug must not end the thread: logged, the result is None
+                log.exception("unexpected error in the %s of the sync service", self.name)
+                result = None
             with self._cond:           # closed: the loop is gone (and its wake pipe with it)
                 if self._closed:
                     return
-                self._done.append((tag, results))
+                self._done.append((tag, result))
                 self._wake()
 
-    def collect(self) -> list[tuple[Any, list[dict[str, Any]] | None]]:
+    def collect(self) -> list[tuple[Any, Any]]:
         with self._cond:
             done, self._done = self._done, []
         return done
 
     def close(self, timeout_s: float) -> None:
-        """No more runs; wait (bounded) for one under way. Its verdicts are dropped."""
+        """No more jobs; wait (bounded) for one under way. Its result is dropped."""
         with self._cond:
             self._closed = True
             self._pending = None
@@ -243,7 +246,10 @@ class SyncService:
         self.next_verify = now
         self.recheck_at: float | None = None
         self._recheck_left: list[float] = []
-        self._checks: _CheckRunner | None = None    # the checks thread while run() runs
+        self._checks: _Worker | None = None         # the checks' thread while run() runs
+        self._lookups: _Worker | None = None        # the public-IP lookup's thread, likewise
+        self._public_busy = False                   # a lookup is under way on that thread
+        self._public_answered = False               # a lookup has answered (or failed) once
         self._last_plan: Plan | None = None
         self.backoff = {k: Backoff() for k in ("settings", "public_ip", "store", "apply",
                                                "round")}
@@ -384,15 +390,18 @@ class SyncService:
         if force_public:
             # at once, but not more often than every FORCED_GAP_S (a flapping link)
             self.next_public = min(self.next_public, self._last_public_poll + FORCED_GAP_S)
-        if time.monotonic() >= self.next_public:
+        if time.monotonic() >= self.next_public and not self._public_busy:
             self._last_public_poll = time.monotonic()
             self._poll_public(self._last_public_poll)
         if time.monotonic() >= self.next_fetch:
             self._fetch(time.monotonic())
-        if self._fetched_once and time.monotonic() >= self.next_publish:
+        # the first answer of the lookup comes first (not a stale address published, applied)
+        first_lookup = self._public_busy and not self._public_answered
+        if self._fetched_once and time.monotonic() >= self.next_publish and not first_lookup:
             self._publish(time.monotonic())
         mono = time.monotonic()
-        if (self.dirty or mono >= self.next_verify) and mono >= self.next_apply:
+        if (self.dirty or mono >= self.next_verify) and mono >= self.next_apply \
+                and not first_lookup:
             applied = self._apply(mono)
         if self.recheck_at is not None and time.monotonic() >= self.recheck_at:
             self._recheck()
@@ -428,11 +437,31 @@ class SyncService:
         own.update(local_ip=local.local_ip, interface=local.interface, gateway=local.gateway)
 
     def _poll_public(self, mono: float) -> None:
+        """Ask for the public IP: on the lookup's thread while the service runs (the answer
+        comes back to :meth:`_take_public`), here and now otherwise."""
         assert self.settings is not None
+        self.next_public = math.inf     # a wish for an earlier poll meanwhile lowers it
+        if self._lookups is not None:
+            self._public_busy = True
+            self._lookups.submit(mono, copy.deepcopy(self.settings))
+            return
+        self._take_public(mono, self._lookup_public(self.settings))
+
+    def _lookup_public(self, settings: Settings) -> PublicLookup:
         try:
-            lk = self.public_source(self.settings)
+            return self.public_source(settings)
         except Exception as exc:  # noqa: BLE001
-            lk = PublicLookup(None, f"the lookup failed: {type(exc).__name__}: {exc}")
+            return PublicLookup(None, f"the lookup failed: {type(exc).__name__}: {exc}")
+
+    def _take_public(self, mono: float, lk: PublicLookup | None) -> None:
+        """The answer of the lookup started at *mono*."""
+        self._public_busy = False
+        self._public_answered = True
+        wished = self.next_public       # inf, or an earlier poll asked for meanwhile
+        self._public_answer(mono, lk or PublicLookup(None, "the lookup failed (see the log)"))
+        self.next_public = min(self.next_public, wished)
+
+    def _public_answer(self, mono: float, lk: PublicLookup) -> None:
         self.status["own"]["public_checked_at"] = time.time()
         if not lk.ip:
             keep = self._known_public() or "none known"
@@ -830,7 +859,11 @@ class SyncService:
 
     def _next_wake(self) -> float:
         apply_due = self.next_apply if self.dirty else max(self.next_apply, self.next_verify)
-        cands = [self.next_public, self.next_fetch, apply_due]
+        cands = [self.next_fetch]
+        if not self._public_busy:      # under way: its answer wakes the loop
+            cands.append(self.next_public)
+        if self._public_answered or not self._public_busy:   # else: after the first answer
+            cands.append(apply_due)
         if self.recheck_at is not None:
             cands.append(self.recheck_at)
         return min(cands)
@@ -874,14 +907,13 @@ class SyncService:
             sel.register(monitor.fileno(), selectors.EVENT_READ, "netlink")
         folder_watch = StoreWatch(self.use_folder_watch)
         if self.do_checks:
-            self._checks = _CheckRunner(self._affected_checks, self._wake_loop)
+            self._checks = _Worker("checks", self._affected_checks, self._wake_loop)
+        self._lookups = _Worker("public-IP lookup", self._lookup_public, self._wake_loop)
         force_public = True
         try:
             while not self._stop:
                 try:
-                    if self._checks is not None:
-                        for tag, results in self._checks.collect():
-                            self._take_checks(tag, results)
+                    self._collect()
                     self.round(force_public=force_public)
                 except Exception:  # a bug must not kill the service: log it, keep going
                     log.exception("unexpected error in a sync round; going on")
@@ -897,9 +929,11 @@ class SyncService:
                 self._follow_folder(folder_watch, sel)
                 force_public = self._wait(sel, monitor, folder_watch)
         finally:
-            if self._checks is not None:
-                self._checks.close(CHECKS_STOP_S)
-                self._checks = None
+            for worker in (self._checks, self._lookups):
+                if worker is not None:
+                    worker.close(WORKER_STOP_S)
+            self._checks = self._lookups = None
+            self._public_busy = False
             folder_watch.close(sel)
             sel.close()
             if monitor is not None:
@@ -908,6 +942,15 @@ class SyncService:
             self._finish(lock)
             self.close()
         return 0
+
+    def _collect(self) -> None:
+        """Take what the service's threads finished: public-IP answers, checks' verdicts."""
+        if self._lookups is not None:
+            for started, lookup in self._lookups.collect():
+                self._take_public(started, lookup)
+        if self._checks is not None:
+            for tag, results in self._checks.collect():
+                self._take_checks(tag, results)
 
     def _wait(self, sel: selectors.BaseSelector, monitor: NetlinkMonitor | None,
               watch: StoreWatch) -> bool:
