@@ -49,10 +49,18 @@ class ChangeLatency:
     checks: dict[str, str] = field(default_factory=dict)   # their verdicts
     failures: dict[str, str] = field(default_factory=dict)  # summaries of those that failed
     budget_s: float = 0.0         # goal_s(store, interval_s)
+    watched: bool | None = None   # the laptop's service watched the shared folder (its status)
 
     @property
     def within_budget(self) -> bool:
         return self.hosts_s is not None and self.hosts_s <= self.budget_s
+
+    @property
+    def member_s(self) -> float | None:
+        """From the robot publishing its record to the laptop's hosts entry: the member's part."""
+        if self.hosts_s is None or self.published_s is None:
+            return None
+        return self.hosts_s - self.published_s
 
     @property
     def checks_pass(self) -> bool:
@@ -60,7 +68,8 @@ class ChangeLatency:
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
-        d.update(within_budget=self.within_budget, checks_pass=self.checks_pass)
+        d.update(within_budget=self.within_budget, checks_pass=self.checks_pass,
+                 member_s=self.member_s)
         return d
 
 
@@ -69,7 +78,7 @@ def summarize(runs: list[ChangeLatency]) -> dict[str, Any]:
     out: dict[str, Any] = {"changes": len(runs),
                            "followed": sum(r.hosts_s is not None for r in runs),
                            "within_budget": sum(r.within_budget for r in runs)}
-    for key in ("published_s", "hosts_s", "checks_s"):
+    for key in ("published_s", "hosts_s", "checks_s", "member_s"):
         xs = [getattr(r, key) for r in runs if getattr(r, key) is not None]
         out[key] = ({"median": statistics.median(xs), "max": max(xs), "min": min(xs)}
                     if xs else None)
@@ -100,8 +109,9 @@ def _one_change(rig: SyncRig, new_ip: str, timeout_s: float, rng: random.Random,
         checks = checks_of(st)
         failures = {c["id"]: c["summary"] for c in ((st or {}).get("last_change") or {}).get(
             "checks") or [] if c["status"] == "fail"}
+    watch = ((rig.status("laptop") or {}).get("folder_watch") or {}).get("watching")
     return ChangeLatency(rig.store, rig.interval_s, new_ip, phase, t_pub, t_hosts, t_checks,
-                         checks, failures, goal_s(rig.store, rig.interval_s))
+                         checks, failures, goal_s(rig.store, rig.interval_s), watch)
 
 
 def measure_change_latency(lab, store: str, workdir: Path, *, interval_s: float = 2.0,
