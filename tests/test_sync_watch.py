@@ -315,6 +315,24 @@ def test_a_missing_folder_is_read_until_it_can_be_watched(tmp_path, caplog, monk
         assert took is not None and took <= APPLY_S, (took, log_text(caplog))
 
 
+def test_the_watch_follows_the_settings_to_another_folder(tmp_path, caplog):
+    caplog.set_level(logging.INFO, logger="rosnet_tui.sync")
+    with Member(tmp_path, interval_s=60) as m:
+        assert m.follow("203.0.113.10") is not None
+        other = tmp_path / "other"
+        other.mkdir()
+        m.config.write_text(render_settings(settings(other, 60)))     # the user moves it
+        assert wait_for(lambda: f"watching the shared folder {other}" in log_text(caplog), 10), \
+            log_text(caplog)
+        m.robot = FolderStore(other)
+        took = m.follow("203.0.113.11")
+        assert took is not None and took <= APPLY_S, took
+        (m.folder / "turtlebot.json").write_text("{}")   # the old folder is not watched
+        time.sleep(0.3)
+        assert "refused" not in log_text(caplog)
+        assert load_status(m.state)["folder_watch"]["folder"] == str(other)
+
+
 def test_watching_turned_off_reads_on_the_timer(tmp_path, caplog):
     caplog.set_level(logging.INFO, logger="rosnet_tui.sync")
     with Member(tmp_path, interval_s=2, watch_folder=False) as m:

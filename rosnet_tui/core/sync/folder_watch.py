@@ -274,9 +274,9 @@ class StoreWatch:
         """Open, keep or drop the watch for *store*; True when it started or ended (the caller
         reads the store at once: something may have changed unseen). Cheap: one stat."""
         folder = Path(store.folder) if getattr(store, "kind", "") == "folder" else None
-        if folder != self.folder:
-            self._drop(sel)
+        if folder != self.folder:               # another store (the settings changed)
             was = self.active
+            self._drop(sel)
             self.folder, self._retry_at, self.why_not = folder, 0.0, ""
             if folder is None:
                 return was
