@@ -6,6 +6,10 @@ address (every round; netlink wakes the loop at once on a change), poll the publ
 read the store, publish our record when its content changed, and when anything changed apply the
 new hosts set (and the ROS block) through the safe writer, then run the affected checks.
 
+While the service runs, a watched shared folder wakes the loop as soon as a peer's record is
+complete (:mod:`.folder_watch`), and the public-IP lookup and the checks run on threads of their
+own, so neither a slow what-is-my-IP service nor a peer that does not answer delays a record.
+
 Failures never undo a good configuration: an unreachable store, no internet or a refused write
 keeps the last good state, backs off (bounded) and is logged once, with the recovery logged too.
 """
