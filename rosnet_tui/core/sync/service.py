@@ -6,6 +6,10 @@ address (every round; netlink wakes the loop at once on a change), poll the publ
 read the store, publish our record when its content changed, and when anything changed apply the
 new hosts set (and the ROS block) through the safe writer, then run the affected checks.
 
+While the service runs, a watched shared folder wakes the loop as soon as a peer's record is
+complete (:mod:`.folder_watch`), and the public-IP lookup and the checks run on threads of their
+own, so neither a slow what-is-my-IP service nor a peer that does not answer delays a record.
+
 Failures never undo a good configuration: an unreachable store, no internet or a refused write
 keeps the last good state, backs off (bounded) and is logged once, with the recovery logged too.
 """
@@ -16,9 +20,12 @@ import contextlib
 import copy
 import fcntl
 import logging
+import math
 import os
+import select
 import selectors
 import signal
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -36,6 +43,7 @@ from rosnet_tui.core.hosts import (
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings, save_settings
 
 from .backoff import Backoff, backoff_cap
+from .folder_watch import StoreWatch
 from .plan import Plan, PlanError, check_complete, plan_hosts
 from .records import (
     Candidate,
@@ -65,6 +73,8 @@ RECHECK_AFTER_S = (5.0, 15.0, 45.0)   # re-run failing checks after a change, th
 DEBOUNCE_S = 0.3             # netlink: wait for the burst of messages of one change to end
 FORCED_GAP_S = 2.0           # a network change asks for the public IP at most this often
 MAX_WAIT_S = 5.0
+WORKER_STOP_S = 2.0          # stopping waits this long at most for a check or lookup under way
+FOLDER_SETTLE_S = 0.05       # a watched folder: its events are taken at most this often
 
 log = logging.getLogger("rosnet_tui.sync")
 
@@ -74,7 +84,8 @@ class SyncError(Exception):
 
 
 def read_period(interval_s: float) -> float:
-    """How often peers' records are read: a quarter of the poll interval, 0.25 .. 1 s."""
+    """How often peers' records are read: a quarter of the poll interval, 0.25 .. 1 s (a
+    watched folder is read when a record changes, and every interval_s besides)."""
     return min(1.0, max(0.25, float(interval_s) / 4))
 
 
@@ -126,6 +137,70 @@ class _ServiceLock:
             self.fd = None
 
 
+class _Worker:
+    """Slow work of the service on its own thread while the service runs (the affected checks;
+    the public-IP lookup), so reading records and writing the hosts file never wait on it: a
+    peer that does not answer holds ssh and ros.master for their whole timeouts, a silent
+    what-is-my-IP service the lookup. One job at a time; a newer job replaces one not started
+    yet; results come back through :meth:`collect` (None: the job failed, logged), and *wake*
+    rouses the loop."""
+
+    def __init__(self, name: str, job: Callable[[Any], Any], wake: Callable[[], None]) -> None:
+        self.name = name
+        self._job = job
+        self._wake = wake
+        self._cond = threading.Condition()
+        self._pending: tuple[Any, Any] | None = None
+        self._done: list[tuple[Any, Any]] = []
+        self._closed = False
+        self._thread: threading.Thread | None = None
+
+    def submit(self, tag: Any, arg: Any) -> None:
+        with self._cond:
+            if self._closed:
+                return
+            self._pending = (tag, arg)
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._work, daemon=True,
+                                                name=f"rosnet-sync-{self.name}")
+                self._thread.start()
+            self._cond.notify()
+
+    def _work(self) -> None:
+        while True:
+            with self._cond:
+                while self._pending is None and not self._closed:
+                    self._cond.wait(1.0)
+                if self._closed or self._pending is None:
+                    return
+                tag, arg = self._pending
+                self._pending = None
+            try:
+                result = self._job(arg)
+            except Exception:  # a bug must not end the thread: logged, the result is None
+                log.exception("unexpected error in the %s of the sync service", self.name)
+                result = None
+            with self._cond:           # closed: the loop is gone (and its wake pipe with it)
+                if self._closed:
+                    return
+                self._done.append((tag, result))
+                self._wake()
+
+    def collect(self) -> list[tuple[Any, Any]]:
+        with self._cond:
+            done, self._done = self._done, []
+        return done
+
+    def close(self, timeout_s: float) -> None:
+        """No more jobs; wait (bounded) for one under way. Its result is dropped."""
+        with self._cond:
+            self._closed = True
+            self._pending = None
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+
+
 class SyncService:
     """See the module docstring. Build it, then :meth:`run` (a service) or :meth:`run_once`."""
 
@@ -135,7 +210,8 @@ class SyncService:
                  store: RecordStore | None = None,
                  local_source: Callable[[Settings], LocalAddress] = observe_local,
                  public_source: Callable[[Settings], PublicLookup] | None = None,
-                 save_learned: bool = True, netlink: bool = True) -> None:
+                 save_learned: bool = True, netlink: bool = True,
+                 watch_folder: bool = True) -> None:
         self.config_path = Path(config_path)
         self.state_dir = Path(state_dir)
         self.hosts_path = Path(hosts_path)
@@ -147,6 +223,8 @@ class SyncService:
             lambda s: lookup_public_ip(s, self.state_dir, max(1.0, float(s.checks.timeout_s))))
         self.save_learned = save_learned
         self.use_netlink = netlink
+        self.use_folder_watch = watch_folder
+        self._folder_watched = False             # the loop watches the store's folder now
         self._store_fixed = store is not None
         self.store: RecordStore | None = store
         self._store_key: Any = None
@@ -171,6 +249,10 @@ class SyncService:
         self.next_verify = now
         self.recheck_at: float | None = None
         self._recheck_left: list[float] = []
+        self._checks: _Worker | None = None         # the checks' thread while run() runs
+        self._lookups: _Worker | None = None        # the public-IP lookup's thread, likewise
+        self._public_busy = False                   # a lookup is under way on that thread
+        self._public_answered = False               # a lookup has answered (or failed) once
         self._last_plan: Plan | None = None
         self.backoff = {k: Backoff() for k in ("settings", "public_ip", "store", "apply",
                                                "round")}
@@ -311,15 +393,18 @@ class SyncService:
         if force_public:
             # at once, but not more often than every FORCED_GAP_S (a flapping link)
             self.next_public = min(self.next_public, self._last_public_poll + FORCED_GAP_S)
-        if time.monotonic() >= self.next_public:
+        if time.monotonic() >= self.next_public and not self._public_busy:
             self._last_public_poll = time.monotonic()
             self._poll_public(self._last_public_poll)
         if time.monotonic() >= self.next_fetch:
             self._fetch(time.monotonic())
-        if self._fetched_once and time.monotonic() >= self.next_publish:
+        # the first answer of the lookup comes first (not a stale address published, applied)
+        first_lookup = self._public_busy and not self._public_answered
+        if self._fetched_once and time.monotonic() >= self.next_publish and not first_lookup:
             self._publish(time.monotonic())
         mono = time.monotonic()
-        if (self.dirty or mono >= self.next_verify) and mono >= self.next_apply:
+        if (self.dirty or mono >= self.next_verify) and mono >= self.next_apply \
+                and not first_lookup:
             applied = self._apply(mono)
         if self.recheck_at is not None and time.monotonic() >= self.recheck_at:
             self._recheck()
@@ -355,11 +440,31 @@ class SyncService:
         own.update(local_ip=local.local_ip, interface=local.interface, gateway=local.gateway)
 
     def _poll_public(self, mono: float) -> None:
+        """Ask for the public IP: on the lookup's thread while the service runs (the answer
+        comes back to :meth:`_take_public`), here and now otherwise."""
         assert self.settings is not None
+        self.next_public = math.inf     # a wish for an earlier poll meanwhile lowers it
+        if self._lookups is not None:
+            self._public_busy = True
+            self._lookups.submit(mono, copy.deepcopy(self.settings))
+            return
+        self._take_public(mono, self._lookup_public(self.settings))
+
+    def _lookup_public(self, settings: Settings) -> PublicLookup:
         try:
-            lk = self.public_source(self.settings)
+            return self.public_source(settings)
         except Exception as exc:  # noqa: BLE001
-            lk = PublicLookup(None, f"the lookup failed: {type(exc).__name__}: {exc}")
+            return PublicLookup(None, f"the lookup failed: {type(exc).__name__}: {exc}")
+
+    def _take_public(self, mono: float, lk: PublicLookup | None) -> None:
+        """The answer of the lookup started at *mono*."""
+        self._public_busy = False
+        self._public_answered = True
+        wished = self.next_public       # inf, or an earlier poll asked for meanwhile
+        self._public_answer(mono, lk or PublicLookup(None, "the lookup failed (see the log)"))
+        self.next_public = min(self.next_public, wished)
+
+    def _public_answer(self, mono: float, lk: PublicLookup) -> None:
         self.status["own"]["public_checked_at"] = time.time()
         if not lk.ip:
             keep = self._known_public() or "none known"
@@ -398,7 +503,7 @@ class SyncService:
             return
         self.backoff["store"].succeed()
         self._clear_error("store", f"the store answers again ({self.store.describe()})")
-        self.next_fetch = mono + read_period(self.interval_s)
+        self.next_fetch = mono + self._read_period()
         now = time.time()
         for r in res.refused:
             if not self._remember(("refused", r.source, r.why)):
@@ -419,6 +524,13 @@ class SyncService:
                            "(%s)", name, self.peers[name].record.describe())
         self._take_own(res.own_copies)
         self._fetched_once = True
+
+    def _read_period(self) -> float:
+        """A watched folder wakes the loop when a record changes: read it every interval_s
+        besides (a safety net); other stores every read_period()."""
+        if self._folder_watched:
+            return max(read_period(self.interval_s), self.interval_s)
+        return read_period(self.interval_s)
 
     def _take_peer(self, name: str, cand: Candidate, now: float) -> None:
         old = self.peers.get(name)
@@ -592,9 +704,9 @@ class SyncService:
         self._save_learned(plan)
         self._save_status()
         if self.do_checks:
-            self._run_checks(plan)
             self._recheck_left = list(RECHECK_AFTER_S)
-            self._schedule_recheck()
+            self.recheck_at = None
+            self._run_checks(plan)
         return True
 
     def _summary(self, plan: Plan, old_text: str | None) -> str:
@@ -676,18 +788,38 @@ class SyncService:
 
     # ------------------------------------------------------------------ checks
     def _run_checks(self, plan: Plan) -> None:
-        results = run_affected_checks(plan.settings, hosts_path=self.hosts_path,
-                                      bashrc_path=self.bashrc_path, state_dir=self.state_dir)
+        """The affected checks for *plan*: on the checks thread while the service runs (records
+        are read and applied meanwhile), here and now otherwise (--once, tests)."""
+        tag = (self.status.get("last_change") or {}).get("journal")
+        if self._checks is not None:
+            self._checks.submit(tag, copy.deepcopy(plan))
+            return
+        self._take_checks(tag, self._affected_checks(plan))
+
+    def _affected_checks(self, plan: Plan) -> list[dict[str, Any]]:
+        return run_affected_checks(plan.settings, hosts_path=self.hosts_path,
+                                   bashrc_path=self.bashrc_path, state_dir=self.state_dir)
+
+    def _take_checks(self, tag: Any, results: list[dict[str, Any]] | None) -> None:
+        """Keep the verdicts of the checks run for the change *tag* (its journal entry), unless
+        a newer change came meanwhile (its own checks follow); then plan the re-checks."""
+        change = self.status.get("last_change")
+        if results is None:
+            return
+        if change is not None and change.get("journal") != tag:
+            log.debug("the checks of an earlier change ended after a newer change: not kept")
+            return
         bad = [r for r in results if r["status"] == "fail"]
         for r in results:
             level = logging.WARNING if r["status"] == "fail" else logging.INFO
             log.log(level, "check %-4s %s: %s", r["status"].upper(), r["id"], r["summary"])
-        if self.status.get("last_change") is not None:
-            self.status["last_change"]["checks"] = results
-            self.status["last_change"]["checked_at"] = time.time()
+        if change is not None:
+            change["checks"] = results
+            change["checked_at"] = time.time()
         if not bad:
             self._recheck_left = []
         self._status_dirty = True
+        self._schedule_recheck()
 
     def _schedule_recheck(self) -> None:
         changes = self.status.get("last_change") or {}
@@ -703,7 +835,6 @@ class SyncService:
             return
         log.info("running the failing checks again")
         self._run_checks(self._last_plan)
-        self._schedule_recheck()
 
     # ------------------------------------------------------------------ status
     def _save_status(self, force: bool = False) -> None:
@@ -723,12 +854,19 @@ class SyncService:
     def stop(self) -> None:
         """Ask the loop to stop (safe from a signal handler or another thread)."""
         self._stop = True
+        self._wake_loop()
+
+    def _wake_loop(self) -> None:
         with contextlib.suppress(OSError):
             os.write(self._wake_w, b"x")
 
     def _next_wake(self) -> float:
         apply_due = self.next_apply if self.dirty else max(self.next_apply, self.next_verify)
-        cands = [self.next_public, self.next_fetch, apply_due]
+        cands = [self.next_fetch]
+        if not self._public_busy:      # under way: its answer wakes the loop
+            cands.append(self.next_public)
+        if self._public_answered or not self._public_busy:   # else: after the first answer
+            cands.append(apply_due)
         if self.recheck_at is not None:
             cands.append(self.recheck_at)
         return min(cands)
@@ -770,10 +908,15 @@ class SyncService:
         sel.register(self._wake_r, selectors.EVENT_READ, "wake")
         if monitor is not None:
             sel.register(monitor.fileno(), selectors.EVENT_READ, "netlink")
+        folder_watch = StoreWatch(self.use_folder_watch)
+        if self.do_checks:
+            self._checks = _Worker("checks", self._affected_checks, self._wake_loop)
+        self._lookups = _Worker("public-IP lookup", self._lookup_public, self._wake_loop)
         force_public = True
         try:
             while not self._stop:
                 try:
+                    self._collect()
                     self.round(force_public=force_public)
                 except Exception:  # a bug must not kill the service: log it, keep going
                     log.exception("unexpected error in a sync round; going on")
@@ -786,19 +929,15 @@ class SyncService:
                 force_public = False
                 if self._stop:
                     break
-                timeout = min(MAX_WAIT_S, max(0.02, self._next_wake() - time.monotonic()))
-                for key, _ in sel.select(timeout):
-                    if key.data == "wake":
-                        with contextlib.suppress(OSError):
-                            os.read(self._wake_r, 64)
-                    elif monitor is not None and monitor.drain():
-                        deadline = time.monotonic() + DEBOUNCE_S
-                        while time.monotonic() < deadline and not self._stop:
-                            if sel.select(max(0.0, deadline - time.monotonic())):
-                                monitor.drain()
-                        log.info("the kernel reports a link, address or route change")
-                        force_public = True
+                self._follow_folder(folder_watch, sel)
+                force_public = self._wait(sel, monitor, folder_watch)
         finally:
+            for worker in (self._checks, self._lookups):
+                if worker is not None:
+                    worker.close(WORKER_STOP_S)
+            self._checks = self._lookups = None
+            self._public_busy = False
+            folder_watch.close(sel)
             sel.close()
             if monitor is not None:
                 monitor.close()
@@ -806,6 +945,66 @@ class SyncService:
             self._finish(lock)
             self.close()
         return 0
+
+    def _collect(self) -> None:
+        """Take what the service's threads finished: public-IP answers, checks' verdicts."""
+        if self._lookups is not None:
+            for started, lookup in self._lookups.collect():
+                self._take_public(started, lookup)
+        if self._checks is not None:
+            for tag, results in self._checks.collect():
+                self._take_checks(tag, results)
+
+    def _wait(self, sel: selectors.BaseSelector, monitor: NetlinkMonitor | None,
+              watch: StoreWatch) -> bool:
+        """Sleep until something is due, :meth:`stop`, a network change (True) or a peer's
+        record completed in the watched folder. Folder events that change no record (a sync
+        tool's temporary files) go on waiting; folder events are taken at most every
+        FOLDER_SETTLE_S, so a storm of them costs a bounded number of reads."""
+        period = read_period(self.interval_s)
+        while not self._stop:
+            timeout = min(MAX_WAIT_S, max(0.02, self._next_wake() - time.monotonic()))
+            ready = sel.select(timeout)
+            if not ready:
+                return False
+            for key, _ in ready:
+                if key.data == "wake":
+                    with contextlib.suppress(OSError):
+                        os.read(self._wake_r, 64)
+                    return False
+                if key.data == "netlink" and monitor is not None and monitor.drain():
+                    deadline = time.monotonic() + DEBOUNCE_S
+                    while time.monotonic() < deadline and not self._stop:
+                        # netlink only: other ready descriptors would make this spin
+                        if select.select([monitor.fileno()], [], [],
+                                         max(0.0, deadline - time.monotonic()))[0]:
+                            monitor.drain()
+                    log.info("the kernel reports a link, address or route change")
+                    return True
+                if key.data == StoreWatch.SELECTOR_KEY:
+                    changed = watch.drain(sel, period)
+                    # the rest of the burst (a sync tool completes several files) comes in
+                    # meanwhile; only stop() cuts this pause short
+                    select.select([self._wake_r], [], [], FOLDER_SETTLE_S)
+                    changed = watch.drain(sel, period) or changed
+                    if changed:
+                        self.next_fetch = min(self.next_fetch, time.monotonic())
+                        return False
+            if time.monotonic() >= self._next_wake():
+                return False
+        return False
+
+    def _follow_folder(self, watch: StoreWatch, sel: selectors.BaseSelector) -> None:
+        """Keep the watch on the store's folder (a folder store): started, kept or ended."""
+        if self.store is None:
+            return
+        started_or_ended = watch.follow(self.store, sel, read_period(self.interval_s))
+        if started_or_ended or watch.active != self._folder_watched:
+            self.next_fetch = min(self.next_fetch, time.monotonic())  # a change may be unseen
+        self._folder_watched = watch.active
+        if self.status.get("folder_watch") != watch.describe():
+            self.status["folder_watch"] = watch.describe()
+            self._status_dirty = True
 
     def close(self) -> None:
         for fd in (self._wake_r, self._wake_w):
