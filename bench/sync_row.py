@@ -118,7 +118,7 @@ def run(lab: Any, opts: Options, state: Path) -> RowResult:
                          f"the member watched the folder during {watched} of {len(got)} changes"
                          f" (read every {read_period(INTERVAL_S):g} s otherwise)")
         else:
-            parts.append(f"the member reads the zone every {read_period(INTERVAL_S):g} s")
+            parts.append(f"the member reads the zone every {max(read_period(INTERVAL_S), INTERVAL_S):g} s")
         if missed:
             parts.append(f"{missed} of {len(got)} changes not followed within {timeout:g} s")
         failed = sorted({k for r in got for k in r.get("failures", {})})

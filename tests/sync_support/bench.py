@@ -29,7 +29,8 @@ from .lab_sync import AFFECTED_PASS, SyncRig, checks_of, hosts_entry, prepare_la
 STORES = ("folder", "dns")
 NEW_IPS = ("203.0.113.77", "203.0.113.78")   # alternated, so every change is a real change
 CHANGES = 10                                 # changes measured per store (the issue: >= 10)
-GOAL_OVER_INTERVAL_S = {"folder": 1.0, "dns": 2.0}
+# DNS: the master's poll and the member's poll of the zone (both interval_s) add up.
+GOAL_OVER_INTERVAL_S = {"folder": 1.0, "dns": 3.0}
 
 
 def goal_s(store: str, interval_s: float) -> float:

@@ -527,8 +527,10 @@ class SyncService:
 
     def _read_period(self) -> float:
         """A watched folder wakes the loop when a record changes: read it every interval_s
-        besides (a safety net); other stores every read_period()."""
-        if self._folder_watched:
+        besides (a safety net). The DNS store is polled every interval_s (each read is a query to
+        a name server, often a provider's, from every member). A folder that cannot be watched
+        is read every read_period() (a local read costs nothing)."""
+        if self._folder_watched or getattr(self.store, "kind", "") == "dns":
             return max(read_period(self.interval_s), self.interval_s)
         return read_period(self.interval_s)
 
