@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from typing import Any
 
+from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
 from rosnet_tui.core.settings import ROLES, validate_ip, validate_name
 
 RECORD_VERSION = 1
@@ -275,56 +276,13 @@ def parse_record(data: bytes | str | Mapping[str, Any], *, expect_name: str | No
     return rec
 
 
-def _depth_problem(text: str, limit: int = MAX_DEPTH) -> str | None:
-    """Why *text* nests arrays/objects too deeply to be a record (None: it does not).
-
-    Checked before decoding: the decoder recurses once per level and a few thousand brackets
-    (4 KB) would exhaust Python's stack."""
-    depth = 0
-    in_string = escaped = False
-    for c in text:
-        if in_string:
-            if escaped:
-                escaped = False
-            elif c == "\\":
-                escaped = True
-            elif c == '"':
-                in_string = False
-        elif c == '"':
-            in_string = True
-        elif c in "[{":
-            depth += 1
-            if depth > limit:
-                return f"nested more than {limit} levels deep"
-        elif c in "]}":
-            depth -= 1
-    return None
-
-
-def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for k, v in pairs:
-        if k in out:
-            raise RecordError(f"the key {k[:40]!r} appears twice (which one is meant?)")
-        out[k] = v
-    return out
-
-
 def loads_json(text: str) -> Any:
     """Decode a record's JSON text: RecordError (only) for anything that is not plain JSON of
     bounded depth, with each key once."""
-    why = _depth_problem(text)
-    if why:
-        raise RecordError(f"{why} (not a record)")
     try:
-        return json.loads(text, object_pairs_hook=_no_duplicates)
-    except RecordError:
-        raise
-    except json.JSONDecodeError as exc:
-        raise RecordError(f"not valid JSON ({exc.msg} at character {exc.pos}; "
-                          "a partial copy?)") from None
-    except (ValueError, RecursionError, OverflowError) as exc:  # e.g. an int of 5,000 digits
-        raise RecordError(f"not usable JSON ({str(exc)[:80]})") from None
+        return loads_bounded(text, max_depth=MAX_DEPTH)
+    except JsonInputError as exc:
+        raise RecordError(f"{exc} (a partial copy, or not a record?)") from None
 
 
 # --------------------------------------------------------------------------- successors
