@@ -30,8 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"address and port to listen on (default {DEFAULT_LISTEN})")
     p.add_argument("--connect-timeout", type=number_in(0.1, 60), default=2.0, metavar="SECONDS",
                    help="how long one connect-back may take, 0.1-60 seconds (default 2)")
-    p.add_argument("--rate-limit", type=number_in(1, 10000, whole=True), default=30, metavar="N",
-                   help="port checks allowed per caller address per minute, 1-10000 "
+    p.add_argument("--rate-limit", type=number_in(1, 1_000_000, whole=True), default=30, metavar="N",
+                   help="port checks allowed per caller address per minute, 1-1000000 "
                         "(default 30)")
     p.add_argument("--max-concurrent", type=number_in(1, 1024, whole=True), default=16,
                    metavar="N", help="connect-backs in progress at once, 1-1024 (default 16)")

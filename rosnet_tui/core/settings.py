@@ -7,6 +7,7 @@ comments and layout of a hand-edited file.
 
 from __future__ import annotations
 
+import fcntl
 import ipaddress
 import math
 import os
@@ -20,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 import tomlkit
+
+from rosnet_tui.core import tempfiles
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -668,6 +671,8 @@ def _merge_table(doc: Any, name: str, values: dict[str, Any]) -> None:
 def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
     """Write *text* to *path* atomically: a temp file in the same folder, fsync, rename."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    # What a killed writer of this file left: removed (ours, its writer gone, not locked).
+    tempfiles.sweep(path.parent, tempfiles.ATOMIC_TMP, path.name)
     # An unpredictable name, created exclusively and never through a link.
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{secrets.token_hex(4)}")
     if mode is None:
@@ -678,10 +683,11 @@ def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, mode)
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+            fcntl.flock(f.fileno(), fcntl.LOCK_EX)   # ours until renamed
             f.write(text)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+            os.replace(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)
