@@ -445,3 +445,83 @@ def test_temp_files_of_killed_writers_are_removed_by_the_next_run(tmp_path):
 def _temps(root: Path) -> list[str]:
     return sorted(str(p.relative_to(root)) for p in root.rglob(".*")
                   if p.is_file() and (p.name.endswith(".tmp") or ".tmp-" in p.name))
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root (to act as another user)")
+def test_in_a_folder_the_writer_may_not_write_the_journal_goes_to_the_state_dir(monkeypatch):
+    """A user's own file in a folder only root may write: in place, journaled under the state
+    dir; after a cut write the next apply through that state dir completes it first."""
+    top = Path(__import__("tempfile").mkdtemp(prefix="rosnet-h15-"))
+    try:
+        os.chmod(top, 0o755)
+        folder, sd = top / "etc", top / "state"
+        folder.mkdir(mode=0o755)
+        sd.mkdir(mode=0o700)
+        os.chown(sd, 65534, 65534)
+        target = folder / "hosts"
+        original = hosts_text(30_000, 10)
+        target.write_bytes(original)
+        os.chown(target, 65534, 65534)
+        new = b"# new first line\n" + original[:10_000]
+        os.setegid(65534)
+        os.seteuid(65534)
+        try:
+            monkeypatch.setattr(mf, "_write_all", _half_then_crash(mf._write_all, new))
+            with pytest.raises(_Crash):
+                mf.write_file(target, new, journal_dir=sd / "inplace")
+            monkeypatch.undo()
+            torn = target.read_bytes()
+            assert torn not in (original, new)
+            assert list((sd / "inplace").iterdir())                       # its journal
+            stale = mf.Preview(target, torn, torn + b"# more\n")
+            with pytest.raises(mf.StalePreviewError):                    # the next run
+                mf.apply_previews([stale], state_dir=sd)
+            assert target.read_bytes() == new                             # completed first
+            assert not list((sd / "inplace").iterdir())
+            mf.apply_previews([mf.Preview(target, new, new + b"# more\n")], state_dir=sd)
+            assert target.read_bytes() == new + b"# more\n"
+        finally:
+            os.seteuid(0)
+            os.setegid(0)
+    finally:
+        shutil.rmtree(top, ignore_errors=True)
+    tally(AREA, 1, 1, "journal in the state dir")
+
+
+@pytest.mark.parametrize("place", ["in place", "rename"])
+def test_an_apply_interrupted_in_a_live_process_is_rolled_back_whole(tmp_path, monkeypatch,
+                                                                      place):
+    """Ctrl-C (not a kill) in the middle of a write: the apply is rolled back, and the file being
+    written when it came is put back too (its entry says rolled back: it must not end up new)."""
+    target, sd = tmp_path / "hosts", tmp_path / "state"
+    original = hosts_text(200_000, 11)
+    target.write_bytes(original)
+    if place == "in place":
+        monkeypatch.setattr(mf, "is_mount_point", lambda p: True)
+    p = mf.preview_block(target, BODY, position="top")
+    real, fired = mf._write_all, []
+
+    def interrupted(fd, chunk):
+        if chunk == p.new and not fired:
+            fired.append(1)
+            real(fd, chunk[: len(chunk) // 2])
+            raise KeyboardInterrupt
+        real(fd, chunk)
+    monkeypatch.setattr(mf, "_write_all", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        mf.apply_preview(p, state_dir=sd)
+    monkeypatch.setattr(mf, "_write_all", real)
+    assert fired
+    assert mf.read_bytes(target) == original == target.read_bytes()
+    assert mf.last_entry(sd) is None                              # nothing left to undo
+    assert not [x for x in tmp_path.iterdir() if x.name.endswith((".inplace", ".tmp"))]
+    tally(AREA, 1, 1, f"interrupted apply ({place})")
+
+
+def _half_then_crash(real, data: bytes):
+    def half(fd, chunk):
+        if chunk == data:
+            real(fd, chunk[: len(chunk) // 2])
+            raise _Crash
+        real(fd, chunk)
+    return half

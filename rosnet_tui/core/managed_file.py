@@ -353,11 +353,11 @@ def can_write(path: Path) -> bool:
     try:
         real = Path(os.path.realpath(path))
         if real.exists():
-            return os.access(real, os.W_OK)  # rename if the folder allows it, else in place
+            return os.access(real, os.W_OK, effective_ids=True)  # rename if the folder allows it, else in place
         parent = real.parent
         while not parent.exists() and parent != parent.parent:
             parent = parent.parent
-        return os.access(parent, os.W_OK | os.X_OK)
+        return os.access(parent, os.W_OK | os.X_OK, effective_ids=True)
     except OSError:
         return False
 
@@ -411,6 +411,7 @@ def sweep_state_dir(state_dir: Path) -> list[str]:
                 removed += tempfiles.sweep(Path(e.path), tempfiles.PRIVATE_TMP)
     for folder in (sd, sd / "sync"):
         removed += tempfiles.sweep(folder, tempfiles.ATOMIC_TMP)
+    removed += tempfiles.sweep(sd / "inplace", tempfiles.MANAGED_TMP)
     return removed
 
 
@@ -516,18 +517,9 @@ def _recover_from(real: Path, st: os.stat_result, jpath: Path, wait_s: float) ->
     deadline = time.monotonic() + wait_s
     while True:
         try:
-            jfd = os.open(jpath, os.O_RDWR | os.O_NOFOLLOW)
-            writable = True
-        except FileNotFoundError:
-            return None
-        except PermissionError:
-            try:
-                jfd = os.open(jpath, os.O_RDONLY | os.O_NOFOLLOW)
-            except OSError:
-                return None
-            writable = False
+            jfd = os.open(jpath, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
         except OSError:
-            return None
+            return None                       # none (the usual case), or not ours to read
         try:
             try:
                 fcntl.flock(jfd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -555,13 +547,17 @@ def _recover_from(real: Path, st: os.stat_result, jpath: Path, wait_s: float) ->
                 _, old, new = parsed
                 if cur in (new, old) or _is_torn(cur, old, new):
                     target = new
-            if not writable or not os.access(real, os.W_OK):
-                return target if target is not None and target != cur else None
-            if target is not None and cur != target:
-                _rewrite(real, target)
-                if real.read_bytes() != target:
-                    raise OSError(errno.EIO, f"completing an interrupted write of {real} failed")
-            os.unlink(jpath)
+            effective = target if target is not None and target != cur else None
+            if not (os.access(real, os.W_OK, effective_ids=True) and os.access(jpath.parent, os.W_OK | os.X_OK, effective_ids=True)):
+                return effective              # a user reading what root will complete
+            try:
+                if effective is not None:
+                    _rewrite(real, effective)
+                    if real.read_bytes() != effective:
+                        return effective      # not completed: the journal stays for later
+                os.unlink(jpath)
+            except OSError:
+                return effective              # e.g. a read-only mount: same as not allowed
             _fsync_dir(jpath.parent)
             return None
         finally:
@@ -580,7 +576,12 @@ def _write_in_place(real: Path, data: bytes, journal_dir: Path | None = None) ->
     recover_in_place(real, journal_dir=journal_dir)
     old = real.read_bytes()
     st = os.stat(real)
-    folder = real.parent if os.access(real.parent, os.W_OK | os.X_OK) else journal_dir
+    folder = real.parent if os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True) else journal_dir
+    if folder is not None and folder == journal_dir:
+        try:
+            os.makedirs(folder, mode=0o700, exist_ok=True)
+        except OSError:
+            folder = None
     jfd: int | None = None
     jpath: Path | None = None
     if folder is not None:
@@ -689,7 +690,7 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
     euid = os.geteuid()
     in_place = (is_mount_point(real) or st.st_nlink > 1
                 or (euid != 0 and st.st_uid != euid)
-                or not os.access(real.parent, os.W_OK | os.X_OK))
+                or not os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True))
     if not in_place:
         _remove_stale_temps(real.parent, real.name)
         try:
@@ -939,11 +940,18 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
         try:
             for i, p in enumerate(todo):
                 outcome = write_file(p.path, p.new, new_mode=p.new_mode,
-                                     journal_dir=_inplace_dir(sd, owner))
+                                     journal_dir=sd / INPLACE_DIR)
                 entry.files[i].in_place = outcome.in_place
                 result.files.append(outcome)
                 done.append(i)
         except BaseException as exc:
+            # The file being written when it failed may be half written (in place): put back
+            # too (its journal is completed first), so no file keeps an apply marked undone.
+            cut = len(done)
+            if cut < len(todo):
+                with contextlib.suppress(Exception):
+                    if file_digest(read_bytes(todo[cut].path)) != entry.files[cut].before:
+                        done = [*done, cut]
             _roll_back(sd, entry, done)
             entry.undone = _now() + " (rolled back: the apply failed)"
             with contextlib.suppress(Exception):
@@ -1009,19 +1017,11 @@ def _restore_one(sd: Path, f: JournalFile) -> None:
         raise ManagedFileError(f"the backup {b} is damaged (digest mismatch); "
                                f"{f.path} was left as it is")
     write_file(Path(f.real_path), data, mode=f.mode, uid=f.uid, gid=f.gid,
-               journal_dir=_inplace_dir(sd, _owner_for(sd)))
+               journal_dir=sd / INPLACE_DIR)
 
 
+# Where an in-place write journals when the target's folder may not be written.
 INPLACE_DIR = "inplace"
-
-
-def _inplace_dir(sd: Path, owner: tuple[int, int] | None) -> Path | None:
-    """Where an in-place write journals when the target's folder may not be written."""
-    try:
-        _mkdir(sd / INPLACE_DIR, owner)
-    except (OSError, ManagedFileError):
-        return None
-    return sd / INPLACE_DIR
 
 
 def _roll_back(sd: Path, entry: JournalEntry, done: Iterable[int]) -> None:
