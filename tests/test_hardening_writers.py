@@ -525,3 +525,32 @@ def _half_then_crash(real, data: bytes):
             raise _Crash
         real(fd, chunk)
     return half
+
+
+# --------------------------------------------------------------------------- what is read
+def test_a_target_that_is_not_a_regular_file_is_refused_without_reading_it(tmp_path):
+    """``hosts apply --file FIFO`` hung and ``--file`` on a link to /dev/zero read until memory
+    ran out (siblings of the settings loader's): refused at once, exit 1, no traceback."""
+    from tests.test_cli_writers import CONFIG
+
+    cfg = tmp_path / "config.toml"
+    cfg.write_text(CONFIG)
+    fifo, zero = tmp_path / "fifo", tmp_path / "zero"
+    os.mkfifo(fifo)
+    zero.symlink_to("/dev/zero")
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    n = 0
+    for target in (fifo, zero):
+        for cmd in (["hosts", "apply"], ["ros", "apply"]):
+            started = time.monotonic()
+            r = subprocess.run([sys.executable, "-m", "rosnet_tui", *cmd, "--config", str(cfg),
+                                "--file", str(target), "--yes", "--no-checks", "--state-dir",
+                                str(tmp_path / "state")], capture_output=True, text=True,
+                               timeout=30, env=env, cwd=REPO, stdin=subprocess.DEVNULL)
+            assert r.returncode == 1 and "not a regular file" in r.stderr, (cmd, r.stderr[-800:])
+            assert "Traceback" not in r.stderr
+            assert time.monotonic() - started < 15
+            n += 1
+    with pytest.raises(mf.ManagedFileError, match="not a regular file"):
+        mf.read_bytes(fifo)
+    tally(AREA, n, n, "not a regular file")

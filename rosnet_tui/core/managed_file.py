@@ -243,7 +243,7 @@ def read_bytes(path: Path) -> bytes | None:
         _remove_stale_temps(real.parent, real.name)
         if effective is not None:
             return effective
-        return Path(path).read_bytes()
+        return _read_regular(Path(path))
     except FileNotFoundError:
         return None
     except IsADirectoryError:
@@ -252,6 +252,29 @@ def read_bytes(path: Path) -> bytes | None:
         raise PermissionNeededError(f"this user may not read {path}", [Path(path)]) from None
     except OSError as exc:
         raise ManagedFileError(f"cannot read {path}: {exc.strerror}") from None
+
+
+MAX_FILE_BYTES = 256 << 20   # hosts files and shell files are far smaller
+
+
+def _read_regular(path: Path) -> bytes:
+    """A regular file's bytes; anything else (a FIFO, a device behind a link) is refused
+    without reading it, as is a file over MAX_FILE_BYTES."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
+        if not stat.S_ISREG(st.st_mode):
+            raise ManagedFileError(f"{path} is not a regular file (a FIFO or a device?); "
+                                   "nothing was read or written")
+        if st.st_size > MAX_FILE_BYTES:
+            raise ManagedFileError(f"{path} is too big ({st.st_size} bytes) to be a file "
+                                   "rosnet-tui edits")
+        with os.fdopen(os.dup(fd), "rb") as f:
+            return f.read()
+    finally:
+        os.close(fd)
 
 
 @dataclass(frozen=True)
