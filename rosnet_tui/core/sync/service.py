@@ -36,7 +36,7 @@ from rosnet_tui.core.hosts import (
 )
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings, save_settings
 
-from .applied import load_applied, save_applied
+from .applied import applied_path, load_applied, save_applied
 from .backoff import Backoff, backoff_cap
 from .plan import Plan, PlanError, check_complete, plan_hosts
 from .records import (
@@ -442,8 +442,10 @@ class SyncService:
         if why is not None:
             assert prev is not None
             self._once(("older", name, rec.rank, prev.rank), logging.WARNING,
-                       "refused the record %s (%s): %s; keeping #%d of %s", cand.source, name,
-                       why, prev.seq, format_time(prev.timestamp))
+                       "refused the record %s (%s): %s; keeping #%d of %s (if %s really "
+                       "started counting again, remove its entry from %s)", cand.source, name,
+                       why, prev.seq, format_time(prev.timestamp), name,
+                       applied_path(self.state_dir))
             return
         self._applied[name.lower()] = rec
         try:
