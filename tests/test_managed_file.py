@@ -440,9 +440,10 @@ class _Crash(BaseException):
 
 @pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("mount"),
                     reason="bind mounts need root and mount(8)")
-def test_a_crash_inside_an_in_place_shrink_leaves_a_valid_file(tmp_path, monkeypatch):
+def test_a_crash_inside_an_in_place_shrink_is_completed_by_the_next_read(tmp_path, monkeypatch):
     """In place (a bind-mounted /etc/hosts) the write and the truncation are two steps: dying
-    between them must leave the new content plus blank lines, never a tail of old bytes."""
+    between them leaves a tail of old bytes, and the journal beside the file; the next read
+    completes the write (issue 15: padding with blank lines was not enough)."""
     src, dst, sd = tmp_path / "netns-hosts", tmp_path / "hosts", tmp_path / "state"
     src.write_bytes(b"127.0.0.1\tlocalhost\n# keep me\n")
     dst.write_bytes(b"underneath\n")
@@ -458,10 +459,14 @@ def test_a_crash_inside_an_in_place_shrink_leaves_a_valid_file(tmp_path, monkeyp
         monkeypatch.setattr(mf, "_before_truncate", crash)
         with pytest.raises(_Crash):
             mf.apply_preview(short, state_dir=sd)
+        monkeypatch.setattr(mf, "_before_truncate", None)
         left = src.read_bytes()
-        assert left.startswith(short.new)
-        assert set(left[len(short.new):]) <= {ord("\n")}  # only blank lines after it
+        assert left.startswith(short.new) and left != short.new
+        assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
+        left = mf.read_bytes(dst)
+        assert left == short.new == src.read_bytes()
         assert mf.extract_block(left.decode()) == ["203.0.113.7  peer7"]
         assert b"# keep me" in left and b"peer29" not in left
+        assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
     finally:
         subprocess.run(["umount", str(dst)], timeout=10, check=False)

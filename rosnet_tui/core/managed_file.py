@@ -13,6 +13,13 @@ The flow the UI and the CLI share:
    a verified in-place rewrite where the file is a mount point (``/etc/hosts`` in containers and
    under ``ip netns exec``), where rename fails with EBUSY/EXDEV.
 3. :func:`plan_undo` / :func:`apply_undo` put the files of the last apply back, byte for byte.
+
+An in-place rewrite cannot be atomic, so it is journaled: the old and the new bytes go to a
+journal file beside the target first (``.NAME.rosnet-tui.DEV-INODE.inplace``, fsynced, locked by
+the writer while it writes), then the target is rewritten, then the journal is removed. A writer
+killed at any moment leaves the old content, the new one, or a mix of the two with its journal:
+the next read through :func:`read_bytes` (every preview, apply and undo) completes the write. Temp
+files of killed writers (beside the target, in the state dir) are removed by the next run.
 """
 
 from __future__ import annotations
@@ -33,6 +40,8 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
+from rosnet_tui.core import tempfiles
+
 BEGIN_MARKER = "# BEGIN rosnet-tui"
 END_MARKER = "# END rosnet-tui"
 ABSENT = "absent"  # the digest of a file that does not exist
@@ -40,7 +49,8 @@ LOCK_TIMEOUT_S = 10.0
 JOURNAL_KEEP = 100  # applies remembered for undo; older ones (and their backups) are dropped
 
 _MARKER_RE = re.compile(r"^[ \t]*#[ \t]*(BEGIN|END)[ \t]+rosnet-tui(?:[ \t]|$)")
-_TMP_RE = re.compile(r"^\.(?P<name>.+)\.rosnet-tui\.(?P<pid>\d+)\.[0-9a-f]+\.tmp$")
+_TMP_RE = tempfiles.MANAGED_TMP
+INPLACE_MAGIC = b"rosnet-tui in-place journal 1\n"
 
 # Test hook: called between the fsync of the temp file and the rename (crash tests set it).
 _before_rename: Callable[[], None] | None = None
@@ -222,9 +232,18 @@ class LineChange:
 
 # --------------------------------------------------------------------------- preview
 def read_bytes(path: Path) -> bytes | None:
-    """The file's bytes, or None when it does not exist. Other errors: ManagedFileError."""
+    """The file's bytes, or None when it does not exist. Other errors: ManagedFileError.
+
+    An in-place write that was cut short (its journal is still beside the file) is completed
+    first when this process may write the file; otherwise the bytes it will have once
+    completed are returned."""
     try:
-        return Path(path).read_bytes()
+        effective = recover_in_place(Path(path))
+        real = Path(os.path.realpath(path))
+        _remove_stale_temps(real.parent, real.name)
+        if effective is not None:
+            return effective
+        return _read_regular(Path(path))
     except FileNotFoundError:
         return None
     except IsADirectoryError:
@@ -233,6 +252,29 @@ def read_bytes(path: Path) -> bytes | None:
         raise PermissionNeededError(f"this user may not read {path}", [Path(path)]) from None
     except OSError as exc:
         raise ManagedFileError(f"cannot read {path}: {exc.strerror}") from None
+
+
+MAX_FILE_BYTES = 256 << 20   # hosts files and shell files are far smaller
+
+
+def _read_regular(path: Path) -> bytes:
+    """A regular file's bytes; anything else (a FIFO, a device behind a link) is refused
+    without reading it, as is a file over MAX_FILE_BYTES."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
+        if not stat.S_ISREG(st.st_mode):
+            raise ManagedFileError(f"{path} is not a regular file (a FIFO or a device?); "
+                                   "nothing was read or written")
+        if st.st_size > MAX_FILE_BYTES:
+            raise ManagedFileError(f"{path} is too big ({st.st_size} bytes) to be a file "
+                                   "rosnet-tui edits")
+        with os.fdopen(os.dup(fd), "rb") as f:
+            return f.read()
+    finally:
+        os.close(fd)
 
 
 @dataclass(frozen=True)
@@ -334,11 +376,11 @@ def can_write(path: Path) -> bool:
     try:
         real = Path(os.path.realpath(path))
         if real.exists():
-            return os.access(real, os.W_OK)  # rename if the folder allows it, else in place
+            return os.access(real, os.W_OK, effective_ids=True)  # rename if the folder allows it, else in place
         parent = real.parent
         while not parent.exists() and parent != parent.parent:
             parent = parent.parent
-        return os.access(parent, os.W_OK | os.X_OK)
+        return os.access(parent, os.W_OK | os.X_OK, effective_ids=True)
     except OSError:
         return False
 
@@ -376,25 +418,24 @@ def _copy_xattrs(src: Path, fd: int) -> None:
             pass
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as f:
-            return f.read().rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
-    except OSError:
-        return False
-
-
 def _remove_stale_temps(folder: Path, name: str) -> None:
     """Remove temp files that writers killed before their rename left behind."""
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return
-    for e in entries:
-        m = _TMP_RE.match(e.name)
-        if m and m.group("name") == name and not _pid_alive(int(m.group("pid"))):
-            with contextlib.suppress(OSError):
-                os.unlink(e.path)
+    tempfiles.sweep(folder, tempfiles.MANAGED_TMP, name)
+
+
+def sweep_state_dir(state_dir: Path) -> list[str]:
+    """Remove the temp files killed writers left in the state dir (journal entries, backups,
+    status files); the names removed."""
+    sd = Path(state_dir)
+    removed = tempfiles.sweep(sd / "journal", tempfiles.PRIVATE_TMP)
+    with contextlib.suppress(OSError), os.scandir(sd / "backups") as it:
+        for e in it:
+            if e.is_dir(follow_symlinks=False):
+                removed += tempfiles.sweep(Path(e.path), tempfiles.PRIVATE_TMP)
+    for folder in (sd, sd / "sync"):
+        removed += tempfiles.sweep(folder, tempfiles.ATOMIC_TMP)
+    removed += tempfiles.sweep(sd / "inplace", tempfiles.MANAGED_TMP)
+    return removed
 
 
 def _write_all(fd: int, data: bytes) -> None:
@@ -404,19 +445,64 @@ def _write_all(fd: int, data: bytes) -> None:
         off += os.pwrite(fd, view[off:], off)
 
 
-def _write_in_place(real: Path, data: bytes) -> None:
-    """Rewrite an existing file through its own inode (mount points, hard links, other owners).
+# --------------------------------------------------------------------------- in-place journal
+def _journal_name(real: Path, st: os.stat_result) -> str:
+    return f".{real.name}.rosnet-tui.{st.st_dev:x}-{st.st_ino:x}.inplace"
 
-    Not atomic: the caller has a backup. Read back to verify; on mismatch put the old bytes back.
-    New content shorter than the old is written padded with newlines to the old length first, so
-    a crash before the truncation leaves the new content and blank lines, never a tail of old
-    bytes after it.
-    """
-    old = real.read_bytes()
-    padded = data + b"\n" * (len(old) - len(data)) if len(data) < len(old) else data
+
+def _journal_bytes(real: Path, st: os.stat_result, old: bytes, new: bytes) -> bytes:
+    head = {"path": str(real), "dev": st.st_dev, "ino": st.st_ino,
+            "old_len": len(old), "old_sha256": hashlib.sha256(old).hexdigest(),
+            "new_len": len(new), "new_sha256": hashlib.sha256(new).hexdigest()}
+    return INPLACE_MAGIC + json.dumps(head, sort_keys=True).encode() + b"\n" + old + new
+
+
+def _parse_journal(data: bytes) -> tuple[dict, bytes, bytes] | None:
+    """(header, old, new) of an in-place journal, or None when it is not a whole, valid one."""
+    if not data.startswith(INPLACE_MAGIC):
+        return None
+    nl = data.find(b"\n", len(INPLACE_MAGIC))
+    if nl < 0:
+        return None
+    try:
+        head = json.loads(data[len(INPLACE_MAGIC):nl])
+        old_len, new_len = int(head["old_len"]), int(head["new_len"])
+    except (ValueError, TypeError, KeyError):
+        return None
+    body = data[nl + 1:]
+    if old_len < 0 or new_len < 0 or len(body) != old_len + new_len:
+        return None
+    old, new = body[:old_len], body[old_len:]
+    if hashlib.sha256(old).hexdigest() != head.get("old_sha256") \
+            or hashlib.sha256(new).hexdigest() != head.get("new_sha256"):
+        return None
+    return head, old, new
+
+
+def _common_prefix(a: bytes, b: bytes) -> int:
+    n = min(len(a), len(b))
+    lo, step = 0, 1 << 16
+    while lo < n:                                 # whole blocks first, then bytes
+        hi = min(n, lo + step)
+        if a[lo:hi] != b[lo:hi]:
+            break
+        lo = hi
+    while lo < n and a[lo] == b[lo]:
+        lo += 1
+    return lo
+
+
+def _is_torn(cur: bytes, old: bytes, new: bytes) -> bool:
+    """Whether *cur* is what rewriting *old* with *new* in place leaves when cut short: the new
+    bytes up to some point, the old ones after it (not yet truncated, or extended)."""
+    k = _common_prefix(cur, new)
+    return cur[k:] == old[k:]
+
+
+def _rewrite(real: Path, data: bytes) -> None:
     fd = os.open(real, os.O_WRONLY | os.O_NOFOLLOW)
     try:
-        _write_all(fd, padded)
+        _write_all(fd, data)
         os.fsync(fd)
         if _before_truncate is not None:
             _before_truncate()
@@ -424,16 +510,145 @@ def _write_in_place(real: Path, data: bytes) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
-    if real.read_bytes() != data:
-        fd = os.open(real, os.O_WRONLY | os.O_NOFOLLOW)
+
+
+def recover_in_place(path: Path, *, journal_dir: Path | None = None,
+                     wait_s: float = LOCK_TIMEOUT_S) -> bytes | None:
+    """Complete an in-place write of *path* that was cut short, from its journal (beside the
+    file, or in *journal_dir*).
+
+    Returns None when there is nothing to do (no journal: read the file as it is) or when the
+    write was completed here; when this process may not write the file (a user previewing what
+    root's service left), the bytes the file will hold once completed. A journal whose writer is
+    still at work (it holds the journal's lock) is waited for, up to *wait_s*. The file is
+    changed only when it holds the journal's old bytes, its new ones, or a mix that only that
+    write leaves; after anyone else's change the journal is dropped and the file left alone.
+    Raises OSError (FileNotFoundError when *path* does not exist).
+    """
+    real = Path(os.path.realpath(path))
+    st = os.stat(real)
+    name = _journal_name(real, st)
+    jpaths = [real.parent / name] + ([Path(journal_dir) / name] if journal_dir else [])
+    for jpath in jpaths:
+        got = _recover_from(real, st, jpath, wait_s)
+        if got is not None:
+            return got
+    return None
+
+
+def _recover_from(real: Path, st: os.stat_result, jpath: Path, wait_s: float) -> bytes | None:
+    deadline = time.monotonic() + wait_s
+    while True:
         try:
-            _write_all(fd, old)
-            os.ftruncate(fd, len(old))
-            os.fsync(fd)
+            jfd = os.open(jpath, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+        except OSError:
+            return None                       # none (the usual case), or not ours to read
+        try:
+            try:
+                fcntl.flock(jfd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    return None               # a live writer: it finishes its own write
+                time.sleep(0.02)
+                continue
+            jst = os.fstat(jfd)
+            try:
+                if os.stat(jpath).st_ino != jst.st_ino:
+                    continue                  # replaced while we waited: look again
+            except FileNotFoundError:
+                return None                   # its writer finished and removed it
+            # Trust only a journal of root or of this user, that nobody else may change.
+            if jst.st_uid not in (0, os.geteuid()) or jst.st_mode & 0o022 \
+                    or not stat.S_ISREG(jst.st_mode):
+                return None
+            with os.fdopen(os.dup(jfd), "rb") as f:
+                parsed = _parse_journal(f.read(2 * st.st_size + (64 << 20)))
+            cur = real.read_bytes()
+            target = None
+            if parsed is not None and parsed[0].get("path") == str(real) \
+                    and (parsed[0].get("dev"), parsed[0].get("ino")) == (st.st_dev, st.st_ino):
+                _, old, new = parsed
+                if cur in (new, old) or _is_torn(cur, old, new):
+                    target = new
+            effective = target if target is not None and target != cur else None
+            if not (os.access(real, os.W_OK, effective_ids=True) and os.access(jpath.parent, os.W_OK | os.X_OK, effective_ids=True)):
+                return effective              # a user reading what root will complete
+            try:
+                if effective is not None:
+                    _rewrite(real, effective)
+                    if real.read_bytes() != effective:
+                        return effective      # not completed: the journal stays for later
+                os.unlink(jpath)
+            except OSError:
+                return effective              # e.g. a read-only mount: same as not allowed
+            _fsync_dir(jpath.parent)
+            return None
         finally:
-            os.close(fd)
-        raise ManagedFileError(f"{real}: the content read back differs from what was written; "
-                               "the previous content was put back")
+            os.close(jfd)
+
+
+def _write_in_place(real: Path, data: bytes, journal_dir: Path | None = None) -> None:
+    """Rewrite an existing file through its own inode (mount points, hard links, other owners).
+
+    Journaled (see the module docstring): a kill at any moment leaves the old bytes, the new
+    ones, or a state the next :func:`read_bytes` completes. Read back to verify; on a mismatch
+    the old bytes are put back. The journal goes beside the file, or into *journal_dir* when
+    the file's folder may not be written (then only a write through the same state dir
+    completes it); with neither, the write is not journaled.
+    """
+    recover_in_place(real, journal_dir=journal_dir)
+    old = real.read_bytes()
+    st = os.stat(real)
+    folder = real.parent if os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True) else journal_dir
+    if folder is not None and folder == journal_dir:
+        try:
+            os.makedirs(folder, mode=0o700, exist_ok=True)
+        except OSError:
+            folder = None
+    jfd: int | None = None
+    jpath: Path | None = None
+    if folder is not None:
+        jpath = Path(folder) / _journal_name(real, st)
+        tmp = Path(folder) / f".{real.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+        jfd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW,
+                      stat.S_IMODE(st.st_mode) & 0o644)
+        try:
+            fcntl.flock(jfd, fcntl.LOCK_EX)   # held until the write is done (or we die)
+            _write_all(jfd, _journal_bytes(real, st, old, data))
+            os.fsync(jfd)
+            os.rename(tmp, jpath)
+            _fsync_dir(Path(folder))
+        except BaseException:
+            os.close(jfd)
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+    try:
+        ok = False
+        try:
+            _rewrite(real, data)
+            ok = real.read_bytes() == data
+        except Exception:
+            with contextlib.suppress(Exception):
+                _put_back(real, old, jpath)
+            raise
+        if not ok:
+            _put_back(real, old, jpath)
+            raise ManagedFileError(f"{real}: the content read back differs from what was "
+                                   "written; the previous content was put back")
+        if jpath is not None:
+            os.unlink(jpath)
+            _fsync_dir(jpath.parent)
+    finally:
+        if jfd is not None:
+            os.close(jfd)
+
+
+def _put_back(real: Path, old: bytes, jpath: Path | None) -> None:
+    """After a failed in-place write: the old bytes again, and the journal dropped."""
+    _rewrite(real, old)
+    if jpath is not None and real.read_bytes() == old:
+        os.unlink(jpath)
 
 
 def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: int | None,
@@ -443,6 +658,7 @@ def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: in
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
     try:
         try:
+            fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
             _write_all(fd, data)
             if uid is not None or gid is not None:
                 try:
@@ -453,11 +669,11 @@ def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: in
             if xattr_src is not None:
                 _copy_xattrs(xattr_src, fd)
             os.fsync(fd)
+            if _before_rename is not None:
+                _before_rename()
+            os.replace(tmp, real)
         finally:
             os.close(fd)
-        if _before_rename is not None:
-            _before_rename()
-        os.replace(tmp, real)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
@@ -467,7 +683,7 @@ def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: in
 
 def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
                uid: int | None = None, gid: int | None = None,
-               new_mode: int = 0o644) -> WriteOutcome:
+               new_mode: int = 0o644, journal_dir: Path | None = None) -> WriteOutcome:
     """Write *data* to *path* safely (None deletes it); keeps mode, owner and xattrs.
 
     Symlinks are followed (a dotfile linked into a repo stays a link). Rename when possible;
@@ -497,7 +713,7 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
     euid = os.geteuid()
     in_place = (is_mount_point(real) or st.st_nlink > 1
                 or (euid != 0 and st.st_uid != euid)
-                or not os.access(real.parent, os.W_OK | os.X_OK))
+                or not os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True))
     if not in_place:
         _remove_stale_temps(real.parent, real.name)
         try:
@@ -506,7 +722,8 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
         except OSError as exc:
             if exc.errno not in (errno.EBUSY, errno.EXDEV):
                 raise
-    _write_in_place(real, data)
+    _remove_stale_temps(real.parent, real.name)
+    _write_in_place(real, data, journal_dir)
     if stat.S_IMODE(os.stat(real).st_mode) != mode:
         with contextlib.suppress(OSError):
             os.chmod(real, mode)
@@ -606,14 +823,15 @@ def _write_private(path: Path, data: bytes, owner: tuple[int, int] | None) -> No
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
     try:
         try:
+            fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
             _write_all(fd, data)
             if owner:
                 with contextlib.suppress(OSError):
                     os.fchown(fd, *owner)
             os.fsync(fd)
+            os.replace(tmp, path)
         finally:
             os.close(fd)
-        os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
@@ -656,6 +874,11 @@ def journal_entries(state_dir: Path | None = None) -> list[JournalEntry]:
         names = sorted(n for n in os.listdir(folder) if re.fullmatch(r"\d{6,}\.json", n))
     except FileNotFoundError:
         return []
+    except NotADirectoryError:
+        raise ManagedFileError(f"{folder.parent} is not a folder: it cannot be the state "
+                               "dir") from None
+    except OSError as exc:
+        raise ManagedFileError(f"cannot read the journal in {folder}: {exc.strerror}") from None
     for n in names:
         try:
             out.append(JournalEntry.from_json(json.loads((folder / n).read_text("utf-8"))))
@@ -711,7 +934,11 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
     sd = _state_dir(state_dir)
     owner = _owner_for(sd)
     with _locked(sd, owner):
+        sweep_state_dir(sd)
         for p in previews:
+            # an in-place write of this file cut short, journaled in the state dir
+            with contextlib.suppress(OSError):
+                recover_in_place(p.path, journal_dir=sd / INPLACE_DIR)
             _check_fresh(p)
         entry = JournalEntry(_next_id(sd), _now(), label or "; ".join(p.label for p in todo if p.label), [])
         bdir = sd / "backups" / entry.id
@@ -735,11 +962,19 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
         done: list[int] = []
         try:
             for i, p in enumerate(todo):
-                outcome = write_file(p.path, p.new, new_mode=p.new_mode)
+                outcome = write_file(p.path, p.new, new_mode=p.new_mode,
+                                     journal_dir=sd / INPLACE_DIR)
                 entry.files[i].in_place = outcome.in_place
                 result.files.append(outcome)
                 done.append(i)
         except BaseException as exc:
+            # The file being written when it failed may be half written (in place): put back
+            # too (its journal is completed first), so no file keeps an apply marked undone.
+            cut = len(done)
+            if cut < len(todo):
+                with contextlib.suppress(Exception):
+                    if file_digest(read_bytes(todo[cut].path)) != entry.files[cut].before:
+                        done = [*done, cut]
             _roll_back(sd, entry, done)
             entry.undone = _now() + " (rolled back: the apply failed)"
             with contextlib.suppress(Exception):
@@ -804,7 +1039,12 @@ def _restore_one(sd: Path, f: JournalFile) -> None:
     if data is not None and file_digest(data) != f.before:
         raise ManagedFileError(f"the backup {b} is damaged (digest mismatch); "
                                f"{f.path} was left as it is")
-    write_file(Path(f.real_path), data, mode=f.mode, uid=f.uid, gid=f.gid)
+    write_file(Path(f.real_path), data, mode=f.mode, uid=f.uid, gid=f.gid,
+               journal_dir=sd / INPLACE_DIR)
+
+
+# Where an in-place write journals when the target's folder may not be written.
+INPLACE_DIR = "inplace"
 
 
 def _roll_back(sd: Path, entry: JournalEntry, done: Iterable[int]) -> None:
@@ -854,8 +1094,11 @@ def plan_undo(state_dir: Path | None = None, *, entry_id: str | None = None) -> 
     if entry_id is not None and entry.id != entry_id:
         raise StalePreviewError(f"the last change is now #{entry.id}, not #{entry_id}; "
                                 "look at the new preview and try again")
+    sweep_state_dir(sd)
     previews, conflicts = [], []
     for f in entry.files:
+        with contextlib.suppress(OSError):
+            recover_in_place(Path(f.real_path), journal_dir=sd / INPLACE_DIR)
         current = read_bytes(Path(f.real_path))
         b = _backup_path(sd, f)
         target = b.read_bytes() if b else None

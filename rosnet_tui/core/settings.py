@@ -7,16 +7,22 @@ comments and layout of a hand-edited file.
 
 from __future__ import annotations
 
+import fcntl
 import ipaddress
+import math
 import os
 import re
 import secrets
+import stat
 import sys
+import unicodedata
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import tomlkit
+
+from rosnet_tui.core import tempfiles
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -30,19 +36,39 @@ PORT_MIN, PORT_MAX = 1024, 65000
 DEFAULT_PUBLIC_IP_URLS = ("https://ifconfig.co/ip",)
 DEFAULT_PORT_CHECK_URL = "https://ifconfig.co"
 
+MAX_SETTINGS_BYTES = 1 << 20      # a settings file is a few KB: anything over 1 MiB is refused
+MAX_NESTING = 32                  # arrays/inline tables inside each other (the schema needs 1)
+SHOWN_VALUE_CHARS = 60            # a value quoted in a message is cut to this many characters
+
 _NAME_RE = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*$")
 _SSH_USER_RE = re.compile(r"^[a-z_][a-z0-9_.-]{0,31}$", re.IGNORECASE)
 
 
+def shown(value: object, limit: int = SHOWN_VALUE_CHARS) -> str:
+    """*value* as it may appear in a message: one line (control and separator characters
+    escaped) and at most *limit* characters, with the full length said when cut."""
+    text = str(value) if not isinstance(value, int) or abs(value) < 10**30 else "a huge number"
+    out = []
+    for c in text:
+        if unicodedata.category(c) in ("Cc", "Cf", "Zl", "Zp", "Cs"):
+            out.append(c.encode("unicode_escape", "backslashreplace").decode("ascii"))
+        else:
+            out.append(c)
+    one = "".join(out)
+    if len(one) > limit:
+        return one[:limit] + f"... ({len(text)} characters)"
+    return one
+
+
 class SettingsError(Exception):
-    """A settings file that cannot be used: says where (line, key) and why."""
+    """A settings file that cannot be used: says where (line, key) and why, in one short line."""
 
     def __init__(self, message: str, *, path: Path | None = None, line: int | None = None,
                  key: str | None = None) -> None:
-        self.message = message
+        self.message = shown(message, 300)
         self.path = path
         self.line = line
-        self.key = key
+        self.key = shown(key, 80) if key is not None else None
         super().__init__(str(self))
 
     def __str__(self) -> str:
@@ -77,7 +103,7 @@ def validate_ip(value: str, *, required: bool = True) -> str | None:
     try:
         addr = ipaddress.ip_address(value)
     except ValueError:
-        return f"'{value}' is not an IP address (expected four numbers like 192.168.1.10)"
+        return f"'{shown(value)}' is not an IP address (expected four numbers like 192.168.1.10)"
     if addr.version != 4:
         return "use an IPv4 address: the procedure's port forwarding is for IPv4"
     if addr.is_unspecified or addr.is_multicast or str(addr) == "255.255.255.255":
@@ -87,10 +113,12 @@ def validate_ip(value: str, *, required: bool = True) -> str | None:
 
 def validate_port(value: int | str, *, lo: int = PORT_MIN, hi: int = PORT_MAX) -> str | None:
     """Return why *value* is not a port in lo..hi, or None when it is."""
+    if isinstance(value, bool):
+        return "a port is a number, not true/false"
     try:
-        port = int(str(value).strip())
+        port = value if isinstance(value, int) else int(str(value).strip())
     except ValueError:
-        return f"'{value}' is not a port number"
+        return f"'{shown(value)}' is not a port number"
     if not lo <= port <= hi:
         return f"the port must be between {lo} and {hi}"
     return None
@@ -98,13 +126,13 @@ def validate_port(value: int | str, *, lo: int = PORT_MIN, hi: int = PORT_MAX) -
 
 def validate_ssh_user(value: str) -> str | None:
     if value and not _SSH_USER_RE.match(value):
-        return f"'{value}' is not a valid user name"
+        return f"'{shown(value)}' is not a valid user name"
     return None
 
 
 def validate_url(value: str) -> str | None:
     if not re.match(r"^https?://[^\s/]+", value or ""):
-        return f"'{value}' is not an http:// or https:// URL"
+        return f"'{shown(value)}' is not an http:// or https:// URL"
     return None
 
 
@@ -206,12 +234,15 @@ class Settings:
         add("this.office_ip", validate_ip(t.office_ip, required=False))
         add("this.portable_ip", validate_ip(t.portable_ip, required=False))
         names = {t.name}
+        seen = {t.name.lower()}           # host names do not differ by case
         for i, p in enumerate(self.peers):
             k = f"peer[{i + 1}]"
             add(f"{k}.name", validate_name(p.name))
-            if p.name in names:
-                add(f"{k}.name", f"the name '{p.name}' is used twice")
+            if p.name.lower() in seen:
+                add(f"{k}.name", f"the name '{shown(p.name)}' is used twice (names are the "
+                                 "same whatever the case)")
             names.add(p.name)
+            seen.add(p.name.lower())
             add(f"{k}.local_ip", validate_ip(p.local_ip, required=False))
             add(f"{k}.public_ip", validate_ip(p.public_ip, required=False))
             add(f"{k}.office_ip", validate_ip(p.office_ip, required=False))
@@ -235,12 +266,12 @@ class Settings:
         for url in self.probe.public_ip_urls:
             add("probe.public_ip_urls", validate_url(url))
         add("probe.port_check_url", validate_url(self.probe.port_check_url))
-        if not 0.1 <= float(self.checks.timeout_s) <= 120:
+        if not _number_within(self.checks.timeout_s, 0.1, 120):
             add("checks.timeout_s", "must be between 0.1 and 120 seconds")
         y = self.sync
         add("sync.store", None if y.store in SYNC_STORES
             else f"must be one of {', '.join(SYNC_STORES)}")
-        if not 1 <= float(y.interval_s) <= 86400:
+        if not _number_within(y.interval_s, 1, 86400):
             add("sync.interval_s", "must be between 1 and 86400 seconds")
         if y.dns_server:
             add("sync.dns_server", validate_ip(y.dns_server))
@@ -252,6 +283,15 @@ class Settings:
     @property
     def complete(self) -> bool:
         return not self.problems()
+
+
+def _number_within(value: Any, lo: float, hi: float) -> bool:
+    """A real number (not true/false, not NaN or infinite, any size of int) in lo..hi."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    if isinstance(value, float) and not math.isfinite(value):
+        return False
+    return lo <= value <= hi
 
 
 # --------------------------------------------------------------------------- paths
@@ -281,11 +321,16 @@ _TYPE_WORDS = {str: "a string in quotes", int: "a whole number", list: "a list [
                (int, float): "a number"}
 
 
+def _lines(text: str) -> list[str]:
+    """The lines as TOML counts them: only LF ends a line (U+2028, VT, FF ... do not)."""
+    return text.split("\n")
+
+
 def _locate(text: str, table: str, key: str | None, index: int = 0) -> int | None:
     """Find the 1-based line of *key* in [table] (the *index*-th [[table]]), by a light scan."""
     current, seen = None, -1
     header = re.compile(r"^\s*(\[\[?)\s*([A-Za-z0-9_.-]+)\s*\]\]?")
-    for n, line in enumerate(text.splitlines(), 1):
+    for n, line in enumerate(_lines(text), 1):
         m = header.match(line)
         if m:
             current = m.group(2)
@@ -312,23 +357,126 @@ def _check_table(text: str, path: Path | None, table: str, data: Any, index: int
             raise SettingsError(f"unknown key (known keys in [{table}]: {known})", path=path,
                                 line=_locate(text, table, key, index), key=full)
         want = schema[key]
-        ok = isinstance(value, want) and not (want is int and isinstance(value, bool))
+        ok = isinstance(value, want) and not isinstance(value, bool)
         if not ok:
             raise SettingsError(f"must be {_TYPE_WORDS[want]}", path=path,
                                 line=_locate(text, table, key, index), key=full)
 
 
+_HEADER_RE = re.compile(r"^\s*(\[\[?)\s*([A-Za-z0-9_.\"' -]+?)\s*\]\]?\s*(?:#.*)?$")
+_KEY_RE = re.compile(r"^\s*([A-Za-z0-9_.\"' -]+?)\s*=")
+
+
+def _key_at(text: str, lineno: int) -> str | None:
+    """The dotted key (table.key) whose value is on line *lineno*, by a light scan."""
+    table = None
+    lines = _lines(text)
+    for line in lines[:lineno - 1]:
+        m = _HEADER_RE.match(line)
+        if m:
+            table = m.group(2).strip().strip("\"'")
+    m = _KEY_RE.match(lines[lineno - 1]) if 0 < lineno <= len(lines) else None
+    if not m:
+        return table
+    key = m.group(1).strip().strip("\"'")
+    return f"{table}.{key}" if table else key
+
+
+def _nesting(text: str, limit: int = MAX_NESTING) -> int | None:
+    """The line where arrays/inline tables nest deeper than *limit* (None: they do not).
+
+    Checked before parsing: the parser recurses once per level, and a few hundred brackets
+    would exhaust Python's stack. Strings and comments are skipped."""
+    depth, line, i, n = 0, 1, 0, len(text)
+    at_line_start = True
+    while i < n:
+        c = text[i]
+        if c == "\n":
+            line += 1
+            at_line_start = True
+            i += 1
+            continue
+        if c in " \t":
+            i += 1
+            continue
+        if c == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        if text.startswith(('"""', "'''"), i):
+            end = text.find(text[i:i + 3], i + 3)
+            end = n if end < 0 else end + 3
+            line += text.count("\n", i, end)
+            i = end
+            at_line_start = False
+            continue
+        if c in "\"'":
+            j = i + 1
+            while j < n and text[j] != c and text[j] != "\n":
+                j += 2 if c == '"' and text[j] == "\\" else 1
+            i = j + 1 if j < n and text[j] == c else j
+            at_line_start = False
+            continue
+        if c in "[{" and not (at_line_start and depth == 0 and c == "["):
+            depth += 1
+            if depth > limit:
+                return line
+        elif c in "]}" and depth > 0:
+            depth -= 1
+        elif at_line_start and depth == 0 and c == "[":
+            j = text.find("\n", i)       # a table header: skip it whole
+            i = n if j < 0 else j
+            continue
+        at_line_start = False
+        i += 1
+    return None
+
+
+_TWICE_RE = re.compile(r"Cannot (?:declare|overwrite|mutate)[^()]*\(([^)]*)\)")
+
+
+def _toml_problem(text: str, exc: tomllib.TOMLDecodeError, path: Path | None) -> SettingsError:
+    """A TOML syntax error in words: the line, and for the usual slips what to write instead."""
+    line = getattr(exc, "lineno", None)
+    msg = getattr(exc, "msg", None) or str(exc)
+    if line is None:
+        m = re.search(r"line (\d+)", str(exc))
+        line = int(m.group(1)) if m else None
+    for n, ln in enumerate(_lines(text), 1):
+        m = _HEADER_RE.match(ln)
+        if m and m.group(1) == "[" and m.group(2).strip() == "peer":
+            return SettingsError("peers are written as [[peer]] (two brackets), one table per "
+                                 "peer", path=path, line=n, key="peer")
+    m = _TWICE_RE.search(msg)
+    if m:
+        name = ".".join(x.strip().strip("'\"") for x in m.group(1).split(",") if x.strip())
+        if name:
+            return SettingsError(f"[{name}] or its key is written twice: each table and key "
+                                 "once (peers: one [[peer]] table each)", path=path, line=line,
+                                 key=name)
+    return SettingsError(f"not valid TOML: {msg}", path=path, line=line)
+
+
 def parse_settings(text: str, path: Path | None = None) -> Settings:
     """Parse and validate the text of a settings file. Raises SettingsError only."""
+    if text.startswith("\ufeff"):
+        raise SettingsError("the file starts with a byte-order mark (U+FEFF): save it as UTF-8 "
+                            "without one", path=path, line=1)
+    deep = _nesting(text)
+    if deep is not None:
+        raise SettingsError(f"values nested more than {MAX_NESTING} levels deep", path=path,
+                            line=deep, key=_key_at(text, deep))
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        line = getattr(exc, "lineno", None)
-        msg = getattr(exc, "msg", None) or str(exc)
-        if line is None:
-            m = re.search(r"line (\d+)", str(exc))
-            line = int(m.group(1)) if m else None
-        raise SettingsError(f"not valid TOML: {msg}", path=path, line=line) from None
+        raise _toml_problem(text, exc, path) from None
+    except RecursionError:
+        raise SettingsError("values nested too deeply", path=path) from None
+    except ValueError as exc:  # an integer of more than 4,300 digits
+        m = re.search(r"[0-9_]{300,}", text)
+        line = text.count("\n", 0, m.start()) + 1 if m else None
+        raise SettingsError(f"a value cannot be read ({shown(exc, 80)})", path=path, line=line,
+                            key=_key_at(text, line) if line else None) from None
     for top in raw:
         if top not in _SCHEMA:
             raise SettingsError(f"unknown section (known: {', '.join('[' + s + ']' for s in _SCHEMA)})",
@@ -380,16 +528,48 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
     return s
 
 
-def load_settings(path: Path) -> Settings | None:
-    """Load the settings file at *path*; None when it does not exist yet."""
+def read_settings_text(path: Path) -> str | None:
+    """The text of the settings file at *path*, None when it does not exist. Bounded: anything
+    but a regular file (a FIFO, a device such as /dev/zero behind a link, a folder) is refused
+    without reading, and so is a file over MAX_SETTINGS_BYTES. Raises SettingsError."""
     try:
-        text = path.read_text(encoding="utf-8")
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC)
     except FileNotFoundError:
         return None
-    except UnicodeDecodeError:
-        raise SettingsError("the file is not UTF-8 text", path=path) from None
     except OSError as exc:
         raise SettingsError(f"cannot read the file: {exc.strerror}", path=path) from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise SettingsError("not a regular file (a folder, a FIFO or a device?): a settings "
+                                "file is a text file", path=path)
+        if st.st_size > MAX_SETTINGS_BYTES:
+            raise SettingsError(f"too big ({st.st_size} bytes; a settings file is a few KB, at "
+                                f"most {MAX_SETTINGS_BYTES})", path=path)
+        chunks, total = [], 0
+        while total <= MAX_SETTINGS_BYTES:
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+        if total > MAX_SETTINGS_BYTES:
+            raise SettingsError(f"too big (over {MAX_SETTINGS_BYTES} bytes)", path=path)
+    except OSError as exc:
+        raise SettingsError(f"cannot read the file: {exc.strerror}", path=path) from None
+    finally:
+        os.close(fd)
+    try:
+        return b"".join(chunks).decode("utf-8")
+    except UnicodeDecodeError:
+        raise SettingsError("the file is not UTF-8 text", path=path) from None
+
+
+def load_settings(path: Path) -> Settings | None:
+    """Load the settings file at *path*; None when it does not exist yet."""
+    text = read_settings_text(path)
+    if text is None:
+        return None
     return parse_settings(text, path)
 
 
@@ -491,6 +671,8 @@ def _merge_table(doc: Any, name: str, values: dict[str, Any]) -> None:
 def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
     """Write *text* to *path* atomically: a temp file in the same folder, fsync, rename."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    # What a killed writer of this file left: removed (ours, its writer gone, not locked).
+    tempfiles.sweep(path.parent, tempfiles.ATOMIC_TMP, path.name)
     # An unpredictable name, created exclusively and never through a link.
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{secrets.token_hex(4)}")
     if mode is None:
@@ -501,10 +683,11 @@ def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, mode)
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+            fcntl.flock(f.fileno(), fcntl.LOCK_EX)   # ours until renamed
             f.write(text)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+            os.replace(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)
@@ -527,10 +710,7 @@ def save_settings(s: Settings, path: Path) -> None:
     Refuses (SettingsError) to overwrite an existing file that does not parse: the user's text is
     never replaced without their say-so.
     """
-    try:
-        previous = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        previous = None
+    previous = read_settings_text(path)
     if previous is not None:
         parse_settings(previous, path)  # raises on a malformed file: never clobber it
     atomic_write_text(path, render_settings(s, previous))

@@ -20,11 +20,16 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import binascii
 import contextlib
 import errno
+import hashlib
+import hmac
 import logging
 import os
+import re
 import socket
+import stat
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
@@ -149,20 +154,151 @@ def host_key_name(name: str, port: int) -> str:
     return name if port == 22 else f"[{name}]:{port}"
 
 
+MAX_KNOWN_HOSTS_BYTES = 16 << 20
+
+
+@dataclass
+class KnownHostKeys:
+    """What known_hosts says of one host: its keys by type (every listed key counts, as with
+    OpenSSH), the revoked keys, and notes on lines that were not used."""
+
+    keys: dict[str, list[bytes]]          # key type -> key blobs, in file order
+    revoked: set[bytes]                   # blobs marked @revoked (for any host: never accepted)
+    notes: list[str]
+
+    def fingerprints(self, ktype: str | None = None) -> list[str]:
+        types = [ktype] if ktype else list(self.keys)
+        return [key_fingerprint(b) for t in types for b in self.keys.get(t, [])]
+
+
+def key_fingerprint(blob: bytes) -> str:
+    """OpenSSH's SHA256 fingerprint of a public key blob."""
+    return "SHA256:" + base64.b64encode(hashlib.sha256(blob).digest()).decode().rstrip("=")
+
+
+def _read_known_hosts(path: Path) -> str | None:
+    """The text of one known_hosts file; None when missing, unreadable or not a regular file
+    (a FIFO there must not hang a check)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    except OSError:
+        return None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        with os.fdopen(os.dup(fd), "rb") as f:
+            data = f.read(MAX_KNOWN_HOSTS_BYTES)
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    return data.decode("utf-8", "replace")
+
+
+def _pattern_matches(pattern: str, name: str) -> bool:
+    """OpenSSH host pattern: ``*`` and ``?`` wildcards, case-insensitive; brackets are literal
+    (``[name]:port``)."""
+    rx = "".join(".*" if c == "*" else "." if c == "?" else re.escape(c) for c in pattern.lower())
+    return re.fullmatch(rx, name.lower()) is not None
+
+
+def _hosts_match(field: str, name: str) -> bool:
+    """Whether a known_hosts host field (patterns, negations, a hashed name) names *name*."""
+    if field.startswith("|1|"):
+        parts = field.split("|")
+        if len(parts) != 4:
+            return False
+        try:
+            salt = base64.b64decode(parts[2], validate=True)
+            want = base64.b64decode(parts[3], validate=True)
+        except (binascii.Error, ValueError):
+            return False
+        return hmac.compare_digest(hmac.new(salt, name.encode(), hashlib.sha1).digest(), want)
+    matched = False
+    for pat in field.split(","):
+        if pat.startswith("!"):
+            if _pattern_matches(pat[1:], name):
+                return False          # a negated pattern that matches excludes the host
+        elif pat and _pattern_matches(pat, name):
+            matched = True
+    return matched
+
+
+def _key_blob(ktype: str, b64: str) -> bytes | None:
+    """The key blob of a ``type base64`` pair, or None when it is not a well-formed key of
+    that type (the blob starts with its own type name)."""
+    try:
+        blob = base64.b64decode(b64, validate=True)
+    except (binascii.Error, ValueError):
+        return None
+    if len(blob) < 4:
+        return None
+    n = int.from_bytes(blob[:4], "big")
+    if blob[4:4 + n] != ktype.encode("ascii", "replace") or len(blob) <= 4 + n:
+        return None
+    return blob
+
+
+def _known_host_keys(files: list[Path], lookup: str) -> KnownHostKeys:
+    """Read *files* (OpenSSH known_hosts format) for the host spelled *lookup*.
+
+    Never raises for a file's content: a line we cannot use is skipped. ``@cert-authority``
+    lines are not used (host certificates are not checked here; the server's plain key must be
+    listed) and said in the notes when they name this host; ``@revoked`` keys are refused
+    whatever host they name."""
+    out = KnownHostKeys({}, set(), [])
+    ca_lines, bad_lines = 0, 0
+    for f in files:
+        text = _read_known_hosts(f)
+        if text is None:
+            continue
+        for raw in text.split("\n"):
+            line = raw.strip()
+            if not line or line.startswith("#"):
+                continue
+            fields = line.split()
+            marker = fields.pop(0) if fields[0].startswith("@") else None
+            if len(fields) < 3:
+                if fields and _hosts_match(fields[0], lookup):
+                    bad_lines += 1
+                continue
+            hosts, ktype, b64 = fields[0], fields[1], fields[2]
+            if marker == "@revoked":
+                blob = _key_blob(ktype, b64)
+                if blob is not None:
+                    out.revoked.add(blob)
+                continue
+            if not _hosts_match(hosts, lookup):
+                continue
+            if marker == "@cert-authority":
+                ca_lines += 1
+                continue
+            blob = _key_blob(ktype, b64) if marker is None else None
+            if blob is None:
+                bad_lines += 1
+                continue
+            if blob not in out.keys.setdefault(ktype, []):
+                out.keys[ktype].append(blob)
+    if ca_lines:
+        out.notes.append(f"{ca_lines} @cert-authority line(s) for this host not used (host "
+                         "certificates are not checked; the server's own key must be listed)")
+    if bad_lines:
+        out.notes.append(f"{bad_lines} malformed line(s) for this host skipped")
+    return out
+
+
 def _known_keys(files: list[Path], lookup: str) -> dict[str, paramiko.PKey]:
+    """The first listed key of each type for *lookup* (see :func:`_known_host_keys`)."""
     import paramiko
 
     found: dict[str, paramiko.PKey] = {}
-    for f in files:
-        hk = paramiko.HostKeys()
-        try:
-            hk.load(str(f))
-        except (OSError, paramiko.SSHException, ValueError):
-            continue
-        entry = hk.lookup(lookup)
-        if entry:
-            for ktype in entry.keys():
-                found.setdefault(ktype, entry[ktype])
+    for ktype, blobs in _known_host_keys(files, lookup).keys.items():
+        for blob in blobs:
+            try:
+                found[ktype] = paramiko.PKey.from_type_string(ktype, blob)
+                break
+            except Exception:  # noqa: BLE001 - a type paramiko does not know
+                continue
     return found
 
 
@@ -175,7 +311,7 @@ def trust_host_key(opts: SshOptions | None, name: str, port: int, host_key: str)
     ktype, _, b64 = host_key.strip().partition(" ")
     base64.b64decode(b64.split()[0], validate=True)  # refuse garbage
     path = ssh_dir(opts) / "known_hosts"
-    if _known_keys([path], host_key_name(name, port)).get(ktype) is not None:
+    if _known_host_keys([path], host_key_name(name, port)).keys.get(ktype):
         raise ValueError(f"{path} already has a {ktype} key for {name}; remove it first "
                          f"(ssh-keygen -R {host_key_name(name, port)})")
     path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
@@ -228,6 +364,7 @@ class _Holder:
 class _Conn:
     result: SshResult
     transport: paramiko.Transport | None = None
+    said: str = ""                # notes on known_hosts, carried into the command's result
 
 
 def _fail(failure: str, detail: str, *, fingerprint: str | None = None,
@@ -307,7 +444,9 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
     if holder.cancelled:
         sock.close()
         return _fail("timeout", "cancelled", address=addr)
-    known = _known_keys(known_hosts_files(opts), host_key_name(name, port))
+    info = _known_host_keys(known_hosts_files(opts), host_key_name(name, port))
+    known = info.keys
+    said = f" (known_hosts: {'; '.join(info.notes)})" if info.notes else ""
     try:
         t = paramiko.Transport(sock)
         holder.transport = t
@@ -336,6 +475,14 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
                      address=addr)
     fp, ktype = key.fingerprint, key.get_name()
     key_text = f"{ktype} {key.get_base64()}"
+    blob = key.asbytes()
+    if blob in info.revoked:
+        t.close()
+        return _fail("host_key_changed",
+                     f"the host key of {name} ({ktype} {fp}) is REVOKED in known_hosts "
+                     f"(@revoked): refused. Its keys must be replaced on {name}, then the new "
+                     f"key verified: " + verify_commands(name, port, ktype, user) + said,
+                     fingerprint=fp, host_key=key_text, address=addr)
     if ktype not in known:
         t.close()
         if known:
@@ -344,20 +491,21 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
                          f"known_hosts has a {others} key for {name} but the server now offers a "
                          f"{ktype} key ({fp}); refused. If {name} was reinstalled, remove the old "
                          f"entry (ssh-keygen -R {host_key_name(name, port)}) and verify the new one: "
-                         + verify_commands(name, port, ktype, user),
+                         + verify_commands(name, port, ktype, user) + said,
                          fingerprint=fp, host_key=key_text, address=addr)
         return _fail("host_key_unknown",
                      f"the host key of {name} is not in known_hosts: {ktype} {fp}; not trusted "
-                     f"until you confirm it: " + verify_commands(name, port, ktype, user),
+                     f"until you confirm it: " + verify_commands(name, port, ktype, user) + said,
                      fingerprint=fp, host_key=key_text, address=addr)
-    if known[ktype] != key:
+    if blob not in known[ktype]:
         t.close()
         return _fail("host_key_changed",
-                     f"the host key of {name} CHANGED: known_hosts has {known[ktype].fingerprint}, "
+                     f"the host key of {name} CHANGED: known_hosts has "
+                     f"{', '.join(info.fingerprints(ktype))}, "
                      f"the server shows {fp}; refused (a reinstall, or someone in the middle). "
                      f"If you know why, remove the old entry with ssh-keygen -R "
                      f"{host_key_name(name, port)} and verify the new one: "
-                     + verify_commands(name, port, ktype, user),
+                     + verify_commands(name, port, ktype, user) + said,
                      fingerprint=fp, host_key=key_text, address=addr)
     keys, notes = _load_keys(opts)
     if not keys:
@@ -383,8 +531,8 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
             break
         if t.is_authenticated():
             return _Conn(SshResult(True, None, "", "", None,
-                                   f"logged in to {name} ({addr}) as {user} with a key",
-                                   fp, key_text, addr), t)
+                                   f"logged in to {name} ({addr}) as {user} with a key" + said,
+                                   fp, key_text, addr), t, said)
     t.close()
     if holder.cancelled or time.monotonic() >= deadline:
         return _fail("timeout", f"no login to {name} within the timeout", fingerprint=fp,
@@ -426,6 +574,7 @@ class SshSession:
         self.result = conn.result
         self.timeout = timeout
         self._transport = conn.transport
+        self._said = conn.said
         self._chan: paramiko.Channel | None = None
         self._out = bytearray()
         self._err = bytearray()
@@ -523,6 +672,7 @@ class SshSession:
         status = self._chan.recv_exit_status() if self._chan.exit_status_ready() else None
         detail = (f"ran on {self.peer.name} as {self.peer.ssh_user}, exit status {status}"
                   if status is not None else f"the session with {self.peer.name} closed")
+        detail += self._said
         return SshResult(status is not None, status, self.stdout, self.stderr,
                          None if status is not None else "sshd", detail,
                          self.result.fingerprint, self.result.host_key, self.result.address)

@@ -42,6 +42,7 @@ from rosnet_tui.core.hosts import (
 )
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings, save_settings
 
+from .applied import applied_path, load_applied, save_applied
 from .backoff import Backoff, backoff_cap
 from .folder_watch import StoreWatch
 from .plan import Plan, PlanError, check_complete, plan_hosts
@@ -53,6 +54,7 @@ from .records import (
     format_time,
     new_record,
     parse_record,
+    successor_problem,
 )
 from .status import (
     ALIVE_EVERY_S,
@@ -280,6 +282,13 @@ class SyncService:
         except BaseException:
             self.close()
             raise
+        # The record of each peer applied before (this run or an earlier one): a copy that does
+        # not follow it (a lower seq) is refused, and it stands until a successor comes.
+        self._applied = load_applied(self.state_dir)
+        for p in self.settings.peers if self.settings else []:
+            prev = self._applied.get(p.name.lower())
+            if prev is not None:
+                self.peers[p.name] = Candidate(prev, "the record applied before (state dir)")
 
     # ================================================================== settings and store
     @property
@@ -541,12 +550,22 @@ class SyncService:
         peer_status["seen_at"] = now
         if old is not None and rec == old.record:
             return
-        if old is not None and rec.rank < old.record.rank and rec.rank[1] <= old.record.rank[1]:
-            self._once(("older", name, rec.seq), logging.WARNING,
-                       "%s: the store holds an older record (#%d, %s) than the one already seen "
-                       "(#%d); keeping the newer", cand.source, rec.seq,
-                       format_time(rec.timestamp), old.record.seq)
+        prev = self._applied.get(name.lower()) or (old.record if old is not None else None)
+        why = successor_problem(prev, rec)
+        if why is not None:
+            assert prev is not None
+            self._once(("older", name, rec.rank, prev.rank), logging.WARNING,
+                       "refused the record %s (%s): %s; keeping #%d of %s (if %s really "
+                       "started counting again, remove its entry from %s)", cand.source, name,
+                       why, prev.seq, format_time(prev.timestamp), name,
+                       applied_path(self.state_dir))
             return
+        self._applied[name.lower()] = rec
+        try:
+            save_applied(self.state_dir, self._applied)
+        except OSError as exc:
+            self._once(("applied", str(exc)), logging.WARNING,
+                       "cannot keep the applied records in the state dir: %s", exc)
         if old is None:
             log.info("record of %s: %s (from %s)", name, rec.describe(), cand.source)
         elif old.record.same_content(rec):
@@ -605,8 +624,10 @@ class SyncService:
             if self.own is not None and self.own.name == name:
                 rec = self.own.next(local_ip=local, public_ip=public, role=role, now=now)
             else:
+                # No earlier record of ours anywhere: counting starts again, said by seq_epoch.
                 rec = new_record(name, local_ip=local, public_ip=public, role=role,
-                                 seq=(self.own.seq + 1) if self.own else 1, now=now)
+                                 seq=(self.own.seq + 1) if self.own else 1, now=now,
+                                 seq_epoch=self.own.seq_epoch if self.own else int(now))
             check_record(rec)
         except RecordError as exc:
             self._error("publish", f"this component's own record would be refused by peers: "
