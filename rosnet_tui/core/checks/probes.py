@@ -15,9 +15,12 @@ import ipaddress
 import shlex
 import time
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 from urllib.parse import urljoin, urlsplit
 
 from rosnet_tui import __version__
+from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext
 from rosnet_tui.core.checks.data import view
 from rosnet_tui.core.settings import Peer, Settings
@@ -186,3 +189,61 @@ def stderr_tail(res: SshResult) -> str:
     """The last lines the peer's program wrote on stderr, on one line."""
     tail = (res.stderr or "").strip().splitlines()[-3:]
     return " | ".join(tail)
+
+
+# --------------------------------------------------------------------------- ROS 2 (rmw_zenoh)
+# Shared by the ros2.* checks (checks/ros2.py and checks/ros2_graph.py).
+ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()   # the peer program, fed to `python3 -`
+
+
+def zenoh_env(ctx: CheckContext) -> dict[str, str]:
+    """The ROS 2 variables nodes started here get (environment, then ~/.bashrc)."""
+    return zenohproto.ros_env(ctx.env, str(ctx.bashrc_path))
+
+
+def node_endpoint(ctx: CheckContext) -> tuple[str, str]:
+    """(endpoint, 'router'|'client'): where a ROS 2 node started here connects."""
+    return zenohproto.peer_endpoint(zenoh_env(ctx), ros2.local_endpoint())
+
+
+async def open_zenoh(endpoint: str, t: float) -> tuple[Any | None, str | None]:
+    """A Zenoh client session on *endpoint* within *t* s: (session, None) or (None, why not)."""
+    try:
+        return await run_blocking(zenohproto.open_client, endpoint, t, timeout=t + 0.4), None
+    except asyncio.TimeoutError:
+        return None, f"no Zenoh session within {t + 0.4:.1f} s"
+    except zenohproto.ZenohMissing:
+        return None, "eclipse-zenoh is not installed for this Python (pip install eclipse-zenoh)"
+    except zenohproto.OpenFailed as exc:
+        return None, str(exc)
+
+
+async def close_zenoh(session: Any) -> None:
+    if session is not None:
+        with contextlib.suppress(Exception):
+            await run_blocking(session.close, timeout=1.0)
+
+
+def ros2_peers(ctx: CheckContext) -> list[Peer]:
+    """Peers to run the other side on (those with an SSH user), the master first."""
+    s = ctx.settings
+    return sorted(ssh_peers(s), key=lambda p: p.name != s.master_name)
+
+
+def zenoh_peer_problem(res: SshResult, peer: Peer, rep: dict | None) -> str | None:
+    """Why the peer's zenoh program gave no usable report (None: it did)."""
+    if res.failure and res.failure != "timeout" and rep is None:
+        return f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
+    if res.exit_status == 127:
+        return f"{peer.name} has no python3 (exit status 127)"
+    if rep is not None and rep.get("error") == "no_zenoh":
+        return f"{peer.name}'s python3 has no eclipse-zenoh (pip install eclipse-zenoh there)"
+    if rep is None:
+        return (f"the probe on {peer.name} gave no report "
+                f"({stderr_tail(res) or res.detail or 'no output'})")
+    return None
+
+
+def router_links(info: dict) -> list[str]:
+    """Ids of the routers a router (its admin space *info*) has sessions with."""
+    return [x["zid"] for x in info.get("sessions") or [] if x.get("whatami") == "router"]
