@@ -286,9 +286,14 @@ def listen_problem(endpoint: str, ipv6: bool) -> str | None:
 
 def override_problems(s: Settings, values: dict[str, Any]) -> list[str]:
     """What is wrong with a parsed ZENOH_CONFIG_OVERRIDE for this component's role."""
+    eps = endpoints_of(values.get("connect/endpoints"), str(values.get("mode") or "peer"))
+    remote = [e for e in eps if listen_problem(e, True) != "loopback"]
+    if values.get("mode") == "peer" and remote:
+        return [f"nodes here are peers connected straight to {', '.join(remote)}: a router does "
+                "not pass data between two peers, so they see the graph but get no data; use "
+                f"client mode (mode=\"client\") or run a router here"]
     if values.get("mode") != "client":
         return []
-    eps = endpoints_of(values.get("connect/endpoints"), "client")
     if s.is_master:
         return ["ZENOH_CONFIG_OVERRIDE puts the master's nodes in client mode; the master runs "
                 "the router the others connect to"]

@@ -195,15 +195,25 @@ def _zenoh():
     return zenoh
 
 
-def open_client(endpoint: str, timeout: float) -> Any:
-    """A client session on *endpoint* (scouting off), or OpenFailed within about *timeout* s."""
+def open_client(endpoint: str, timeout: float, mode: str = "client") -> Any:
+    """A session on *endpoint* within about *timeout* s, or OpenFailed.
+
+    ``client`` (the default) talks to the router only. ``peer`` is what rmw_zenoh's nodes are: a
+    peer attached to a router (listening on loopback only, as theirs do), so a probe meets the
+    same routing as a real node, peer-mode traps included. Multicast and gossip scouting are off:
+    the endpoint is the only way in.
+    """
     zenoh = _zenoh()
     c = zenoh.Config()
-    c.insert_json5("mode", '"client"')
+    c.insert_json5("mode", json.dumps(mode))
     c.insert_json5("connect/endpoints", json.dumps([endpoint]))
     c.insert_json5("connect/timeout_ms", str(max(100, int(timeout * 1000))))
+    c.insert_json5("connect/exit_on_failure", "true")
     c.insert_json5("scouting/multicast/enabled", "false")
     c.insert_json5("scouting/gossip/enabled", "false")
+    if mode == "peer":
+        c.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
+        c.insert_json5("scouting/delay", "0")
     try:
         return zenoh.open(c)
     except Exception as exc:  # zenoh.ZError: the reason is in the text
@@ -368,14 +378,20 @@ def parse_report(text: str) -> dict[str, Any] | None:
 
 
 def peer_endpoint(env: dict[str, str], local: str) -> tuple[str, str]:
-    """(endpoint, why) a node on this machine uses: the override's connect endpoint in client
-    mode, else the local router."""
+    """(endpoint, how) a node on this machine uses: ``router`` (a peer of the local router, the
+    default), or what ZENOH_CONFIG_OVERRIDE says: ``client`` or ``peer`` straight to another
+    machine's router (a lone node)."""
     override = env.get("ZENOH_CONFIG_OVERRIDE", "")
-    if re.search(r'(^|;)\s*mode\s*=\s*"client"', override):
-        m = re.search(r'connect/endpoints\s*=\s*\[\s*"([^"]+)"', override)
-        if m:
-            return m.group(1), "client"
+    m = re.search(r'(?:^|;)\s*mode\s*=\s*"(client|peer)"', override)
+    ep = re.search(r'connect/endpoints\s*=\s*\[\s*"([^"]+)"', override)
+    if m and ep:
+        return ep.group(1), m.group(1)
     return local, "router"
+
+
+def session_mode(how: str) -> str:
+    """The Zenoh mode of a node that connects *how* (``router`` means: a peer of that router)."""
+    return "client" if how == "client" else "peer"
 
 
 def run_program(argv: list[str]) -> int:
@@ -399,7 +415,7 @@ def run_program(argv: list[str]) -> int:
     domain = int(a.get("domain", env.get("ROS_DOMAIN_ID") or "0") or 0)
     base.update(endpoint=endpoint, how=how, domain=domain)
     try:
-        session = open_client(endpoint, min(2.0, timeout * 0.4))
+        session = open_client(endpoint, min(2.0, timeout * 0.4), session_mode(how))
     except OpenFailed as exc:
         _report(error="open", detail=f"{endpoint}: {exc}", **base)
         return 0

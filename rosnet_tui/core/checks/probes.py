@@ -206,10 +206,13 @@ def node_endpoint(ctx: CheckContext) -> tuple[str, str]:
     return zenohproto.peer_endpoint(zenoh_env(ctx), ros2.local_endpoint())
 
 
-async def open_zenoh(endpoint: str, t: float) -> tuple[Any | None, str | None]:
-    """A Zenoh client session on *endpoint* within *t* s: (session, None) or (None, why not)."""
+async def open_zenoh(endpoint: str, t: float, how: str = "client"
+                     ) -> tuple[Any | None, str | None]:
+    """A Zenoh session on *endpoint* within *t* s: (session, None) or (None, why not). *how* is
+    node_endpoint()'s answer (a node's way in: a peer of a router, or client), or "client"."""
+    mode = zenohproto.session_mode(how)
     try:
-        return await run_blocking(zenohproto.open_client, endpoint, t, timeout=t + 0.4), None
+        return await run_blocking(zenohproto.open_client, endpoint, t, mode, timeout=t + 0.4), None
     except asyncio.TimeoutError:
         return None, f"no Zenoh session within {t + 0.4:.1f} s"
     except zenohproto.ZenohMissing:

@@ -68,7 +68,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     endpoint, how = node_endpoint(ctx)
     session, why = await open_zenoh(endpoint, min(2.0, t * 0.3))
     if session is None:
-        who = "this machine's router" if how == "router" else "the master's router (client mode)"
+        who = "this machine's router" if how == "router" else f"the master's router ({how} mode)"
         return Outcome(Status.FAIL, f"cannot read the graph: {who} does not answer at {endpoint} "
                                     f"({why})", [], data)
     ours = zenohproto.probe_name()
@@ -196,7 +196,7 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
     deadline = time.monotonic() + budget_s
     arrow = f"here -> {peer.name}" if out else f"{peer.name} -> here"
     endpoint, how = node_endpoint(ctx)
-    session, why = await open_zenoh(endpoint, min(2.0, budget_s * 0.2))
+    session, why = await open_zenoh(endpoint, min(2.0, budget_s * 0.2), how)
     if session is None:
         hop = "our_router" if how == "router" else "master_router"
         return (Status.FAIL, f"{arrow}: {_HOPS[hop]} does not answer at {endpoint} ({why})", [],
