@@ -423,7 +423,10 @@ def run_program(argv: list[str]) -> int:
         base["router"] = router_info(session, min(1.0, timeout * 0.2))
         topic = a.get("topic", "")
         if cmd == "graph":
-            node = ProbeNode(session, domain, a.get("name", probe_name()), "rosnet_tui/graph")
+            name = a.get("name", probe_name())
+            node = ProbeNode(session, domain, name, "rosnet_tui/graph")
+            acked = threading.Event()  # the other side has seen our probe node: we may go
+            ack = session.declare_subscriber(f"rosnet_tui/ack/{name}", lambda _s: acked.set())
             print(READY_MARK, flush=True)
             want = a.get("expect", "")
             seen: list[dict[str, Any]] = []
@@ -432,6 +435,8 @@ def run_program(argv: list[str]) -> int:
                 if not want or any(t["name"] == want for t in seen):
                     break
                 time.sleep(0.1)
+            acked.wait(max(0.0, deadline - time.monotonic()))
+            ack.undeclare()
             node.close()
             _report(tokens=seen, own_zid=node.zid, **base)
         elif cmd == "sub":

@@ -83,13 +83,18 @@ async def check_graph(ctx: CheckContext) -> Outcome:
         stdin=ZENOH_SOURCE, timeout=max(0.5, deadline - time.monotonic()))) for p in peers]
     tokens: list[dict] = []
     info: dict = {}
+    acked: set[str] = set()
     try:
         while True:
             left = deadline - time.monotonic()
             tokens = await run_blocking(zenohproto.graph, session, dom, max(0.1, min(0.5, left)),
                                         timeout=max(0.3, min(1.5, left + 0.5)))
             names = {tk["name"] for tk in tokens}
-            if all(n in names for n in theirs.values()) or left < t * 0.25:
+            for n in theirs.values():
+                if n in names and n not in acked:  # the peer may drop its probe node now
+                    acked.add(n)
+                    session.put(f"rosnet_tui/ack/{n}", b"seen")
+            if len(acked) == len(theirs) or left < t * 0.25:
                 break
             await asyncio.sleep(0.15)
         info = await run_blocking(zenohproto.router_info, session, 0.5, timeout=1.0)
