@@ -217,7 +217,10 @@ def open_client(endpoint: str, timeout: float, mode: str = "client") -> Any:
     try:
         return zenoh.open(c)
     except Exception as exc:  # zenoh.ZError: the reason is in the text
-        text = str(exc).split(" at ", 1)[0].strip()
+        text = str(exc).split(" at /", 1)[0].strip()
+        if text.startswith("Unable to connect"):
+            text = (f"no Zenoh router answered at {endpoint} within {timeout:.1f} s (nothing "
+                    "listens there, or the port is not reachable)")
         raise OpenFailed(text or type(exc).__name__) from None
 
 
@@ -422,6 +425,11 @@ def run_program(argv: list[str]) -> int:
     try:
         base["router"] = router_info(session, min(1.0, timeout * 0.2))
         topic = a.get("topic", "")
+        if how == "router" and a.get("member") == "1" and not [
+                x for x in base["router"].get("sessions") or [] if x.get("whatami") == "router"]:
+            _report(error="no_link", detail="its router has no link to the master's router",
+                    **base)
+            return 0
         if cmd == "graph":
             name = a.get("name", probe_name())
             node = ProbeNode(session, domain, name, "rosnet_tui/graph")

@@ -57,6 +57,24 @@ def _user_nodes(tokens: list[dict]) -> dict[tuple[str, str], bool]:
     return nodes
 
 
+async def _unlinked(ctx: CheckContext, session: Any, how: str) -> str | None:
+    """On a member whose nodes sit on its own router: why that router has no link to the
+    master's (None: it has one, or this is the master, or the nodes here are clients)."""
+    if ctx.settings.is_master or how != "router":
+        return None
+    info = await run_blocking(zenohproto.router_info, session, 0.4, timeout=0.8)
+    if router_links(info):
+        return None
+    return (f"this machine's router has no link to the master's router "
+            f"{ctx.settings.master_name} (it cannot reach tcp/{ctx.settings.master_name}:"
+            f"{ctx.settings.ros.zenoh_port}, or its config does not connect there)")
+
+
+def _member_arg(ctx: CheckContext, peer: Peer) -> list[str]:
+    """Tell the peer program it is a member (its router must be linked to the master's)."""
+    return ["--member", "1"] if peer.name != ctx.settings.master_name else []
+
+
 @check("ros2.graph", "ros", "The ROS 2 graph: every component's nodes are seen", FACTOR_GRAPH,
        ros=2)
 async def check_graph(ctx: CheckContext) -> Outcome:
@@ -71,6 +89,11 @@ async def check_graph(ctx: CheckContext) -> Outcome:
         who = "this machine's router" if how == "router" else f"the master's router ({how} mode)"
         return Outcome(Status.FAIL, f"cannot read the graph: {who} does not answer at {endpoint} "
                                     f"({why})", [], data)
+    unlinked = await _unlinked(ctx, session, how)
+    if unlinked:
+        await close_zenoh(session)
+        return Outcome(Status.FAIL, f"only this component's part of the graph is visible: "
+                                    f"{unlinked} (see ros2.router)", [], data)
     ours = zenohproto.probe_name()
     node = await run_blocking(zenohproto.ProbeNode, session, dom, ours, "rosnet_tui/graph",
                               timeout=2.0)
@@ -79,7 +102,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     remote_t = max(0.5, t * 0.55)
     tasks = [asyncio.ensure_future(ssh_run(
         ctx.ssh, p, python_stdin_command("graph", "--expect", ours, "--name", theirs[p.name],
-                                         "--timeout", f"{remote_t:.1f}"),
+                                         "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)),
         stdin=ZENOH_SOURCE, timeout=max(0.5, deadline - time.monotonic()))) for p in peers]
     tokens: list[dict] = []
     info: dict = {}
@@ -94,7 +117,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
                 if n in names and n not in acked:  # the peer may drop its probe node now
                     acked.add(n)
                     session.put(f"rosnet_tui/ack/{n}", b"seen")
-            if len(acked) == len(theirs) or left < t * 0.25:
+            if len(acked) == len(theirs) or left < t * 0.25 or all(x.done() for x in tasks):
                 break
             await asyncio.sleep(0.15)
         info = await run_blocking(zenohproto.router_info, session, 0.5, timeout=1.0)
@@ -111,9 +134,13 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     data["seen_from"].append("here")
     problems: list[str] = []
     missing: dict[str, list[str]] = {}
+    dead: list[str] = []
     for p, res in zip(peers, results, strict=True):
         rep = zenohproto.parse_report(res.stdout)
         why_not = zenoh_peer_problem(res, p, rep)
+        if not why_not and rep is not None and rep.get("error") in ("open", "no_link"):
+            dead.append(f"on {p.name}, {rep.get('detail')}")
+            continue
         if why_not or rep is None or rep.get("error"):
             problems.append(why_not or f"on {p.name}: {rep.get('detail') if rep else '?'}")
             continue
@@ -150,6 +177,12 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     ev.append(f"topics: {', '.join(f'{a} [{b}]' for a, b in data['topics']) or 'none'}")
     ev += [f"not checked from a peer: {p}" for p in problems]
     not_there = [p for p, seen in data["ours_seen"].items() if not seen]
+    if dead:
+        data["missing"] = sorted(set(data["missing"]) | {p.name for p in peers
+                                                         if any(d.startswith(f"on {p.name},")
+                                                                for d in dead)})
+        return Outcome(Status.FAIL, "the other side of the graph cannot be reached: "
+                                    + "; ".join(dead), ev, data)
     if missing or not_there:
         parts = [f"{c}'s nodes are not seen from here: {', '.join(v)}" for c, v in missing.items()]
         parts += [f"our probe node is not seen on {p}" for p in not_there]
@@ -206,14 +239,21 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
         hop = "our_router" if how == "router" else "master_router"
         return (Status.FAIL, f"{arrow}: {_HOPS[hop]} does not answer at {endpoint} ({why})", [],
                 _pdata(peer.name, False, hop, None, why))
+    unlinked = await _unlinked(ctx, session, how)
+    if unlinked:
+        await close_zenoh(session)
+        return (Status.FAIL, f"{arrow}: no message can pass: {unlinked}", [],
+                _pdata(peer.name, False, "master_router", None, unlinked))
     tag = secrets.token_hex(4)
     topic, text, dom = f"rosnet_tui/probe_{tag}", f"rosnet-tui {tag}", ctx.settings.ros.domain_id
     node = await run_blocking(zenohproto.ProbeNode, session, dom, zenohproto.probe_name(), topic,
                               timeout=2.0)
     await run_blocking(node.publisher if out else node.subscription, timeout=2.0)
-    remote_t = max(1.0, budget_s * 0.6)
+    remote_t = max(1.0, min(budget_s * 0.6, ctx.timeout_s * 2))
+    deadline = min(deadline, time.monotonic() + remote_t + max(1.0, ctx.timeout_s))
     args = (["sub", "--expect", text] if out else ["pub", "--text", text, "--ack", tag])
-    cmd = python_stdin_command(*args, "--topic", topic, "--timeout", f"{remote_t:.1f}")
+    cmd = python_stdin_command(*args, "--topic", topic, "--timeout", f"{remote_t:.1f}",
+                               *_member_arg(ctx, peer))
     got: tuple[str | None, bool | None, int] = (None, None, 0)
     ev: list[str] = []
     info: dict = {}
@@ -255,7 +295,7 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
     ev.append(f"{peer.name}: {rep.get('how')} session on {rep.get('endpoint')}"
               + (f", router {rep['router'].get('zid')}" if rep.get("router") else ""))
     if rep.get("error"):
-        return (Status.FAIL, f"{arrow}: {peer.name}'s router does not answer: {rep.get('detail')}",
+        return (Status.FAIL, f"{arrow}: on {peer.name}, {rep.get('detail')}",
                 ev, _pdata(peer.name, False, "peer_router", None, rep.get("detail")))
     if out:
         received, att_ok, seen = rep.get("received"), rep.get("attachment_ok"), rep.get("saw_publisher")
