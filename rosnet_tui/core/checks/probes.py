@@ -201,6 +201,12 @@ def zenoh_env(ctx: CheckContext) -> dict[str, str]:
     return zenohproto.ros_env(ctx.env, str(ctx.bashrc_path))
 
 
+def node_domain(ctx: CheckContext) -> int:
+    """The ROS_DOMAIN_ID nodes started here use (unset: 0); ros2.env compares it with the settings."""
+    value = zenoh_env(ctx).get("ROS_DOMAIN_ID", "").strip() or "0"
+    return int(value) if value.isdigit() else ctx.settings.ros.domain_id
+
+
 def node_endpoint(ctx: CheckContext) -> tuple[str, str]:
     """(endpoint, 'router'|'client'): where a ROS 2 node started here connects."""
     return zenohproto.peer_endpoint(zenoh_env(ctx), ros2.local_endpoint())

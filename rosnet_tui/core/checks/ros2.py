@@ -108,7 +108,7 @@ async def check_env(ctx: CheckContext) -> Outcome:
         values, bad = ros2.parse_override(override)
         ev.append(f"ZENOH_CONFIG_OVERRIDE={override}")
         problems += [f"ZENOH_CONFIG_OVERRIDE: {b}" for b in bad]
-        client = values.get("mode") == "client"
+        client = values.get("mode") in ("client", "peer") and bool(values.get("connect/endpoints"))
         problems += ros2.override_problems(s, values)
         if client and (distro or "").lower() in ros2.DISTROS_WITHOUT_OVERRIDE:
             warns.append("on Humble, ZENOH_CONFIG_OVERRIDE works only from rmw_zenoh 0.1.2: "
@@ -212,14 +212,17 @@ def _listening(port: int) -> list[str]:
 
 
 def _remote_peers(info: dict, local: set[str]) -> list[str]:
-    out = []
+    """Addresses of other machines with sessions attached in peer mode ("N from ADDRESS")."""
+    count: dict[str, int] = {}
     for x in info.get("sessions") or []:
         if x.get("whatami") != "peer":
             continue
         hosts = [ln.split("/", 1)[-1].rsplit(":", 1)[0].strip("[]") for ln in x.get("links") or []]
-        if any(h and not is_loopback(h) and h not in local for h in hosts):
-            out.append(f"{x.get('zid')} ({', '.join(hosts)})")
-    return out
+        for h in hosts:
+            if h and not is_loopback(h) and h not in local:
+                count[h] = count.get(h, 0) + 1
+                break
+    return [f"{n} from {h}" for h, n in count.items()]
 
 
 @check("ros2.router", "ros", "The master's Zenoh router answers by name", FACTOR_ROUTER, ros=2)

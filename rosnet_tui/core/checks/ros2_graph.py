@@ -19,6 +19,7 @@ from rosnet_tui.core.checks.probes import (
     ZENOH_SOURCE,
     budget,
     close_zenoh,
+    node_domain,
     node_endpoint,
     open_zenoh,
     python_stdin_command,
@@ -78,7 +79,7 @@ def _member_arg(ctx: CheckContext, peer: Peer) -> list[str]:
 @check("ros2.graph", "ros", "The ROS 2 graph: every component's nodes are seen", FACTOR_GRAPH,
        ros=2)
 async def check_graph(ctx: CheckContext) -> Outcome:
-    s, dom = ctx.settings, ctx.settings.ros.domain_id
+    s, dom = ctx.settings, node_domain(ctx)
     t = budget(ctx, "ros2.graph")
     deadline = time.monotonic() + t - 0.3
     data: dict[str, Any] = {"nodes": [], "topics": [], "seen_from": [], "missing": [],
@@ -103,7 +104,8 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     tasks = [asyncio.ensure_future(ssh_run(
         ctx.ssh, p, python_stdin_command("graph", "--expect", ours, "--name", theirs[p.name],
                                          "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)),
-        stdin=ZENOH_SOURCE, timeout=max(0.5, deadline - time.monotonic()))) for p in peers]
+        stdin=ZENOH_SOURCE, timeout=max(0.5, deadline - time.monotonic()),
+        connect_timeout=max(0.5, ctx.timeout_s * 0.6))) for p in peers]
     tokens: list[dict] = []
     info: dict = {}
     acked: set[str] = set()
@@ -135,6 +137,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     problems: list[str] = []
     missing: dict[str, list[str]] = {}
     dead: list[str] = []
+    domains: list[str] = []
     for p, res in zip(peers, results, strict=True):
         rep = zenohproto.parse_report(res.stdout)
         why_not = zenoh_peer_problem(res, p, rep)
@@ -157,7 +160,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
         if gone:
             missing[p.name] = gone
         if str(rep.get("domain")) != str(dom):
-            ev.append(f"{p.name}'s nodes use ROS_DOMAIN_ID {rep.get('domain')}, ours {dom}")
+            domains.append(f"{p.name}'s nodes use ROS_DOMAIN_ID {rep.get('domain')}, ours {dom}")
         ev.append(f"from {p.name}: {len(theirs_nodes)} node(s); our probe node "
                   f"{'seen' if data['ours_seen'][p.name] else 'NOT seen'} there")
     for (z, n), humble in sorted(here.items(), key=lambda kv: kv[0][1]):
@@ -186,8 +189,8 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     if missing or not_there:
         parts = [f"{c}'s nodes are not seen from here: {', '.join(v)}" for c, v in missing.items()]
         parts += [f"our probe node is not seen on {p}" for p in not_there]
-        return Outcome(Status.FAIL, "; ".join(parts) + ": the routers are not linked (see "
-                                    "ros2.router), or the domain ids differ", ev, data)
+        cause = "; ".join(domains) or "the routers are not linked (see ros2.router)"
+        return Outcome(Status.FAIL, "; ".join(parts) + f": {cause}", ev + domains, data)
     if data["mixed_hashes"]:
         return Outcome(Status.FAIL, "Humble nodes (TypeHashNotSupported) and Jazzy-or-later nodes "
                                     "share this graph: they see each other but every message "
@@ -217,9 +220,9 @@ _HOPS = {"our_router": "our router", "master_router": "the master's router",
 def _quiet_hop(ctx: CheckContext, ours: dict, rep: dict, receiver_here: bool) -> tuple[str, str]:
     """Where a message that nobody saw went missing, from both routers' links."""
     s = ctx.settings
-    if str(rep.get("domain")) != str(ctx.settings.ros.domain_id):
+    if str(rep.get("domain")) != str(node_domain(ctx)):
         return ("our_subscriber" if receiver_here else "peer_subscriber",
-                f"the peer's nodes use ROS_DOMAIN_ID {rep.get('domain')}, ours {ctx.settings.ros.domain_id}")
+                f"the peer's nodes use ROS_DOMAIN_ID {rep.get('domain')}, ours {node_domain(ctx)}")
     if not s.is_master and node_endpoint(ctx)[1] == "router" and not router_links(ours):
         return "master_router", "this machine's router has no link to the master's router"
     prouter = rep.get("router") or {}
@@ -227,6 +230,18 @@ def _quiet_hop(ctx: CheckContext, ours: dict, rep: dict, receiver_here: bool) ->
         return "peer_router", "the peer's router has no link to this router (the master's)"
     return ("our_subscriber" if receiver_here else "peer_subscriber",
             "both routers are linked, yet the subscriber saw neither the publisher nor its data")
+
+
+async def _seen_by_client(endpoint: str, dom: int, topic: str) -> bool | None:
+    """Whether the graph, read as `ros2 node list` reads it (a client), has a publisher on
+    *topic* (None: no session to ask)."""
+    viewer, _ = await open_zenoh(endpoint, 0.5)
+    if viewer is None:
+        return None
+    try:
+        return await run_blocking(zenohproto.sees, viewer, dom, "MP", topic, 0.3, timeout=1.0)
+    finally:
+        await close_zenoh(viewer)
 
 
 async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
@@ -245,7 +260,7 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
         return (Status.FAIL, f"{arrow}: no message can pass: {unlinked}", [],
                 _pdata(peer.name, False, "master_router", None, unlinked))
     tag = secrets.token_hex(4)
-    topic, text, dom = f"rosnet_tui/probe_{tag}", f"rosnet-tui {tag}", ctx.settings.ros.domain_id
+    topic, text, dom = f"rosnet_tui/probe_{tag}", f"rosnet-tui {tag}", node_domain(ctx)
     node = await run_blocking(zenohproto.ProbeNode, session, dom, zenohproto.probe_name(), topic,
                               timeout=2.0)
     await run_blocking(node.publisher if out else node.subscription, timeout=2.0)
@@ -255,10 +270,12 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
     cmd = python_stdin_command(*args, "--topic", topic, "--timeout", f"{remote_t:.1f}",
                                *_member_arg(ctx, peer))
     got: tuple[str | None, bool | None, int] = (None, None, 0)
+    seen_pub: bool | None = None
     ev: list[str] = []
     info: dict = {}
     try:
-        async with ssh_session(ctx.ssh, peer, cmd, timeout=max(0.5, budget_s * 0.3)) as sess:
+        async with ssh_session(ctx.ssh, peer, cmd,
+                               timeout=max(0.5, min(budget_s * 0.3, ctx.timeout_s * 0.6))) as sess:
             if not sess.ok:
                 return (Status.SKIP, f"skipped: could not run the other side on {peer.name}: SSH "
                                      f"failed ({sess.result.failure}): {sess.result.detail}", [],
@@ -272,17 +289,15 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
                     if await sess.read_until(zenohproto.REPORT_MARK, timeout=0.1) is not None:
                         break
             elif ready is not None:
-                got = await run_blocking(zenohproto.wait_message, node,
-                                         max(0.2, deadline - time.monotonic() - 0.8), text,
-                                         timeout=max(0.5, deadline - time.monotonic()))
+                window = max(0.2, min(deadline - time.monotonic() - 0.8, remote_t - 1.0))
+                got = await run_blocking(zenohproto.wait_message, node, window, text,
+                                         timeout=window + 1.0)
                 if got[0] is not None:
                     session.put(f"rosnet_tui/ack/{tag}", b"ok")
+                else:  # while the peer still publishes: is its publisher in the graph?
+                    seen_pub = await _seen_by_client(endpoint, dom, topic)
             info = await run_blocking(zenohproto.router_info, session, 0.4, timeout=0.8)
             res = await sess.wait(max(0.3, deadline - time.monotonic()))
-        seen_pub = None
-        if not out and got[0] is None:
-            seen_pub = await run_blocking(zenohproto.sees, session, dom, "MP", topic, 0.3,
-                                          timeout=1.0)
     finally:
         await run_blocking(node.close, timeout=1.0)
         await close_zenoh(session)
