@@ -17,13 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import budget, python_command, shq, ssh_peers
+from rosnet_tui.core.checks.probes import budget, chat_ros2, python_command, shq, ssh_peers
 from rosnet_tui.core.hosts import HostsEntry, hosts_entries
 from rosnet_tui.core.listener import ECHO, GREETING
 from rosnet_tui.core.procedure import is_ip, is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer
-from rosnet_tui.core.ssh import SshResult, resolve_ipv4, run_blocking, ssh_run, ssh_session
+from rosnet_tui.core.ssh import SshResult, resolve_ipv4, ssh_run, ssh_session
 
 
 def _is_loopback_ip(ip: str) -> bool:
@@ -414,7 +414,7 @@ def _ssh_failure(res: SshResult, peer: Peer) -> tuple[bool, str, list[str]]:
 @check("linux.chat_out", "linux", "Chat by name: we connect to the peer", 3.0)
 async def check_chat_out(ctx: CheckContext) -> Outcome:
     if ctx.settings.ros2:  # ROS 2 over rmw_zenoh: only the way to the master's router matters
-        return await _chat_ros2(ctx, out=True)
+        return await chat_ros2(ctx, out=True)
     me = ctx.settings.this.name or "this component"
 
     async def one(peer: Peer, total: float) -> tuple[bool, str | None, list[str]]:
@@ -497,7 +497,7 @@ async def check_chat_out(ctx: CheckContext) -> Outcome:
 @check("linux.chat_in", "linux", "Chat by name: the peer connects to us", 3.0)
 async def check_chat_in(ctx: CheckContext) -> Outcome:
     if ctx.settings.ros2:  # ROS 2 over rmw_zenoh: only the way to the master's router matters
-        return await _chat_ros2(ctx, out=False)
+        return await chat_ros2(ctx, out=False)
     me = ctx.settings.this.name
     if not me:
         return Outcome(Status.SKIP, "this component has no name in the settings yet",
@@ -551,94 +551,3 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
         return True, None, ev
 
     return await _chat_per_peer(ctx, "linux.chat_in", one, f"chat from the peer to {me}")
-
-
-# --------------------------------------------------------------------------- ROS 2 (rmw_zenoh)
-_ROS2_CONNECT = r"""
-import socket, sys
-name = sys.argv[1]; port = int(sys.argv[2]); t = float(sys.argv[3])
-try:
-    ip = socket.gethostbyname(name)
-except Exception as e:
-    print("RESOLVE-ERROR %s" % e); sys.exit(2)
-print("RESOLVED %s" % ip); sys.stdout.flush()
-try:
-    socket.create_connection((ip, port), timeout=t).close()
-except Exception as e:
-    print("CONNECT-ERROR %s" % e); sys.exit(3)
-print("CONNECTED")
-"""
-
-
-def _listening_here(port: int) -> bool:
-    """Whether a process listens on TCP *port* here (the master's router, normally)."""
-    import psutil  # noqa: PLC0415
-
-    try:
-        return any(c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == port
-                   for c in psutil.net_connections(kind="tcp"))
-    except (psutil.AccessDenied, OSError):
-        return False
-
-
-async def _chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
-    """Under ROS 2 only one connection crosses the modems: from each member, by name, to the
-    master's router port. So the chat toward the master is a TCP connection by name to
-    turtlebot:<zenoh_port> (made here on a member; made by each member over SSH on the master),
-    and the other direction is skipped: members accept nothing."""
-    s = ctx.settings
-    data: dict[str, Any] = {"peers": {}}
-    port, me = s.ros.zenoh_port, s.this.name or "this component"
-    if out == s.is_master:
-        why = (f"{me} is the ROS 2 master: it never connects to the members (their routers "
-               "connect in to it; linux.chat_in tests that way)" if out else
-               f"{me} is a ROS 2 member: it accepts no connections (its router connects out "
-               "to the master's; linux.chat_out tests that way)")
-        return Outcome(Status.SKIP, f"skipped: {why}", [], data)
-    t = budget(ctx, "linux.chat_in" if not out else "linux.chat_out") * 0.8
-    if out:
-        master = s.master_name
-        addrs, err = await resolve_ipv4(master, min(1.0, t * 0.3))
-        if not addrs:
-            data["peers"][master] = {"ok": False, "failure": "resolve"}
-            return Outcome(Status.FAIL, f"{master} does not resolve here: {err}", [], data)
-        ok, line = await tcp_connect(addrs[0], port, t * 0.6)
-        data["peers"][master] = {"ok": ok, "failure": None if ok else "connect"}
-        ev = [f"{master} -> {addrs[0]}", line]
-        if ok:
-            return Outcome(Status.PASS, f"{me} reaches {master}:{port} by name (the master's "
-                                        "router port, through its modem)", ev, data)
-        return Outcome(Status.FAIL, f"{me} cannot connect to {master}:{port} by name "
-                                    f"({addrs[0]}): the master's modem does not forward TCP "
-                                    f"{port}, or nothing listens there", ev, data)
-    peers = ssh_peers(s)
-    for p in s.peers:
-        if not p.ssh_user:
-            data["peers"][p.name] = {"ok": False, "failure": "no_user"}
-    if not peers:
-        return Outcome(Status.SKIP, _NO_SSH, data=data)
-    async with contextlib.AsyncExitStack() as stack:
-        if not await run_blocking(_listening_here, port, timeout=1.0):
-            with contextlib.suppress(OSError):
-                await stack.enter_async_context(ctx.listeners.hold(port))
-        cmd = python_command(_ROS2_CONNECT, me, str(port), f"{t * 0.5:.1f}")
-        got = await asyncio.gather(*(ssh_run(ctx.ssh, p, cmd, timeout=t,
-                                             connect_timeout=t * 0.5) for p in peers))
-    ev: list[str] = []
-    bad: list[str] = []
-    for p, res in zip(peers, got, strict=True):
-        text = res.stdout
-        if "CONNECTED" in text:
-            data["peers"][p.name] = {"ok": True, "failure": None}
-            ev.append(f"{p.name} connected to {me}:{port} by name ({text.split()[1]})")
-            continue
-        failure = ("peer_resolve" if "RESOLVE-ERROR" in text else "connect" if text else
-                   f"ssh:{res.failure or 'sshd'}")
-        data["peers"][p.name] = {"ok": False, "failure": failure}
-        ev.append(f"{p.name}: {text.strip() or res.detail}")
-        bad.append(f"{p.name} ({failure})")
-    if bad:
-        return Outcome(Status.FAIL, f"members cannot reach {me}:{port} by name: {', '.join(bad)}",
-                       ev, data)
-    return Outcome(Status.PASS, f"every member reaches {me}:{port} by name (the router port)",
-                   ev, data)
