@@ -255,7 +255,7 @@ class Ros2RouterData(TypedDict, total=False):
     endpoint: str             # tcp/<master>:<zenoh_port>
     address: str | None       # the master's name resolved here (None: it does not resolve)
     reachable: bool           # a Zenoh session opened on the master's router
-    failure: Literal["resolve", "refused", "timeout", "unreachable", "not_zenoh", "open"] | None
+    failure: Literal["resolve", "refused", "timeout", "unreachable", "not_zenoh", "open"] | None  # why not reachable
     router_zid: str | None    # the master's router's Zenoh id
     router_version: str | None  # its Zenoh version (None: admin space off)
     locators: list[str]       # what it says it listens on
