@@ -323,3 +323,88 @@ def router_config_problems(s: Settings, listen: list[str], connect: list[str],
                 f"fails to start; listen on tcp/0.0.0.0:{port}"]
     return [f"the router listens on loopback only ({', '.join(on_port)}): the forward cannot "
             f"reach it; listen on tcp/0.0.0.0:{port}"]
+
+
+# --------------------------------------------------------------------------- the writer
+def writer_problems(s: Settings) -> list[tuple[str, str]]:
+    """Why the ROS 2 configuration cannot be written from *s* (empty: it can)."""
+    relevant = re.compile(r"^(this\.(name|role)|ros\.(master|version|zenoh_port|domain_id)|"
+                          r"peer\[\d+\]\.name)$")
+    out = [(k, why) for k, why in s.problems() if relevant.match(k)]
+    if not out and not s.master_name:
+        out.append(("ros.master", "the name of the master (the hub every router links to) is "
+                                  "not set"))
+    return out
+
+
+def bashrc_block(s: Settings, *, client: bool = False, router_config_path: Path | None = None,
+                 session_config_path: Path | None = None, distro: str = "") -> list[str]:
+    """The lines of our ~/.bashrc block under ROS 2 (between the markers)."""
+    lone = client and not s.is_master
+    if s.is_master:
+        who = (f"{s.this.name} is the master: its router is the hub, listening on TCP "
+               f"{s.ros.zenoh_port} (forwarded by its modem)")
+    elif lone:
+        who = (f"{s.this.name} runs no router: its nodes connect to {master_endpoint(s)} in "
+               "client mode")
+    else:
+        who = (f"{s.this.name} is a member: its router connects to {master_endpoint(s)}; no "
+               "forwarding needed here")
+    lines = ["# Managed by rosnet-tui: edits inside this block are replaced.",
+             f"# ROS 2 over rmw_zenoh: {who}"]
+    if not lone:
+        lines.append("# Start the router with: ros2 run rmw_zenoh_cpp rmw_zenohd")
+    return lines + env_lines(s, client=lone, router_config_path=router_config_path,
+                             session_config_path=session_config_path, distro=distro)
+
+
+def preview_whole_file(path: Path, text: str, label: str) -> Any:
+    """A preview replacing *path* with *text*, refused when the file exists and is not ours."""
+    from rosnet_tui.core import managed_file as mf
+
+    old = mf.read_bytes(path)
+    if old is not None and not is_managed(mf.decode(old)):
+        raise mf.ManagedFileError(f"{path} exists and was not written by rosnet-tui: move it "
+                                  "away (or point the setting at another file), then try again")
+    return mf.Preview(Path(path), old, mf.encode(text), label, (), 0o644)
+
+
+def previews(s: Settings, bashrc_path: Path, *, client: bool = False,
+             router_config_path: Path | None = None, session_config_path: Path | None = None,
+             distro: str | None = None) -> list[Any]:
+    """What ``ros apply`` writes under ROS 2, as managed-file previews (one undo restores all):
+    the ~/.bashrc block, and the router's config (or, for a lone client node on Humble, the
+    session config)."""
+    from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core.hosts import WriterSettingsError
+
+    problems = writer_problems(s)
+    if problems:
+        raise WriterSettingsError(problems)
+    distro = os.environ.get("ROS_DISTRO", "") if distro is None else distro
+    lone = client and not s.is_master
+    rc_path = router_config_path or default_router_config_path()
+    sc_path = session_config_path or default_session_config_path()
+    body = bashrc_block(s, client=lone, router_config_path=rc_path,
+                        session_config_path=sc_path, distro=distro)
+    out = [mf.preview_block(bashrc_path, body, position="end",
+                            label=f"ROS 2 environment in {Path(bashrc_path).name}",
+                            new_mode=0o644)]
+    if not lone:
+        out.append(preview_whole_file(rc_path, render_router_config(s),
+                                      f"Zenoh router config {rc_path.name}"))
+    elif distro.lower() in DISTROS_WITHOUT_OVERRIDE:
+        out.append(preview_whole_file(sc_path, render_session_config(s),
+                                      f"Zenoh session config {sc_path.name}"))
+    return out
+
+
+def shell_lines(s: Settings, *, client: bool = False, distro: str | None = None) -> list[str]:
+    """The lines for the current shell (``eval "$(rosnet-tui ros export)"``)."""
+    from rosnet_tui.core.hosts import WriterSettingsError
+
+    problems = writer_problems(s)
+    if problems:
+        raise WriterSettingsError(problems)
+    distro = os.environ.get("ROS_DISTRO", "") if distro is None else distro
+    return env_lines(s, client=client and not s.is_master, distro=distro)
