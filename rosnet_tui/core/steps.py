@@ -292,6 +292,23 @@ assert tuple(STEP_BY_ID) == STEP_IDS, "the steps are listed in the procedure's o
 def step_for(step_id: str, settings: Settings) -> Step:
     """The step as *settings*' ROS version has it (ROS 2: the ros2.* checks and expectation)."""
     step = STEP_BY_ID[step_id]
-    if step_id == "ros" and settings.ros2:
-        return replace(step, expected=ROS2_EXPECTED, check_ids=ROS2_CHECK_IDS)
-    return step
+    if not settings.ros2:
+        return step
+    master = settings.is_master
+    port = settings.ros.zenoh_port
+    if step_id == "isp":
+        return replace(step, expected=(
+            f"The provider allows one incoming TCP port ({port}) and the modem has a public IP "
+            "the members can reach." if master else
+            "This machine reaches the internet; nothing needs to reach it (any connection "
+            "works, carrier-grade NAT included)."))
+    if step_id == "router":
+        return replace(step, expected=(
+            f"TCP {port}, tested from outside the modem, reaches this component's Zenoh router."
+            if master else "Nothing to forward: this member's router connects out to the "
+                           "master's."))
+    if step_id == "linux":
+        return replace(step, expected=(
+            "The components ping each other by name and open SSH sessions by name; every member "
+            f"reaches the master's router port ({port}) by name."))
+    return replace(step, expected=ROS2_EXPECTED, check_ids=ROS2_CHECK_IDS)

@@ -105,12 +105,13 @@ class StepScreen(Screen):
     def refresh_config(self) -> None:
         """Settings changed: re-render the tailored configuration (and, when the ROS version
         changed, the step's list of checks)."""
+        from rosnet_tui.core.steps import step_for
+
+        self.step = step_for(self.step.id, self.session.settings)
+        self.query_one("#expected-text", Static).update(self.step.expected)
         specs = self.session.specs(self.step.id)
         if [c.id for c in specs] != [c.id for c in self.specs]:
-            from rosnet_tui.core.steps import step_for
-
-            self.specs, self.step = specs, step_for(self.step.id, self.session.settings)
-            self.query_one("#expected-text", Static).update(self.step.expected)
+            self.specs = specs
             old = self.query_one("#check-list", CheckList)
             parent = old.parent
             old.remove()
