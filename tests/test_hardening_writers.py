@@ -27,6 +27,7 @@ from pathlib import Path
 import pytest
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_write as mw
 from tests.hardening_tally import tally
 
 REPO = Path(__file__).resolve().parents[1]
@@ -52,6 +53,7 @@ _CHILD = textwrap.dedent("""
     import sys
     from pathlib import Path
     from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core import managed_write as mw
     mode, dst, state, fa, fb = sys.argv[1:6]
     dst, state = Path(dst), Path(state)
     A, B = Path(fa).read_bytes(), Path(fb).read_bytes()
@@ -61,12 +63,12 @@ _CHILD = textwrap.dedent("""
     out.write("S %s\\n" % cls(mf.read_bytes(dst))); out.flush()   # the next run: recovered?
     if mode == "check":
         sys.exit(0)
-    write_all = mf._write_all
+    write_all = mw._write_all
     def marked(fd, data):            # a mark before every large write: the parent kills then
         if len(data) > 100000:
             out.write("W\\n"); out.flush()
         write_all(fd, data)
-    mf._write_all = marked
+    mw._write_all = marked
     prune = mf._prune
     mf._prune = lambda sd, keep=3: prune(sd, keep)
     body = __BODY__
@@ -249,16 +251,16 @@ def test_an_undo_cut_short_is_completed_by_the_next_undo_without_force(tmp_path,
         mf.apply_preview(mf.preview_block(dst, BODY, position="top"), state_dir=sd)
         applied = src.read_bytes()
         if hook == "_write_all":     # die in the middle of the rewrite: half new, half old
-            real = mf._write_all
+            real = mw._write_all
 
             def half(fd, data):
                 if len(data) == len(original) and data == original:
                     real(fd, data[: len(data) // 2])
                     raise _Crash
                 real(fd, data)
-            monkeypatch.setattr(mf, "_write_all", half)
+            monkeypatch.setattr(mw, "_write_all", half)
         else:
-            monkeypatch.setattr(mf, "_before_truncate", _crash)
+            monkeypatch.setattr(mw, "_before_truncate", _crash)
         with pytest.raises(_Crash):
             mf.undo_last(sd)
         monkeypatch.undo()
@@ -284,7 +286,7 @@ def test_an_apply_cut_short_is_completed_by_the_next_read(tmp_path, monkeypatch)
         long_body = [f"203.0.113.{i}  peer{i}" for i in range(1, 30)]
         mf.apply_preview(mf.preview_block(dst, long_body, position="top"), state_dir=sd)
         short = mf.preview_block(dst, ["203.0.113.7  peer7"], position="top")
-        monkeypatch.setattr(mf, "_before_truncate", _crash)
+        monkeypatch.setattr(mw, "_before_truncate", _crash)
         with pytest.raises(_Crash):
             mf.apply_preview(short, state_dir=sd)
         monkeypatch.undo()
@@ -305,7 +307,7 @@ def test_after_a_foreign_change_the_journal_is_dropped_and_the_file_left_alone(t
     dst.write_bytes(b"underneath\n")
     _bind(src, dst)
     try:
-        monkeypatch.setattr(mf, "_before_truncate", _crash)
+        monkeypatch.setattr(mw, "_before_truncate", _crash)
         with pytest.raises(_Crash):
             mf.write_file(dst, b"short new content\n")
         monkeypatch.undo()
@@ -320,8 +322,8 @@ def test_after_a_foreign_change_the_journal_is_dropped_and_the_file_left_alone(t
 
 def _cut_in_place(path: Path, new: bytes, monkeypatch) -> None:
     """Leave *path* as an in-place write of *new* killed before its truncation leaves it."""
-    monkeypatch.setattr(mf, "is_mount_point", lambda p: True)   # take the in-place path
-    monkeypatch.setattr(mf, "_before_truncate", _crash)
+    monkeypatch.setattr(mw, "is_mount_point", lambda p: True)   # take the in-place path
+    monkeypatch.setattr(mw, "_before_truncate", _crash)
     with pytest.raises(_Crash):
         mf.write_file(path, new)
     monkeypatch.undo()
@@ -377,14 +379,15 @@ _TEMP_CHILD = textwrap.dedent("""
     import sys
     from pathlib import Path
     from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core import managed_write as mw
     from rosnet_tui.core.settings import atomic_write_text
     target, state, status = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
     big = sys.argv[4]
-    write_all = mf._write_all
+    write_all = mw._write_all
     def marked(fd, data):
         sys.stdout.write("W\\n"); sys.stdout.flush()
         write_all(fd, data)
-    mf._write_all = marked
+    mw._write_all = marked
     prune = mf._prune
     mf._prune = lambda sd, keep=3: prune(sd, keep)
     text = Path(big).read_text()
@@ -466,7 +469,7 @@ def test_in_a_folder_the_writer_may_not_write_the_journal_goes_to_the_state_dir(
         os.setegid(65534)
         os.seteuid(65534)
         try:
-            monkeypatch.setattr(mf, "_write_all", _half_then_crash(mf._write_all, new))
+            monkeypatch.setattr(mw, "_write_all", _half_then_crash(mw._write_all, new))
             with pytest.raises(_Crash):
                 mf.write_file(target, new, journal_dir=sd / "inplace")
             monkeypatch.undo()
@@ -497,9 +500,9 @@ def test_an_apply_interrupted_in_a_live_process_is_rolled_back_whole(tmp_path, m
     original = hosts_text(200_000, 11)
     target.write_bytes(original)
     if place == "in place":
-        monkeypatch.setattr(mf, "is_mount_point", lambda p: True)
+        monkeypatch.setattr(mw, "is_mount_point", lambda p: True)
     p = mf.preview_block(target, BODY, position="top")
-    real, fired = mf._write_all, []
+    real, fired = mw._write_all, []
 
     def interrupted(fd, chunk):
         if chunk == p.new and not fired:
@@ -507,10 +510,10 @@ def test_an_apply_interrupted_in_a_live_process_is_rolled_back_whole(tmp_path, m
             real(fd, chunk[: len(chunk) // 2])
             raise KeyboardInterrupt
         real(fd, chunk)
-    monkeypatch.setattr(mf, "_write_all", interrupted)
+    monkeypatch.setattr(mw, "_write_all", interrupted)
     with pytest.raises(KeyboardInterrupt):
         mf.apply_preview(p, state_dir=sd)
-    monkeypatch.setattr(mf, "_write_all", real)
+    monkeypatch.setattr(mw, "_write_all", real)
     assert fired
     assert mf.read_bytes(target) == original == target.read_bytes()
     assert mf.last_entry(sd) is None                              # nothing left to undo

@@ -20,6 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_write as mw
 
 REPO = Path(__file__).resolve().parent.parent
 BODY_A = ["10.10.10.1\tturtlebot", "198.51.100.2\tsami"]
@@ -302,12 +303,13 @@ _CHILD = textwrap.dedent("""
     import random, sys, time
     from pathlib import Path
     from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core import managed_write as mw
     path, state, mode = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3]
     a, b = Path(sys.argv[4]).read_bytes(), Path(sys.argv[5]).read_bytes()
     def hook():
         sys.stdout.write("T\\n"); sys.stdout.flush()
         time.sleep(random.uniform(0, 0.003))
-    mf._before_rename = hook
+    mw._before_rename = hook
     sys.stdout.write("R\\n"); sys.stdout.flush()
     for _ in range(10000):
         cur = path.read_bytes()
@@ -416,7 +418,7 @@ def test_rename_over_a_mount_point_falls_back_even_when_not_detected(tmp_path, m
     dst.write_text("b\n")
     _bind_mount(src, dst)
     try:
-        monkeypatch.setattr(mf, "is_mount_point", lambda p: False)  # detection missed it
+        monkeypatch.setattr(mw, "is_mount_point", lambda p: False)  # detection missed it
         r = mf.apply_preview(mf.preview_block(dst, ["x"]), state_dir=sd)  # rename: EBUSY
         assert r.in_place and mf.extract_block(src.read_text()) == ["x"]
     finally:
@@ -456,10 +458,10 @@ def test_a_crash_inside_an_in_place_shrink_is_completed_by_the_next_read(tmp_pat
         def crash() -> None:
             raise _Crash
 
-        monkeypatch.setattr(mf, "_before_truncate", crash)
+        monkeypatch.setattr(mw, "_before_truncate", crash)
         with pytest.raises(_Crash):
             mf.apply_preview(short, state_dir=sd)
-        monkeypatch.setattr(mf, "_before_truncate", None)
+        monkeypatch.setattr(mw, "_before_truncate", None)
         left = src.read_bytes()
         assert left.startswith(short.new) and left != short.new
         assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".inplace")]

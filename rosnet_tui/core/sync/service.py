@@ -18,34 +18,22 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import fcntl
 import logging
 import math
 import os
-import select
-import selectors
-import signal
-import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core.bashrc import master_uri, preview_bashrc
 from rosnet_tui.core.hosts import (
     DEFAULT_HOSTS_PATH,
-    PROFILE_TITLES,
-    WriterSettingsError,
-    find_hosts_conflicts,
 )
-from rosnet_tui.core.settings import Settings, SettingsError, load_settings, save_settings
+from rosnet_tui.core.settings import Settings, SettingsError, load_settings
 
 from .applied import applied_path, load_applied, save_applied
 from .backoff import Backoff, backoff_cap
-from .folder_watch import StoreWatch
-from .plan import Plan, PlanError, check_complete, plan_hosts
+from .plan import Plan
 from .records import (
     Candidate,
     Record,
@@ -56,154 +44,36 @@ from .records import (
     parse_record,
     successor_problem,
 )
+from .service_apply import RECHECK_AFTER_S, ApplyMixin  # noqa: F401
+from .service_loop import LoopMixin, install_signal_handlers  # noqa: F401
 from .status import (
-    ALIVE_EVERY_S,
     MAX_REFUSED,
     empty_status,
     load_status,
-    save_status,
-    state_owner,
-    sync_dir,
 )
 from .store import RecordStore, StoreConfigError, StoreError, make_store
-from .watcher import LocalAddress, NetlinkMonitor, PublicLookup, lookup_public_ip, observe_local
-
-AFFECTED_CHECKS = ("linux.hosts", "linux.resolve", "linux.ssh", "ros.master")
-VERIFY_EVERY_S = 30.0        # look at the hosts file again even when nothing changed
-HEARTBEAT_S = 3600.0         # republish an unchanged record this often (its age then says alive)
-RECHECK_AFTER_S = (5.0, 15.0, 45.0)   # re-run failing checks after a change, then give up
-DEBOUNCE_S = 0.3             # netlink: wait for the burst of messages of one change to end
-FORCED_GAP_S = 2.0           # a network change asks for the public IP at most this often
-MAX_WAIT_S = 5.0
-WORKER_STOP_S = 2.0          # stopping waits this long at most for a check or lookup under way
-FOLDER_SETTLE_S = 0.05       # a watched folder: its events are taken at most this often
+from .watcher import LocalAddress, PublicLookup, lookup_public_ip, observe_local
+from .workers import (  # noqa: F401 (re-exported)
+    AFFECTED_CHECKS,
+    DEBOUNCE_S,
+    FOLDER_SETTLE_S,
+    FORCED_GAP_S,
+    HEARTBEAT_S,
+    MAX_WAIT_S,
+    VERIFY_EVERY_S,
+    WORKER_STOP_S,
+    RoundResult,
+    SyncError,
+    _ServiceLock,
+    _Worker,
+    read_period,
+    run_affected_checks,
+)
 
 log = logging.getLogger("rosnet_tui.sync")
 
 
-class SyncError(Exception):
-    """The service cannot start (settings, store configuration, another instance)."""
-
-
-def read_period(interval_s: float) -> float:
-    """How often peers' records are read: a quarter of the poll interval, 0.25 .. 1 s (a
-    watched folder is read when a record changes, and every interval_s besides)."""
-    return min(1.0, max(0.25, float(interval_s) / 4))
-
-
-@dataclass
-class RoundResult:
-    ok: bool
-    applied: bool
-    errors: dict[str, str]
-
-
-class _ServiceLock:
-    """One sync service per state dir: an flock held while it runs."""
-
-    def __init__(self, state_dir: Path) -> None:
-        self.path = sync_dir(state_dir) / "service.lock"
-        self.fd: int | None = None
-
-    def acquire(self) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        try:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
-        except OSError as exc:
-            raise SyncError(f"cannot open the lock {self.path}: {exc.strerror} (is the service "
-                            "running as another user?)") from None
-        owner = state_owner(self.path.parent.parent)
-        if owner:
-            with contextlib.suppress(OSError):
-                os.fchown(fd, *owner)
-                os.chown(self.path.parent, *owner)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            try:
-                other = os.read(fd, 32).decode(errors="replace").strip()
-            except OSError:
-                other = "?"
-            os.close(fd)
-            raise SyncError(f"another rosnet-tui sync is running with this state dir "
-                            f"(pid {other or '?'}; lock {self.path})") from None
-        os.ftruncate(fd, 0)
-        os.write(fd, f"{os.getpid()}\n".encode())
-        self.fd = fd
-
-    def release(self) -> None:
-        if self.fd is not None:
-            with contextlib.suppress(OSError):
-                os.ftruncate(self.fd, 0)
-            os.close(self.fd)
-            self.fd = None
-
-
-class _Worker:
-    """Slow work of the service on its own thread while the service runs (the affected checks;
-    the public-IP lookup), so reading records and writing the hosts file never wait on it: a
-    peer that does not answer holds ssh and ros.master for their whole timeouts, a silent
-    what-is-my-IP service the lookup. One job at a time; a newer job replaces one not started
-    yet; results come back through :meth:`collect` (None: the job failed, logged), and *wake*
-    rouses the loop."""
-
-    def __init__(self, name: str, job: Callable[[Any], Any], wake: Callable[[], None]) -> None:
-        self.name = name
-        self._job = job
-        self._wake = wake
-        self._cond = threading.Condition()
-        self._pending: tuple[Any, Any] | None = None
-        self._done: list[tuple[Any, Any]] = []
-        self._closed = False
-        self._thread: threading.Thread | None = None
-
-    def submit(self, tag: Any, arg: Any) -> None:
-        with self._cond:
-            if self._closed:
-                return
-            self._pending = (tag, arg)
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._work, daemon=True,
-                                                name=f"rosnet-sync-{self.name}")
-                self._thread.start()
-            self._cond.notify()
-
-    def _work(self) -> None:
-        while True:
-            with self._cond:
-                while self._pending is None and not self._closed:
-                    self._cond.wait(1.0)
-                if self._closed or self._pending is None:
-                    return
-                tag, arg = self._pending
-                self._pending = None
-            try:
-                result = self._job(arg)
-            except Exception:  # a bug must not end the thread: logged, the result is None
-                log.exception("unexpected error in the %s of the sync service", self.name)
-                result = None
-            with self._cond:           # closed: the loop is gone (and its wake pipe with it)
-                if self._closed:
-                    return
-                self._done.append((tag, result))
-                self._wake()
-
-    def collect(self) -> list[tuple[Any, Any]]:
-        with self._cond:
-            done, self._done = self._done, []
-        return done
-
-    def close(self, timeout_s: float) -> None:
-        """No more jobs; wait (bounded) for one under way. Its result is dropped."""
-        with self._cond:
-            self._closed = True
-            self._pending = None
-            self._cond.notify_all()
-        if self._thread is not None:
-            self._thread.join(timeout_s)
-
-
-class SyncService:
+class SyncService(ApplyMixin, LoopMixin):
     """See the module docstring. Build it, then :meth:`run` (a service) or :meth:`run_once`."""
 
     def __init__(self, config_path: Path, *, state_dir: Path,
@@ -657,413 +527,3 @@ class SyncService:
                     log.info("removed this component's stale copies: %s", ", ".join(gone))
 
     # ------------------------------------------------------------------ applying
-    def _plan(self) -> Plan:
-        assert self.settings is not None
-        return plan_hosts(self.settings, local_ip=self.local.local_ip if self.local else "",
-                          public_ip=self._known_public(),
-                          records={n: c.record for n, c in self.peers.items()})
-
-    def _apply(self, mono: float) -> bool:
-        """Write the hosts set (and the ROS block) when they differ from the files; True if
-        something was written."""
-        self.next_verify = mono + VERIFY_EVERY_S
-        plan = self._plan()
-        self._last_plan = plan
-        try:
-            old = mf.read_bytes(self.hosts_path)
-            text = mf.decode(old) if old is not None else None
-            check_complete(plan, text)
-            body = plan.body()
-            notes = [f"line {c.lineno} '{c.old.strip()}' {c.why}" for c in
-                     find_hosts_conflicts(text, plan.settings, plan.profile)]
-            previews = [mf.preview_block(self.hosts_path, body, position="top",
-                                         label=f"hosts: {plan.profile} set", notes=notes,
-                                         new_mode=0o644, current=old, use_current=True)]
-        except (PlanError, WriterSettingsError, mf.ManagedFileError) as exc:
-            self.next_apply = self._fail("apply", f"{exc}; the hosts file is left as it is", mono)
-            return False
-        for n in notes:
-            self._once(("conflict", n), logging.WARNING, "%s: %s (rosnet-tui hosts apply "
-                       "--comment-conflicts fixes it, with your consent)", self.hosts_path, n)
-        if self.bashrc_path is not None and not plan.settings.ros2:
-            # (ROS 2: the member's router dials the master by name; the hosts line is all)
-            try:
-                previews.append(preview_bashrc(plan.settings, self.bashrc_path))
-            except (WriterSettingsError, mf.ManagedFileError) as exc:
-                self._once(("bashrc", str(exc)), logging.WARNING,
-                           "%s is left as it is: %s", self.bashrc_path, exc)
-        self._update_peer_status(plan)
-        changed = [p for p in previews if p.changed]
-        if not changed:
-            self.dirty = False
-            self.backoff["apply"].succeed()
-            self._clear_error("apply")
-            return False
-        summary = self._summary(plan, text)
-        diff = "".join(p.diff() for p in changed)
-        log.info("applying: %s\n%s", summary, diff.rstrip("\n"))
-        try:
-            result = mf.apply_previews(previews, state_dir=self.state_dir, label=f"sync: {summary}")
-        except mf.StalePreviewError as exc:
-            log.info("%s; trying again", exc)
-            self.next_apply = mono + 0.2
-            return False
-        except mf.PermissionNeededError as exc:
-            self.next_apply = self._fail("apply", f"{exc} (run the sync service as root: "
-                                                  "rosnet-tui sync install-service)", mono)
-            return False
-        except mf.ManagedFileError as exc:
-            self.next_apply = self._fail("apply", f"{exc}; the files are left as they were", mono)
-            return False
-        self.dirty = False
-        self.backoff["apply"].succeed()
-        self._clear_error("apply", "writing works again")
-        backups = ", ".join(str(b) for b in result.backups) or "none (new file)"
-        log.info("wrote %s (journal #%s, backup %s; 'rosnet-tui undo' puts it back)",
-                 ", ".join(str(p.path) for p in changed), result.entry_id, backups)
-        self.status["profile"] = plan.profile
-        self.status["last_change"] = {"at": time.time(), "summary": summary, "diff": diff,
-                                      "journal": result.entry_id, "checks": []}
-        self._status_dirty = True
-        self._save_learned(plan)
-        self._save_status()
-        if self.do_checks:
-            self._recheck_left = list(RECHECK_AFTER_S)
-            self.recheck_at = None
-            self._run_checks(plan)
-        return True
-
-    def _summary(self, plan: Plan, old_text: str | None) -> str:
-        from rosnet_tui.core.checks.linux import parse_hosts
-
-        try:
-            body = mf.extract_block(old_text) or []
-        except mf.DamagedBlockError:
-            body = []
-        before: dict[str, str] = {}
-        for _, ip, names in parse_hosts("\n".join(body)):
-            for n in names:
-                before.setdefault(n.lower(), ip)
-        parts = []
-        for e in plan.entries:
-            was = before.get(e.name.lower())
-            if was is None:
-                parts.append(f"{e.name} -> {e.ip} (new)")
-            elif was != e.ip:
-                parts.append(f"{e.name} {was} -> {e.ip}")
-        if not parts:
-            parts.append("the block rewritten (same addresses)")
-        return f"{'; '.join(parts)} [{PROFILE_TITLES[plan.profile].split(' (')[0]} set]"
-
-    def _update_peer_status(self, plan: Plan) -> None:
-        self.status["profile"] = plan.profile
-        for c in plan.choices:
-            p = self.status["peers"].setdefault(c.name, {})
-            if p.get("address") != c.address or p.get("where") != c.where:
-                p.update(address=c.address, where=c.where, why=c.why)
-                self._status_dirty = True
-
-    def _save_learned(self, plan: Plan) -> None:
-        """Keep the observed addresses in the settings file too, so `check`, `hosts apply` and
-        the wizard agree with the hosts file (comments and layout kept)."""
-        if not self.save_learned:
-            return
-        try:
-            fresh = load_settings(self.config_path)
-        except SettingsError as exc:
-            self._once(("learned", str(exc)), logging.WARNING,
-                       "the settings file was not updated: %s", exc)
-            return
-        if fresh is None:
-            return
-        learned = plan.learned
-        changes = []
-        for key in ("local_ip", "public_ip", "profile"):
-            new = getattr(learned.this, key)
-            if new and getattr(fresh.this, key) != new:
-                changes.append(f"this.{key} {getattr(fresh.this, key) or '-'} -> {new}")
-                setattr(fresh.this, key, new)
-        for p in fresh.peers:
-            lp = next((x for x in learned.peers if x.name == p.name), None)
-            if lp is None or p.name not in self.peers:
-                continue
-            for key in ("local_ip", "public_ip"):
-                new = getattr(lp, key)
-                if new and getattr(p, key) != new:
-                    changes.append(f"{p.name}.{key} {getattr(p, key) or '-'} -> {new}")
-                    setattr(p, key, new)
-        if not changes:
-            return
-        try:
-            st = os.stat(self.config_path)
-            save_settings(fresh, self.config_path)
-            if os.geteuid() == 0 and (st.st_uid, st.st_gid) != (0, 0):
-                with contextlib.suppress(OSError):
-                    os.chown(self.config_path, st.st_uid, st.st_gid)
-            with contextlib.suppress(OSError):
-                st2 = os.stat(self.config_path)
-                self._settings_key = (st2.st_mtime_ns, st2.st_size, st2.st_ino)
-                self.settings = fresh
-        except (SettingsError, OSError) as exc:
-            self._once(("learned", str(exc)), logging.WARNING,
-                       "the settings file was not updated: %s", exc)
-            return
-        log.info("settings updated (%s): %s", self.config_path, "; ".join(changes))
-
-    # ------------------------------------------------------------------ checks
-    def _run_checks(self, plan: Plan) -> None:
-        """The affected checks for *plan*: on the checks thread while the service runs (records
-        are read and applied meanwhile), here and now otherwise (--once, tests)."""
-        tag = (self.status.get("last_change") or {}).get("journal")
-        if self._checks is not None:
-            self._checks.submit(tag, copy.deepcopy(plan))
-            return
-        self._take_checks(tag, self._affected_checks(plan))
-
-    def _affected_checks(self, plan: Plan) -> list[dict[str, Any]]:
-        return run_affected_checks(plan.settings, hosts_path=self.hosts_path,
-                                   bashrc_path=self.bashrc_path, state_dir=self.state_dir)
-
-    def _take_checks(self, tag: Any, results: list[dict[str, Any]] | None) -> None:
-        """Keep the verdicts of the checks run for the change *tag* (its journal entry), unless
-        a newer change came meanwhile (its own checks follow); then plan the re-checks."""
-        change = self.status.get("last_change")
-        if results is None:
-            return
-        if change is not None and change.get("journal") != tag:
-            log.debug("the checks of an earlier change ended after a newer change: not kept")
-            return
-        bad = [r for r in results if r["status"] == "fail"]
-        for r in results:
-            level = logging.WARNING if r["status"] == "fail" else logging.INFO
-            log.log(level, "check %-4s %s: %s", r["status"].upper(), r["id"], r["summary"])
-        if change is not None:
-            change["checks"] = results
-            change["checked_at"] = time.time()
-        if not bad:
-            self._recheck_left = []
-        self._status_dirty = True
-        self._schedule_recheck()
-
-    def _schedule_recheck(self) -> None:
-        changes = self.status.get("last_change") or {}
-        failing = any(c["status"] == "fail" for c in changes.get("checks") or [])
-        if failing and self._recheck_left:
-            self.recheck_at = time.monotonic() + self._recheck_left.pop(0)
-        else:
-            self.recheck_at = None
-
-    def _recheck(self) -> None:
-        self.recheck_at = None
-        if self._last_plan is None:
-            return
-        log.info("running the failing checks again")
-        self._run_checks(self._last_plan)
-
-    # ------------------------------------------------------------------ status
-    def _save_status(self, force: bool = False) -> None:
-        now = time.time()
-        if not (force or self._status_dirty or now - self._alive_saved > ALIVE_EVERY_S):
-            return
-        self.status["alive_at"] = now
-        try:
-            save_status(self.state_dir, self.status)
-        except OSError as exc:
-            self._once(("status", str(exc)), logging.WARNING, "cannot save the status: %s", exc)
-            return
-        self._status_dirty = False
-        self._alive_saved = now
-
-    # ================================================================== running
-    def stop(self) -> None:
-        """Ask the loop to stop (safe from a signal handler or another thread)."""
-        self._stop = True
-        self._wake_loop()
-
-    def _wake_loop(self) -> None:
-        with contextlib.suppress(OSError):
-            os.write(self._wake_w, b"x")
-
-    def _next_wake(self) -> float:
-        apply_due = self.next_apply if self.dirty else max(self.next_apply, self.next_verify)
-        cands = [self.next_fetch]
-        if not self._public_busy:      # under way: its answer wakes the loop
-            cands.append(self.next_public)
-        if self._public_answered or not self._public_busy:   # else: after the first answer
-            cands.append(apply_due)
-        if self.recheck_at is not None:
-            cands.append(self.recheck_at)
-        return min(cands)
-
-    def _start(self, lock: _ServiceLock) -> None:
-        lock.acquire()
-        assert self.settings is not None
-        self.status.update(pid=os.getpid(), started_at=time.time(), stopped_at=None)
-        s = self.settings
-        log.info("sync for %s (%s): %s; public IP every %g s, peers read every %g s; hosts file "
-                 "%s%s", s.this.name, s.this.role, self.store.describe() if self.store else "?",
-                 self.interval_s, read_period(self.interval_s), self.hosts_path,
-                 f", ROS block in {self.bashrc_path}" if self.bashrc_path else "")
-
-    def _finish(self, lock: _ServiceLock) -> None:
-        self.status["stopped_at"] = time.time()
-        self._save_status(force=True)
-        lock.release()
-
-    def run_once(self) -> RoundResult:
-        """One full round (the public IP asked now), for cron and tests."""
-        lock = _ServiceLock(self.state_dir)
-        self._start(lock)
-        try:
-            return self.round(force_public=True)
-        finally:
-            self._finish(lock)
-            self.close()
-
-    def run(self) -> int:
-        """Run until :meth:`stop` (SIGTERM/SIGINT through :func:`install_signal_handlers`)."""
-        lock = _ServiceLock(self.state_dir)
-        self._start(lock)
-        monitor = NetlinkMonitor.open() if self.use_netlink else None
-        if self.use_netlink and monitor is None:
-            log.info("no netlink here: local address changes are seen within %g s",
-                     read_period(self.interval_s))
-        sel = selectors.DefaultSelector()
-        sel.register(self._wake_r, selectors.EVENT_READ, "wake")
-        if monitor is not None:
-            sel.register(monitor.fileno(), selectors.EVENT_READ, "netlink")
-        folder_watch = StoreWatch(self.use_folder_watch)
-        if self.do_checks:
-            self._checks = _Worker("checks", self._affected_checks, self._wake_loop)
-        self._lookups = _Worker("public-IP lookup", self._lookup_public, self._wake_loop)
-        force_public = True
-        try:
-            while not self._stop:
-                try:
-                    self._collect()
-                    self.round(force_public=force_public)
-                except Exception:  # a bug must not kill the service: log it, keep going
-                    log.exception("unexpected error in a sync round; going on")
-                    self._error("round", "an unexpected error (see the log); retrying")
-                    pause = self.backoff["round"].fail()
-                    self.next_fetch = self.next_apply = time.monotonic() + pause
-                else:
-                    if self.backoff["round"].succeed():
-                        self._clear_error("round")
-                force_public = False
-                if self._stop:
-                    break
-                self._follow_folder(folder_watch, sel)
-                force_public = self._wait(sel, monitor, folder_watch)
-        finally:
-            for worker in (self._checks, self._lookups):
-                if worker is not None:
-                    worker.close(WORKER_STOP_S)
-            self._checks = self._lookups = None
-            self._public_busy = False
-            folder_watch.close(sel)
-            sel.close()
-            if monitor is not None:
-                monitor.close()
-            log.info("sync stopped")
-            self._finish(lock)
-            self.close()
-        return 0
-
-    def _collect(self) -> None:
-        """Take what the service's threads finished: public-IP answers, checks' verdicts."""
-        if self._lookups is not None:
-            for started, lookup in self._lookups.collect():
-                self._take_public(started, lookup)
-        if self._checks is not None:
-            for tag, results in self._checks.collect():
-                self._take_checks(tag, results)
-
-    def _wait(self, sel: selectors.BaseSelector, monitor: NetlinkMonitor | None,
-              watch: StoreWatch) -> bool:
-        """Sleep until something is due, :meth:`stop`, a network change (True) or a peer's
-        record completed in the watched folder. Folder events that change no record (a sync
-        tool's temporary files) go on waiting; folder events are taken at most every
-        FOLDER_SETTLE_S, so a storm of them costs a bounded number of reads."""
-        period = read_period(self.interval_s)
-        while not self._stop:
-            timeout = min(MAX_WAIT_S, max(0.02, self._next_wake() - time.monotonic()))
-            ready = sel.select(timeout)
-            if not ready:
-                return False
-            for key, _ in ready:
-                if key.data == "wake":
-                    with contextlib.suppress(OSError):
-                        os.read(self._wake_r, 64)
-                    return False
-                if key.data == "netlink" and monitor is not None and monitor.drain():
-                    deadline = time.monotonic() + DEBOUNCE_S
-                    while time.monotonic() < deadline and not self._stop:
-                        # netlink only: other ready descriptors would make this spin
-                        if select.select([monitor.fileno()], [], [],
-                                         max(0.0, deadline - time.monotonic()))[0]:
-                            monitor.drain()
-                    log.info("the kernel reports a link, address or route change")
-                    return True
-                if key.data == StoreWatch.SELECTOR_KEY:
-                    changed = watch.drain(sel, period)
-                    # the rest of the burst (a sync tool completes several files) comes in
-                    # meanwhile; only stop() cuts this pause short
-                    select.select([self._wake_r], [], [], FOLDER_SETTLE_S)
-                    changed = watch.drain(sel, period) or changed
-                    if changed:
-                        self.next_fetch = min(self.next_fetch, time.monotonic())
-                        return False
-            if time.monotonic() >= self._next_wake():
-                return False
-        return False
-
-    def _follow_folder(self, watch: StoreWatch, sel: selectors.BaseSelector) -> None:
-        """Keep the watch on the store's folder (a folder store): started, kept or ended."""
-        if self.store is None:
-            return
-        started_or_ended = watch.follow(self.store, sel, read_period(self.interval_s))
-        if started_or_ended or watch.active != self._folder_watched:
-            self.next_fetch = min(self.next_fetch, time.monotonic())  # a change may be unseen
-        self._folder_watched = watch.active
-        if self.status.get("folder_watch") != watch.describe():
-            self.status["folder_watch"] = watch.describe()
-            self._status_dirty = True
-
-    def close(self) -> None:
-        for fd in (self._wake_r, self._wake_w):
-            with contextlib.suppress(OSError):
-                os.close(fd)
-        self._wake_r = self._wake_w = -1
-
-
-def install_signal_handlers(service: SyncService) -> None:
-    """SIGTERM and SIGINT (Ctrl-C) stop the service cleanly after the current step."""
-    def handler(signum: int, frame: Any) -> None:
-        log.info("stopping (%s)", signal.Signals(signum).name)
-        service.stop()
-
-    signal.signal(signal.SIGTERM, handler)
-    signal.signal(signal.SIGINT, handler)
-
-
-# --------------------------------------------------------------------------- the checks
-def run_affected_checks(settings: Settings, *, hosts_path: Path, bashrc_path: Path | None,
-                        state_dir: Path, ids: tuple[str, ...] = AFFECTED_CHECKS,
-                        ) -> list[dict[str, Any]]:
-    """Run the checks a hosts/ROS change affects (concurrently, each under its timeout):
-    [{"id", "status", "summary"}] in *ids* order."""
-    from rosnet_tui.core.checks.runner import RunOptions, run_now, select
-
-    if settings.ros2:  # the ROS 2 counterparts of the ROS 1 checks a new address affects
-        ids = tuple(dict.fromkeys("ros2.router" if i.startswith("ros.") else i for i in ids))
-    specs = select(ids=ids)
-    env = dict(os.environ)
-    with contextlib.suppress(WriterSettingsError):
-        env["ROS_MASTER_URI"] = master_uri(settings)
-    for v in ("ROS_IP", "ROS_HOSTNAME"):
-        env.pop(v, None)
-    opts = RunOptions(hosts_path=hosts_path, state_dir=state_dir, env=env, upnp=False,
-                      bashrc_path=bashrc_path)
-    got = run_now(copy.deepcopy(settings), specs, opts)
-    return [{"id": r.id, "status": r.status.value, "summary": r.summary} for r in got]
