@@ -80,7 +80,7 @@ def collect_results(settings: Any, steps: list[str] | None = None, *, timeout: f
     def say(r: Any, done: int, total: int) -> None:
         _err(f"[{done}/{total}] {r.status.label:<4} {r.id}: {r.summary}")
 
-    return run_now(settings, select(steps), RunOptions(timeout_s=timeout, upnp=upnp),
+    return run_now(settings, select(steps, settings=settings), RunOptions(timeout_s=timeout, upnp=upnp),
                    on_result=say if progress else None)
 
 

@@ -27,6 +27,9 @@ ROLES = ("master", "member")
 CONNECTIONS = ("corporate", "home", "telecom")
 PROFILES = ("remote", "office", "portable")
 PORT_MIN, PORT_MAX = 1024, 65000
+ROS_VERSIONS = (1, 2)            # 1: ROS 1 (roscore); 2: ROS 2 over rmw_zenoh
+ZENOH_PORT_DEFAULT = 7447        # rmw_zenoh's router port
+DOMAIN_ID_MAX = 232              # ROS_DOMAIN_ID: 0..232
 DEFAULT_PUBLIC_IP_URLS = ("https://ifconfig.co/ip",)
 DEFAULT_PORT_CHECK_URL = "https://ifconfig.co"
 
@@ -133,10 +136,36 @@ class Peer:
     portable_ip: str = ""    # the peer's address on the portable LAN (default: local_ip)
 
 
+def default_ros_version(env: dict[str, str] | None = None) -> int:
+    """The ROS version a new settings file starts with: ROS_VERSION of the environment (what a
+    sourced ROS setup sets), else 1."""
+    value = (os.environ if env is None else env).get("ROS_VERSION", "").strip()
+    return 2 if value == "2" else 1
+
+
+def validate_ros_version(value: int | str) -> str | None:
+    """Return why *value* is not a ROS version this product knows (1 or 2), or None."""
+    if str(value).strip() in ("1", "2"):
+        return None
+    return "must be 1 (ROS 1, roscore) or 2 (ROS 2 over rmw_zenoh)"
+
+
+def validate_domain_id(value: int | str) -> str | None:
+    """Return why *value* is not a ROS_DOMAIN_ID (0-232), or None."""
+    try:
+        n = int(str(value).strip())
+    except ValueError:
+        return f"'{value}' is not a whole number"
+    return None if 0 <= n <= DOMAIN_ID_MAX else f"must be between 0 and {DOMAIN_ID_MAX}"
+
+
 @dataclass
 class RosSettings:
     master: str = ""
-    port: int = 11311
+    port: int = 11311                    # ROS 1: the master's port
+    version: int = 1                     # 1 or 2 (a file without it: the environment's ROS_VERSION)
+    zenoh_port: int = ZENOH_PORT_DEFAULT  # ROS 2: the master's Zenoh router port (TCP)
+    domain_id: int = 0                   # ROS 2: ROS_DOMAIN_ID
 
 
 @dataclass
@@ -181,6 +210,11 @@ class Settings:
     @property
     def is_master(self) -> bool:
         return self.this.role == "master"
+
+    @property
+    def ros2(self) -> bool:
+        """True when this network runs ROS 2 over rmw_zenoh ([ros] version = 2)."""
+        return self.ros.version == 2
 
     @property
     def master_name(self) -> str:
@@ -231,6 +265,9 @@ class Settings:
         elif t.role == "member":
             add("ros.master", "a member needs the name of the master")
         add("ros.port", validate_port(self.ros.port, lo=1, hi=65535))
+        add("ros.version", validate_ros_version(self.ros.version))
+        add("ros.zenoh_port", validate_port(self.ros.zenoh_port))
+        add("ros.domain_id", validate_domain_id(self.ros.domain_id))
         add("probe.port", validate_port(self.probe.port))
         for url in self.probe.public_ip_urls:
             add("probe.public_ip_urls", validate_url(url))
@@ -254,6 +291,11 @@ class Settings:
         return not self.problems()
 
 
+def new_settings(env: dict[str, str] | None = None) -> Settings:
+    """Settings for a component that has no settings file yet (ROS version from the environment)."""
+    return Settings(ros=RosSettings(version=default_ros_version(env)))
+
+
 # --------------------------------------------------------------------------- paths
 def default_config_path() -> Path:
     base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
@@ -271,7 +313,7 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
              "public_ip": str, "interface": str, "office_ip": str, "portable_ip": str},
     "peer": {"name": str, "local_ip": str, "public_ip": str, "ssh_user": str, "ssh_port": int,
              "office_ip": str, "portable_ip": str},
-    "ros": {"master": str, "port": int},
+    "ros": {"master": str, "port": int, "version": int, "zenoh_port": int, "domain_id": int},
     "probe": {"port": int, "public_ip_urls": list, "port_check_url": str},
     "checks": {"timeout_s": (int, float)},
     "sync": {"store": str, "folder": str, "interval_s": (int, float), "dns_server": str,
@@ -350,6 +392,8 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
     if "ros" in raw:
         _check_table(text, path, "ros", raw["ros"])
         s.ros = replace(s.ros, **raw["ros"])
+    if "version" not in raw.get("ros", {}):
+        s.ros.version = default_ros_version()  # files from before ROS 2 keep working
     if "probe" in raw:
         _check_table(text, path, "probe", raw["probe"])
         urls = raw["probe"].get("public_ip_urls", s.probe.public_ip_urls)
@@ -406,7 +450,10 @@ def _table_values(s: Settings) -> dict[str, dict[str, Any]]:
     for k in ("local_ip", "public_ip", "interface", "office_ip", "portable_ip"):
         if getattr(t, k):
             this[k] = getattr(t, k)
-    ros: dict[str, Any] = {"master": s.ros.master or s.master_name, "port": s.ros.port}
+    ros: dict[str, Any] = {"version": s.ros.version, "master": s.ros.master or s.master_name,
+                           "port": s.ros.port}
+    if s.ros2 or s.ros.zenoh_port != ZENOH_PORT_DEFAULT or s.ros.domain_id:
+        ros.update(zenoh_port=s.ros.zenoh_port, domain_id=s.ros.domain_id)
     probe = {"port": s.probe.port, "public_ip_urls": list(s.probe.public_ip_urls),
              "port_check_url": s.probe.port_check_url}
     y = s.sync

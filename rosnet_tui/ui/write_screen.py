@@ -68,7 +68,8 @@ class WriteScreen(ModalScreen[bool]):
             self.query_one("#write-apply", Button).disabled = True
             return
         p = self.preview
-        diff = p.diff()
+        self.companions = self.plan.companions(self.option)  # more files in the same apply
+        diff = "".join([p.diff(), *(c.diff() for c in self.companions)])
         self.query_one("#write-diff", Static).update(
             Syntax(diff, "diff", theme="ansi_dark", word_wrap=True) if diff else
             f"{p.path} already holds this configuration: nothing to write.")
@@ -80,8 +81,10 @@ class WriteScreen(ModalScreen[bool]):
             notes.append(f"Apply writes {p.path} (backup kept; `rosnet-tui undo` reverts).")
         if self.plan.footnote:
             notes.append(self.plan.footnote)
+        notes += [f"Apply writes {c.path} too." for c in self.companions if c.changed]
         status.update("\n".join(notes))
-        self.query_one("#write-apply", Button).disabled = not p.changed
+        self.query_one("#write-apply", Button).disabled = not (
+            p.changed or any(c.changed for c in self.companions))
 
     @on(Button.Pressed, "#write-cancel")
     def action_cancel(self) -> None:
@@ -90,7 +93,8 @@ class WriteScreen(ModalScreen[bool]):
     @on(Button.Pressed, "#write-apply")
     def action_apply(self) -> None:
         p = self.preview
-        if p is None or not p.changed:
+        extra = [c for c in getattr(self, "companions", []) if c.changed]
+        if p is None or not (p.changed or extra):
             return
         state_dir = self.state_dir
         try:
@@ -106,6 +110,8 @@ class WriteScreen(ModalScreen[bool]):
                                 "else was changed.", severity="error", timeout=8)
                     self.refresh_preview()
                     return
+            elif extra:
+                mf.apply_previews([p, *extra], state_dir=state_dir, label=self.plan.title)
             else:
                 mf.apply_preview(p, state_dir=state_dir)
         except mf.StalePreviewError:
