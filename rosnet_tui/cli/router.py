@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, load_settings_or_say
-from rosnet_tui.cli.hosts import confirm, err, rerun_checks, state_dir_of
+from rosnet_tui.cli.hosts import ask, err, interactive, rerun_checks, state_dir_of
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp import journal
 from rosnet_tui.core.upnp.modem import LEASE_MAX_S, LEASE_MIN_S, Modem, find_modem
@@ -99,6 +99,20 @@ def _no_modem(notes: list[str]) -> None:
         err(f"  {n}")
     err("Forward the port by hand in the modem's web page (see the Router step), or switch "
         "UPnP / NAT-PMP on there if it has them.")
+
+
+def _consent(args: argparse.Namespace, question: str) -> int | None:
+    """None to go on; an exit code to stop with (declined, or no terminal to ask on)."""
+    if args.yes:
+        return None
+    if interactive():
+        if ask(question):
+            return None
+        print("Cancelled: nothing was asked of the modem.")
+        return EXIT_FAIL
+    err("rosnet-tui: the modem is not asked without your consent, and there is no terminal to "
+        "ask on: read the forwards above, then run the same command with --yes")
+    return EXIT_USAGE
 
 
 def _lease_words(s: int) -> str:
@@ -215,7 +229,7 @@ def run_map(args: argparse.Namespace) -> int:
     if args.dry_run:
         print("Dry run: nothing was asked of the modem.")
         return EXIT_OK
-    stop = confirm(args, "Ask the modem for these forwards?")
+    stop = _consent(args, "Ask the modem for these forwards?")
     if stop is not None:
         return stop
     try:
@@ -258,7 +272,7 @@ def run_unmap(args: argparse.Namespace) -> int:
     print("Forwards rosnet-tui made (only these are removed):")
     for _e, m in live:
         print(f"  {journal.describe(m)}")
-    stop = confirm(args, "Remove them from the modem?")
+    stop = _consent(args, "Remove them from the modem?")
     if stop is not None:
         return stop
     try:

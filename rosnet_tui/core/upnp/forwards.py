@@ -25,6 +25,9 @@ LEASE_S = 24 * 3600        # a forward we make lasts a day unless renewed (the s
 TEST_LEASE_S = 15 * 60     # the test port: only while the checks run
 DESCRIPTION = "rosnet-tui"
 CGNAT_NET = ipaddress.ip_network("100.64.0.0/10")
+# A home or office LAN's ranges (documentation ranges count as public: the lab's internet).
+PRIVATE_NETS = tuple(ipaddress.ip_network(n) for n in ("10.0.0.0/8", "172.16.0.0/12",
+                                                        "192.168.0.0/16"))
 
 
 @dataclass(frozen=True)
@@ -104,7 +107,9 @@ def wan_kind(external_ip: str | None) -> str:
         return "unknown"
     if a in CGNAT_NET:
         return "shared"
-    return "private" if a.is_private else "public"
+    if any(a in n for n in PRIVATE_NETS):
+        return "private"
+    return "none" if a.is_unspecified or a.is_link_local or a.is_loopback else "public"
 
 
 def wan_words(external_ip: str | None) -> str:
