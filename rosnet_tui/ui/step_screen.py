@@ -103,7 +103,21 @@ class StepScreen(Screen):
         self.sub_title = f"{t.name or '?'} · {t.role} · {t.connection} · {t.profile}"
 
     def refresh_config(self) -> None:
-        """Settings changed: re-render the tailored configuration."""
+        """Settings changed: re-render the tailored configuration (and, when the ROS version
+        changed, the step's list of checks)."""
+        from rosnet_tui.core.steps import step_for
+
+        self.step = step_for(self.step.id, self.session.settings)
+        self.query_one("#expected-text", Static).update(self.step.expected)
+        specs = self.session.specs(self.step.id)
+        if [c.id for c in specs] != [c.id for c in self.specs]:
+            self.specs = specs
+            old = self.query_one("#check-list", CheckList)
+            parent = old.parent
+            old.remove()
+            if parent is not None:
+                parent.mount(CheckList([(c.id, c.title) for c in specs],
+                                       advice=self.session.findings_for, id="check-list"))
         if self.step.id == "router":
             self._render_card()
         else:

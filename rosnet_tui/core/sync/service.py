@@ -550,7 +550,8 @@ class SyncService:
         for n in notes:
             self._once(("conflict", n), logging.WARNING, "%s: %s (rosnet-tui hosts apply "
                        "--comment-conflicts fixes it, with your consent)", self.hosts_path, n)
-        if self.bashrc_path is not None:
+        if self.bashrc_path is not None and not plan.settings.ros2:
+            # (ROS 2: the member's router dials the master by name; the hosts line is all)
             try:
                 previews.append(preview_bashrc(plan.settings, self.bashrc_path))
             except (WriterSettingsError, mf.ManagedFileError) as exc:
@@ -832,6 +833,8 @@ def run_affected_checks(settings: Settings, *, hosts_path: Path, bashrc_path: Pa
     [{"id", "status", "summary"}] in *ids* order."""
     from rosnet_tui.core.checks.runner import RunOptions, run_now, select
 
+    if settings.ros2:  # the ROS 2 counterparts of the ROS 1 checks a new address affects
+        ids = tuple(dict.fromkeys("ros2.router" if i.startswith("ros.") else i for i in ids))
     specs = select(ids=ids)
     env = dict(os.environ)
     with contextlib.suppress(WriterSettingsError):
