@@ -239,3 +239,16 @@ def test_cgnat_modem_refuses_in_words_and_isp_cgnat_uses_it(lab, world):
             assert isp["data"]["cgnat"] is True, isp
             assert isp["data"]["method"] == "upnp" and isp["data"]["wan_ip"] == ""
             assert "no public address" in isp["summary"], isp["summary"]
+
+
+def test_isp_cgnat_reads_the_modems_empty_external_address_as_carrier_nat(lab, world):
+    """miniupnpd behind carrier NAT reports an EMPTY external address (not 100.64.x): that is
+    the modem's own word for carrier-grade NAT, and isp.cgnat must read it as such."""
+    w = world
+    with lab.variant("cgnat"), UpnpModem(lab, stun=False):
+        isp = w.check("robot", step="isp")["isp.cgnat"]
+        assert isp["data"]["method"] == "upnp", isp
+        assert isp["data"]["wan_ip"] == "", isp
+        assert isp["data"]["cgnat"] is True, isp
+        assert "no public address" in isp["summary"], isp["summary"]
+        assert not any(e.rstrip().endswith("WAN address is") for e in isp["evidence"]), isp

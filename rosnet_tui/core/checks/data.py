@@ -66,8 +66,8 @@ class IspPublicIpData(TypedDict, total=False):
 
 
 class IspCgnatData(TypedDict, total=False):
-    wan_ip: str | None   # the modem's internet-side address as it told over UPnP (None: not asked)
-    method: Literal["none", "upnp", "traceroute"]  # how the verdict was reached
+    wan_ip: str | None   # the modem's internet-side address as it told (UPnP IGD, NAT-PMP; "": it reports none; None: not told)
+    method: Literal["none", "upnp", "traceroute"]  # how the verdict was reached ("upnp": the modem's own word)
     cgnat: bool          # carrier-grade NAT (100.64.0.0/10) seen on the way out
     double_nat: bool     # a second private NAT seen on the way out
     hop: str | None      # the address that shows the NAT (None: no NAT seen)

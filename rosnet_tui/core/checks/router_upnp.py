@@ -96,6 +96,13 @@ async def check_upnp(ctx: CheckContext) -> Outcome:
     data["needed"] = [w.port for w in lasting]
     if need.note:
         return Outcome(Status.SKIP, f"skipped: {need.note}", [], data)
+    if need.refusal:  # ROS 1: whatever the modem speaks, a range cannot be asked for
+        data["range_needed"] = True
+        ip = s.this.local_ip or "this machine's local IP"
+        return Outcome(Status.SKIP, "skipped: ROS 1 needs TCP 1024-65000 and no protocol maps a "
+                                    "range (UPnP IGD, PCP and NAT-PMP forward one port per "
+                                    f"request): forward the range to {ip} by hand in the modem's "
+                                    f"page, or make {ip} the DMZ host", [need.refusal], data)
     total = budget(ctx, "router.upnp") * 0.9
     start = time.monotonic()
     notes: list[str] = []
@@ -116,11 +123,6 @@ async def check_upnp(ctx: CheckContext) -> Outcome:
     if modem.external_ip is not None:
         evidence.append(f"the modem's external address: {modem.external_ip or '(none)'}")
     evidence += [n for n in notes if "error" in n or "refused" in n]
-    if need.refusal:
-        data["range_needed"] = True
-        return Outcome(Status.SKIP, f"skipped: {modem.describe()}, but ROS 1 needs the whole range "
-                                    "1024-65000 and no protocol maps a range: forward it by hand "
-                                    "or use the DMZ (see the advice)", evidence, data)
     deadline = start + total
     try:
         got = await run_blocking(_inspect, modem, lasting, ctx.state_dir, deadline,
