@@ -45,6 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     a = rs.add_parser("map", help="forward what the settings call for (asks first)")
     _common(a)
+    a.add_argument("--protocol", choices=PROTOCOL_CHOICES, default="auto",
+                   help="which protocol to ask with (default: UPnP IGD, else PCP, else NAT-PMP)")
     a.add_argument("--dry-run", action="store_true", help="show what would be asked, ask nothing")
     a.add_argument("--yes", "-y", action="store_true",
                    help="ask the modem without asking you (needed where there is no terminal)")
@@ -69,8 +71,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _common(p: argparse.ArgumentParser) -> None:
     add_config_option(p)
-    p.add_argument("--protocol", choices=PROTOCOL_CHOICES, default="auto",
-                   help="which protocol to use (default: UPnP IGD, else PCP, else NAT-PMP)")
     p.add_argument("--timeout", type=float, metavar="S", default=None,
                    help="seconds to find the modem (default: checks.timeout_s, 3)")
     p.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
@@ -85,12 +85,10 @@ def _timeout(args: argparse.Namespace, settings) -> float | None:
     return t
 
 
-def _find(args: argparse.Namespace, timeout: float) -> tuple[Modem | None, list[str]]:
+def _find(timeout: float) -> tuple[Modem | None, list[str]]:
+    """The modem over every protocol (each one tells something: IGD and NAT-PMP its address)."""
     notes: list[str] = []
-    protocols = None if args.protocol == "auto" else (args.protocol,)
-    modem = (find_modem(timeout, notes=notes) if protocols is None
-             else find_modem(timeout, notes=notes, protocols=protocols))
-    return modem, notes
+    return find_modem(timeout, notes=notes), notes
 
 
 def _no_modem(notes: list[str]) -> None:
@@ -115,20 +113,9 @@ def _consent(args: argparse.Namespace, question: str) -> int | None:
     return EXIT_USAGE
 
 
-def _lease_words(s: int) -> str:
-    if s >= 3600 and s % 3600 == 0:
-        return f"{s // 3600} h"
-    return f"{s // 60} min" if s >= 60 and s % 60 == 0 else f"{s} s"
-
-
 def _say_modem(modem: Modem) -> None:
-    print(f"Modem: {modem.describe()}.")
-    if modem.external_ip is not None:
-        kind = fw.wan_kind(modem.external_ip)
-        print(f"  external address: {modem.external_ip or '(none reported)'}"
-              + ("" if kind == "public" else f" - it {fw.wan_words(modem.external_ip)}"))
-    if modem.mac:
-        print(f"  MAC address: {modem.mac}")
+    for line in fw.modem_lines(modem):
+        print(line)
 
 
 # --------------------------------------------------------------------------- mappings
@@ -139,7 +126,7 @@ def run_mappings(args: argparse.Namespace) -> int:
     timeout = _timeout(args, settings)
     if timeout is None:
         return EXIT_USAGE
-    modem, notes = _find(args, timeout)
+    modem, notes = _find(timeout)
     sd = state_dir_of(args)
     if modem is None:
         if args.json:
@@ -174,7 +161,7 @@ def run_mappings(args: argparse.Namespace) -> int:
             print("Forwards rosnet-tui made on this modem:")
             for m in recorded.values():
                 print(f"  * {m['protocol']} {m['port']} -> {m['internal_client']}:{m['port']} "
-                      f"({m.get('via')}, lease {_lease_words(int(m.get('lease_s') or 0))})")
+                      f"({m.get('via')}, lease {fw.lease_words(int(m.get('lease_s') or 0))})")
         return EXIT_OK if not why else EXIT_FAIL
     if not listed:
         print("The modem holds no forward.")
@@ -182,7 +169,7 @@ def run_mappings(args: argparse.Namespace) -> int:
         print("Forwards the modem holds (* made by rosnet-tui for this machine):")
         for f in listed:
             mark = "*" if fw.is_ours(f, modem, set(recorded)) else " "
-            lease = _lease_words(f.lease_s) if f.lease_s else "no expiry"
+            lease = fw.lease_words(f.lease_s) if f.lease_s else "no expiry"
             print(f"  {mark} {f.protocol} {f.external_port} -> {f.internal_client}:"
                   f"{f.internal_port}  lease {lease}  '{f.description}'")
     return EXIT_OK
@@ -200,32 +187,24 @@ def run_map(args: argparse.Namespace) -> int:
     timeout = _timeout(args, settings)
     if timeout is None:
         return EXIT_USAGE
-    need = fw.needs(settings, lease_s=args.lease, test_port=not args.no_test_port)
-    if need.refusal:
-        err(f"rosnet-tui: nothing was asked of the modem. {need.refusal}")
-        return EXIT_FAIL
-    if not need.forwards:
-        print(f"Nothing to forward: {need.note}.")
-        return EXIT_OK
-    modem, notes = _find(args, timeout)
-    if modem is None:
-        _no_modem(notes)
-        return EXIT_FAIL
-    via = modem.protocol if args.protocol == "auto" else args.protocol
-    _say_modem(modem)
     sd = state_dir_of(args)
-    ours = fw.recorded_here(modem, sd)
-    print(f"Forwards to ask for, over {label(via)}:")
-    for w in need.forwards:
-        again = " (already ours: the lease is renewed)" if (w.protocol, w.port) in ours else ""
-        print(f"  {w.protocol} {w.port} -> {modem.local_ip}:{w.port}  lease "
-              f"{_lease_words(w.lease_s)}  {w.why}{again}")
-    if settings.this.local_ip and settings.this.local_ip != modem.local_ip:
-        print(f"note: the settings name {settings.this.local_ip} as this machine's local IP, but "
-              f"it reaches the modem from {modem.local_ip}: the forward goes to {modem.local_ip}")
-    if fw.wan_kind(modem.external_ip) in ("none", "shared"):
-        print(f"warning: the modem {fw.wan_words(modem.external_ip)}: a sign of carrier-grade "
-              "NAT; it will probably refuse")
+    plan = fw.preview(settings, state_dir=sd, timeout=timeout, lease_s=args.lease,
+                      test_port=not args.no_test_port, via=args.protocol)
+    for line in plan.lines:
+        print(line)
+    if plan.blocked:
+        if plan.modem is None and plan.need.forwards:
+            _no_modem(plan.notes)
+            return EXIT_FAIL
+        if not plan.need.forwards and not plan.need.refusal:
+            print(plan.blocked)
+            return EXIT_OK
+        err(f"rosnet-tui: nothing was asked of the modem. {plan.blocked}")
+        return EXIT_FAIL
+    modem, via = plan.modem, plan.via
+    assert modem is not None
+    for w in plan.warnings:
+        print(f"warning: {w}")
     if args.dry_run:
         print("Dry run: nothing was asked of the modem.")
         return EXIT_OK
@@ -233,11 +212,11 @@ def run_map(args: argparse.Namespace) -> int:
     if stop is not None:
         return stop
     try:
-        result = fw.map_forwards(settings, modem, need.forwards, state_dir=sd, via=via,
+        result = fw.map_forwards(settings, modem, plan.need.forwards, state_dir=sd, via=via,
                                  timeout=max(timeout * 2, 5.0))
     except fw.MapRefused as exc:
         err(f"rosnet-tui: refused, nothing was changed: {exc.words}")
-        return EXIT_USAGE if exc.kind == "usage" else EXIT_FAIL
+        return EXIT_FAIL
     except ModemError as exc:
         err(f"rosnet-tui: the modem did not give a usable answer, nothing was changed: {exc}")
         return EXIT_FAIL
@@ -245,7 +224,7 @@ def run_map(args: argparse.Namespace) -> int:
         print(f"warning: {w}")
     for m in result.made:
         print(f"Forwarded {m['protocol']} {m['port']} -> {m['internal_client']}:{m['port']} "
-              f"({label(m['via'])}, lease {_lease_words(int(m['lease_s']))}).")
+              f"({label(m['via'])}, lease {fw.lease_words(int(m['lease_s']))}).")
     for p in result.refreshed:
         print(f"Renewed the lease of TCP {p} (already forwarded by rosnet-tui).")
     if result.entry_id:

@@ -271,8 +271,7 @@ STEPS: tuple[Step, ...] = (
          "A port tested from outside the modem is reported Open: the modem forwards it to "
          "this component.",
          configure_router,
-         ("router.local_ip", "router.port_free", "router.listener", "router.port_open",
-          "router.upnp")),
+         ("router.local_ip", "router.port_free", "router.listener", "router.port_open")),
     Step("linux",
          "The components ping each other by name, open SSH sessions by name, and exchange "
          "messages over TCP by name, whichever side starts.",

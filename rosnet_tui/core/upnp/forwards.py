@@ -331,3 +331,95 @@ def renew_due(settings: Settings, *, state_dir: Path | None = None, now: float |
     left = [float(m.get("renewed_at", 0)) + int(m.get("lease_s", LEASE_S)) / 2 - now
             for _e, m in journal.live(state_dir) if not m.get("temporary")]
     return said, (max(min(left), 60.0) if left else None)
+
+
+# --------------------------------------------------------------------------- the preview
+def lease_words(s: int) -> str:
+    if s >= 3600 and s % 3600 == 0:
+        return f"{s // 3600} h"
+    return f"{s // 60} min" if s >= 60 and s % 60 == 0 else f"{s} s"
+
+
+@dataclass
+class MapPreview:
+    """What `router map` (and the wizard's m) would ask the modem, before asking anything."""
+
+    need: Needs
+    modem: Modem | None = None
+    via: str = ""
+    notes: list[str] = field(default_factory=list)   # what was tried to find the modem
+    lines: list[str] = field(default_factory=list)   # the modem, then each forward to ask for
+    warnings: list[str] = field(default_factory=list)
+    blocked: str = ""        # why nothing can be asked ("" when it can)
+
+
+def modem_lines(modem: Modem) -> list[str]:
+    out = [f"Modem: {modem.describe()}."]
+    if modem.external_ip is not None:
+        kind = wan_kind(modem.external_ip)
+        out.append(f"  external address: {modem.external_ip or '(none reported)'}"
+                   + ("" if kind == "public" else f" - it {wan_words(modem.external_ip)}"))
+    if modem.mac:
+        out.append(f"  MAC address: {modem.mac}")
+    return out
+
+
+def preview(settings: Settings, *, state_dir: Path | None = None, timeout: float = 3.0,
+            lease_s: int = LEASE_S, test_port: bool = True, via: str = "auto") -> MapPreview:
+    """Find the modem and say what would be asked of it (nothing is asked yet)."""
+    from rosnet_tui.core.upnp.modem import find_modem
+
+    out = MapPreview(needs(settings, lease_s=lease_s, test_port=test_port))
+    if out.need.refusal:
+        out.blocked = out.need.refusal
+        return out
+    if not out.need.forwards:
+        out.blocked = f"Nothing to forward: {out.need.note}."
+        return out
+    out.modem = find_modem(timeout, notes=out.notes)
+    if out.modem is None:
+        out.blocked = ("No modem answered UPnP IGD, PCP or NAT-PMP (the default gateway was "
+                       "asked): forward the port by hand in the modem's web page, or switch UPnP "
+                       "or NAT-PMP on there if it has them.")
+        return out
+    m = out.modem
+    out.via = m.protocol if via == "auto" else via
+    out.lines = modem_lines(m)
+    if out.via not in m.protocols:
+        out.blocked = (f"The modem does not answer {label(out.via)} (it speaks "
+                       f"{', '.join(label(p) for p in m.protocols)}).")
+        return out
+    ours = recorded_here(m, state_dir)
+    out.lines.append(f"Forwards to ask for, over {label(out.via)}:")
+    for w in out.need.forwards:
+        again = " (already ours: the lease is renewed)" if (w.protocol, w.port) in ours else ""
+        out.lines.append(f"  {w.protocol} {w.port} -> {m.local_ip}:{w.port}  lease "
+                         f"{lease_words(w.lease_s)}  {w.why}{again}")
+    if settings.this.local_ip and settings.this.local_ip != m.local_ip:
+        out.warnings.append(f"the settings name {settings.this.local_ip} as this machine's local "
+                            f"IP, but it reaches the modem from {m.local_ip}: the forward goes "
+                            f"to {m.local_ip}")
+    if wan_kind(m.external_ip) in ("none", "shared"):
+        out.warnings.append(f"the modem {wan_words(m.external_ip)}: a sign of carrier-grade NAT; "
+                            "it will probably refuse")
+    return out
+
+
+def card_lines(data: dict | None) -> list[str]:
+    """The Router step's words for router.upnp's data (the modem's own word), or nothing."""
+    if not data or not data.get("protocols"):
+        return []
+    speaks = " and ".join(label(str(p)) for p in data["protocols"])
+    out = [f"The modem {data.get('gateway')} speaks {speaks}."]
+    ip = data.get("external_ip")
+    if ip is not None:
+        out.append(f"It says its external address is {ip or '(none)'}"
+                   + ("" if data.get("wan") in ("public", "unknown") else
+                      f": {wan_words(ip)}") + ".")
+    for f in data.get("forwards") or []:
+        out.append(f"It forwards {f.get('protocol')} {f.get('external_port')} here "
+                   f"('{f.get('description')}').")
+    if data.get("missing") and not data.get("cgnat"):
+        ports = ", ".join(f"TCP {p}" for p in data["missing"])
+        out.append(f"It can forward {ports} for you: press m (or `rosnet-tui router map`).")
+    return out
