@@ -252,3 +252,64 @@ def test_isp_cgnat_reads_the_modems_empty_external_address_as_carrier_nat(lab, w
         assert isp["data"]["cgnat"] is True, isp
         assert "no public address" in isp["summary"], isp["summary"]
         assert not any(e.rstrip().endswith("WAN address is") for e in isp["evidence"]), isp
+
+
+# ---------------------------------------------------------------------------- leases and undo
+def test_sync_renews_our_lease_and_removes_the_forward_when_stopped_if_asked(lab, world,
+                                                                              tmp_path):
+    import signal
+
+    from rosnet_tui.core.settings import SyncSettings, atomic_write_text, render_settings
+
+    w = world
+    sd = tmp_path / "state"
+    with UpnpModem(lab) as modem:
+        r = rosnet(lab, w, "robot", "router", "map", "--yes", "--no-checks", "--no-test-port",
+                   "--lease", "120", "--state-dir", str(sd))
+        assert r.returncode == 0, r.stdout + r.stderr
+        entry = next((sd / "journal").glob("*.json"))
+        doc = json.loads(entry.read_text())
+        doc["mappings"][0]["renewed_at"] -= 100          # most of the lease is gone
+        entry.write_text(json.dumps(doc))
+        s = w.settings("robot")
+        (tmp_path / "shared").mkdir()
+        s.sync = SyncSettings(store="folder", folder=str(tmp_path / "shared"), interval_s=2.0)
+        s.has_sync = True
+        cfg = tmp_path / "sync.toml"
+        atomic_write_text(cfg, render_settings(s), mode=0o644)
+        hosts = tmp_path / "hosts"
+        hosts.write_text("127.0.0.1 localhost\n")
+        proc = lab.spawn("robot", [sys.executable, "-m", "rosnet_tui", "sync", "--config",
+                                   str(cfg), "--state-dir", str(sd), "--hosts-file", str(hosts),
+                                   "--no-bashrc", "--no-checks", "--no-save-settings",
+                                   "--unmap-on-stop"], env=w.env("robot"))
+        try:
+            assert lab.wait_output(proc, r"modem: renewed TCP 7447", timeout=20), \
+                lab.output(proc)
+            renewed = json.loads(entry.read_text())["mappings"][0]
+            assert time.time() - renewed["renewed_at"] < 30
+            assert reachable(lab, ZPORT)
+            proc.send_signal(signal.SIGTERM)
+            assert lab.wait_output(proc, r"sync stopped", timeout=20), lab.output(proc)
+        finally:
+            lab.kill(proc)
+        assert "TCP 7447: removed from the modem" in lab.output(proc)
+        assert modem.wait_mapped(ZPORT, present=False)
+        assert not reachable(lab, ZPORT)
+
+
+def test_undo_refuses_when_the_modem_is_gone_and_force_forgets(lab, world):
+    w = world
+    with UpnpModem(lab) as modem:
+        r = rosnet(lab, w, "robot", "router", "map", "--yes", "--no-checks", "--no-test-port")
+        assert r.returncode == 0, r.stderr
+        modem.stop()                                # the robot is on another network now
+        r = rosnet(lab, w, "robot", "undo", "--yes", "--no-checks")
+        assert r.returncode == 1, r.stdout + r.stderr
+        assert "cannot remove TCP 7447" in r.stderr and "no modem answers" in r.stderr
+        assert "Nothing was changed" in r.stderr
+        r = rosnet(lab, w, "robot", "undo", "--yes", "--no-checks", "--force")
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert "forgotten, not removed" in r.stdout
+        r = rosnet(lab, w, "robot", "undo", "--yes", "--no-checks")
+        assert "nothing to undo" in r.stdout

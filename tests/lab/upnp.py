@@ -42,12 +42,13 @@ UUID = "1f0c3c2e-5a0b-4a40-9c1d-7e2f00000018"
 MINIUPNPD = "/usr/sbin/miniupnpd"
 STUND = "/usr/sbin/stund"
 NFT = "/usr/sbin/nft"
+NATPMPC = "/usr/bin/natpmpc"   # the second LAN host's own NAT-PMP client
 
 
 def upnp_available() -> tuple[bool, str]:
-    missing = [p for p in (MINIUPNPD, STUND, NFT) if not Path(p).exists()]
+    missing = [p for p in (MINIUPNPD, STUND, NFT, NATPMPC) if not Path(p).exists()]
     if missing:
-        return False, ("the UPnP lab needs Debian's miniupnpd, stun-server and nftables: "
+        return False, ("the UPnP lab needs Debian's miniupnpd, stun-server, nftables and natpmpc: "
                        + ", ".join(missing) + " missing")
     return True, ""
 

@@ -135,7 +135,8 @@ class SyncService:
                  store: RecordStore | None = None,
                  local_source: Callable[[Settings], LocalAddress] = observe_local,
                  public_source: Callable[[Settings], PublicLookup] | None = None,
-                 save_learned: bool = True, netlink: bool = True) -> None:
+                 save_learned: bool = True, netlink: bool = True,
+                 unmap_on_stop: bool = False) -> None:
         self.config_path = Path(config_path)
         self.state_dir = Path(state_dir)
         self.hosts_path = Path(hosts_path)
@@ -147,6 +148,7 @@ class SyncService:
             lambda s: lookup_public_ip(s, self.state_dir, max(1.0, float(s.checks.timeout_s))))
         self.save_learned = save_learned
         self.use_netlink = netlink
+        self.unmap_on_stop = unmap_on_stop      # remove our forwards on the modem when stopped
         self._store_fixed = store is not None
         self.store: RecordStore | None = store
         self._store_key: Any = None
@@ -169,6 +171,7 @@ class SyncService:
         self.next_publish = now
         self.next_apply = now
         self.next_verify = now
+        self.next_renew = now                   # our forwards' leases on the modem
         self.recheck_at: float | None = None
         self._recheck_left: list[float] = []
         self._last_plan: Plan | None = None
@@ -323,6 +326,8 @@ class SyncService:
             applied = self._apply(mono)
         if self.recheck_at is not None and time.monotonic() >= self.recheck_at:
             self._recheck()
+        if time.monotonic() >= self.next_renew:
+            self._renew_forwards()
         self._save_status()
         errors = {k: v["message"] for k, v in self.status["errors"].items()}
         return RoundResult(not errors, applied, errors)
@@ -720,6 +725,29 @@ class SyncService:
         self._status_dirty = False
         self._alive_saved = now
 
+    # ================================================================== forwards on the modem
+    def _renew_forwards(self) -> None:
+        """Renew the leases of the forwards `rosnet-tui router map` made (bounded, quiet when
+        there are none: the journal says so without asking the modem)."""
+        from rosnet_tui.core.upnp.forwards import renew_due
+
+        try:
+            said, next_in = renew_due(self.settings, state_dir=self.state_dir)
+        except Exception as exc:  # noqa: BLE001 - the modem's trouble must not stop the sync
+            said, next_in = [f"renewing the forwards failed: {exc}"], 300.0
+        for line in said:
+            log.info("modem: %s", line)
+        self.next_renew = time.monotonic() + (next_in if next_in is not None else 600.0)
+
+    def _unmap_forwards(self) -> None:
+        from rosnet_tui.core.upnp.forwards import unmap_ours
+
+        try:
+            for line in unmap_ours(state_dir=self.state_dir, timeout=5.0):
+                log.info("modem: %s", line)
+        except Exception as exc:  # noqa: BLE001
+            log.warning("modem: the forwards were not removed: %s", exc)
+
     # ================================================================== running
     def stop(self) -> None:
         """Ask the loop to stop (safe from a signal handler or another thread)."""
@@ -803,6 +831,8 @@ class SyncService:
             sel.close()
             if monitor is not None:
                 monitor.close()
+            if self.unmap_on_stop:
+                self._unmap_forwards()
             log.info("sync stopped")
             self._finish(lock)
             self.close()
