@@ -70,3 +70,24 @@ UPNP_CASES = {
     "router.upnp.cgnat": _case(r("warn", external_ip="", wan="none", cgnat=True,
                                  missing=[7447])),
 }
+
+
+def test_isp_cgnat_from_the_modems_empty_address_is_worded_as_such():
+    from rosnet_tui.core.checks.isp import judge_no_wan
+    from rosnet_tui.core.results import Status as S
+
+    st, summary, upd = judge_no_wan({})
+    assert st is S.WARN and upd == {"cgnat": True, "hop": None}
+    assert summary.startswith("carrier-grade NAT: the modem reports no public address")
+    st, summary, upd = judge_no_wan({"double_nat": True, "hop": "192.168.0.1"})
+    assert upd["double_nat"] and "192.168.0.1" in summary
+    res = CheckResult("isp.cgnat", "isp", Status.WARN, summary, [], 0.1, 6.0,
+                      {"wan_ip": "", "method": "upnp", "cgnat": True, "double_nat": False,
+                       "hop": None})
+    f = only(advise([res], member()), "ros2.cgnat")   # a member: harmless under ROS 2
+    assert f.severity == "info"
+    from rosnet_tui.core.settings import Settings, ThisComponent
+
+    ros1 = Settings(this=ThisComponent(name="turtlebot", role="master"))
+    f = only(advise([res], ros1), "isp.cgnat")
+    assert "the modem itself reports no public address" in f.meaning, f.meaning

@@ -457,3 +457,59 @@ def test_journal_entries_without_forwards_are_written_as_before(tmp_path):
     e2 = mf.JournalEntry.from_json({**e.to_json(), "mappings": [m, "junk", 3]})
     assert e2.mappings == [m]
     assert mf.JournalEntry.from_json(e2.to_json()).mappings == [m]
+
+
+# --------------------------------------------------------------------------- the commands
+def _cli(tmp_path, settings, *args: str):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from rosnet_tui.core.settings import render_settings
+
+    cfg = tmp_path / "config.toml"
+    cfg.write_text(render_settings(settings))
+    root = Path(__file__).resolve().parents[1]
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(root), "HOME": str(tmp_path),
+           "XDG_STATE_HOME": str(tmp_path / "state")}
+    return subprocess.run([sys.executable, "-m", "rosnet_tui", "router", *args, "--config",
+                           str(cfg)], capture_output=True, text=True, timeout=60, env=env)
+
+
+def _master(version: int):
+    from rosnet_tui.core.settings import RosSettings, Settings, ThisComponent
+
+    return Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1",
+                                       interface="lo"),
+                    ros=RosSettings(master="turtlebot", version=version))
+
+
+def test_router_map_refuses_ros1_in_words_without_asking_any_modem(tmp_path):
+    p = _cli(tmp_path, _master(1), "map", "--yes")
+    assert p.returncode == 1, p.stdout + p.stderr
+    assert "nothing was asked of the modem" in p.stderr
+    assert "no protocol maps a range" in p.stderr and "DMZ" in p.stderr
+
+
+def test_router_map_on_a_ros2_member_has_nothing_to_do(tmp_path):
+    from rosnet_tui.core.settings import Peer
+
+    s = _master(2)
+    s.this.name, s.this.role = "sami", "member"
+    s.peers = [Peer(name="turtlebot", public_ip="203.0.113.2")]
+    p = _cli(tmp_path, s, "map", "--yes")
+    assert p.returncode == 0 and "Nothing to forward" in p.stdout, p.stdout + p.stderr
+
+
+@pytest.mark.parametrize("args,match", [
+    (["map", "--lease", "0"], "--lease must be between"),
+    (["map", "--lease", "999999999"], "--lease must be between"),
+    (["map", "--timeout", "0"], "--timeout must be between"),
+    (["map", "--protocol", "ssh"], "invalid choice"),
+    ([], "ACTION"),
+])
+def test_router_bad_usage_is_exit_2(tmp_path, args, match):
+    p = _cli(tmp_path, _master(2), *args)
+    assert p.returncode == 2, p.stdout + p.stderr
+    assert match in p.stderr
+    assert "Traceback" not in p.stderr
