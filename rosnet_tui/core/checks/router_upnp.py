@@ -4,7 +4,8 @@ Asked over UPnP IGD, PCP or NAT-PMP (the default gateway only, all at once, boun
 check's timeout): pass when the forward the settings call for exists and points at this machine;
 warn when the modem offers forwarding but the forward is missing (``rosnet-tui router map`` makes
 it); fail when the port is forwarded to another machine; skip when no modem answers, or when
-nothing can be mapped (a ROS 2 member needs nothing; ROS 1 needs a range, which no protocol maps).
+nothing needs mapping (a ROS 2 member). A ROS 2 check: ROS 1 needs a range, which no protocol
+maps (the wizard's m and ``router map`` say so, with the manual and DMZ paths).
 ``router.port_open`` still proves reachability from outside.
 """
 
@@ -81,7 +82,8 @@ def _inspect(modem: Modem, wanted: list[fw.Wanted], state_dir, deadline: float) 
     return out
 
 
-@check("router.upnp", "router", "The modem forwards our port itself (UPnP IGD, NAT-PMP, PCP)", 1.5)
+@check("router.upnp", "router", "The modem forwards our port itself (UPnP IGD, NAT-PMP, PCP)", 1.5,
+       ros=2)
 async def check_upnp(ctx: CheckContext) -> Outcome:
     s = ctx.settings
     data: dict[str, Any] = {"protocol": None, "protocols": [], "gateway": None,
