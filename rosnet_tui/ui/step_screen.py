@@ -114,18 +114,22 @@ class StepScreen(Screen):
         specs = self.session.specs(self.step.id)
         if [c.id for c in specs] != [c.id for c in self.specs]:
             self.specs = specs
-            old = self.query_one("#check-list", CheckList)
-            parent = old.parent
-            old.remove()
-            if parent is not None:
-                parent.mount(CheckList([(c.id, c.title) for c in specs],
-                                       advice=self.session.findings_for, id="check-list"))
+            self.run_worker(self._replace_check_list(specs), exclusive=False)
         if self.step.id == "router":
             self._render_card()
         else:
             self.config_source = self.session.configuration_text(self.step.id)
             self.query_one("#config-text", Static).update(_markdown(self.config_source))
         self.refresh_subtitle()
+
+    async def _replace_check_list(self, specs: list) -> None:
+        old = self.query_one("#check-list", CheckList)
+        parent = old.parent
+        await old.remove()
+        if parent is not None:
+            await parent.mount(CheckList([(c.id, c.title) for c in specs],
+                                         advice=self.session.findings_for, id="check-list"))
+            self._sync_results()
 
     def _render_card(self) -> None:
         pane = self.query_one("#config-pane")
