@@ -313,3 +313,18 @@ def test_undo_refuses_when_the_modem_is_gone_and_force_forgets(lab, world):
         assert "forgotten, not removed" in r.stdout
         r = rosnet(lab, w, "robot", "undo", "--yes", "--no-checks")
         assert "nothing to undo" in r.stdout
+
+
+def test_isp_cgnat_is_not_fooled_by_a_modem_that_learned_the_carriers_address_by_stun(lab, world):
+    """With STUN, miniupnpd behind carrier NAT reports the carrier's public address as its own;
+    the path still shows the carrier's 100.64 hop, and that wins."""
+    w = world
+    with lab.variant("cgnat"), UpnpModem(lab, stun=True):
+        isp = w.check("robot", step="isp")["isp.cgnat"]
+        assert isp["data"]["cgnat"] is True, isp
+        assert isp["data"]["wan_ip"] == ADDR.CARRIER_PUBLIC, isp
+        res = w.check("robot", step="router")
+        r = rosnet(lab, w, "robot", "router", "map", "--yes", "--no-checks")
+        assert r.returncode == 1, r.stdout + r.stderr
+        assert "UPnP IGD error 501" in r.stderr, r.stderr
+        assert res["router.upnp"]["status"] in ("warn", "fail"), explain(res)

@@ -378,6 +378,14 @@ async def check_cgnat(ctx: CheckContext) -> Outcome:
         return Outcome(status, summary, evidence, data)
     if wan_ip:
         data.update(wan_ip=wan_ip, method="upnp")
+        if hops:  # a modem can learn a public address from outside (STUN): the path has the say
+            p_status, p_summary, seen = judge_path(hops, target or "", data.get("source"))
+            if seen.get("cgnat") or seen.get("double_nat"):
+                evidence.append(f"the modem reports {wan_ip} as its address, but the path out "
+                                "shows NAT beyond it (a modem can learn the outside address, "
+                                "e.g. by STUN)")
+                data.update(seen, method="traceroute", hops=[h.ip for h in hops])
+                return Outcome(p_status, p_summary, evidence, data)
         public_ip = None
         if is_public_v4(wan_ip):
             public_ip = await fetch_public_ip(ctx, max(total - (time.monotonic() - start), 0.5))
