@@ -513,3 +513,13 @@ def test_router_bad_usage_is_exit_2(tmp_path, args, match):
     assert p.returncode == 2, p.stdout + p.stderr
     assert match in p.stderr
     assert "Traceback" not in p.stderr
+
+
+def test_pcp_to_a_natpmp_only_modem_ends_at_once(udp):
+    udp(lambda req: [struct.pack("!BBHI", 0, 128 + req[1], 1, 7)])   # "unsupported version"
+    t = time.monotonic()
+    with pytest.raises(NoAnswer, match="NAT-PMP only"):
+        pmp.pcp_map(HOST, HOST, "TCP", 7447, 7447, 600, bytes(12), soon())
+    with pytest.raises(NoAnswer, match="NAT-PMP only"):
+        pmp.pcp_announce(HOST, HOST, soon())
+    assert time.monotonic() - t < 0.5

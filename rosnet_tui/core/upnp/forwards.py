@@ -244,6 +244,8 @@ def map_forwards(settings: Settings, modem: Modem, wanted: list[Wanted], *,
                               and m["protocol"] == rec["protocol"]) if entry else rec
                 target.update(got, state="made", made_at=now, renewed_at=now)
                 made.append(target)
+                if entry is not None:  # at once: a crash now still leaves it undoable
+                    journal.save(entry, state_dir)
     except BaseException:
         if entry is not None:
             for m in made:

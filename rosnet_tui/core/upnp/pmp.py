@@ -162,7 +162,7 @@ def pcp_announce(gateway: str, client_ip: str, deadline: float, *,
 
     def accept(d: bytes):
         if len(d) < 4 or d[0] != 2 or d[1] != 0x80:
-            if len(d) >= 4 and d[0] == 0 and d[1] == 0x80 and d[3] == 1:
+            if len(d) >= 4 and d[0] == 0 and d[1] >= 0x80 and d[3] == 1:
                 raise NoAnswer("the modem speaks NAT-PMP only")
             return None
         if len(d) != 24:
@@ -193,7 +193,7 @@ def pcp_map(gateway: str, client_ip: str, protocol: str, internal_port: int,
 
     def accept(d: bytes):
         if len(d) < 4 or d[0] != 2 or d[1] != 0x81:
-            if len(d) >= 4 and d[0] == 0 and d[1] == 0x80 and d[3] == 1:
+            if len(d) >= 4 and d[0] == 0 and d[1] >= 0x80 and d[3] == 1:
                 raise NoAnswer("the modem speaks NAT-PMP only")
             return None
         if len(d) < 60 or (len(d) - 60) % 4:
