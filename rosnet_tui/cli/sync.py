@@ -18,7 +18,15 @@ import time
 from pathlib import Path
 
 import rosnet_tui
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, config_path
+from rosnet_tui.cli import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    config_path,
+    number_in,
+    state_dir_problem,
+)
 from rosnet_tui.core import privilege
 
 UNIT_NAME = "rosnet-tui-sync.service"
@@ -44,8 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--unmap-on-stop", action="store_true",
                    help="when stopped, remove the forwards `rosnet-tui router map` made on the "
                         "modem (they are renewed while the service runs)")
-    p.add_argument("--interval", type=float, metavar="S", default=None,
-                   help="public-IP poll interval in seconds (default: sync.interval_s, 60)")
+    p.add_argument("--interval", type=number_in(1, 86400), metavar="S", default=None,
+                   help="public-IP poll interval in seconds, 1-86400 (default: "
+                        "sync.interval_s, 60)")
     p.add_argument("-v", "--verbose", action="store_true", help="log every step (debug)")
     p.add_argument("-q", "--quiet", action="store_true", help="log only warnings and errors")
     p.set_defaults(func=run_service)
@@ -131,8 +140,9 @@ def run_service(args: argparse.Namespace) -> int:
     from rosnet_tui.core.sync.service import SyncError, SyncService, install_signal_handlers
 
     _setup_logging(args)
-    if args.interval is not None and not 1 <= args.interval <= 86400:
-        _err("rosnet-tui sync: --interval must be between 1 and 86400 seconds")
+    bad_dir = state_dir_problem(_state_dir(args))
+    if bad_dir:
+        _err(f"rosnet-tui sync: {bad_dir}")
         return EXIT_USAGE
     hosts = Path(args.hosts_file).expanduser().absolute() if args.hosts_file else DEFAULT_HOSTS_PATH
     try:

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, add_config_option
+from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, state_dir_problem
 from rosnet_tui.cli.hosts import (
     HOSTS_CHECKS,
     confirm,
@@ -55,6 +55,10 @@ def _settings_quietly(args: argparse.Namespace) -> Settings | None:
 
 def run(args: argparse.Namespace) -> int:
     sd = state_dir_of(args)
+    bad_dir = state_dir_problem(sd)
+    if bad_dir:
+        err(f"rosnet-tui undo: {bad_dir}")
+        return EXIT_USAGE
     try:
         plan = mf.plan_undo(sd, entry_id=args.expect_entry)
     except mf.NothingToUndoError as exc:

@@ -10,7 +10,10 @@ the manual and DMZ paths instead.
 from __future__ import annotations
 
 import contextlib
+import copy
+import functools
 import ipaddress
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -425,3 +428,45 @@ def card_lines(data: dict | None) -> list[str]:
         ports = ", ".join(f"TCP {p}" for p in data["missing"])
         out.append(f"It can forward {ports} for you: press m (or `rosnet-tui router map`).")
     return out
+
+
+class Renewer:
+    """The sync service's part: renew our forwards' leases when due, on a thread of its own
+    while the service runs (its loop never waits on a modem), in line for a single round."""
+
+    def __init__(self, state_dir: Path, log) -> None:
+        self.state_dir = state_dir
+        self.log = log
+        self.next_at = 0.0                      # time.monotonic() of the next look
+        self._thread: threading.Thread | None = None
+
+    def tick(self, settings: Settings | None, *, background: bool) -> None:
+        if settings is None or time.monotonic() < self.next_at or \
+                (self._thread is not None and self._thread.is_alive()):
+            return
+        self.next_at = float("inf")
+        work = functools.partial(self._renew, copy.deepcopy(settings))
+        if not background:
+            work()
+            return
+        self._thread = threading.Thread(target=work, name="forward renewal", daemon=True)
+        self._thread.start()
+
+    def _renew(self, settings: Settings) -> None:
+        try:
+            said, next_in = renew_due(settings, state_dir=self.state_dir)
+        except Exception as exc:  # noqa: BLE001 - the modem's trouble must not stop the sync
+            said, next_in = [f"renewing the forwards failed: {exc}"], 300.0
+        for line in said:
+            self.log.info("modem: %s", line)
+        self.next_at = time.monotonic() + (next_in if next_in is not None else 600.0)
+
+    def unmap(self, timeout: float = 5.0) -> None:
+        """Remove our forwards (the service was asked to, when it stops)."""
+        if self._thread is not None:
+            self._thread.join(timeout)
+        try:
+            for line in unmap_ours(state_dir=self.state_dir, timeout=timeout):
+                self.log.info("modem: %s", line)
+        except Exception as exc:  # noqa: BLE001
+            self.log.warning("modem: the forwards were not removed: %s", exc)
