@@ -128,6 +128,16 @@ DEMO_RESULTS_ROS2 = [
     CheckResult("ros2.pubsub_in", "ros", Status.PASS,
                 "sami -> here: a message in rmw_zenoh's format went through the routers",
                 [], 0.7, 12.0, {"peer": "sami", "ok": True}),
+    CheckResult("router.upnp", "router", Status.WARN,
+                "TCP 7447 is not forwarded; the modem offers forwarding (UPnP IGD): `rosnet-tui "
+                "router map` asks it",
+                ["the modem 10.10.10.254 (home gateway) speaks UPnP IGD and NAT-PMP; this machine "
+                 "is 10.10.10.1 towards it", "the modem's external address: 203.0.113.2"],
+                0.3, 4.5,
+                {"protocol": "upnp", "protocols": ["upnp", "natpmp"], "gateway": "10.10.10.254",
+                 "external_ip": "203.0.113.2", "wan": "public", "cgnat": False, "needed": [7447],
+                 "present": [], "missing": [7447], "conflicts": [], "forwards": [],
+                 "can_list": True, "range_needed": False, "tried": []}),
 ]
 
 

@@ -49,6 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     _service_options(p)
     p.add_argument("--once", action="store_true",
                    help="one round (publish, read, apply, check), then exit (for cron or tests)")
+    p.add_argument("--unmap-on-stop", action="store_true",
+                   help="when stopped, remove the forwards `rosnet-tui router map` made on the "
+                        "modem (they are renewed while the service runs)")
     p.add_argument("--interval", type=number_in(1, 86400), metavar="S", default=None,
                    help="public-IP poll interval in seconds, 1-86400 (default: "
                         "sync.interval_s, 60)")
@@ -145,7 +148,8 @@ def run_service(args: argparse.Namespace) -> int:
     try:
         service = SyncService(config_path(args), state_dir=_state_dir(args), hosts_path=hosts,
                               bashrc_path=_bashrc(args), run_checks=not args.no_checks,
-                              interval_s=args.interval, save_learned=not args.no_save_settings)
+                              interval_s=args.interval, save_learned=not args.no_save_settings,
+                              unmap_on_stop=args.unmap_on_stop)
     except SyncError as exc:
         _err(f"rosnet-tui sync: {exc}")
         return EXIT_USAGE

@@ -176,18 +176,25 @@ class JournalEntry:
     files: list[JournalFile]
     undone: str | None = None
     version: int = 1
+    # Port forwards made on the modem (rosnet_tui.core.upnp.journal): no files, undone by
+    # removing them from the modem they were made on.
+    mappings: list[dict] = field(default_factory=list)
 
     def to_json(self) -> dict:
-        return {"version": self.version, "id": self.id, "created": self.created,
-                "label": self.label, "undone": self.undone,
-                "files": [f.__dict__ for f in self.files]}
+        d = {"version": self.version, "id": self.id, "created": self.created,
+             "label": self.label, "undone": self.undone,
+             "files": [f.__dict__ for f in self.files]}
+        if self.mappings:
+            d["mappings"] = self.mappings
+        return d
 
     @classmethod
     def from_json(cls, d: dict) -> JournalEntry:
         return cls(id=str(d["id"]), created=str(d.get("created", "")),
                    label=str(d.get("label", "")), undone=d.get("undone"),
                    files=[JournalFile(**f) for f in d.get("files", [])],
-                   version=int(d.get("version", 1)))
+                   version=int(d.get("version", 1)),
+                   mappings=[m for m in d.get("mappings") or [] if isinstance(m, dict)])
 
 
 @dataclass
@@ -495,6 +502,7 @@ class UndoResult:
     entry_id: str
     label: str
     files: list[Path]
+    forwards: list[str] = field(default_factory=list)  # what happened to the entry's forwards
 
 
 def last_entry(state_dir: Path | None = None) -> JournalEntry | None:
@@ -549,6 +557,11 @@ def apply_undo(plan: UndoPlan, *, force: bool = False) -> UndoResult:
             raise StalePreviewError("the journal changed since the undo preview; try again")
         for p in plan.previews:
             _check_fresh(p)
+        forwards: list[str] = []
+        if plan.entry.mappings:  # forwards on the modem: removed there (bounded), or refused
+            from rosnet_tui.core.upnp.journal import undo_mappings
+
+            forwards = undo_mappings(plan.entry, force=force)
         restored = []
         for p, f in zip(plan.previews, plan.entry.files, strict=True):
             if p.changed:
@@ -558,7 +571,7 @@ def apply_undo(plan: UndoPlan, *, force: bool = False) -> UndoResult:
             restored.append(Path(f.path))
         plan.entry.undone = _now()
         _save_entry(sd, plan.entry, owner)
-        return UndoResult(plan.entry.id, plan.entry.label, restored)
+        return UndoResult(plan.entry.id, plan.entry.label, restored, forwards)
 
 
 def undo_last(state_dir: Path | None = None, *, force: bool = False) -> UndoResult:

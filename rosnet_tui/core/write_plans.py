@@ -117,7 +117,7 @@ PLANS: dict[str, Callable[[Settings, WritePaths], WritePlan]] = {
 }
 
 # The checks an undo may change.
-UNDO_AFFECTS = ("linux.hosts", "linux.resolve", "ros.env", "ros2.env")
+UNDO_AFFECTS = ("linux.hosts", "linux.resolve", "ros.env", "ros2.env", "router.upnp")
 
 
 def write_plan(step_id: str, settings: Settings, paths: WritePaths) -> WritePlan | None:

@@ -20,6 +20,7 @@ from textual.widgets import Button, Checkbox, Static
 
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import privilege
+from rosnet_tui.core.upnp.journal import describe as describe_forward
 from rosnet_tui.core.write_plans import WritePlan
 
 
@@ -155,8 +156,11 @@ class UndoScreen(ModalScreen[bool]):
             self.query_one("#write-apply", Button).disabled = True
             return
         diff = self.plan.diff()
+        forwards = [f"Remove the forward {describe_forward(m)}" for m in self.plan.entry.mappings
+                    if m.get("state") == "made"]
         self.query_one("#write-diff", Static).update(
-            Syntax(diff, "diff", theme="ansi_dark", word_wrap=True) if diff else "")
+            Syntax(diff, "diff", theme="ansi_dark", word_wrap=True) if diff else
+            "\n".join(forwards))
         notes = [f"Changed since by someone else: {c}" for c in self.plan.conflicts]
         if self.plan.conflicts:
             notes.append("Undo would lose those changes: run `rosnet-tui undo --force` if you "
@@ -195,5 +199,7 @@ class UndoScreen(ModalScreen[bool]):
         except mf.ManagedFileError as exc:
             self.notify(f"Not undone: {exc}", severity="error", timeout=10)
             return
-        self.notify("Restored the files of the last write.", timeout=5)
+        self.notify("Removed the forwards of the last change from the modem."
+                    if self.plan.entry.mappings else "Restored the files of the last write.",
+                    timeout=5)
         self.dismiss(True)

@@ -38,6 +38,9 @@ RULE_ORDER: tuple[str, ...] = (
     "router.port_open.partial",
     "router.port_open.no_verdict",
     "ros2.port.not_forwarded",              # ROS 2: Table 1 read on the master's zenoh_port
+    "router.upnp.conflict",                 # the modem's own word (UPnP IGD, PCP, NAT-PMP)
+    "router.upnp.cgnat",
+    "router.upnp.missing",
     # step 3: Linux
     "linux.name.loopback",
     "linux.name.wrong",

@@ -203,7 +203,10 @@ def _not_forwarded(ev: Evidence) -> list[Hit]:
                  f"to {local}; nothing else is needed for ROS 2 (no range, no UDP).",
                  f"Reserve {local} for {_master(ev)} by DHCP so the forward keeps pointing at it.",
                  "If the forward is there and still closed: the provider may block incoming "
-                 "connections (carrier-grade NAT: see the ISP step)."],
+                 "connections (carrier-grade NAT: see the ISP step).",
+                 f"If {_master(ev)}'s modem speaks UPnP IGD, PCP or NAT-PMP, `rosnet-tui router "
+                 f"map` on {_master(ev)} asks it for this forward (it shows the request and "
+                 "waits for a yes)."],
                 check_ids=ids or ["ros2.router"], evidence=[f"router.port_open/ros2.router: {seen}"])]
 
 

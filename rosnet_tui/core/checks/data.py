@@ -66,8 +66,8 @@ class IspPublicIpData(TypedDict, total=False):
 
 
 class IspCgnatData(TypedDict, total=False):
-    wan_ip: str | None   # the modem's internet-side address as it told over UPnP (None: not asked)
-    method: Literal["none", "upnp", "traceroute"]  # how the verdict was reached
+    wan_ip: str | None   # the modem's internet-side address as it told (UPnP IGD, NAT-PMP; "": it reports none; None: not told)
+    method: Literal["none", "upnp", "traceroute"]  # how the verdict was reached ("upnp": the modem's own word)
     cgnat: bool          # carrier-grade NAT (100.64.0.0/10) seen on the way out
     double_nat: bool     # a second private NAT seen on the way out
     hop: str | None      # the address that shows the NAT (None: no NAT seen)
@@ -112,6 +112,40 @@ class RouterPortOpenData(TypedDict, total=False):
     zenoh_port: int         # the master's Zenoh router port
     zenoh_port_open: bool | None  # open from outside (None: could not be tested)
     zenoh_listener: Literal["router", "ours", "none"]  # who answered on it during the test
+
+
+# ---- step 2, the modem's own word (rosnet_tui/core/checks/router_upnp.py)
+class UpnpForwardRow(TypedDict, total=False):
+    protocol: str          # "TCP" | "UDP"
+    external_port: int     # the port on the modem's internet side
+    internal_client: str   # where the modem forwards it (this machine's local IP here)
+    internal_port: int     # the port there
+    description: str       # the forward's label on the modem
+    lease_s: int           # seconds of lease left (0: no expiry)
+    ours: bool             # made by rosnet-tui (recorded, or labelled rosnet-tui)
+
+
+class UpnpConflict(TypedDict, total=False):
+    port: int              # a port this component needs
+    internal_client: str   # the other machine the modem forwards it to
+    description: str       # that forward's label on the modem
+
+
+class RouterUpnpData(TypedDict, total=False):
+    protocol: Literal["upnp", "pcp", "natpmp"] | None  # what rosnet-tui would map with (None: no modem)
+    protocols: list[str]   # every protocol the modem answered
+    gateway: str | None    # the modem asked (the default gateway)
+    external_ip: str | None  # its external address as it reports it ("": none; None: not told)
+    wan: Literal["public", "private", "shared", "none", "unknown"]  # what kind of address that is
+    cgnat: bool            # the modem's own word points to carrier-grade NAT (no or shared address)
+    needed: list[int]      # the TCP ports the settings call for (ROS 2 master: zenoh_port)
+    present: list[int]     # needed ports the modem forwards to this machine
+    missing: list[int]     # needed ports it does not forward
+    conflicts: list[UpnpConflict]  # needed ports it forwards to another machine
+    forwards: list[UpnpForwardRow]  # the modem's forwards that point at this machine (UPnP only)
+    can_list: bool         # the protocol can list forwards (UPnP IGD; not NAT-PMP or PCP)
+    range_needed: bool     # ROS 1: the whole range is needed, which no protocol maps
+    tried: list[str]       # what was asked and what came back, in words
 
 
 # ---- step 3, Linux (rosnet_tui/core/checks/linux.py)
@@ -309,6 +343,7 @@ DATA: dict[str, type] = {
     "router.port_free": RouterPortFreeData,
     "router.listener": RouterListenerData,
     "router.port_open": RouterPortOpenData,
+    "router.upnp": RouterUpnpData,
     "linux.hosts": LinuxHostsData,
     "linux.resolve": LinuxResolveData,
     "linux.ping": LinuxPingData,

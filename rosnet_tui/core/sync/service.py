@@ -30,6 +30,7 @@ from rosnet_tui.core.hosts import (
     DEFAULT_HOSTS_PATH,
 )
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings
+from rosnet_tui.core.upnp.forwards import Renewer
 
 from .applied import applied_path, load_applied, save_applied
 from .backoff import Backoff, backoff_cap
@@ -83,7 +84,7 @@ class SyncService(ApplyMixin, LoopMixin):
                  local_source: Callable[[Settings], LocalAddress] = observe_local,
                  public_source: Callable[[Settings], PublicLookup] | None = None,
                  save_learned: bool = True, netlink: bool = True,
-                 watch_folder: bool = True) -> None:
+                 watch_folder: bool = True, unmap_on_stop: bool = False) -> None:
         self.config_path = Path(config_path)
         self.state_dir = Path(state_dir)
         self.hosts_path = Path(hosts_path)
@@ -96,6 +97,8 @@ class SyncService(ApplyMixin, LoopMixin):
         self.save_learned = save_learned
         self.use_netlink = netlink
         self.use_folder_watch = watch_folder
+        self.unmap_on_stop = unmap_on_stop       # remove our forwards on the modem when stopped
+        self.forwards = Renewer(self.state_dir, log)  # our forwards' leases (router map)
         self._folder_watched = False             # the loop watches the store's folder now
         self._store_fixed = store is not None
         self.store: RecordStore | None = store
@@ -287,6 +290,7 @@ class SyncService(ApplyMixin, LoopMixin):
             applied = self._apply(mono)
         if self.recheck_at is not None and time.monotonic() >= self.recheck_at:
             self._recheck()
+        self.forwards.tick(self.settings, background=self._lookups is not None)
         self._save_status()
         errors = {k: v["message"] for k, v in self.status["errors"].items()}
         return RoundResult(not errors, applied, errors)

@@ -124,6 +124,8 @@ class LoopMixin:
             sel.close()
             if monitor is not None:
                 monitor.close()
+            if self.unmap_on_stop:
+                self.forwards.unmap()
             log.info("sync stopped")
             self._finish(lock)
             self.close()
