@@ -10,7 +10,7 @@ from rosnet_tui.cli import EXIT_USAGE, config_path
 
 
 def run_wizard(args: argparse.Namespace) -> int:
-    from rosnet_tui.core.settings import Settings, SettingsError, load_settings
+    from rosnet_tui.core.settings import SettingsError, load_settings, new_settings
 
     path = config_path(args)
     try:
@@ -29,6 +29,6 @@ def run_wizard(args: argparse.Namespace) -> int:
               "written through sudo.", file=sys.stderr)
     from rosnet_tui.ui.app import AppDeps, RosnetApp
 
-    app = RosnetApp(AppDeps(config_path=path, settings=settings or Settings(),
+    app = RosnetApp(AppDeps(config_path=path, settings=settings or new_settings(),
                             open_setup=bool(getattr(args, "setup", False))))
     return app.run() or 0

@@ -79,9 +79,10 @@ class WizardSession:
 
     # ------------------------------------------------------------------ checks
     def specs(self, step: str) -> list[CheckSpec]:
+        """The checks of *step* for the settings' ROS version (ros.* or ros2.*)."""
         if step not in self._specs:
             self._specs[step] = self.specs_for(step)
-        return self._specs[step]
+        return [c for c in self._specs[step] if c.applies(self.settings)]
 
     def make_context(self) -> CheckContext:
         """The context of one round of checks (the one door: core.checks.runner)."""

@@ -27,7 +27,8 @@ what to configure on *this* component, and live checks.
 | `a` | the advisor: what the results mean, what to do |
 | `g` | go back to the step where the highlighted check's cause is |
 | `w` | write the configuration (Linux: hosts set; ROS: `ROS_MASTER_URI`) |
-| `u` | undo the last write |
+| `u` | undo the last write (or the last forward the modem made) |
+| `m` | let the modem forward the port itself (Router step: UPnP IGD, PCP, NAT-PMP) |
 | `k` | review a peer's unknown SSH host key (Linux step) |
 | `z` | zoom the focused pane (again to restore) |
 | `Tab` | move between panes |

@@ -117,15 +117,26 @@ def sysctl_script(host: str) -> str:
     ])
 
 
+ZENOH_PORT = 7447
+
+
 def forward_rules(side: str, mode: str) -> list[str]:
     """The modem's port-forwarding (DNAT) rules, for chain RNL_PF of the nat table.
 
-    *mode*: "healthy" (to the computer), "none", "wrong" (to a local IP where nobody is),
-    "refuse" (none, and the modem answers every TCP connection with a reset), "travel" (to the
-    travel router's WAN address, double_nat).
+    *mode*: "healthy" (22 and 1024-65000 to the computer, ROS 1), "none", "wrong" (the same, to a
+    local IP where nobody is), "refuse" (none, and the modem answers every TCP connection with a
+    reset), "travel" (to the travel router's WAN address, double_nat); and for ROS 2: "ros2" (TCP
+    22 and TCP 7447 only: the master's router) and "ssh" (TCP 22 only: the SSH path the checks
+    use to run the peer's side; no ROS traffic comes in).
     """
     if mode in ("none", "refuse"):
         return []
+    if mode in ("ros2", "ssh"):
+        rules = [f"-A RNL_PF -p tcp --dport 22 -j DNAT --to-destination {LOCAL_IP[side]}"]
+        if mode == "ros2":
+            rules.append(f"-A RNL_PF -p tcp --dport {ZENOH_PORT} -j DNAT --to-destination "
+                         f"{LOCAL_IP[side]}")
+        return rules
     target = {"healthy": LOCAL_IP[side], "travel": ADDR.TRAVEL_WAN}.get(mode, WRONG_FORWARD[side])
     return [f"-A RNL_PF -p tcp --dport 22 -j DNAT --to-destination {target}",
             f"-A RNL_PF -p tcp --dport 1024:65000 -j DNAT --to-destination {target}",

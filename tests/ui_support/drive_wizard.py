@@ -42,7 +42,7 @@ async def drive(config: Path, state_dir: Path) -> dict:
         for step in STEPS:
             item = app.screen.query_one(f"#step-item-{step.id}")
             out["bar"][step.id] = str(item.render())
-        out["findings"] = [{"rule": f.rule, "severity": f.severity} for f in app.findings]
+        out["findings"] = [{"rule": f.rule, "severity": f.severity} for f in app.session.findings]
     return out
 
 

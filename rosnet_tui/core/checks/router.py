@@ -290,6 +290,14 @@ async def _probe_from_peer(ctx: CheckContext, peer: Peer, public_ip: str, ports:
     return None, ping, f"the probe on {peer.name} did not run: {why}"
 
 
+def _answer_kind(state: str, text: str, lst: TestListener | None) -> str:
+    """How a port answered the peer (data.PortAnswer): our token, another program, or the way
+    the connection failed."""
+    if state == "open":
+        return "other" if lst is not None and lst.token not in text else "token"
+    return "timeout" if state == "timeout" else kind_from_text(text)
+
+
 def _explain_connect_error(text: str) -> str:
     low = text.lower()
     if "refused" in low:
@@ -344,6 +352,8 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
         return Outcome(Status.SKIP, "skipped: " + LAN_SKIP.format(profile=s.this.profile), [],
                        {"ports": [], "test_port": s.probe.port, "test_port_open": None,
                         "public_ip": None})
+    if s.ros2:  # ROS 2 over rmw_zenoh: one port, on the master only (see below)
+        return await _port_open_ros2(ctx)
     total = budget(ctx, "router.port_open") * 0.9
     loop = asyncio.get_running_loop()
     start = loop.time()
@@ -400,9 +410,7 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
                     for p in ports:
                         state, text = raw.get(p, ("error", "no result"))
                         lst = ours.get(p)
-                        answers[p] = ("other" if lst is not None and lst.token not in text
-                                      else "token") if state == "open" else \
-                            "timeout" if state == "timeout" else kind_from_text(text)
+                        answers[p] = _answer_kind(state, text, lst)
                         if state == "open":
                             if lst is not None and lst.token not in text:
                                 outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: accepted, but "
@@ -472,3 +480,91 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
     n = len(ports)
     return Outcome(Status.PASS, f"{n} port{'s' if n > 1 else ''} open {where} "
                                 f"({', '.join(map(str, ports))})", evidence, data)
+
+
+# --------------------------------------------------------------------------- ROS 2 (rmw_zenoh)
+async def _port_open_ros2(ctx: CheckContext) -> Outcome:
+    """router.port_open under [ros] version = 2: only the master's modem forwards anything, TCP
+    zenoh_port to its router; a member needs no forwarding (its router connects out)."""
+    s = ctx.settings
+    zport, test_port = s.ros.zenoh_port, s.probe.port
+    data: dict[str, Any] = {"ports": [], "test_port": test_port, "public_ip": None,
+                            "zenoh_port": zport, "zenoh_port_open": None, "zenoh_listener": "none"}
+    if not s.is_master:
+        return Outcome(Status.SKIP, f"skipped: {s.this.name or 'this component'} is a ROS 2 "
+                                    "member: its router connects out to the master's, so its "
+                                    "modem needs no forwarding at all", [], data)
+    total = budget(ctx, "router.port_open") * 0.9
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+
+    def left() -> float:
+        return max(total - (loop.time() - start), 0.2)
+
+    evidence: list[str] = []
+    ours: dict[int, TestListener | None] = {}
+    async with contextlib.AsyncExitStack() as stack:
+        if await run_blocking(listening_locally, zport, timeout=1.0):
+            data["zenoh_listener"] = "router"
+            evidence.append(f"TCP {zport}: a process listens here (the Zenoh router)")
+        else:
+            with contextlib.suppress(OSError):
+                ours[zport] = await stack.enter_async_context(ctx.listeners.hold(zport))
+                data["zenoh_listener"] = "ours"
+                evidence.append(f"TCP {zport}: no router listens; our listener stands in for it")
+        with contextlib.suppress(OSError):
+            ours[test_port] = await stack.enter_async_context(ctx.listeners.hold(test_port))
+        ports = [zport, test_port]
+        peer = next(iter(ssh_peers(s)), None) if s.this.profile == "remote" else None
+        public_ip = await fetch_public_ip(ctx, min(left() * 0.25, 3.0)) or s.this.public_ip or None
+        data["public_ip"] = public_ip
+        outcomes: dict[int, tuple[bool | None, str]] = {}
+        via = "echoip"
+        answers: dict[int, str | None] = {}     # how each port answered (peer test only)
+        if peer is not None and public_ip:
+            raw, data["public_ip_ping"], why = await _probe_from_peer(
+                ctx, peer, public_ip, ports, t_connect=min(max(left() * 0.35, 0.5), 3.0),
+                total=left() * 0.9, patience=max(ctx.timeout_s * 0.6, 0.3))
+            if raw is None:
+                evidence.append(why + "; asking the port checker instead")
+            else:
+                via = f"peer:{peer.name}"
+                for p in ports:
+                    state, text = raw.get(p, ("error", "no result"))
+                    lst = ours.get(p)
+                    answers[p] = _answer_kind(state, text, lst)
+                    if state == "open" and lst is not None and lst.token not in text:
+                        outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: accepted, but not "
+                                              "by this machine: forwarded to another one")
+                    elif state == "open":
+                        outcomes[p] = (True, f"{peer.name} -> {public_ip}:{p}: open")
+                    elif state == "timeout":
+                        outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: no answer "
+                                              "(dropped: no forwarding or a firewall)")
+                    else:
+                        outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: {text}"
+                                       + _explain_connect_error(text))
+        if not outcomes:
+            got = await asyncio.gather(*(_probe_echoip(ctx, p, left() * 0.9) for p in ports))
+            outcomes.update(zip(ports, got, strict=True))
+    for p in ports:
+        reachable, line = outcomes[p]
+        data["ports"].append({"port": p, "reachable": reachable, "via": via,
+                              "listener": p in ours or (p == zport and
+                                                        data["zenoh_listener"] == "router"),
+                              "answer": answers.get(p) if via != "echoip" else None})
+        evidence.append(line + ("" if p == zport else " (the test port: not needed for ROS 2)"))
+    zopen = outcomes[zport][0]
+    data["zenoh_port_open"] = zopen
+    where = f"from {via[5:]}" if via.startswith("peer:") else "by the port checker"
+    who = {"router": "the Zenoh router listens", "ours": "our listener stands in for the router",
+           "none": "nothing could listen"}[data["zenoh_listener"]]
+    if zopen is None:
+        return Outcome(Status.FAIL, f"could not test TCP {zport} from outside: {outcomes[zport][1]}",
+                       evidence, data)
+    if not zopen:
+        return Outcome(Status.FAIL, f"TCP {zport} (the master's Zenoh router) is closed {where} "
+                                    f"while {who} here: the modem does not forward it to "
+                                    f"{s.this.local_ip or 'this machine'}", evidence, data)
+    return Outcome(Status.PASS, f"TCP {zport} is open {where} ({who}); ROS 2 needs no other "
+                                "port", evidence, data)
