@@ -10,7 +10,7 @@ import pytest
 from rosnet_tui.core.checks import REGISTRY, CheckContext, linux, load_builtin_checks, run_check
 from rosnet_tui.core.hosts import HostsEntry
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings import Peer, ProbeSettings, Settings, ThisComponent
+from rosnet_tui.core.settings import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh import SshOptions
 from tests.test_checks_isp import free_port
 from tests.test_ssh import ssh_client, sshd  # noqa: F401
@@ -200,6 +200,41 @@ async def test_chat_out_reports_ssh_trouble(ssh_client, tmp_path):  # noqa: F811
     s = settings(peers=[ssh_client.peer(ssh_port=free_port())])
     r = await run("linux.chat_out", ctx(s, tmp_path, ssh_client))
     assert r.status is Status.FAIL and r.data["peers"]["localhost"]["failure"] == "ssh:network"
+
+
+def ros2_settings(role: str, peers: list[Peer], port: int) -> Settings:
+    """ROS 2 on loopback: the master is "localhost", its router port *port*."""
+    return Settings(this=ThisComponent(name="localhost" if role == "master" else "sami",
+                                       role=role, local_ip="127.0.0.1"),
+                    peers=peers, probe=ProbeSettings(port=free_port()),
+                    ros=RosSettings(master="localhost", version=2, zenoh_port=port))
+
+
+async def test_ros2_chat_out_says_how_the_connection_to_the_masters_router_went(tmp_path):
+    """Under ROS 2 a member's chat is its TCP connection to the master's router port; the kind
+    of a failed connection is recorded as for ROS 1's chats (the advisor ranks by it)."""
+    import socket
+
+    port = free_port()
+    s = ros2_settings("member", [Peer(name="localhost", public_ip="127.0.0.1")], port)
+    r = await run("linux.chat_out", ctx(s, tmp_path))
+    assert r.status is Status.FAIL
+    assert r.data["peers"]["localhost"] == {"ok": False, "failure": "connect", "tcp": "refused"}
+    with socket.socket() as router:
+        router.bind(("127.0.0.1", port))
+        router.listen(4)
+        r = await run("linux.chat_out", ctx(s, tmp_path))
+    assert r.status is Status.PASS, r.evidence
+    assert r.data["peers"]["localhost"]["tcp"] == "connected"
+    inn = await run("linux.chat_in", ctx(s, tmp_path))
+    assert inn.status is Status.SKIP and "accepts no connections" in inn.summary
+
+
+async def test_ros2_chat_in_on_the_master_records_the_members_connection(ssh_client, tmp_path):  # noqa: F811
+    s = ros2_settings("master", [ssh_client.peer()], free_port())
+    r = await run("linux.chat_in", ctx(s, tmp_path, ssh_client))
+    assert r.status is Status.PASS, r.evidence
+    assert r.data["peers"]["localhost"] == {"ok": True, "failure": None, "tcp": "connected"}
 
 
 async def test_chats_skip_without_an_ssh_user(tmp_path):

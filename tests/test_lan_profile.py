@@ -12,7 +12,7 @@ from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, 
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.router_card import build_router_card, render_router_card
 from rosnet_tui.core.ssh import SshOptions
-from rosnet_tui.core.steps import STEP_BY_ID
+from rosnet_tui.core.steps import STEP_BY_ID, step_for
 from tests.test_router_card import NET, robot
 
 load_builtin_checks()
@@ -56,3 +56,50 @@ def test_port_open_skips_with_the_reason_on_a_lan_profile(tmp_path, profile):
     assert f"on the {profile} LAN profile every component is on the same LAN" in r.summary
     assert "nothing needs forwarding" in r.summary and "hotspot cannot forward" in r.summary
     assert r.duration_s < 0.5           # nothing was sent
+
+
+# --------------------------------------------------------------------------- LAN and ROS 2
+def lan2(profile: str, role: str = "master"):
+    """A LAN profile under ROS 2 (rmw_zenoh): the robot as master, or the laptop as member."""
+    s = lan(profile)
+    this = dataclasses.replace(s.this, role=role, name="turtlebot" if role == "master" else "sami")
+    return dataclasses.replace(s, this=this, ros=dataclasses.replace(s.ros, version=2))
+
+
+@pytest.mark.parametrize("role", ["master", "member"])
+def test_router_step_under_ros2_on_a_lan_profile_says_nothing_is_forwarded(role):
+    s = lan2("portable", role)
+    text = STEP_BY_ID["router"].configure(s)
+    assert "Nothing to forward on the portable hotspot's LAN" in text
+    assert "Forward **TCP 7447**" not in text and "no DMZ" in text
+    assert "TCP **7447**" in text                  # the master's router port, across the LAN
+    assert "a chat by name, both ways" not in text  # ROS 2 tests one way only
+    expected = step_for("router", s).expected
+    assert expected.startswith("Nothing to forward on the portable LAN"), expected
+    # The remote profile keeps ROS 2's own text.
+    remote = dataclasses.replace(s, this=dataclasses.replace(s.this, profile="remote"))
+    assert ("Forward **TCP 7447**" in STEP_BY_ID["router"].configure(remote)) == (role == "master")
+
+
+@pytest.mark.parametrize("markdown", [False, True])
+def test_router_card_under_ros2_on_a_lan_profile_forwards_nothing(markdown):
+    card = build_router_card(lan2("office"), NET)
+    assert card.forwards == [] and card.dmz_host == "" and card.exposure_warning == []
+    out = render_router_card(card, markdown=markdown)
+    assert "none on the office LAN" in out and "7447" not in out
+    assert "DMZ host" not in out and "Exposure" not in out
+    assert "the master's router port" in out and "both ways" not in out
+    assert max(len(line) for line in out.splitlines()) <= 80
+
+
+@pytest.mark.parametrize("role", ["master", "member"])
+def test_port_open_under_ros2_skips_for_the_lan_first(tmp_path, role):
+    """The LAN skip comes before ROS 2's branch: a master on a LAN is not tested from outside,
+    and a member on a LAN is skipped for the LAN's reason, not for being a member."""
+    ctx = CheckContext(settings=lan2("office", role), timeout_s=1.0, state_dir=tmp_path,
+                       upnp=False, ssh_options=SshOptions(ssh_agent=False))
+    r = asyncio.run(run_check(REGISTRY["router.port_open"], ctx))
+    assert r.status is Status.SKIP
+    assert "on the office LAN profile every component is on the same LAN" in r.summary
+    assert "ROS 2 member" not in r.summary
+    assert r.duration_s < 0.5

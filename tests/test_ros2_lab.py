@@ -107,6 +107,9 @@ def test_port_not_forwarded_fails_fast_and_names_the_forward(ros2):
     robot = ros2.check("robot", step="router")
     port = robot["router.port_open"]
     assert port["status"] == "fail" and port["data"]["zenoh_port_open"] is False, explain(robot)
+    # Issue 14's evidence under ROS 2 too: how the port answered the peer, and the ping.
+    answers = {row["port"]: row.get("answer") for row in port["data"]["ports"]}
+    assert answers[7447] == "timeout" and port["data"]["public_ip_ping"] is True, explain(robot)
     assert "ros2.port.not_forwarded" in rules(port), explain(robot)
 
 
