@@ -4,6 +4,7 @@ the steps text, which checks a version runs, and address sync leaving the ROS 2 
 from __future__ import annotations
 
 import json
+import shlex
 import struct
 from dataclasses import replace
 from pathlib import Path
@@ -212,3 +213,22 @@ def test_address_sync_leaves_the_ros2_block_alone(tmp_path):
     assert "203.0.113.2\tturtlebot" in hosts.read_text().replace(" ", "\t") or \
         "turtlebot" in hosts.read_text()
     assert bashrc.read_text() == before, bashrc.read_text()
+
+
+def test_the_zenoh_peer_program_runs_with_the_peers_site_packages(tmp_path):
+    """The ROS 1 probes run ``python3 -S`` (stdlib only, a faster start: issue 14), but the Zenoh
+    peer program imports eclipse-zenoh from the peer's site-packages: its command keeps site
+    (with -S every ROS 2 check said "no eclipse-zenoh" on a peer that has it)."""
+    import subprocess
+    import sys
+
+    from rosnet_tui.core.checks.probes import python_stdin_command, zenoh_peer_command
+
+    cmd = zenoh_peer_command("graph", "--timeout", "1")
+    assert " -S " not in f" {cmd} " and cmd.startswith("python3 - ")
+    assert " -S " in f" {python_stdin_command('nodes')} "
+    src = Path(zenohproto.__file__).read_text()
+    r = subprocess.run(["sh", "-c", cmd.replace("python3", shlex.quote(sys.executable), 1)],
+                       input=src, capture_output=True, text=True, timeout=30, cwd=tmp_path)
+    rep = zenohproto.parse_report(r.stdout)
+    assert rep is not None and rep.get("error") != "no_zenoh", (r.stdout, r.stderr)

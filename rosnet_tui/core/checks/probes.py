@@ -216,10 +216,17 @@ def python_command(script: str, *args: str, python: str = "python3") -> str:
             f"{quoted}").strip()
 
 
-def python_stdin_command(*args: str) -> str:
+def python_stdin_command(*args: str, site: bool = False) -> str:
     """A shell command running the program fed on stdin with python3 on a peer (``python3 -``,
-    without site, as :func:`python_command`)."""
-    return "python3 -S - " + " ".join(shlex.quote(a) for a in args)
+    without site as :func:`python_command`, unless *site*: the program imports a package the
+    peer installed)."""
+    return ("python3 - " if site else "python3 -S - ") + " ".join(shlex.quote(a) for a in args)
+
+
+def zenoh_peer_command(*args: str) -> str:
+    """The command running the Zenoh peer program (core/zenohproto.py, fed on stdin) on a peer:
+    with site, since it imports eclipse-zenoh from the peer's site-packages."""
+    return python_stdin_command(*args, site=True)
 
 
 def peer_program_problem(res: SshResult, peer: Peer) -> str | None:

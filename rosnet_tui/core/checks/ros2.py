@@ -24,10 +24,10 @@ from rosnet_tui.core.checks.probes import (
     close_zenoh,
     node_endpoint,
     open_zenoh,
-    python_stdin_command,
     ros2_peers,
     router_links,
     zenoh_env,
+    zenoh_peer_command,
     zenoh_peer_problem,
 )
 from rosnet_tui.core.procedure import is_loopback
@@ -57,7 +57,7 @@ def _read_router_config(path: str) -> tuple[dict | None, str | None]:
 
 async def _peer_infos(ctx: CheckContext, t: float) -> dict[str, dict | str]:
     peers = ros2_peers(ctx)
-    cmd = python_stdin_command("info")
+    cmd = zenoh_peer_command("info")
     got = await asyncio.gather(*(ssh_run(ctx.ssh, p, cmd, stdin=ZENOH_SOURCE, timeout=t) for p in peers))
     out: dict[str, dict | str] = {}
     for p, res in zip(peers, got, strict=True):

@@ -22,9 +22,9 @@ from rosnet_tui.core.checks.probes import (
     node_domain,
     node_endpoint,
     open_zenoh,
-    python_stdin_command,
     ros2_peers,
     router_links,
+    zenoh_peer_command,
     zenoh_peer_problem,
 )
 from rosnet_tui.core.procedure import is_loopback
@@ -102,7 +102,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     theirs = {p.name: zenohproto.probe_name() for p in peers}
     remote_t = max(0.5, t * 0.55)
     tasks = [asyncio.ensure_future(ssh_run(
-        ctx.ssh, p, python_stdin_command("graph", "--expect", ours, "--name", theirs[p.name],
+        ctx.ssh, p, zenoh_peer_command("graph", "--expect", ours, "--name", theirs[p.name],
                                          "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)),
         stdin=ZENOH_SOURCE, timeout=max(0.5, deadline - time.monotonic()),
         connect_timeout=max(0.5, ctx.timeout_s * 0.6))) for p in peers]
@@ -267,7 +267,7 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
     remote_t = max(1.0, min(budget_s * 0.6, ctx.timeout_s * 2))
     deadline = min(deadline, time.monotonic() + remote_t + max(1.0, ctx.timeout_s))
     args = (["sub", "--expect", text] if out else ["pub", "--text", text, "--ack", tag])
-    cmd = python_stdin_command(*args, "--topic", topic, "--timeout", f"{remote_t:.1f}",
+    cmd = zenoh_peer_command(*args, "--topic", topic, "--timeout", f"{remote_t:.1f}",
                                *_member_arg(ctx, peer))
     got: tuple[str | None, bool | None, int] = (None, None, 0)
     seen_pub: bool | None = None
