@@ -20,6 +20,7 @@ from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.settings import Settings, default_state_dir
 from rosnet_tui.core.steps import STEP_BY_ID
+from rosnet_tui.ui.keys import OrderedKeys
 from rosnet_tui.ui.messages import Navigate, SettingsSaved
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
@@ -53,7 +54,7 @@ class AppDeps:
                              context_factory=self.make_context)
 
 
-class RosnetApp(App[int]):
+class RosnetApp(OrderedKeys, App[int]):
     CSS_PATH = "app.tcss"
     TITLE = "rosnet-tui"
     ENABLE_COMMAND_PALETTE = False
@@ -75,6 +76,7 @@ class RosnetApp(App[int]):
 
     def __init__(self, deps: AppDeps) -> None:
         super().__init__()
+        self._init_ordered_keys()
         self.deps = deps
         self.session = deps.session()
         self.current_step = self.session.last_step()

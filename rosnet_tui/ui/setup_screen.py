@@ -67,10 +67,12 @@ class PeerRow(Horizontal):
                      tooltip="Remove this peer")
 
     def read(self) -> S.Peer:
-        i = self.index
-        val = lambda suffix: self.query_one(f"#peer-{i}-{suffix}", Input).value.strip()  # noqa: E731
-        return replace(self.peer, name=val("name"), local_ip=val("local"), public_ip=val("public"),
-                       ssh_user=val("user"))
+        """The peer as typed so far (its own values until its fields are mounted)."""
+        i, p = self.index, self.peer
+        typed = {w.id: w.value.strip() for w in self.query(Input)}
+        val = lambda suffix, default: typed.get(f"peer-{i}-{suffix}", default)  # noqa: E731
+        return replace(p, name=val("name", p.name), local_ip=val("local", p.local_ip),
+                       public_ip=val("public", p.public_ip), ssh_user=val("user", p.ssh_user))
 
 
 class SetupScreen(Screen[bool]):
@@ -191,10 +193,10 @@ class SetupScreen(Screen[bool]):
             return None
 
     @on(Button.Pressed, "#add-peer")
-    def action_add_peer(self) -> None:
+    async def action_add_peer(self) -> None:
         row = self._peer_row(S.Peer(name=""))
-        self.query_one("#peer-rows").mount(row)
-        self.call_after_refresh(lambda: row.query_one(Input).focus())
+        await self.query_one("#peer-rows").mount(row)  # mounted before the next key is read
+        row.query_one(Input).focus()
 
     @on(Button.Pressed, ".peer-remove")
     def _remove_peer(self, event: Button.Pressed) -> None:
