@@ -7,6 +7,7 @@ run checks, write plans) and reports back with messages.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +25,7 @@ from rosnet_tui.ui.keys import OrderedKeys
 from rosnet_tui.ui.messages import Navigate, SettingsSaved
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
+from rosnet_tui.ui.terminal import frugal_driver_class
 from rosnet_tui.ui.widgets import StepBar
 
 
@@ -75,7 +77,8 @@ class RosnetApp(OrderedKeys, App[int]):
     WIDE_AT = 110  # columns from which configuration and verification sit side by side
 
     def __init__(self, deps: AppDeps) -> None:
-        super().__init__()
+        super().__init__(driver_class=None if os.environ.get("ROSNET_TUI_FRUGAL") == "0"
+                         else frugal_driver_class())
         self._init_ordered_keys()
         self.deps = deps
         self.session = deps.session()
