@@ -224,8 +224,9 @@ async def test_evidence_expands_for_the_highlighted_check(tmp_path):
         await pilot.pause(0.2)
         await pilot.press("e")
         await pilot.pause()
-        box = app.screen.query_one("#evidence")
-        assert box.display and "reachable: false" in str(box.render())
+        box = app.screen.query_one("#evidence-box")
+        text = app.screen.query_one("#evidence")
+        assert box.display and "reachable: false" in str(text.render())
         assert isinstance(app.screen.focused, DataTable)
         await pilot.press("enter")  # Enter toggles too
         await pilot.pause()

@@ -7,7 +7,6 @@ layer that shows it, and tests can build one without an app.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,8 +16,9 @@ from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.netinfo import LocalNet, with_detected
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.settings import Settings, atomic_write_text, default_state_dir, save_settings
+from rosnet_tui.core.settings import Settings, default_state_dir, save_settings
 from rosnet_tui.core.steps import STEP_BY_ID
+from rosnet_tui.core.ui_state import UiState, local_time
 from rosnet_tui.core.write_plans import WritePaths, WritePlan, write_plan
 
 if TYPE_CHECKING:
@@ -67,6 +67,17 @@ class WizardSession:
     _states: dict[str, tuple[str, CheckResult | None]] = field(default_factory=dict, init=False,
                                                                repr=False)
     _specs: dict[str, list[CheckSpec]] = field(default_factory=dict, init=False, repr=False)
+    # What survives the session (ui.json): results as they land, findings, the set-up draft.
+    ui_state: UiState = field(init=False, repr=False)
+    _restored: dict[str, str] = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.ui_state = UiState(self.state_dir)
+        for cid, (result, at) in self.ui_state.results().items():
+            self._states[cid] = (result.status.value, result)
+            self._restored[cid] = at
+        if self._restored:
+            self.findings = list(self.ui_state.findings())  # type: ignore[arg-type]
 
     # ------------------------------------------------------------------ settings
     def runtime_settings(self) -> Settings:
@@ -74,7 +85,16 @@ class WizardSession:
         return with_detected(self.settings, self.detected)
 
     def save_settings(self, settings: Settings) -> None:
-        save_settings(settings, self.config_path)
+        """Save *settings*; a file that already says the same is left untouched (not a byte,
+        not its time)."""
+        from rosnet_tui.core.settings import SettingsError, load_settings
+
+        try:
+            same = self.config_path.exists() and load_settings(self.config_path) == settings
+        except SettingsError:
+            same = False
+        if not same:
+            save_settings(settings, self.config_path)
         self.settings = settings
 
     # ------------------------------------------------------------------ checks
@@ -99,10 +119,19 @@ class WizardSession:
 
     def set_check_state(self, check_id: str, state: str, result: CheckResult | None) -> None:
         self._states[check_id] = (state, result)
+        self._restored.pop(check_id, None)
         if result is not None or state == NOT_RUN:
             from rosnet_tui.core.advisor import advise  # loaded with the first result
 
             self.findings = advise(self.latest_results(), self.runtime_settings())
+        if result is not None:  # kept at once: a dropped session loses nothing
+            self.ui_state.set_result(result, self.findings)
+
+    def restored_at(self, check_id: str) -> str:
+        """When the shown result of *check_id* came, if it is from an earlier session ('' if
+        it is from this one, or there is none)."""
+        at = self._restored.get(check_id)
+        return local_time(at) if at else ""
 
     def latest_results(self) -> dict[str, CheckResult]:
         return {cid: r for cid, (_state, r) in self._states.items() if r is not None}
@@ -163,19 +192,20 @@ class WizardSession:
         return trust_host_key(self.make_context().ssh, name, port, host_key)
 
     # ------------------------------------------------------------------ where the user was
-    def _ui_state_path(self) -> Path:
-        return self.state_dir / "ui.json"
-
     def last_step(self) -> str:
-        try:
-            data = json.loads(self._ui_state_path().read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            return STEP_IDS[0]
-        step = data.get("last_step") if isinstance(data, dict) else None
+        step = self.ui_state.last_step
         return step if step in STEP_IDS else STEP_IDS[0]
 
     def record_step(self, step: str) -> None:
-        try:
-            atomic_write_text(self._ui_state_path(), json.dumps({"last_step": step}) + "\n")
-        except OSError:
-            pass  # remembering the step is a convenience, never a reason to fail
+        self.ui_state.set_last_step(step)  # a convenience: never a reason to fail
+
+    # ------------------------------------------------------------------ the set-up draft
+    def draft(self) -> dict | None:
+        """A set-up form being filled in and not saved yet, from this or an earlier session."""
+        return self.ui_state.draft
+
+    def save_draft(self, fields: dict[str, str], peers: list[dict[str, str]]) -> None:
+        self.ui_state.set_draft(fields, peers)
+
+    def clear_draft(self) -> None:
+        self.ui_state.clear_draft()

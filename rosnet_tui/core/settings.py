@@ -57,6 +57,18 @@ class SettingsError(Exception):
 
 
 # --------------------------------------------------------------------------- validators
+# Names /etc/hosts already gives to this machine itself: a component called so would be looked up
+# as this machine (localhost, the ip6-* set of Debian-like systems).
+RESERVED_NAMES = ("localhost", "localhost.localdomain", "broadcasthost")
+RESERVED_PREFIXES = ("ip6-",)
+
+
+def shown(value: str, limit: int = 24) -> str:
+    """*value* quoted for a message, cut to *limit* characters (a paste can be kilobytes)."""
+    value = " ".join(str(value).split())
+    return f"'{value}'" if len(value) <= limit else f"'{value[:limit - 3]}...'"
+
+
 def validate_name(value: str) -> str | None:
     """Return why *value* is not a usable network name, or None when it is."""
     if not value:
@@ -67,6 +79,9 @@ def validate_name(value: str) -> str | None:
         return "use letters, digits and '-' only (like turtlebot or sami-laptop)"
     if value.replace(".", "").isdigit():
         return "a name cannot be only digits"
+    low = value.lower()
+    if low in RESERVED_NAMES or low.startswith(RESERVED_PREFIXES):
+        return f"{shown(value)} is reserved for this machine itself in /etc/hosts: pick another"
     return None
 
 
@@ -77,7 +92,7 @@ def validate_ip(value: str, *, required: bool = True) -> str | None:
     try:
         addr = ipaddress.ip_address(value)
     except ValueError:
-        return f"'{value}' is not an IP address (expected four numbers like 192.168.1.10)"
+        return f"{shown(value)} is not an IP address (expected four numbers like 192.168.1.10)"
     if addr.version != 4:
         return "use an IPv4 address: the procedure's port forwarding is for IPv4"
     if addr.is_unspecified or addr.is_multicast or str(addr) == "255.255.255.255":
@@ -90,7 +105,7 @@ def validate_port(value: int | str, *, lo: int = PORT_MIN, hi: int = PORT_MAX) -
     try:
         port = int(str(value).strip())
     except ValueError:
-        return f"'{value}' is not a port number"
+        return f"{shown(value)} is not a port number"
     if not lo <= port <= hi:
         return f"the port must be between {lo} and {hi}"
     return None
@@ -98,7 +113,7 @@ def validate_port(value: int | str, *, lo: int = PORT_MIN, hi: int = PORT_MAX) -
 
 def validate_ssh_user(value: str) -> str | None:
     if value and not _SSH_USER_RE.match(value):
-        return f"'{value}' is not a valid user name"
+        return f"{shown(value)} is not a valid user name"
     return None
 
 
@@ -206,11 +221,16 @@ class Settings:
         add("this.office_ip", validate_ip(t.office_ip, required=False))
         add("this.portable_ip", validate_ip(t.portable_ip, required=False))
         names = {t.name}
+        folded = {t.name.lower(): "this component"}
         for i, p in enumerate(self.peers):
             k = f"peer[{i + 1}]"
             add(f"{k}.name", validate_name(p.name))
-            if p.name in names:
-                add(f"{k}.name", f"the name '{p.name}' is used twice")
+            if p.name.lower() in folded:  # names are looked up without regard to case
+                same = folded[p.name.lower()]
+                add(f"{k}.name", f"{shown(p.name)} is this component's own name"
+                    if same == "this component" else
+                    f"the name {shown(p.name)} is used twice (names ignore case)")
+            folded.setdefault(p.name.lower(), p.name)
             names.add(p.name)
             add(f"{k}.local_ip", validate_ip(p.local_ip, required=False))
             add(f"{k}.public_ip", validate_ip(p.public_ip, required=False))

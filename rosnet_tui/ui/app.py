@@ -26,6 +26,7 @@ from rosnet_tui.ui.messages import Navigate, SettingsSaved
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.terminal import frugal_driver_class
+from rosnet_tui.ui.theme import THEME, linux_console, use_console_glyphs
 from rosnet_tui.ui.widgets import StepBar
 
 
@@ -72,6 +73,8 @@ class RosnetApp(OrderedKeys, App[int]):
         Binding("s", "setup", "Set-up"),
         Binding("question_mark", "help", "Help", key_display="?"),
         Binding("q", "leave", "Quit"),
+        Binding("ctrl+z", "suspend_process", "Suspend", show=False, priority=True),
+        Binding("ctrl+l", "redraw", "Redraw", show=False),
     ]
 
     WIDE_AT = 110  # columns from which configuration and verification sit side by side
@@ -86,13 +89,19 @@ class RosnetApp(OrderedKeys, App[int]):
 
     # ------------------------------------------------------------------ start-up
     def on_mount(self) -> None:
+        self.register_theme(THEME)
+        self.theme = THEME.name
+        if linux_console():
+            self.add_class("linux")
+            use_console_glyphs()
+        self._catch_signals()
         self.session.detected = self.deps.detect_net()
         self.set_class(self.size.width >= self.WIDE_AT, "wide")
         for step_id in STEP_IDS:
             screen = StepScreen(STEP_BY_ID[step_id], self.session.specs(step_id), self.session)
             self.install_screen(screen, name=f"step-{step_id}")
         self.push_screen(f"step-{self.current_step}")
-        if self.deps.open_setup or not self.session.settings.complete:
+        if self.deps.open_setup or not self.session.settings.complete or self.session.draft():
             self.action_setup()
 
     def on_resize(self, event) -> None:
@@ -152,6 +161,48 @@ class RosnetApp(OrderedKeys, App[int]):
 
     async def action_leave(self) -> None:
         await self.action_quit()
+
+    def action_redraw(self) -> None:
+        """Ctrl+L: send the whole screen again (after line noise, or a message over it)."""
+        forget = getattr(self._driver, "forget_screen", None)
+        if forget is not None:
+            forget()
+        self.refresh(repaint=True, layout=True)
+        self.screen.refresh(repaint=True)
+
+    # ------------------------------------------------------------------ leaving
+    def _catch_signals(self) -> None:
+        """SIGTERM and SIGHUP (a dropped SSH session) end the wizard the normal way: what was
+        typed is kept, the terminal is given back as it was."""
+        import asyncio
+        import signal
+
+        if self.is_headless:
+            return
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            try:
+                loop.add_signal_handler(sig, self._on_signal, sig)
+            except (NotImplementedError, RuntimeError, ValueError):
+                pass
+
+    def _on_signal(self, sig: int) -> None:
+        self.keep_state()
+        self.exit(return_code=128 + int(sig))
+
+    def keep_state(self) -> None:
+        """Save what is not saved yet (the set-up draft); results are saved as they land."""
+        for screen in self.screen_stack:
+            keep = getattr(screen, "keep_draft", None)
+            if keep is not None:
+                try:
+                    keep()
+                except Exception:  # keeping a draft must never stand in the way of leaving
+                    pass
+
+    def _handle_exception(self, error: Exception) -> None:
+        self.keep_state()  # a crash keeps the draft too
+        super()._handle_exception(error)
 
     def action_advisor(self) -> None:
         from rosnet_tui.ui.advisor_screen import AdvisorScreen

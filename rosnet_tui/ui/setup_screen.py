@@ -15,6 +15,7 @@ from textual.widgets import Button, Footer, Header, Input, Label, Select, Static
 from rosnet_tui.core import settings as S
 from rosnet_tui.core.session import WizardSession
 from rosnet_tui.ui.messages import SettingsSaved
+from rosnet_tui.ui.theme import cut
 from rosnet_tui.ui.widgets import OrderedInput
 
 
@@ -28,6 +29,28 @@ class CoreValidator(Validator):
 
     def validate(self, value: str) -> ValidationResult:
         why = self.func(value.strip(), **self.kwargs)
+        return self.failure(why) if why else self.success()
+
+
+class PeerNameValidator(Validator):
+    """A peer's name: a valid name, not this component's own, not another peer's (names are
+    looked up without regard to case), refused as it is typed."""
+
+    def __init__(self, row: PeerRow) -> None:
+        super().__init__()
+        self.row = row
+
+    def validate(self, value: str) -> ValidationResult:
+        value = value.strip()
+        why = S.validate_name(value)
+        if why is None:
+            screen = self.row.screen if self.row.is_attached else None
+            others = screen.names_in_use(self.row) if isinstance(screen, SetupScreen) else {}
+            same = others.get(value.lower())
+            if same == "this component":
+                why = f"{S.shown(value)} is this component's own name"
+            elif same:
+                why = f"{S.shown(value)} is already a peer (names ignore case)"
         return self.failure(why) if why else self.success()
 
 
@@ -56,7 +79,7 @@ class PeerRow(Horizontal):
     def compose(self) -> ComposeResult:
         i, p = self.index, self.peer
         yield OrderedInput(p.name, placeholder="name", id=f"peer-{i}-name", compact=True,
-                    validators=[CoreValidator(S.validate_name)], classes="peer-name")
+                           validators=[PeerNameValidator(self)], classes="peer-name")
         yield OrderedInput(p.local_ip, placeholder="local IP", id=f"peer-{i}-local", compact=True,
                     validators=[CoreValidator(S.validate_ip, required=False)])
         yield OrderedInput(p.public_ip, placeholder="public IP", id=f"peer-{i}-public", compact=True,
@@ -79,25 +102,31 @@ class SetupScreen(Screen[bool]):
     """Who this component is, and who its peers are. Dismisses True when settings were saved."""
 
     BINDINGS = [
-        Binding("escape", "cancel", "Back"),
+        Binding("escape,f10", "cancel", "Back", key_display="Esc/F10"),
         Binding("ctrl+s", "save", "Save"),
         Binding("ctrl+n", "add_peer", "Add peer"),
     ]
+    DRAFT_DELAY_S = 0.3  # typing is kept this soon after the last key
 
     def __init__(self, session: WizardSession, **kwargs) -> None:
         super().__init__(**kwargs)
         self.session = session
         self.detected = session.detected
         self._next_peer = 0
+        self._draft_timer = None
+        self._restored_draft = False
 
     def compose(self) -> ComposeResult:
         s = self.session.settings
         t = s.this
-        local_ip = t.local_ip or self.detected.local_ip
+        # First run: the detected address, ready to keep. Saved settings keep their blank (the
+        # address is then detected at each run), so saving them unchanged changes nothing.
+        local_ip = t.local_ip or ("" if s.complete else self.detected.local_ip)
         yield Header(show_clock=False, icon="")
         with VerticalScroll(id="setup-form"):
             yield Static("Describe this machine and the components it must reach. Tab moves "
-                         "between fields; Ctrl+S saves.", id="setup-intro")
+                         "between fields; Ctrl+S saves; Esc or F10 goes back without saving.",
+                         id="setup-intro")
             yield Static("This component", classes="section")
             with Horizontal(classes="field"):
                 yield Label("Name", classes="field-label")
@@ -118,8 +147,10 @@ class SetupScreen(Screen[bool]):
                              id="this-profile", compact=True)
             with Horizontal(classes="field"):
                 yield Label("Local IP", classes="field-label")
-                yield OrderedInput(local_ip, placeholder="e.g. 10.10.10.1", id="this-local-ip",
-                            compact=True, validators=[CoreValidator(S.validate_ip)])
+                yield OrderedInput(local_ip, placeholder=self.detected.local_ip or "e.g. 10.10.10.1",
+                                   id="this-local-ip", compact=True,
+                                   validators=[CoreValidator(
+                                       S.validate_ip, required=not self.detected.local_ip)])
             yield Label(self._local_ip_hint(), id="this-local-ip-error", classes="field-hint")
             with Horizontal(classes="field"):
                 yield Label("Test port", classes="field-label")
@@ -156,16 +187,101 @@ class SetupScreen(Screen[bool]):
         self._next_peer += 1
         return row
 
-    def on_mount(self) -> None:
+    async def on_mount(self) -> None:
         self.title = "rosnet-tui"
         self.sub_title = "set-up"
+        await self._restore_draft()
         self._update_role()
         self.query_one("#this-name", Input).focus()
+
+    # ------------------------------------------------------------------ the draft
+    def form_fields(self) -> tuple[dict[str, str], list[dict[str, str]]]:
+        """Every field as typed: this component's by widget id, and the peers' rows."""
+        fields: dict[str, str] = {}
+        for w in self.query(Input):
+            if w.id and not w.id.startswith("peer-"):
+                fields[w.id] = w.value
+        for sel in self.query(Select):
+            if sel.id and sel.value is not Select.BLANK:
+                fields[sel.id] = str(sel.value)
+        peers = [{"name": p.name, "local_ip": p.local_ip, "public_ip": p.public_ip,
+                  "ssh_user": p.ssh_user} for p in (row.read() for row in self.query(PeerRow))]
+        return fields, peers
+
+    def keep_draft(self) -> None:
+        """Save the form as typed, unless it says what the saved settings say."""
+        if self._draft_timer is not None:
+            self._draft_timer.stop()
+            self._draft_timer = None
+        if not self.is_mounted:
+            return
+        fields, peers = self.form_fields()
+        settings, _problems = self.read_form()
+        if settings == self.session.settings and self.session.config_path.exists():
+            self.session.clear_draft()
+        else:
+            self.session.save_draft(fields, peers)
+
+    def _draft_soon(self) -> None:
+        if self._draft_timer is not None:
+            self._draft_timer.stop()
+        self._draft_timer = self.set_timer(self.DRAFT_DELAY_S, self.keep_draft)
+
+    async def _restore_draft(self) -> None:
+        draft = self.session.draft()
+        if not draft:
+            return
+        for wid, value in draft["fields"].items():
+            try:
+                widget = self.query_one(f"#{wid}")
+            except Exception:
+                continue  # a field this version does not have
+            try:
+                if isinstance(widget, Input):
+                    widget.value = str(value)
+                elif isinstance(widget, Select):
+                    widget.value = value
+            except Exception:
+                continue  # a value the field refuses: it keeps the saved one
+        peers = draft.get("peers")
+        if isinstance(peers, list):
+            rows = self.query_one("#peer-rows")
+            await rows.remove_children()
+            for p in peers:
+                if isinstance(p, dict):
+                    peer = S.Peer(name=str(p.get("name", "")), local_ip=str(p.get("local_ip", "")),
+                                  public_ip=str(p.get("public_ip", "")),
+                                  ssh_user=str(p.get("ssh_user", "")))
+                    await rows.mount(self._peer_row(peer))
+        from rosnet_tui.core.ui_state import local_time
+
+        when = local_time(str(draft.get("at", "")))
+        self._restored_draft = True
+        self.notify(f"Back where you were: the set-up typed {when or 'earlier'} and not saved "
+                    "yet. Ctrl+S saves it, Esc discards it.", timeout=8)
+
+    def names_in_use(self, row: PeerRow) -> dict[str, str]:
+        """Lower-cased names taken by this component and the peers other than *row*."""
+        names: dict[str, str] = {}
+        try:
+            names[self.query_one("#this-name", Input).value.strip().lower()] = "this component"
+        except Exception:
+            pass
+        for other in self.query(PeerRow):
+            if other is not row:
+                name = other.read().name.lower()
+                if name:
+                    names.setdefault(name, other.read().name)
+        return names
 
     # ------------------------------------------------------------------ events
     @on(Select.Changed, "#this-role")
     def _role_changed(self) -> None:
         self._update_role()
+
+    @on(Select.Changed)
+    def _select_changed(self) -> None:
+        self._draft_soon()
 
     def _update_role(self) -> None:
         is_member = self.query_one("#this-role", Select).value == "member"
@@ -174,6 +290,7 @@ class SetupScreen(Screen[bool]):
 
     @on(Input.Changed)
     def _input_changed(self, event: Input.Changed) -> None:
+        self._draft_soon()
         if event.input.id and event.validation_result is not None:
             label = self._error_label(event.input.id)
             if label is not None:
@@ -181,7 +298,7 @@ class SetupScreen(Screen[bool]):
                 msg = "" if ok else "; ".join(event.validation_result.failure_descriptions)
                 if event.input.id == "this-local-ip" and ok:
                     msg = self._local_ip_hint()
-                label.update(msg)
+                label.update(cut(msg, max(20, self.size.width - 16)))
                 label.set_class(not ok, "-shown")
 
     def _error_label(self, input_id: str) -> Label | None:
@@ -199,10 +316,11 @@ class SetupScreen(Screen[bool]):
         row.query_one(Input).focus()
 
     @on(Button.Pressed, ".peer-remove")
-    def _remove_peer(self, event: Button.Pressed) -> None:
+    async def _remove_peer(self, event: Button.Pressed) -> None:
         row = event.button.parent
         if isinstance(row, PeerRow):
-            row.remove()
+            await row.remove()
+            self._draft_soon()
 
     @on(Button.Pressed, "#save")
     def action_save(self) -> None:
@@ -216,15 +334,21 @@ class SetupScreen(Screen[bool]):
         except S.SettingsError as exc:
             self.notify(str(exc), title="Not saved", severity="error", timeout=10)
             return
+        if self._draft_timer is not None:
+            self._draft_timer.stop()
+        self.session.clear_draft()
         self.app.post_message(SettingsSaved())
         self.dismiss(True)
 
     @on(Button.Pressed, "#cancel")
     def action_cancel(self) -> None:
         if not self.session.settings.complete:
-            self.notify("Fill in this component and save first (Ctrl+Q quits).",
-                        severity="warning")
+            self.notify("Fill in this component and save first (Ctrl+Q quits; what you typed "
+                        "is kept for next time).", severity="warning")
             return
+        if self._draft_timer is not None:
+            self._draft_timer.stop()
+        self.session.clear_draft()  # going back without saving: the draft is dropped
         self.dismiss(False)
 
     # ------------------------------------------------------------------ form -> settings
@@ -236,7 +360,7 @@ class SetupScreen(Screen[bool]):
                        connection=str(self.query_one("#this-connection", Select).value),
                        profile=str(self.query_one("#this-profile", Select).value),
                        local_ip=val("this-local-ip"),
-                       interface=old.this.interface or self.detected.interface)
+                       interface=old.this.interface)
         peers = [row.read() for row in self.query(PeerRow)]
         master = this.name if role == "master" else val("ros-master")
         problems: list[tuple[str, str]] = []
@@ -248,8 +372,10 @@ class SetupScreen(Screen[bool]):
         settings = replace(old, this=this, peers=peers, ros=replace(old.ros, master=master),
                            probe=replace(old.probe, port=port))
         problems += settings.problems()
-        if S.validate_ip(this.local_ip):
-            problems.insert(0, ("this.local_ip", S.validate_ip(this.local_ip) or ""))
+        # Blank is fine when this machine's address can be detected at each run.
+        why = S.validate_ip(this.local_ip, required=not self.detected.local_ip)
+        if why:
+            problems.insert(0, ("this.local_ip", why))
         return settings, problems
 
     def _show_problem(self, key: str, why: str) -> None:
@@ -271,7 +397,7 @@ class SetupScreen(Screen[bool]):
             label_id = f"{target}-error" if target else None
         if label_id:
             label = self.query_one(label_id, Label)
-            label.update(why)
+            label.update(cut(why, max(20, self.size.width - 16)))
             label.set_class(True, "-shown")
         if target:
             self.query_one(target, Input).focus()

@@ -66,7 +66,7 @@ class StepScreen(Screen):
         yield Header(show_clock=False, icon="")
         yield StepBar(self.step.id, id="step-bar")
         with Container(id="panes"):
-            with Vertical(id="expected-pane", classes="pane") as expected:
+            with VerticalScroll(id="expected-pane", classes="pane") as expected:
                 expected.border_title = f"{self.step.number} {self.step.title}: expected outcome"
                 yield Static(self.step.expected, id="expected-text")
             with Container(id="lower"):
@@ -124,10 +124,19 @@ class StepScreen(Screen):
         """Show the latest known state of every check and every step (shared through the app)."""
         session = self.session
         checks = self.query_one(CheckList)
+        earlier = set()
         for cid in checks.rows:
             state, result = session.check_state(cid)
-            if checks.rows[cid].state != state or checks.rows[cid].result is not result:
-                checks.set_state(cid, state, result)
+            at = session.restored_at(cid)
+            if at:
+                earlier.add(at)
+            row = checks.rows[cid]
+            if row.state != state or row.result is not result or row.at != at:
+                checks.set_state(cid, state, result, at)
+        verify = self.query_one("#verify-pane")
+        title = "Verification" + (f" (results of {min(earlier)}: r runs again)" if earlier else "")
+        if verify.border_title != title:
+            verify.border_title = title
         bar = self.query_one(StepBar)
         for step_id, state in session.step_states().items():
             bar.set_state(step_id, state)
@@ -143,8 +152,18 @@ class StepScreen(Screen):
             self.run_specs([spec])
 
     def action_cancel_checks(self) -> None:
-        if self.workers.cancel_group(self, "checks"):
-            self.notify("Checks cancelled.", timeout=3)
+        """Cancel the checks running on any step (they may have been started elsewhere)."""
+        steps = []
+        for screen in self.app.screen_stack + list(getattr(self.app, "_installed_screens",
+                                                           {}).values()):
+            if isinstance(screen, StepScreen) and screen.is_mounted and screen not in steps:
+                if screen.workers.cancel_group(screen, "checks"):
+                    steps.append(screen)
+        if steps:
+            names = ", ".join(f"{s.step.number} {s.step.title}" for s in steps)
+            self.notify(f"Cancelled the checks of {names}.", timeout=3)
+        else:
+            self.notify("No checks are running.", timeout=3)
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         if action == "write":
@@ -231,18 +250,17 @@ class StepScreen(Screen):
         self.set_class(message.shown, "-evidence")
 
     def action_zoom(self) -> None:
+        """Zoom the focused pane (the evidence box, or the pane holding the focus); again to
+        restore."""
         if self.maximized is not None:
             self.minimize()
             return
-        focused = self.focused
-        pane = None
-        while focused is not None:
-            if focused.has_class("pane"):
-                pane = focused
-                break
-            focused = focused.parent  # type: ignore[assignment]
-        if pane is not None:
-            self.maximize(pane, container=False)
+        node = self.focused
+        while node is not None and not (node.has_class("pane") or node.has_class("zoomable")):
+            node = node.parent  # type: ignore[assignment]
+        if node is None:
+            node = self.query_one("#verify-pane")
+        self.maximized = node  # containers refuse Screen.maximize(); the property does it
 
     def run_specs(self, specs: list[CheckSpec]) -> None:
         if not specs:
