@@ -11,14 +11,14 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical
 from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Header, Static
+from textual.widgets import DataTable, Footer, Static
 
 from rosnet_tui.core.advisor import Finding, all_rules
 from rosnet_tui.core.procedure import SEVERITY_WORDS as SEVERITY_WORD
 from rosnet_tui.core.procedure import step_title
 from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.steps import STEP_BY_ID
-from rosnet_tui.ui.widgets import RowTable
+from rosnet_tui.ui.widgets import PlainHeader, RowTable
 
 
 def _short_step(step_id: str | None) -> str:
@@ -28,7 +28,7 @@ def _short_step(step_id: str | None) -> str:
 
 class AdvisorScreen(Screen[str | None]):
     BINDINGS = [
-        Binding("escape", "close", "Back"),
+        Binding("escape,q,f10", "close", "Back", key_display="Esc/q"),
         Binding("t", "toggle_view", "All rules / findings"),
         Binding("g", "go", "Go to its step"),
     ]
@@ -40,7 +40,7 @@ class AdvisorScreen(Screen[str | None]):
         self._rows: list[tuple[str, str, str, str, str | None, bool, str]] = []
 
     def compose(self) -> ComposeResult:
-        yield Header(show_clock=False, icon="")
+        yield PlainHeader()
         with Vertical(id="advisor-body"):
             yield Static("", id="advisor-caption")
             yield RowTable(cursor_type="row", id="advisor-table")

@@ -10,13 +10,13 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import Screen
 from textual.validation import ValidationResult, Validator
-from textual.widgets import Button, Footer, Header, Input, Label, Select, Static
+from textual.widgets import Button, Footer, Input, Label, Select, Static
 
 from rosnet_tui.core import settings as S
 from rosnet_tui.core.session import WizardSession
 from rosnet_tui.ui.messages import SettingsSaved
 from rosnet_tui.ui.theme import cut
-from rosnet_tui.ui.widgets import OrderedInput
+from rosnet_tui.ui.widgets import OrderedInput, PlainHeader
 
 
 class CoreValidator(Validator):
@@ -86,7 +86,7 @@ class PeerRow(Horizontal):
                     validators=[CoreValidator(S.validate_ip, required=False)])
         yield OrderedInput(p.ssh_user, placeholder="ssh user", id=f"peer-{i}-user", compact=True,
                     validators=[CoreValidator(S.validate_ssh_user)], classes="peer-user")
-        yield Button("del", id=f"peer-{i}-remove", compact=True, classes="peer-remove",
+        yield Button("[del]", id=f"peer-{i}-remove", compact=True, classes="peer-remove",
                      tooltip="Remove this peer")
 
     def read(self) -> S.Peer:
@@ -122,7 +122,7 @@ class SetupScreen(Screen[bool]):
         # First run: the detected address, ready to keep. Saved settings keep their blank (the
         # address is then detected at each run), so saving them unchanged changes nothing.
         local_ip = t.local_ip or ("" if s.complete else self.detected.local_ip)
-        yield Header(show_clock=False, icon="")
+        yield PlainHeader()
         with VerticalScroll(id="setup-form"):
             yield Static("Describe this machine and the components it must reach. Tab moves "
                          "between fields; Ctrl+S saves; Esc or F10 goes back without saving.",
@@ -170,9 +170,9 @@ class SetupScreen(Screen[bool]):
                     yield self._peer_row(p)
             yield Label("", id="peer-error", classes="field-error")
             with Horizontal(id="setup-buttons"):
-                yield Button("Add peer", id="add-peer", compact=True)
-                yield Button("Save", id="save", variant="primary", compact=True)
-                yield Button("Cancel", id="cancel", compact=True)
+                yield Button("[Add peer]", id="add-peer", compact=True)
+                yield Button("[Save]", id="save", variant="primary", compact=True)
+                yield Button("[Cancel]", id="cancel", compact=True)
         yield Footer()
 
     def _local_ip_hint(self) -> str:

@@ -10,7 +10,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Container, Vertical, VerticalScroll
 from textual.screen import Screen
-from textual.widgets import Footer, Header, Static
+from textual.widgets import Footer, Static
 
 from rosnet_tui.core.checks import CheckSpec
 from rosnet_tui.core.checks.runner import stream
@@ -18,7 +18,7 @@ from rosnet_tui.core.session import NOT_RUN, RUNNING, WizardSession
 from rosnet_tui.core.steps import Step
 from rosnet_tui.core.write_plans import UNDO_AFFECTS
 from rosnet_tui.ui.messages import Navigate
-from rosnet_tui.ui.widgets import CheckList, StepBar
+from rosnet_tui.ui.widgets import CheckList, PlainHeader, StepBar
 
 
 class _CompactCode(CodeBlock):
@@ -63,7 +63,7 @@ class StepScreen(Screen):
         self.config_source = ""  # the Markdown the Configuration pane shows
 
     def compose(self) -> ComposeResult:
-        yield Header(show_clock=False, icon="")
+        yield PlainHeader()
         yield StepBar(self.step.id, id="step-bar")
         with Container(id="panes"):
             with VerticalScroll(id="expected-pane", classes="pane") as expected:

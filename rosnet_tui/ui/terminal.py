@@ -45,6 +45,27 @@ _TOKEN = re.compile(
     r"|(?P<ctl>[\x00-\x1a\x1c-\x1f\x7f])"
     r"|(?P<text>[^\x00-\x1f\x7f]+)", re.S)
 
+# The Linux console's fonts are code page 437: its printable half, and the pictures of its control
+# codes. Other glyphs become one of these (same width), or "?".
+CP437 = frozenset(bytes(range(32, 256)).decode("cp437") + "☺☻♥♦♣♠•◘○◙♂♀♪♫☼►◄↕‼¶§▬↨↑↓→←∟↔▲▼⌂")
+_CONSOLE_FALLBACK = str.maketrans({
+    "…": ">", "—": "-", "–": "-", "‒": "-", "‘": "'", "’": "'", "“": '"', "”": '"',
+    "╭": "┌", "╮": "┐", "╰": "└", "╯": "┘", "━": "═", "┃": "║", "┏": "╔", "┓": "╗",
+    "┗": "╚", "┛": "╝", "▁": " ", "▂": " ", "▃": "▄", "▅": "▄", "▆": "█", "▇": "█",
+    "▉": "█", "▊": "█", "▋": "▌", "▍": "▌", "▎": " ", "▏": " ", "▔": "▀", "▕": "▐",
+    "✓": "√", "✔": "√", "✗": "x", "✘": "x", "⚠": "!", "❯": ">", "›": ">", "‹": "<",
+    "▶": "►", "◀": "◄", "⏵": "►", "⏴": "◄", "🔒": "#",
+})
+
+
+def console_glyphs(text: str) -> str:
+    """*text* with every glyph the Linux console's font lacks replaced (width kept)."""
+    text = text.translate(_CONSOLE_FALLBACK)
+    if all(ch in CP437 for ch in text):
+        return text
+    return "".join(ch if ch in CP437 else ("??" if _width(ch) == 2 else "?") for ch in text)
+
+
 _CONTENT_CHANGING = set("@JKLMPSTXbr")  # CSI finals that change cells we model (or scroll)
 _SYNC_START, _SYNC_END = "\x1b[?2026h", "\x1b[?2026l"
 
@@ -147,8 +168,9 @@ def _width(ch: str) -> int:
 class FrugalScreen:
     """Rewrite a stream of terminal output so that only changed cells are sent."""
 
-    def __init__(self, cols: int = 80, rows: int = 24) -> None:
+    def __init__(self, cols: int = 80, rows: int = 24, *, console: bool = False) -> None:
         self.cols, self.rows = cols, rows
+        self.console = console  # the Linux console: only its font's glyphs are sent
         self._carry = ""
         self.sent = 0       # characters written out (after rewriting)
         self.received = 0   # characters Textual wrote
@@ -185,7 +207,9 @@ class FrugalScreen:
         for m in _TOKEN.finditer(data):
             kind = m.lastgroup
             if kind == "text":
-                self._text(m.group("text"), out)
+                text = m.group("text")
+                self._text(console_glyphs(text) if self.console and not text.isascii() else text,
+                           out)
             elif kind == "csi":
                 self._csi(m, out)
             elif kind == "ctl":
@@ -387,7 +411,8 @@ def frugal_driver_class():
     class FrugalDriver(LinuxDriver):
         def __init__(self, *args, **kwargs) -> None:
             super().__init__(*args, **kwargs)
-            self.frugal = FrugalScreen()
+            term = os.environ.get("TERM", "")
+            self.frugal = FrugalScreen(console=term == "linux" or term.startswith("linux-"))
 
         def _tty_size(self) -> tuple[int, int]:
             try:

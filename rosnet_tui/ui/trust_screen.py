@@ -7,7 +7,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
-from textual.widgets import Button, Static
+from textual.widgets import Button, Footer, Static
 
 from rosnet_tui.core.ssh import verify_commands
 
@@ -15,7 +15,7 @@ from rosnet_tui.core.ssh import verify_commands
 class TrustKeyScreen(ModalScreen[bool]):
     """Dismisses True only when the user chose to trust the key."""
 
-    BINDINGS = [Binding("escape", "refuse", "Do not trust")]
+    BINDINGS = [Binding("escape,q,f10", "refuse", "Do not trust", key_display="Esc/q")]
 
     def __init__(self, name: str, port: int, host_key: str, fingerprint: str, address: str,
                  user: str = "", **kwargs) -> None:
@@ -37,8 +37,9 @@ class TrustKeyScreen(ModalScreen[bool]):
                 + verify_commands(self.peer_name, self.port, ktype, self.user),
                 id="trust-text", markup=False)
             with Horizontal(id="write-buttons"):
-                yield Button("They match: trust", id="trust-yes", variant="warning", compact=True)
-                yield Button("Do not trust", id="trust-no", variant="primary", compact=True)
+                yield Button("[They match: trust]", id="trust-yes", variant="warning", compact=True)
+                yield Button("[Do not trust]", id="trust-no", variant="primary", compact=True)
+        yield Footer()
 
     def on_mount(self) -> None:
         self.query_one("#trust-no", Button).focus()

@@ -95,6 +95,26 @@ class StepBar(Widget):
             self.post_message(self.Selected(widget.id.removeprefix("step-item-")))
 
 
+class PlainHeader(Static):
+    """The top line: the program and the screen's subject, drawn as one plain line (Textual's
+    Header draws more than it says, and with glyphs the Linux console lacks)."""
+
+    DEFAULT_CSS = """
+    PlainHeader { height: 1; width: 1fr; text-style: bold; padding: 0 1; dock: top; }
+    """
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("", markup=False, **kwargs)
+
+    def on_mount(self) -> None:
+        self.watch(self.screen, "title", self._retitle)
+        self.watch(self.screen, "sub_title", self._retitle)
+
+    def _retitle(self, _value: str = "") -> None:
+        parts = [p for p in (self.screen.title, self.screen.sub_title) if p]
+        self.update(" · ".join(parts))
+
+
 class OrderedInput(Input):
     """An Input whose editing keys (backspace, arrows...) keep their place among typed characters.
 
@@ -222,7 +242,7 @@ class CheckList(Vertical):
         never wider than the pane (no horizontal scrollbar). True when the widths changed."""
         width = self.size.width or 76
         title_w = max([len("Check")] + [len(r.label) for r in self.rows.values()])
-        title_w = min(title_w, max(12, width // 3))
+        title_w = min(title_w, max(12, (width - 9) // 2))
         # Each column has a cell of padding on both sides; one column is kept for a scrollbar.
         rest = max(8, width - 1 - (4 + 2) - (title_w + 2) - 2)
         widths = (4, title_w, rest)

@@ -16,7 +16,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
-from textual.widgets import Button, Checkbox, Static
+from textual.widgets import Button, Checkbox, Footer, Static
 
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import privilege
@@ -26,7 +26,8 @@ from rosnet_tui.core.write_plans import WritePlan
 class WriteScreen(ModalScreen[bool]):
     """Preview -> confirm -> apply. Dismisses True when something was written."""
 
-    BINDINGS = [Binding("escape", "cancel", "Cancel"), Binding("y", "apply", "Apply", show=False)]
+    BINDINGS = [Binding("escape,q,f10", "cancel", "Cancel", key_display="Esc/q"),
+                Binding("y", "apply", "Apply")]
 
     def __init__(self, plan: WritePlan, state_dir: Path, **kwargs) -> None:
         super().__init__(**kwargs)
@@ -45,8 +46,9 @@ class WriteScreen(ModalScreen[bool]):
                 yield Static("", id="write-diff")
             yield Static("", id="write-status", markup=False)
             with Horizontal(id="write-buttons"):
-                yield Button("Apply", id="write-apply", variant="primary", compact=True)
-                yield Button("Cancel", id="write-cancel", compact=True)
+                yield Button("[Apply]", id="write-apply", variant="primary", compact=True)
+                yield Button("[Cancel]", id="write-cancel", compact=True)
+        yield Footer()
 
     def on_mount(self) -> None:
         self.refresh_preview()
@@ -123,7 +125,7 @@ class WriteScreen(ModalScreen[bool]):
 class UndoScreen(ModalScreen[bool]):
     """Show what undoing the last apply does, and do it on confirmation."""
 
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    BINDINGS = [Binding("escape,q,f10", "cancel", "Cancel", key_display="Esc/q")]
 
     def __init__(self, state_dir: Path, **kwargs) -> None:
         super().__init__(**kwargs)
@@ -137,8 +139,9 @@ class UndoScreen(ModalScreen[bool]):
                 yield Static("", id="write-diff")
             yield Static("", id="write-status", markup=False)
             with Horizontal(id="write-buttons"):
-                yield Button("Undo", id="write-apply", variant="primary", compact=True)
-                yield Button("Cancel", id="write-cancel", compact=True)
+                yield Button("[Undo]", id="write-apply", variant="primary", compact=True)
+                yield Button("[Cancel]", id="write-cancel", compact=True)
+        yield Footer()
 
     def on_mount(self) -> None:
         status = self.query_one("#write-status", Static)
