@@ -187,8 +187,31 @@ class RosnetApp(OrderedKeys, App[int]):
                 pass
 
     def _on_signal(self, sig: int) -> None:
+        import threading
+
         self.keep_state()
         self.exit(return_code=128 + int(sig))
+        # Should leaving hang (the loop blocked), give the terminal back and go anyway.
+        timer = threading.Timer(self.HARD_EXIT_S, self._hard_exit, args=(128 + int(sig),))
+        timer.daemon = True
+        timer.start()
+
+    HARD_EXIT_S = 2.0
+
+    def _hard_exit(self, code: int) -> None:
+        import os
+        import termios
+
+        driver = self._driver
+        try:
+            os.write(2, b"\x1b[<u\x1b[?1000l\x1b[?1003l\x1b[?1006l\x1b[?2004l\x1b[?7h"
+                        b"\x1b[?1049l\x1b[?25h\x1b[m")
+            attrs = getattr(driver, "attrs_before", None)
+            if attrs is not None:
+                termios.tcsetattr(driver.fileno, termios.TCSANOW, attrs)
+        except (OSError, termios.error, AttributeError):
+            pass
+        os._exit(code)
 
     def keep_state(self) -> None:
         """Save what is not saved yet (the set-up draft); results are saved as they land."""
