@@ -12,17 +12,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.netinfo import LocalNet, with_detected
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings, default_state_dir, save_settings
 from rosnet_tui.core.steps import STEP_BY_ID
 from rosnet_tui.core.ui_state import UiState, local_time
-from rosnet_tui.core.write_plans import WritePaths, WritePlan, write_plan
 
 if TYPE_CHECKING:
     from rosnet_tui.core.advisor import Finding
+    from rosnet_tui.core.checks import CheckContext, CheckSpec
+    from rosnet_tui.core.write_plans import WritePaths, WritePlan
 
 # A check's state in the wizard: the four result statuses plus two of the wizard's own.
 NOT_RUN, RUNNING = "not run", "running"
@@ -99,9 +99,24 @@ class WizardSession:
 
     # ------------------------------------------------------------------ checks
     def specs(self, step: str) -> list[CheckSpec]:
+        """The checks of *step* (the registry's are imported on first use: the first screen
+        needs only their names)."""
         if step not in self._specs:
             self._specs[step] = self.specs_for(step)
         return self._specs[step]
+
+    def specs_loaded(self, step: str) -> bool:
+        return step in self._specs or self.specs_for is not _default_specs
+
+    def check_rows(self, step: str) -> list[tuple[str, str]]:
+        """(id, title) of every check of *step*, without importing the checks if they are not
+        loaded yet (the title is then the id; the screens show short labels anyway)."""
+        declared = list(STEP_BY_ID[step].check_ids)
+        if not self.specs_loaded(step):
+            return [(cid, cid) for cid in declared]
+        specs = self.specs(step)
+        known = {s.id for s in specs}
+        return [(s.id, s.title) for s in specs] + [(c, c) for c in declared if c not in known]
 
     def make_context(self) -> CheckContext:
         """The context of one round of checks (the one door: core.checks.runner)."""
@@ -140,8 +155,12 @@ class WizardSession:
         return [f for f in self.findings if check_id in f.check_ids]
 
     def step_states(self) -> dict[str, str]:
-        return {s: aggregate([self.check_state(c.id)[0] for c in self.specs(s)])
-                for s in STEP_IDS}
+        out = {}
+        for s in STEP_IDS:
+            ids = ([c.id for c in self.specs(s)] if self.specs_loaded(s)
+                   else list(STEP_BY_ID[s].check_ids))
+            out[s] = aggregate([self.check_state(cid)[0] for cid in ids])
+        return out
 
     # ------------------------------------------------------------------ configuration text
     def configuration_text(self, step_id: str) -> str:
@@ -179,11 +198,15 @@ class WizardSession:
 
     # ------------------------------------------------------------------ writing configuration
     def write_paths(self) -> WritePaths:
+        from rosnet_tui.core.write_plans import WritePaths
+
         return WritePaths(config_path=self.config_path, state_dir=self.state_dir,
                           hosts_path=self.hosts_path, bashrc_path=self.bashrc_path)
 
     def write_plan(self, step_id: str) -> WritePlan | None:
         """What `w` writes on *step_id* (None: the step writes nothing)."""
+        from rosnet_tui.core.write_plans import write_plan
+
         return write_plan(step_id, self.runtime_settings(), self.write_paths())
 
     def trust_host_key(self, name: str, port: int, host_key: str) -> Path:

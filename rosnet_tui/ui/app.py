@@ -11,29 +11,26 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from textual.app import App
 from textual.binding import Binding
 
-from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.netinfo import LocalNet, detect_local_net
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.session import WizardSession
+from rosnet_tui.core.session import _default_specs as registry_specs
 from rosnet_tui.core.settings import Settings, default_state_dir
 from rosnet_tui.core.steps import STEP_BY_ID
 from rosnet_tui.ui.keys import OrderedKeys
 from rosnet_tui.ui.messages import Navigate, SettingsSaved
-from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.terminal import frugal_driver_class
 from rosnet_tui.ui.theme import THEME, linux_console, use_console_glyphs
 from rosnet_tui.ui.widgets import StepBar
 
-
-def _default_specs(step: str) -> list[CheckSpec]:
-    from rosnet_tui.core.checks.runner import select
-
-    return select([step])
+if TYPE_CHECKING:
+    from rosnet_tui.core.checks import CheckContext, CheckSpec
 
 
 @dataclass
@@ -44,7 +41,7 @@ class AppDeps:
     settings: Settings
     state_dir: Path = field(default_factory=default_state_dir)
     detect_net: Callable[[], LocalNet] = detect_local_net
-    specs_for: Callable[[str], list[CheckSpec]] = _default_specs
+    specs_for: Callable[[str], list[CheckSpec]] = registry_specs
     make_context: Callable[[Settings], CheckContext] | None = None
     open_setup: bool = False
     hosts_path: Path = Path("/etc/hosts")
@@ -98,7 +95,7 @@ class RosnetApp(OrderedKeys, App[int]):
         self.session.detected = self.deps.detect_net()
         self.set_class(self.size.width >= self.WIDE_AT, "wide")
         for step_id in STEP_IDS:
-            screen = StepScreen(STEP_BY_ID[step_id], self.session.specs(step_id), self.session)
+            screen = StepScreen(STEP_BY_ID[step_id], self.session)
             self.install_screen(screen, name=f"step-{step_id}")
         self.push_screen(f"step-{self.current_step}")
         if self.deps.open_setup or not self.session.settings.complete or self.session.draft():
@@ -146,6 +143,8 @@ class RosnetApp(OrderedKeys, App[int]):
             self.notify("This is the first step.", timeout=3)
 
     def action_setup(self) -> None:
+        from rosnet_tui.ui.setup_screen import SetupScreen  # loaded when first opened
+
         def done(saved: bool | None) -> None:
             if saved:
                 self.notify(f"Settings saved to {self.session.config_path}", timeout=4)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from rich.markdown import CodeBlock
 from rich.markdown import Markdown as RichMarkdown
 from rich.syntax import Syntax
@@ -12,13 +14,13 @@ from textual.containers import Container, Vertical, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import Footer, Static
 
-from rosnet_tui.core.checks import CheckSpec
-from rosnet_tui.core.checks.runner import stream
 from rosnet_tui.core.session import NOT_RUN, RUNNING, WizardSession
 from rosnet_tui.core.steps import Step
-from rosnet_tui.core.write_plans import UNDO_AFFECTS
 from rosnet_tui.ui.messages import Navigate
 from rosnet_tui.ui.widgets import CheckList, PlainHeader, StepBar
+
+if TYPE_CHECKING:
+    from rosnet_tui.core.checks import CheckSpec
 
 
 class _CompactCode(CodeBlock):
@@ -54,11 +56,9 @@ class StepScreen(Screen):
         Binding("z", "zoom", "Zoom pane", show=False),
     ]
 
-    def __init__(self, step: Step, specs: list[CheckSpec], session: WizardSession,
-                 **kwargs) -> None:
+    def __init__(self, step: Step, session: WizardSession, **kwargs) -> None:
         super().__init__(**kwargs)
         self.step = step
-        self.specs = specs
         self.session = session
         self.config_source = ""  # the Markdown the Configuration pane shows
 
@@ -79,10 +79,8 @@ class StepScreen(Screen):
                         yield Static(_markdown(self.config_source), id="config-text")
                 with Vertical(id="verify-pane", classes="pane") as verify:
                     verify.border_title = "Verification"
-                    known = {s.id for s in self.specs}
-                    rows = [(s.id, s.title) for s in self.specs]
-                    rows += [(cid, cid) for cid in self.step.check_ids if cid not in known]
-                    yield CheckList(rows, advice=self.session.findings_for, id="check-list")
+                    yield CheckList(self.session.check_rows(self.step.id),
+                                    advice=self.session.findings_for, id="check-list")
         yield Footer()
 
     def on_mount(self) -> None:
@@ -140,6 +138,14 @@ class StepScreen(Screen):
         bar = self.query_one(StepBar)
         for step_id, state in session.step_states().items():
             bar.set_state(step_id, state)
+
+    @property
+    def specs(self) -> list[CheckSpec]:
+        """The step's checks, loaded when first run; the list gains their full titles then."""
+        specs = self.session.specs(self.step.id)
+        if self.is_mounted:
+            self.query_one(CheckList).set_titles(self.session.check_rows(self.step.id))
+        return specs
 
     # ------------------------------------------------------------------ actions
     def action_run_checks(self) -> None:
@@ -222,6 +228,7 @@ class StepScreen(Screen):
                              done)
 
     def action_undo(self) -> None:
+        from rosnet_tui.core.write_plans import UNDO_AFFECTS
         from rosnet_tui.ui.write_screen import UndoScreen
 
         def done(undone: bool | None) -> None:
@@ -273,6 +280,8 @@ class StepScreen(Screen):
 
     @work(exclusive=True, exit_on_error=False, group="checks")
     async def _run_worker(self, specs: list[CheckSpec]) -> None:
+        from rosnet_tui.core.checks.runner import stream
+
         session = self.session
         ctx = session.make_context()
         ids = {s.id for s in specs}

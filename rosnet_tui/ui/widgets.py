@@ -237,6 +237,17 @@ class CheckList(Vertical):
                 self._update_row(row)
             table.refresh()
 
+    def set_titles(self, rows: list[tuple[str, str]]) -> None:
+        """The checks got loaded: their full titles, and rows for checks not listed yet."""
+        table = self.query_one(DataTable)
+        for cid, title in rows:
+            row = self.rows.get(cid)
+            if row is None:
+                row = self.rows[cid] = CheckRow(cid, title)
+                table.add_row(*self._cells(row), key=cid)
+            elif row.title != title:
+                row.title = title
+
     def _fit_widths(self) -> bool:
         """Status and title keep their width; the result column takes the rest, so the table is
         never wider than the pane (no horizontal scrollbar). True when the widths changed."""
