@@ -10,13 +10,10 @@ from __future__ import annotations
 import ipaddress
 import os
 import re
-import secrets
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
-
-import tomlkit
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -450,6 +447,8 @@ def _peer_values(p: Peer) -> dict[str, Any]:
 
 def render_settings(s: Settings, previous_text: str | None = None) -> str:
     """Render *s* as TOML, keeping the comments and order of *previous_text* when given."""
+    import tomlkit  # only when saving: reading needs tomllib alone
+
     try:
         doc = tomlkit.parse(previous_text) if previous_text else None
     except Exception:
@@ -496,6 +495,8 @@ def render_settings(s: Settings, previous_text: str | None = None) -> str:
 
 
 def _merge_table(doc: Any, name: str, values: dict[str, Any]) -> None:
+    import tomlkit
+
     tbl = doc.get(name)
     if tbl is None:
         tbl = tomlkit.table()
@@ -512,7 +513,7 @@ def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
     """Write *text* to *path* atomically: a temp file in the same folder, fsync, rename."""
     path.parent.mkdir(parents=True, exist_ok=True)
     # An unpredictable name, created exclusively and never through a link.
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{secrets.token_hex(4)}")
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{os.urandom(4).hex()}")
     if mode is None:
         try:
             mode = path.stat().st_mode & 0o7777

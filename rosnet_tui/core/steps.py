@@ -10,7 +10,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rosnet_tui.core.hosts import hosts_entries
 from rosnet_tui.core.procedure import STEP_IDS, STEP_TITLES, step_number
 from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
 
@@ -112,6 +111,8 @@ def configure_router(s: Settings) -> str:
 # --------------------------------------------------------------------------- step 3: Linux
 def configure_linux(s: Settings) -> str:
     profile = s.this.profile
+    from rosnet_tui.core.hosts import hosts_entries  # with the Linux step, not at start-up
+
     entries = hosts_entries(s, profile)
     width = max((len(e.ip) for e in entries), default=0)
     block = "\n".join(f"{e.ip.ljust(width)}  {e.name}" for e in entries) or "(no entries yet)"

@@ -11,14 +11,14 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical
 from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Static
+from textual.widgets import DataTable, Static
 
 from rosnet_tui.core.advisor import Finding, all_rules
 from rosnet_tui.core.procedure import SEVERITY_WORDS as SEVERITY_WORD
 from rosnet_tui.core.procedure import step_title
 from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.steps import STEP_BY_ID
-from rosnet_tui.ui.widgets import PlainHeader, RowTable
+from rosnet_tui.ui.widgets import KeyBar, PlainHeader, RowTable
 
 
 def _short_step(step_id: str | None) -> str:
@@ -45,7 +45,7 @@ class AdvisorScreen(Screen[str | None]):
             yield Static("", id="advisor-caption")
             yield RowTable(cursor_type="row", id="advisor-table")
             yield Static("", id="advisor-detail", markup=False)
-        yield Footer()
+        yield KeyBar()
 
     def on_mount(self) -> None:
         self.title = "rosnet-tui"

@@ -80,17 +80,19 @@ class RosnetApp(OrderedKeys, App[int]):
         super().__init__(driver_class=None if os.environ.get("ROSNET_TUI_FRUGAL") == "0"
                          else frugal_driver_class())
         self._init_ordered_keys()
+        # The theme and the console's glyphs are chosen before the first style is computed
+        # (choosing them later restyles every widget, at start-up).
+        self.register_theme(THEME)
+        self.theme = THEME.name
+        if linux_console():
+            self.add_class("linux")
+            use_console_glyphs()
         self.deps = deps
         self.session = deps.session()
         self.current_step = self.session.last_step()
 
     # ------------------------------------------------------------------ start-up
     def on_mount(self) -> None:
-        self.register_theme(THEME)
-        self.theme = THEME.name
-        if linux_console():
-            self.add_class("linux")
-            use_console_glyphs()
         self._catch_signals()
         self.session.detected = self.deps.detect_net()
         self.set_class(self.size.width >= self.WIDE_AT, "wide")

@@ -10,13 +10,13 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import Screen
 from textual.validation import ValidationResult, Validator
-from textual.widgets import Button, Footer, Input, Label, Select, Static
+from textual.widgets import Button, Input, Label, Select, Static
 
 from rosnet_tui.core import settings as S
 from rosnet_tui.core.session import WizardSession
 from rosnet_tui.ui.messages import SettingsSaved
 from rosnet_tui.ui.theme import cut
-from rosnet_tui.ui.widgets import OrderedInput, PlainHeader
+from rosnet_tui.ui.widgets import KeyBar, OrderedInput, PlainHeader
 
 
 class CoreValidator(Validator):
@@ -173,7 +173,7 @@ class SetupScreen(Screen[bool]):
                 yield Button("[Add peer]", id="add-peer", compact=True)
                 yield Button("[Save]", id="save", variant="primary", compact=True)
                 yield Button("[Cancel]", id="cancel", compact=True)
-        yield Footer()
+        yield KeyBar()
 
     def _local_ip_hint(self) -> str:
         d = self.detected

@@ -4,45 +4,34 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from rich.markdown import CodeBlock
-from rich.markdown import Markdown as RichMarkdown
-from rich.syntax import Syntax
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Container, Vertical, VerticalScroll
 from textual.screen import Screen
-from textual.widgets import Footer, Static
+from textual.widgets import Static
 
 from rosnet_tui.core.session import NOT_RUN, RUNNING, WizardSession
 from rosnet_tui.core.steps import Step
 from rosnet_tui.ui.messages import Navigate
-from rosnet_tui.ui.widgets import CheckList, PlainHeader, StepBar
+from rosnet_tui.ui.widgets import CheckList, KeyBar, PlainHeader, StepBar
 
 if TYPE_CHECKING:
     from rosnet_tui.core.checks import CheckSpec
 
 
-class _CompactCode(CodeBlock):
-    """A code block without the blank lines around it: rows are scarce at 80x24."""
-
-    def __rich_console__(self, console, options):
-        yield Syntax(str(self.text).rstrip(), self.lexer_name, theme=self.theme, word_wrap=True,
-                     padding=(0, 1), background_color="default")
-
-
-class _Markdown(RichMarkdown):
-    elements = {**RichMarkdown.elements, "fence": _CompactCode, "code_block": _CompactCode}
-
-
-def _markdown(text: str) -> RichMarkdown:
+def _markdown(text: str):
     """The configuration text as one renderable: drawn in a single frame, unlike a widget per
     block, which keeps a step's first visit quick over a slow link (bench row 5)."""
-    return _Markdown(text, code_theme="ansi_dark", inline_code_lexer=None, hyperlinks=False)
+    from rosnet_tui.ui.mdlite import render
+
+    return render(text)
 
 
 class StepScreen(Screen):
     """A step of the procedure, with its checks run live in a worker."""
+
+    AUTO_FOCUS = "#check-table"  # focused as the screen is shown: drawn once, already focused
 
     BINDINGS = [
         Binding("r", "run_checks", "Run"),
@@ -81,12 +70,11 @@ class StepScreen(Screen):
                     verify.border_title = "Verification"
                     yield CheckList(self.session.check_rows(self.step.id),
                                     advice=self.session.findings_for, id="check-list")
-        yield Footer()
+        yield KeyBar()
 
     def on_mount(self) -> None:
         if self.step.id == "router":
             self.call_after_refresh(self._render_card)
-        self.query_one("#check-table").focus()
         self.title = "rosnet-tui"
         self.refresh_subtitle()
         self._sync_results()

@@ -7,9 +7,10 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
-from textual.widgets import Button, Footer, Static
+from textual.widgets import Button, Static
 
 from rosnet_tui.core.ssh import verify_commands
+from rosnet_tui.ui.widgets import KeyBar
 
 
 class TrustKeyScreen(ModalScreen[bool]):
@@ -39,7 +40,7 @@ class TrustKeyScreen(ModalScreen[bool]):
             with Horizontal(id="write-buttons"):
                 yield Button("[They match: trust]", id="trust-yes", variant="warning", compact=True)
                 yield Button("[Do not trust]", id="trust-no", variant="primary", compact=True)
-        yield Footer()
+        yield KeyBar()
 
     def on_mount(self) -> None:
         self.query_one("#trust-no", Button).focus()

@@ -11,7 +11,6 @@ from textual.binding import Binding
 from textual.containers import Vertical, VerticalScroll
 from textual.message import Message
 from textual.reactive import reactive
-from textual.widget import Widget
 from textual.widgets import DataTable, Input, Static
 
 from rosnet_tui.core.results import CheckResult
@@ -30,19 +29,12 @@ STEP_MARK = {"pass": "ok", "warn": "!", "fail": "x", "skip": "-", RUNNING: "..",
              NOT_RUN: "", "partial": "~"}
 
 
-class StepBar(Widget):
-    """One line: the four steps, where you are, and each step's state."""
+class StepBar(Static):
+    """One line: the four steps, where you are (reverse video and '>'), and each step's state
+    in words ([ok], [x]...), so it reads without colour. One widget, redrawn as one line."""
 
     DEFAULT_CSS = """
-    StepBar { height: 1; layout: horizontal; background: $panel; }
-    StepBar > .step-item { width: auto; padding: 0 1 0 0; color: $foreground; }
-    StepBar { background: transparent; }
-    StepBar > .step-item.-current { color: $foreground; text-style: bold reverse; }
-    StepBar > .step-item.-fail { color: $error; }
-    StepBar > .step-item.-warn { color: $warning; }
-    StepBar > .step-item.-pass { color: $success; }
-    StepBar > .step-item.-current.-fail, StepBar > .step-item.-current.-warn,
-    StepBar > .step-item.-current.-pass { color: $foreground; }
+    StepBar { height: 1; width: 1fr; background: transparent; }
     """
 
     current: reactive[str] = reactive("isp")
@@ -53,17 +45,13 @@ class StepBar(Widget):
             super().__init__()
 
     def __init__(self, current: str = "isp", **kwargs) -> None:
-        super().__init__(**kwargs)
+        super().__init__("", markup=False, **kwargs)
         self._states: dict[str, str] = {s.id: NOT_RUN for s in STEPS}
+        self._spans: list[tuple[int, int, str]] = []
         self.set_reactive(StepBar.current, current)
 
-    def compose(self) -> ComposeResult:
-        for s in STEPS:
-            yield Static(self._label(s.id), id=f"step-item-{s.id}", classes="step-item",
-                         markup=False)
-
     def on_mount(self) -> None:
-        self._refresh_items()
+        self._redraw()
 
     def _label(self, step_id: str) -> str:
         step = next(s for s in STEPS if s.id == step_id)
@@ -75,24 +63,63 @@ class StepBar(Widget):
         if self._states.get(step_id) != state:
             self._states[step_id] = state
             if self.is_mounted:
-                self._refresh_items()
+                self._redraw()
 
     def watch_current(self) -> None:
         if self.is_mounted:
-            self._refresh_items()
+            self._redraw()
 
-    def _refresh_items(self) -> None:
+    def _redraw(self) -> None:
+        text = Text(no_wrap=True, overflow="ellipsis")
+        self._spans = []
         for s in STEPS:
-            item = self.query_one(f"#step-item-{s.id}", Static)
-            item.update(self._label(s.id))
-            item.set_class(s.id == self.current, "-current")
-            for st in ("fail", "warn", "pass"):
-                item.set_class(self._states[s.id] == st, f"-{st}")
+            start = len(text)
+            state = self._states[s.id]
+            style = "bold reverse" if s.id == self.current else STATE_COLOUR.get(state, "")
+            text.append(self._label(s.id), style=style)
+            self._spans.append((start, len(text), s.id))
+            text.append(" ")
+        self.update(text)
 
     def on_click(self, event: events.Click) -> None:
-        widget = event.widget
-        if widget is not None and widget.id and widget.id.startswith("step-item-"):
-            self.post_message(self.Selected(widget.id.removeprefix("step-item-")))
+        for start, end, step_id in self._spans:
+            if start <= event.x < end:
+                self.post_message(self.Selected(step_id))
+                return
+
+
+class KeyBar(Static):
+    """The keys of the screen on one line (Textual's Footer is a widget per key, rebuilt at
+    every focus change: more work and more bytes for the same line)."""
+
+    DEFAULT_CSS = """
+    KeyBar { dock: bottom; height: 1; width: 1fr; }
+    """
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("", markup=False, **kwargs)
+
+    def on_mount(self) -> None:
+        self.screen.bindings_updated_signal.subscribe(self, self._bindings_changed)
+        self._bindings_changed(self.screen)
+
+    def on_unmount(self) -> None:
+        self.screen.bindings_updated_signal.unsubscribe(self)
+
+    def _bindings_changed(self, screen) -> None:
+        if not self.is_attached or screen is not self.screen:
+            return
+        text = Text(no_wrap=True, overflow="ellipsis")
+        seen: set[str] = set()
+        for _node, binding, enabled, _tooltip in screen.active_bindings.values():
+            if not binding.show or not enabled or binding.action in seen:
+                continue
+            seen.add(binding.action)
+            if text:
+                text.append(" ")
+            text.append(self.app.get_key_display(binding), style="bold cyan")
+            text.append(f" {binding.description}")
+        self.update(text)
 
 
 class PlainHeader(Static):
@@ -222,7 +249,7 @@ class CheckList(Vertical):
         self._fit_widths()
         for key, label, width in zip(("state", "title", "summary"), ("", "Check", "Result"),
                                      self._widths, strict=True):
-            table.add_column(label, key=key, width=width)
+            table.add_column(Text(label), key=key, width=width)  # Text: never read as markup
         for row in self.rows.values():
             table.add_row(*self._cells(row), key=row.id)
 
@@ -236,6 +263,12 @@ class CheckList(Vertical):
             for row in self.rows.values():
                 self._update_row(row)
             table.refresh()
+
+    def _expected_width(self) -> int:
+        """The pane's width before the first layout (so the first frame is the right one): the
+        screen less the pane's padding, or half of it less a frame when side by side."""
+        width = self.app.size.width or 80
+        return width // 2 - 4 if self.app.has_class("wide") else width - 2
 
     def set_titles(self, rows: list[tuple[str, str]]) -> None:
         """The checks got loaded: their full titles, and rows for checks not listed yet."""
@@ -251,7 +284,7 @@ class CheckList(Vertical):
     def _fit_widths(self) -> bool:
         """Status and title keep their width; the result column takes the rest, so the table is
         never wider than the pane (no horizontal scrollbar). True when the widths changed."""
-        width = self.size.width or 76
+        width = self.size.width or self._expected_width()
         title_w = max([len("Check")] + [len(r.label) for r in self.rows.values()])
         title_w = min(title_w, max(12, (width - 9) // 2))
         # Each column has a cell of padding on both sides; one column is kept for a scrollbar.
@@ -266,7 +299,7 @@ class CheckList(Vertical):
         style = f"bold {colour}".strip() if state in ("pass", "warn", "fail") else colour
         return Text(STATE_LABEL[state], style=style)
 
-    def _cells(self, row: CheckRow) -> tuple[Text, str, str]:
+    def _cells(self, row: CheckRow) -> tuple[Text, Text, Text]:
         if row.state == RUNNING:
             summary = "checking..."
         elif row.result is not None:
@@ -274,7 +307,8 @@ class CheckList(Vertical):
         else:
             summary = "not run yet: press r"
         _s, title_w, rest = self._widths
-        return self._state_text(row.state), cut(row.label, title_w), cut(summary, rest)
+        # Text, not str: a result such as "[x] refused" is shown as it is, not read as markup.
+        return self._state_text(row.state), Text(cut(row.label, title_w)), Text(cut(summary, rest))
 
     def _update_row(self, row: CheckRow) -> None:
         table = self.query_one(DataTable)

@@ -16,11 +16,12 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
-from textual.widgets import Button, Checkbox, Footer, Static
+from textual.widgets import Button, Checkbox, Static
 
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import privilege
 from rosnet_tui.core.write_plans import WritePlan
+from rosnet_tui.ui.widgets import KeyBar
 
 
 class WriteScreen(ModalScreen[bool]):
@@ -48,7 +49,7 @@ class WriteScreen(ModalScreen[bool]):
             with Horizontal(id="write-buttons"):
                 yield Button("[Apply]", id="write-apply", variant="primary", compact=True)
                 yield Button("[Cancel]", id="write-cancel", compact=True)
-        yield Footer()
+        yield KeyBar()
 
     def on_mount(self) -> None:
         self.refresh_preview()
@@ -141,7 +142,7 @@ class UndoScreen(ModalScreen[bool]):
             with Horizontal(id="write-buttons"):
                 yield Button("[Undo]", id="write-apply", variant="primary", compact=True)
                 yield Button("[Cancel]", id="write-cancel", compact=True)
-        yield Footer()
+        yield KeyBar()
 
     def on_mount(self) -> None:
         status = self.query_one("#write-status", Static)
