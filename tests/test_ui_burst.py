@@ -230,3 +230,23 @@ async def test_alt_letter_in_a_field_is_escape_then_letter(tmp_path):
         app.post_message(events.Key("alt+2", "2"))  # Escape closes it, 2 goes to step 2
         await settle(app, pilot)
         assert type(app.screen).__name__ == "StepScreen" and app.screen.step.id == "router"
+
+
+@pytest.mark.parametrize("typed,keys", [
+    ("?\x1b1n", ["question_mark", "escape", "1", "n"]),  # Esc 1 was read as '¡'
+    ("\x1b\t", ["escape", "tab"]),                        # was Shift+Tab
+    ("\x1b\x7f", ["escape", "backspace"]),                # was Ctrl+W
+    ("ab\x1bq", ["a", "b", "escape", "q"]),               # was Alt+Q
+    ("3\x1b[B4", ["3", "down", "4"]),                     # real sequences stay whole
+    ("\x1bOP", ["f1"]),
+])
+def test_escape_then_a_key_in_one_read_is_escape_then_the_key(typed, keys):
+    import time
+
+    from rosnet_tui.ui.keys import escape_first_parser
+
+    parser = escape_first_parser()()
+    got = list(parser.feed(typed))
+    time.sleep(0.15)  # Textual's escape delay
+    got += list(parser.tick())
+    assert [k.key for k in got] == keys

@@ -49,6 +49,32 @@ def split_alt(event: events.Key) -> list[events.Key]:
     return [events.Key("escape", "\x1b"), events.Key(key, char)]
 
 
+# After Escape, these begin a longer sequence (CSI, SS3, OSC, DCS...): never split there.
+_SEQUENCE_STARTS = "[O]P_^X"
+
+
+def escape_first_parser():
+    """Textual's terminal-input parser, reading Escape followed at once by a character as Escape
+    and then that character (imported with the driver).
+
+    Textual maps some Escape+character pairs to other keys, as macOS Option combinations do: Esc 1
+    is read as '¡', Esc Tab as Shift+Tab, Esc Backspace as Ctrl+W. On a slow link Escape and the
+    next key often arrive together, so help stayed open and the key was lost.
+    """
+    from textual._xterm_parser import XTermParser
+
+    class EscapeFirstParser(XTermParser):
+        def _sequence_to_key_events(self, sequence: str, alt: bool = False):
+            if (len(sequence) == 2 and sequence[0] == "\x1b"
+                    and sequence[1] not in _SEQUENCE_STARTS and sequence[1] != "\x1b"):
+                yield events.Key("escape", "\x1b")
+                yield from super()._sequence_to_key_events(sequence[1])
+                return
+            yield from super()._sequence_to_key_events(sequence, alt)
+
+    return EscapeFirstParser
+
+
 class OrderedKeys:
     """App mixin: keys take effect one after the other, each once the app has settled."""
 

@@ -406,7 +406,13 @@ def frugal_driver_class():
     import os
 
     from textual import events
+    from textual.drivers import linux_driver
     from textual.drivers.linux_driver import LinuxDriver
+
+    from rosnet_tui.ui.keys import escape_first_parser
+
+    # The driver builds its parser from this module name when its input thread starts.
+    linux_driver.XTermParser = escape_first_parser()  # type: ignore[misc]
 
     class FrugalDriver(LinuxDriver):
         def __init__(self, *args, **kwargs) -> None:
