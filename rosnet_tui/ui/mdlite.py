@@ -39,7 +39,16 @@ def inline(text: str) -> Text:
             out.append(f"{m.group('lt')} ({m.group('lu')})")
         pos = m.end()
     out.append(text[pos:])
-    return out
+    return _blank_ends_spans(out)
+
+
+def _blank_ends_spans(text: Text) -> Text:
+    """Move the blank after a styled span into it (some SVG viewers drop a span's leading
+    blank, gluing words together in the screenshots)."""
+    for span in text.spans:
+        if text.plain[span.end:span.end + 1] == " ":
+            text.spans[text.spans.index(span)] = span._replace(end=span.end + 1)
+    return text
 
 
 def render(markdown: str) -> Group:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -68,7 +69,7 @@ class PeerRow(Horizontal):
     PeerRow { height: 1; }
     PeerRow > Input { width: 1fr; margin-right: 1; }
     PeerRow > .peer-user { width: 12; }
-    PeerRow > Button { width: 5; min-width: 5; }
+    PeerRow > Button { width: 7; min-width: 7; }
     """
 
     def __init__(self, index: int, peer: S.Peer, **kwargs) -> None:
@@ -86,7 +87,7 @@ class PeerRow(Horizontal):
                     validators=[CoreValidator(S.validate_ip, required=False)])
         yield OrderedInput(p.ssh_user, placeholder="ssh user", id=f"peer-{i}-user", compact=True,
                     validators=[CoreValidator(S.validate_ssh_user)], classes="peer-user")
-        yield Button("[del]", id=f"peer-{i}-remove", compact=True, classes="peer-remove",
+        yield Button(Text("[del]"), id=f"peer-{i}-remove", compact=True, classes="peer-remove",
                      tooltip="Remove this peer")
 
     def read(self) -> S.Peer:
@@ -170,9 +171,9 @@ class SetupScreen(Screen[bool]):
                     yield self._peer_row(p)
             yield Label("", id="peer-error", classes="field-error")
             with Horizontal(id="setup-buttons"):
-                yield Button("[Add peer]", id="add-peer", compact=True)
-                yield Button("[Save]", id="save", variant="primary", compact=True)
-                yield Button("[Cancel]", id="cancel", compact=True)
+                yield Button(Text("[Add peer]"), id="add-peer", compact=True)
+                yield Button(Text("[Save]"), id="save", variant="primary", compact=True)
+                yield Button(Text("[Cancel]"), id="cancel", compact=True)
         yield KeyBar()
 
     def _local_ip_hint(self) -> str:

@@ -243,6 +243,9 @@ class StepScreen(Screen):
 
     def on_check_list_evidence_toggled(self, message: CheckList.EvidenceToggled) -> None:
         self.set_class(message.shown, "-evidence")
+        if message.shown:  # the evidence names the check by its full title: load the checks
+            self.specs  # noqa: B018
+            self.query_one(CheckList).refresh_evidence()
 
     def action_zoom(self) -> None:
         """Zoom the focused pane (the evidence box, or the pane holding the focus); again to

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -38,8 +39,8 @@ class TrustKeyScreen(ModalScreen[bool]):
                 + verify_commands(self.peer_name, self.port, ktype, self.user),
                 id="trust-text", markup=False)
             with Horizontal(id="write-buttons"):
-                yield Button("[They match: trust]", id="trust-yes", variant="warning", compact=True)
-                yield Button("[Do not trust]", id="trust-no", variant="primary", compact=True)
+                yield Button(Text("[They match: trust]"), id="trust-yes", variant="warning", compact=True)
+                yield Button(Text("[Do not trust]"), id="trust-no", variant="primary", compact=True)
         yield KeyBar()
 
     def on_mount(self) -> None:

@@ -76,9 +76,9 @@ class StepBar(Static):
             start = len(text)
             state = self._states[s.id]
             style = "bold reverse" if s.id == self.current else STATE_COLOUR.get(state, "")
-            text.append(self._label(s.id), style=style)
+            # The separating blank inside the span: some SVG viewers drop a span's leading blank.
+            text.append(self._label(s.id) + " ", style=style)
             self._spans.append((start, len(text), s.id))
-            text.append(" ")
         self.update(text)
 
     def on_click(self, event: events.Click) -> None:
@@ -115,10 +115,8 @@ class KeyBar(Static):
             if not binding.show or not enabled or binding.action in seen:
                 continue
             seen.add(binding.action)
-            if text:
-                text.append(" ")
-            text.append(self.app.get_key_display(binding), style="bold cyan")
-            text.append(f" {binding.description}")
+            text.append(self.app.get_key_display(binding) + " ", style="bold cyan")
+            text.append(f"{binding.description} ")
         self.update(text)
 
 
@@ -363,6 +361,10 @@ class CheckList(Vertical):
                 if f.goto_step:
                     lines.append(f"  (go back to the {f.goto_step} step: press g)")
         return "\n".join(lines)
+
+    def refresh_evidence(self) -> None:
+        if self.has_class("-evidence"):
+            self._show_evidence()
 
     def _show_evidence(self) -> None:
         self.query_one("#evidence", Static).update(self.evidence_text(self.highlighted_id))

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rich.syntax import Syntax
+from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -22,6 +22,20 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import privilege
 from rosnet_tui.core.write_plans import WritePlan
 from rosnet_tui.ui.widgets import KeyBar
+
+
+def diff_text(diff: str) -> Text:
+    """A unified diff in the terminal's colours, red kept for failures: added lines green,
+    removed ones yellow, hunk headers in the accent colour; the marks (+ - @@) say it in words
+    too."""
+    out = Text()
+    for line in diff.splitlines():
+        style = ("bold" if line.startswith(("+++", "---")) else
+                 "cyan" if line.startswith("@@") else
+                 "green" if line.startswith("+") else
+                 "yellow" if line.startswith("-") else "")
+        out.append(line + "\n", style=style)
+    return out
 
 
 class WriteScreen(ModalScreen[bool]):
@@ -47,8 +61,8 @@ class WriteScreen(ModalScreen[bool]):
                 yield Static("", id="write-diff")
             yield Static("", id="write-status", markup=False)
             with Horizontal(id="write-buttons"):
-                yield Button("[Apply]", id="write-apply", variant="primary", compact=True)
-                yield Button("[Cancel]", id="write-cancel", compact=True)
+                yield Button(Text("[Apply]"), id="write-apply", variant="primary", compact=True)
+                yield Button(Text("[Cancel]"), id="write-cancel", compact=True)
         yield KeyBar()
 
     def on_mount(self) -> None:
@@ -73,7 +87,7 @@ class WriteScreen(ModalScreen[bool]):
         p = self.preview
         diff = p.diff()
         self.query_one("#write-diff", Static).update(
-            Syntax(diff, "diff", theme="ansi_dark", word_wrap=True) if diff else
+            diff_text(diff) if diff else
             f"{p.path} already holds this configuration: nothing to write.")
         notes = list(p.notes)
         if p.changed and p.needs_privilege and self.plan.sudo_command is not None:
@@ -140,8 +154,8 @@ class UndoScreen(ModalScreen[bool]):
                 yield Static("", id="write-diff")
             yield Static("", id="write-status", markup=False)
             with Horizontal(id="write-buttons"):
-                yield Button("[Undo]", id="write-apply", variant="primary", compact=True)
-                yield Button("[Cancel]", id="write-cancel", compact=True)
+                yield Button(Text("[Undo]"), id="write-apply", variant="primary", compact=True)
+                yield Button(Text("[Cancel]"), id="write-cancel", compact=True)
         yield KeyBar()
 
     def on_mount(self) -> None:
@@ -153,8 +167,7 @@ class UndoScreen(ModalScreen[bool]):
             self.query_one("#write-apply", Button).disabled = True
             return
         diff = self.plan.diff()
-        self.query_one("#write-diff", Static).update(
-            Syntax(diff, "diff", theme="ansi_dark", word_wrap=True) if diff else "")
+        self.query_one("#write-diff", Static).update(diff_text(diff) if diff else "")
         notes = [f"Changed since by someone else: {c}" for c in self.plan.conflicts]
         if self.plan.conflicts:
             notes.append("Undo would lose those changes: run `rosnet-tui undo --force` if you "
