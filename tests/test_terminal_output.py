@@ -132,3 +132,46 @@ def test_incomplete_sequence_waits_for_the_rest():
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__, "-q"]))
+
+
+def _walk(term: str, no_color: bool = False) -> str:
+    """The wizard's output through every screen (steps, results, evidence, advisor, help,
+    set-up), on loopback."""
+    with local_world() as world:
+        world.fresh_state()
+        p = spawn_app(world, term=term, no_color=no_color)
+        try:
+            assert p.wait_text("Your provider allows", 30) is not None
+            p.wait_quiet(0.4, 10)
+            for key, shown in (("2", "Your modem forwards"), ("r", "checking"), ("e", None),
+                               ("3", None), ("4", None), ("a", None), ("\x1b", None),
+                               ("?", "closes this help"), ("\x1b", None),
+                               ("s", "This component"), ("\x1b", None)):
+                mark = p.mark
+                p.send(key)
+                if shown:
+                    p.wait_text(shown, 10, mark)
+                else:
+                    p.wait_for(lambda t: True, 3, mark)
+                p.wait_quiet(0.5, 10)
+        finally:
+            p.close(b"\x11")
+        return p.raw_since(0).decode("utf-8", "replace")
+
+
+def test_the_linux_console_gets_only_glyphs_its_font_has():
+    from rosnet_tui.ui.terminal import CP437
+
+    text = re.sub(r"\x1b\[[0-?]*[ -/]*[@-~]|\x1b\][^\x07\x1b]*(?:\x07|\x1b\\)", "",
+                  _walk("linux"))
+    missing = sorted({ch for ch in text if ord(ch) > 126 and ch not in CP437})
+    assert not missing, missing
+
+
+def test_no_color_draws_no_colour_and_shows_focus_in_reverse():
+    raw = _walk("xterm-256color", no_color=True)
+    params = [p for seq in re.findall(r"\x1b\[([0-9;]*)m", raw) for p in seq.split(";") if p]
+    colours = [p for p in params if p in {"38", "48"} or 30 <= int(p) <= 49 and p not in
+               {"39", "49"} or 90 <= int(p) <= 107]
+    assert not colours, sorted(set(colours))
+    assert "7" in params  # the cursor row and the current step: reverse video

@@ -84,6 +84,10 @@ class RosnetApp(OrderedKeys, App[int]):
         # (choosing them later restyles every widget, at start-up).
         self.register_theme(THEME)
         self.theme = THEME.name
+        if self.no_color:  # NO_COLOR: the terminal's own colours only (Textual chose its filter
+            from textual.filter import Monochrome, NoColor  # for its default theme: greys)
+
+            self._filters = [NoColor() if isinstance(f, Monochrome) else f for f in self._filters]
         if linux_console():
             self.add_class("linux")
             use_console_glyphs()
@@ -162,6 +166,10 @@ class RosnetApp(OrderedKeys, App[int]):
 
     async def action_leave(self) -> None:
         await self.action_quit()
+
+    async def action_quit(self) -> None:
+        self.keep_state()  # Ctrl+Q in the middle of the set-up keeps what was typed
+        await super().action_quit()
 
     def action_redraw(self) -> None:
         """Ctrl+L: send the whole screen again (after line noise, or a message over it)."""

@@ -137,7 +137,8 @@ class OrderedKeys:
             deadline = time.monotonic() + SETTLE_LIMIT_S
             while not self._settled() and time.monotonic() < deadline:
                 await asyncio.sleep(_POLL_S)
-            if not self._pending_keys or getattr(self, "_exit", False):
+            app = self  # type: ignore[assignment]
+            if not self._pending_keys or app._exit or app._closing or app._closed:
                 break
             event = self._pending_keys.popleft()
             released = events.Key(event.key, event.character)
