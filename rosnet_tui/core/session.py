@@ -12,7 +12,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rosnet_tui.core.netinfo import LocalNet, with_detected
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings, default_state_dir, save_settings
@@ -22,6 +21,7 @@ from rosnet_tui.core.ui_state import UiState, local_time
 if TYPE_CHECKING:
     from rosnet_tui.core.advisor import Finding
     from rosnet_tui.core.checks import CheckContext, CheckSpec
+    from rosnet_tui.core.netinfo import LocalNet
     from rosnet_tui.core.write_plans import WritePaths, WritePlan
 
 # A check's state in the wizard: the four result statuses plus two of the wizard's own.
@@ -62,7 +62,10 @@ class WizardSession:
     specs_for: Callable[[str], list[CheckSpec]] = _default_specs
     # Tests hand in their own context factory; None: the runner's everyday context.
     context_factory: Callable[[Settings], CheckContext] | None = None
-    detected: LocalNet = field(default_factory=LocalNet)
+    # How this machine's network is found out (interfaces, default route): asked once, when
+    # something needs it, since saved settings usually say it already.
+    detect_net: Callable[[], LocalNet] | None = None
+    _detected: LocalNet | None = field(default=None, init=False, repr=False)
     findings: list[Finding] = field(default_factory=list)
     _states: dict[str, tuple[str, CheckResult | None]] = field(default_factory=dict, init=False,
                                                                repr=False)
@@ -80,8 +83,26 @@ class WizardSession:
             self.findings = list(self.ui_state.findings())  # type: ignore[arg-type]
 
     # ------------------------------------------------------------------ settings
+    @property
+    def detected(self) -> LocalNet:
+        """This machine's interface, address and gateway (found out on first use)."""
+        if self._detected is None:
+            from rosnet_tui.core.netinfo import LocalNet, detect_local_net
+
+            self._detected = (self.detect_net or detect_local_net)() or LocalNet()
+        return self._detected
+
+    @detected.setter
+    def detected(self, net: LocalNet) -> None:
+        self._detected = net
+
     def runtime_settings(self) -> Settings:
         """The saved settings, with what they leave blank filled in from this machine."""
+        t = self.settings.this
+        if t.local_ip and t.interface:  # nothing to fill in: no need to ask the system
+            return self.settings
+        from rosnet_tui.core.netinfo import with_detected
+
         return with_detected(self.settings, self.detected)
 
     def save_settings(self, settings: Settings) -> None:

@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING
 from textual.app import App
 from textual.binding import Binding
 
-from rosnet_tui.core.netinfo import LocalNet, detect_local_net
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.session import _default_specs as registry_specs
@@ -31,6 +30,13 @@ from rosnet_tui.ui.widgets import StepBar
 
 if TYPE_CHECKING:
     from rosnet_tui.core.checks import CheckContext, CheckSpec
+    from rosnet_tui.core.netinfo import LocalNet
+
+
+def detect_local_net() -> LocalNet:
+    from rosnet_tui.core.netinfo import detect_local_net as detect
+
+    return detect()
 
 
 @dataclass
@@ -51,7 +57,7 @@ class AppDeps:
         return WizardSession(config_path=self.config_path, settings=self.settings,
                              state_dir=self.state_dir, hosts_path=self.hosts_path,
                              bashrc_path=self.bashrc_path, specs_for=self.specs_for,
-                             context_factory=self.make_context)
+                             context_factory=self.make_context, detect_net=self.detect_net)
 
 
 class RosnetApp(OrderedKeys, App[int]):
@@ -98,7 +104,6 @@ class RosnetApp(OrderedKeys, App[int]):
     # ------------------------------------------------------------------ start-up
     def on_mount(self) -> None:
         self._catch_signals()
-        self.session.detected = self.deps.detect_net()
         self.set_class(self.size.width >= self.WIDE_AT, "wide")
         for step_id in STEP_IDS:
             screen = StepScreen(STEP_BY_ID[step_id], self.session)
