@@ -11,6 +11,7 @@ from textual.binding import Binding
 from textual.containers import Vertical, VerticalScroll
 from textual.message import Message
 from textual.reactive import reactive
+from textual.widget import Widget
 from textual.widgets import DataTable, Input, Static
 
 from rosnet_tui.core.results import CheckResult
@@ -29,13 +30,30 @@ STEP_MARK = {"pass": "ok", "warn": "!", "fail": "x", "skip": "-", RUNNING: "..",
              NOT_RUN: "", "partial": "~"}
 
 
-class StepBar(Static):
-    """One line: the four steps, where you are (reverse video and '>'), and each step's state
-    in words ([ok], [x]...), so it reads without colour. One widget, redrawn as one line."""
+class Line(Widget):
+    """One line of text, redrawn only when it changes and never relaid out (its size is fixed):
+    a bar that updates on every focus change should cost nothing when it says the same."""
 
     DEFAULT_CSS = """
-    StepBar { height: 1; width: 1fr; background: transparent; }
+    Line { height: 1; width: 1fr; }
     """
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self._line = Text()
+
+    def show(self, text: Text) -> None:
+        if text.plain != self._line.plain or text.spans != self._line.spans:
+            self._line = text
+            self.refresh()
+
+    def render(self) -> Text:
+        return self._line
+
+
+class StepBar(Line):
+    """One line: the four steps, where you are (reverse video and '>'), and each step's state
+    in words ([ok], [x]...), so it reads without colour. One widget, redrawn as one line."""
 
     current: reactive[str] = reactive("isp")
 
@@ -45,7 +63,7 @@ class StepBar(Static):
             super().__init__()
 
     def __init__(self, current: str = "isp", **kwargs) -> None:
-        super().__init__("", markup=False, **kwargs)
+        super().__init__(**kwargs)
         self._states: dict[str, str] = {s.id: NOT_RUN for s in STEPS}
         self._spans: list[tuple[int, int, str]] = []
         self.set_reactive(StepBar.current, current)
@@ -79,7 +97,7 @@ class StepBar(Static):
             # The separating blank inside the span: some SVG viewers drop a span's leading blank.
             text.append(self._label(s.id) + " ", style=style)
             self._spans.append((start, len(text), s.id))
-        self.update(text)
+        self.show(text)
 
     def on_click(self, event: events.Click) -> None:
         for start, end, step_id in self._spans:
@@ -88,16 +106,13 @@ class StepBar(Static):
                 return
 
 
-class KeyBar(Static):
+class KeyBar(Line):
     """The keys of the screen on one line (Textual's Footer is a widget per key, rebuilt at
     every focus change: more work and more bytes for the same line)."""
 
     DEFAULT_CSS = """
-    KeyBar { dock: bottom; height: 1; width: 1fr; }
+    KeyBar { dock: bottom; }
     """
-
-    def __init__(self, **kwargs) -> None:
-        super().__init__("", markup=False, **kwargs)
 
     def on_mount(self) -> None:
         self.screen.bindings_updated_signal.subscribe(self, self._bindings_changed)
@@ -117,19 +132,16 @@ class KeyBar(Static):
             seen.add(binding.action)
             text.append(self.app.get_key_display(binding) + " ", style="bold cyan")
             text.append(f"{binding.description} ")
-        self.update(text)
+        self.show(text)
 
 
-class PlainHeader(Static):
+class PlainHeader(Line):
     """The top line: the program and the screen's subject, drawn as one plain line (Textual's
     Header draws more than it says, and with glyphs the Linux console lacks)."""
 
     DEFAULT_CSS = """
-    PlainHeader { height: 1; width: 1fr; text-style: bold; padding: 0 1; dock: top; }
+    PlainHeader { text-style: bold; padding: 0 1; dock: top; }
     """
-
-    def __init__(self, **kwargs) -> None:
-        super().__init__("", markup=False, **kwargs)
 
     def on_mount(self) -> None:
         self.watch(self.screen, "title", self._retitle)
@@ -137,7 +149,7 @@ class PlainHeader(Static):
 
     def _retitle(self, _value: str = "") -> None:
         parts = [p for p in (self.screen.title, self.screen.sub_title) if p]
-        self.update(" · ".join(parts))
+        self.show(Text(" · ".join(parts)))
 
 
 class OrderedInput(Input):
