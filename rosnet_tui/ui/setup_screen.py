@@ -15,9 +15,10 @@ from textual.widgets import Button, Input, Label, Select, Static
 
 from rosnet_tui.core import settings as S
 from rosnet_tui.core.session import WizardSession
+from rosnet_tui.ui.fields import OrderedInput
 from rosnet_tui.ui.messages import SettingsSaved
 from rosnet_tui.ui.theme import cut
-from rosnet_tui.ui.widgets import KeyBar, OrderedInput, PlainHeader
+from rosnet_tui.ui.widgets import KeyBar, PlainHeader
 
 
 class CoreValidator(Validator):
