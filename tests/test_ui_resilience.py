@@ -262,3 +262,29 @@ def test_setup_filled_in_one_burst_over_a_pty(world, tmp_path):
     assert saved is not None and saved.this.name == "robot1"
     assert [(x.name, x.local_ip, x.public_ip) for x in saved.peers] == [
         ("sami", "192.168.1.10", "198.51.100.3")]
+
+
+def _process_state(pid: int) -> str:
+    with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+        return f.read().rsplit(")", 1)[1].split()[0]
+
+
+def test_ctrl_z_suspends_and_fg_brings_it_back(world):
+    world.fresh_state()
+    p = spawn_app(world)
+    try:
+        assert p.wait_text(app_title("1"), 30) is not None
+        settle(p)
+        mark = p.mark
+        p.send("\x1a")  # Ctrl+Z
+        deadline = time.monotonic() + 5
+        while _process_state(p.pid) != "T" and time.monotonic() < deadline:
+            p.pump(0.05)
+        assert _process_state(p.pid) == "T", "Ctrl+Z did not suspend the wizard"
+        assert b"\x1b[?1049l" in p.raw_since(mark)  # the terminal given back meanwhile
+        mark = p.mark
+        os.kill(p.pid, signal.SIGCONT)  # what the shell's fg does
+        assert p.wait_text(app_title("1"), 10, mark) is not None  # drawn again, whole
+        assert p.alive()
+    finally:
+        p.close(b"\x11")

@@ -246,3 +246,23 @@ def test_a_damaged_state_file_is_ignored(tmp_path):
     s = WizardSession(config_path=tmp_path / "c.toml", settings=complete_settings(),
                       state_dir=tmp_path / "state")
     assert s.last_step() == "isp" and s.draft() is None and s.latest_results() == {}
+
+
+async def test_the_advisors_advice_scrolls_and_zooms(tmp_path):
+    async def fails(ctx):
+        return Outcome(Status.FAIL, "broken", ["it broke"])
+
+    def specs(step):
+        return [CheckSpec("router.port_open", step, "ports", fails)] if step == "router" else []
+
+    app = make_app(tmp_path, complete_settings(), specs_for=specs)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("2", "r")
+        await pilot.pause(0.3)
+        await pilot.press("a")
+        await pilot.pause()
+        assert type(app.screen).__name__ == "AdvisorScreen"
+        await pilot.press("tab", "z")
+        await pilot.pause()
+        box = app.screen.query_one("#advisor-detail-box")
+        assert app.screen.maximized is box and box.region.height >= 20
