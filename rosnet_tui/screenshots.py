@@ -98,6 +98,78 @@ async def _shoot(out: Path, width: int, height: int) -> list[Path]:
     return written
 
 
+def demo_settings_ros2() -> Settings:
+    """The same scene on ROS 2 over rmw_zenoh: the robot's router is the hub, TCP 7447."""
+    s = demo_settings()
+    s.ros.version = 2
+    return s
+
+
+_R2 = "the master's Zenoh router"
+DEMO_RESULTS_ROS2 = [
+    CheckResult("ros2.env", "ros", Status.PASS,
+                "rmw_zenoh_cpp, domain 0, jazzy, a router on this component",
+                ["RMW_IMPLEMENTATION: environment rmw_zenoh_cpp, ~/.bashrc rmw_zenoh_cpp",
+                 "sami: ROS_DISTRO=jazzy, RMW_IMPLEMENTATION=rmw_zenoh_cpp"], 0.5, 3.0,
+                {"rmw": "rmw_zenoh_cpp", "bashrc_rmw": "rmw_zenoh_cpp", "rmw_ok": True,
+                 "dds": False, "domain_ok": True, "distro": "jazzy"}),
+    CheckResult("ros2.router", "ros", Status.PASS,
+                f"{_R2} (v1.10.2) answers at tcp/turtlebot:7447 (10.10.10.1)",
+                ["TCP 7447 listened on here: 0.0.0.0"], 0.1, 3.0,
+                {"role": "master", "endpoint": "tcp/turtlebot:7447", "reachable": True,
+                 "router_version": "v1.10.2", "listening": ["0.0.0.0"]}),
+    CheckResult("ros2.graph", "ros", Status.PASS,
+                "3 node(s) on 2 component(s) seen; probe nodes seen both ways (from here and "
+                "sami)", ["nodes seen from here: turtlebot: /camera, /base; sami: /teleop"],
+                0.8, 6.0, {"missing": [], "mixed_hashes": False}),
+    CheckResult("ros2.pubsub_out", "ros", Status.PASS,
+                "here -> sami: a message in rmw_zenoh's format went through the routers",
+                [], 0.7, 12.0, {"peer": "sami", "ok": True}),
+    CheckResult("ros2.pubsub_in", "ros", Status.PASS,
+                "sami -> here: a message in rmw_zenoh's format went through the routers",
+                [], 0.7, 12.0, {"peer": "sami", "ok": True}),
+    CheckResult("router.upnp", "router", Status.WARN,
+                "TCP 7447 is not forwarded; the modem offers forwarding (UPnP IGD): `rosnet-tui "
+                "router map` asks it",
+                ["the modem 10.10.10.254 (home gateway) speaks UPnP IGD and NAT-PMP; this machine "
+                 "is 10.10.10.1 towards it", "the modem's external address: 203.0.113.2"],
+                0.3, 4.5,
+                {"protocol": "upnp", "protocols": ["upnp", "natpmp"], "gateway": "10.10.10.254",
+                 "external_ip": "203.0.113.2", "wan": "public", "cgnat": False, "needed": [7447],
+                 "present": [], "missing": [7447], "conflicts": [], "forwards": [],
+                 "can_list": True, "range_needed": False, "tried": []}),
+]
+
+
+async def _shoot_ros2(out: Path, width: int, height: int) -> list[Path]:
+    """The ROS 2 path: the router step (one port, the card) and the ROS step, checks passed,
+    then the set-up."""
+    from rosnet_tui.ui.app import AppDeps, RosnetApp
+
+    written: list[Path] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmpdir = Path(tmp)
+        deps = AppDeps(config_path=tmpdir / "config.toml", settings=demo_settings_ros2(),
+                       state_dir=tmpdir / "state", detect_net=demo_net)
+        app = RosnetApp(deps)
+        async with app.run_test(size=(width, height)) as pilot:
+            await pilot.pause()
+            for r in DEMO_RESULTS_ROS2:
+                app.session.set_check_state(r.id, r.status.value, r)
+            for number, step in ((2, "router"), (4, "ros")):
+                await pilot.press(str(number))
+                await pilot.pause()
+                path = out / f"ros2-step-{number}-{step}-{width}x{height}.svg"
+                app.save_screenshot(filename=path.name, path=str(out))
+                written.append(path)
+            await pilot.press("s")  # the set-up: the ROS version and only its fields
+            await pilot.pause()
+            path = out / f"ros2-setup-{width}x{height}.svg"
+            app.save_screenshot(filename=path.name, path=str(out))
+            written.append(path)
+    return written
+
+
 def generate(out: Path = DEFAULT_OUT) -> list[Path]:
     """Write every screenshot into *out*; return the paths."""
     out.mkdir(parents=True, exist_ok=True)
@@ -105,6 +177,7 @@ def generate(out: Path = DEFAULT_OUT) -> list[Path]:
     paths: list[Path] = []
     for width, height in SIZES:
         paths += asyncio.run(_shoot(out, width, height))
+        paths += asyncio.run(_shoot_ros2(out, width, height))
     return paths
 
 

@@ -22,6 +22,9 @@ from rosnet_tui.core.settings import Peer, RosSettings, Settings, ThisComponent
 ROOT = Path(__file__).resolve().parents[1]
 STEP_OF = {"isp": "isp", "router": "router", "linux": "linux", "ros": "ros"}
 
+from tests.test_advisor_ros2 import ROS2_CASES  # noqa: E402
+from tests.test_advisor_upnp import UPNP_CASES  # noqa: E402
+
 
 # --------------------------------------------------------------------------- builders
 def laptop_settings(**this) -> Settings:
@@ -570,6 +573,8 @@ CASES: dict[str, Case] = {
     "check.no_verdict": _timed_out,
     "check.unexplained": _unexplained,
 }
+CASES.update(ROS2_CASES)  # the ROS 2 rules' cases (tests/test_advisor_ros2.py)
+CASES.update(UPNP_CASES)  # router.upnp's rules (tests/test_advisor_upnp.py)
 
 
 def test_every_rule_has_a_case():

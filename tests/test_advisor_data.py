@@ -20,7 +20,8 @@ from rosnet_tui.core.checks import data as check_data
 from tests.golden import codec, record
 
 ADVISOR = Path(__file__).resolve().parents[1] / "rosnet_tui" / "core" / "advisor"
-RULE_FILES = ("evidence.py", "isp.py", "router.py", "linux.py", "ros.py")
+RULE_FILES = ("evidence.py", "isp.py", "router.py", "linux.py", "ros.py", "ros2.py",
+              "router_upnp.py")
 
 
 def _cases() -> list[dict]:

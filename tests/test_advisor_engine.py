@@ -42,7 +42,8 @@ def test_every_rule_has_one_place_in_the_order():
 def test_rules_that_read_firing_are_evaluated_after_what_they_read():
     pos = {r.id: i for i, r in enumerate(engine._EVAL_ORDER)}
     readers = [r for r in advisor.RULES if r.after]
-    assert {r.id for r in readers} == {"ros.pubsub.out_fails", "ros.pubsub.in_fails"}
+    assert {r.id for r in readers} == {"ros.pubsub.out_fails", "ros.pubsub.in_fails",
+                                       "ros2.peer_mode", "ros2.link.missing"}
     for r in readers:
         assert all(pos[a] < pos[r.id] for a in r.after), r.id
 

@@ -55,7 +55,7 @@ def _all_declarations() -> set[type]:
 # --------------------------------------------------------------------------- ids
 def test_every_registered_check_has_a_declaration_and_every_declaration_a_check():
     ids = [c.id for c in checks_for()]
-    assert len(ids) == 18
+    assert len(ids) == 24
     assert sorted(ids) == sorted(data.DATA)
 
 
@@ -101,7 +101,7 @@ def readme_table() -> dict[str, list[str]]:
     for row in rows:
         cells = [c.strip() for c in row.strip().strip("|").split(" | ")]
         keys = re.findall(r"`([^`]+)`", cells[-1])
-        for cid in re.findall(r"`([a-z]+\.[a-z_]+)`", cells[0]):
+        for cid in re.findall(r"`([a-z0-9]+\.[a-z_]+)`", cells[0]):
             assert cid not in out, f"{cid} twice in README's table"
             out[cid] = keys
     return out
@@ -140,7 +140,7 @@ async def test_every_check_reports_only_declared_keys_when_there_is_nothing_to_c
     """Empty settings: each check's skip or early-failure branch, nothing leaves the machine."""
     s = Settings(probe=ProbeSettings(port=free_port(), public_ip_urls=[], port_check_url=""))
     got = await _run_all(_ctx(tmp_path, s))
-    assert len(got) == 18
+    assert len(got) == 24
     for cid, r in got.items():
         assert not r.summary.startswith("the check failed unexpectedly"), (cid, r.summary)
         assert data.undeclared(cid, r.data) == [], (cid, r.data)
@@ -158,7 +158,7 @@ async def test_every_check_reports_only_declared_keys_against_dead_loopback_serv
                  ros=RosSettings(master="localhost", port=dead))
     (tmp_path / "hosts").write_text("127.0.0.1 localhost\n")
     got = await _run_all(_ctx(tmp_path, s))
-    assert len(got) == 18
+    assert len(got) == 24
     for cid, r in got.items():
         assert not r.summary.startswith("the check failed unexpectedly"), (cid, r.summary)
         assert data.undeclared(cid, r.data) == [], (cid, r.data)
@@ -204,3 +204,28 @@ def test_undeclared_names_nested_paths():
     assert data.undeclared("ros.pubsub_in", {"peer": "", "ok": False,
                                              "peers": {"sami": {"peer": "sami", "ok": True,
                                                                 "failed_hop": None}}}) == []
+
+
+async def test_ros2_checks_report_only_declared_keys_against_dead_loopback_services(tmp_path):
+    """[ros] version = 2: the ros2.* checks (and the ROS 2 branches of router.port_open and the
+    Linux chats) against a master and a peer on loopback ports nobody serves."""
+    dead = free_port()
+    for role in ("master", "member"):
+        s = Settings(this=ThisComponent(name="localhost" if role == "master" else "me",
+                                        local_ip="127.0.0.1", role=role),
+                     peers=[Peer(name="localhost" if role == "member" else "peer",
+                                 local_ip="127.0.0.1", public_ip="127.0.0.1",
+                                 ssh_user="nobody", ssh_port=dead)],
+                     probe=ProbeSettings(port=free_port(),
+                                         public_ip_urls=[f"http://127.0.0.1:{dead}/ip"],
+                                         port_check_url=f"http://127.0.0.1:{dead}"),
+                     ros=RosSettings(master="localhost", version=2, zenoh_port=dead))
+        (tmp_path / "hosts").write_text("127.0.0.1 localhost\n")
+        got = await _run_all(_ctx(tmp_path, s))
+        assert {c for c, r in got.items() if r.status.value != "skip" or r.summary.startswith(
+            "skipped: this check is for")} >= {"ros2.env", "ros2.router", "ros2.graph"}
+        for cid, r in got.items():
+            assert not r.summary.startswith("the check failed unexpectedly"), (cid, r.summary)
+            assert data.undeclared(cid, r.data) == [], (cid, r.data)
+        for cid in ("ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in"):
+            assert got[cid].status.value == "skip" and "ROS 1" in got[cid].summary, cid

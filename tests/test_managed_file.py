@@ -20,6 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_write as mw
 
 REPO = Path(__file__).resolve().parent.parent
 BODY_A = ["10.10.10.1\tturtlebot", "198.51.100.2\tsami"]
@@ -302,12 +303,13 @@ _CHILD = textwrap.dedent("""
     import random, sys, time
     from pathlib import Path
     from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core import managed_write as mw
     path, state, mode = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3]
     a, b = Path(sys.argv[4]).read_bytes(), Path(sys.argv[5]).read_bytes()
     def hook():
         sys.stdout.write("T\\n"); sys.stdout.flush()
         time.sleep(random.uniform(0, 0.003))
-    mf._before_rename = hook
+    mw._before_rename = hook
     sys.stdout.write("R\\n"); sys.stdout.flush()
     for _ in range(10000):
         cur = path.read_bytes()
@@ -416,7 +418,7 @@ def test_rename_over_a_mount_point_falls_back_even_when_not_detected(tmp_path, m
     dst.write_text("b\n")
     _bind_mount(src, dst)
     try:
-        monkeypatch.setattr(mf, "is_mount_point", lambda p: False)  # detection missed it
+        monkeypatch.setattr(mw, "is_mount_point", lambda p: False)  # detection missed it
         r = mf.apply_preview(mf.preview_block(dst, ["x"]), state_dir=sd)  # rename: EBUSY
         assert r.in_place and mf.extract_block(src.read_text()) == ["x"]
     finally:
@@ -440,9 +442,10 @@ class _Crash(BaseException):
 
 @pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("mount"),
                     reason="bind mounts need root and mount(8)")
-def test_a_crash_inside_an_in_place_shrink_leaves_a_valid_file(tmp_path, monkeypatch):
+def test_a_crash_inside_an_in_place_shrink_is_completed_by_the_next_read(tmp_path, monkeypatch):
     """In place (a bind-mounted /etc/hosts) the write and the truncation are two steps: dying
-    between them must leave the new content plus blank lines, never a tail of old bytes."""
+    between them leaves a tail of old bytes, and the journal beside the file; the next read
+    completes the write (issue 15: padding with blank lines was not enough)."""
     src, dst, sd = tmp_path / "netns-hosts", tmp_path / "hosts", tmp_path / "state"
     src.write_bytes(b"127.0.0.1\tlocalhost\n# keep me\n")
     dst.write_bytes(b"underneath\n")
@@ -455,13 +458,17 @@ def test_a_crash_inside_an_in_place_shrink_leaves_a_valid_file(tmp_path, monkeyp
         def crash() -> None:
             raise _Crash
 
-        monkeypatch.setattr(mf, "_before_truncate", crash)
+        monkeypatch.setattr(mw, "_before_truncate", crash)
         with pytest.raises(_Crash):
             mf.apply_preview(short, state_dir=sd)
+        monkeypatch.setattr(mw, "_before_truncate", None)
         left = src.read_bytes()
-        assert left.startswith(short.new)
-        assert set(left[len(short.new):]) <= {ord("\n")}  # only blank lines after it
+        assert left.startswith(short.new) and left != short.new
+        assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
+        left = mf.read_bytes(dst)
+        assert left == short.new == src.read_bytes()
         assert mf.extract_block(left.decode()) == ["203.0.113.7  peer7"]
         assert b"# keep me" in left and b"peer29" not in left
+        assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
     finally:
         subprocess.run(["umount", str(dst)], timeout=10, check=False)

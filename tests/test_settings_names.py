@@ -45,4 +45,5 @@ def test_names_equal_but_for_case_are_refused():
 def test_values_echoed_in_messages_are_cut():
     why = validate_ip("9" * 5000) or ""
     assert len(why) < 100 and "..." in why
-    assert shown("abc") == "'abc'"
+    assert shown("abc") == "abc"
+    assert len(validate_name("localhost" + "-x" * 100 + ".localdomain") or "") < 120

@@ -266,3 +266,12 @@ async def test_the_advisors_advice_scrolls_and_zooms(tmp_path):
         await pilot.pause()
         box = app.screen.query_one("#advisor-detail-box")
         assert app.screen.maximized is box and box.region.height >= 20
+
+
+def test_every_check_has_a_short_title():
+    """The table is drawn before the checks are loaded: every check needs its words there
+    (router.upnp and the ros2.* checks showed their ids)."""
+    from rosnet_tui.core.checks import REGISTRY, load_builtin_checks
+
+    load_builtin_checks()
+    assert set(REGISTRY) - set(SHORT_TITLES) == set()

@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
+import os
+import re
+import stat
 import sys
 from pathlib import Path
 
@@ -17,13 +21,14 @@ from rosnet_tui import __version__
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
 
 # Sub-command modules, in the order --help lists them.
-SUBCOMMAND_MODULES = ("check", "hosts", "ros", "undo", "report", "sync", "probe_server")
+SUBCOMMAND_MODULES = ("check", "hosts", "ros", "router", "undo", "report", "sync", "probe_server")
 # What `rosnet-tui --help` says of each without importing it (a test keeps these equal to the
 # modules' own help): only the command being run is imported, so start-up stays light.
 SUBCOMMAND_HELP = {
     "check": "run the live checks headless and print what they saw",
     "hosts": "write this component's hosts set into /etc/hosts",
     "ros": "write ROS_MASTER_URI for this component's role into ~/.bashrc",
+    "router": "let the modem forward this component's port itself (UPnP IGD, NAT-PMP, PCP)",
     "undo": "restore the files of the last change rosnet-tui made",
     "report": "write a shareable report: settings, results and advice",
     "sync": "keep hosts entries and ROS_MASTER_URI right when public IPs change (a service)",
@@ -36,6 +41,45 @@ class _Parser(argparse.ArgumentParser):
         self.print_usage(sys.stderr)
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n"
                               f"Try '{self.prog} --help' for more.\n")
+
+
+_DECIMAL = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+_WHOLE = re.compile(r"[+-]?\d{1,18}")
+
+
+def number_in(lo: float, hi: float, *, whole: bool = False):
+    """An argparse type: a plain decimal number (a whole one with *whole*) from *lo* to *hi*.
+
+    NaN, infinities, hexadecimal, digit separators and values out of range are refused, so
+    argparse exits 2 naming the option. Say the range in the option's help (``lo-hi``)."""
+    def convert(text: str) -> float | int:
+        t = text.strip()
+        if not (_WHOLE if whole else _DECIMAL).fullmatch(t):
+            raise argparse.ArgumentTypeError(
+                f"'{text[:40]}' is not {'a whole number' if whole else 'a number'} "
+                f"(from {lo:g} to {hi:g})")
+        value: float | int = int(t) if whole else float(t)
+        if not math.isfinite(value) or not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{text[:40]} is out of range: from {lo:g} to "
+                                             f"{hi:g}")
+        return value
+    convert.__name__ = "whole number" if whole else "number"
+    return convert
+
+
+def state_dir_problem(path: Path) -> str | None:
+    """Why *path* cannot be a state dir (None: it can, or it does not exist yet)."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None
+    except NotADirectoryError:
+        return f"--state-dir {path}: a part of this path is a file, not a folder"
+    except OSError as exc:
+        return f"--state-dir {path}: {exc.strerror}"
+    if not stat.S_ISDIR(st.st_mode):
+        return f"--state-dir {path} is not a folder"
+    return None
 
 
 def add_config_option(parser: argparse.ArgumentParser, *, top: bool = False) -> None:

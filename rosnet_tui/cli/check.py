@@ -11,7 +11,14 @@ import json
 import sys
 from typing import Any
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, load_settings_or_say
+from rosnet_tui.cli import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    load_settings_or_say,
+    number_in,
+)
 from rosnet_tui.core.procedure import STEP_IDS
 
 _STYLES = {"pass": "green", "warn": "yellow", "fail": "bold red", "skip": "dim"}
@@ -29,8 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true",
                    help='print {"checks": [...]} as JSON instead of a table')
     add_config_option(p)
-    p.add_argument("--timeout", type=float, metavar="S", default=None,
-                   help="seconds each check may take (default: checks.timeout_s in the settings)")
+    p.add_argument("--timeout", type=number_in(0.1, 120), metavar="S", default=None,
+                   help="seconds each check may take, 0.1-120 (default: checks.timeout_s in "
+                        "the settings)")
     p.add_argument("--no-upnp", action="store_true",
                    help="do not ask the modem over UPnP (isp.cgnat then relies on the path probe)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
@@ -43,9 +51,6 @@ def _err(msg: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     timeout = args.timeout
-    if timeout is not None and not 0.1 <= timeout <= 120:
-        _err("rosnet-tui check: --timeout must be between 0.1 and 120 seconds")
-        return EXIT_USAGE
     settings = load_settings_or_say(args, complete=True)
     if settings is None:
         return EXIT_USAGE
@@ -80,7 +85,7 @@ def collect_results(settings: Any, steps: list[str] | None = None, *, timeout: f
     def say(r: Any, done: int, total: int) -> None:
         _err(f"[{done}/{total}] {r.status.label:<4} {r.id}: {r.summary}")
 
-    return run_now(settings, select(steps), RunOptions(timeout_s=timeout, upnp=upnp),
+    return run_now(settings, select(steps, settings=settings), RunOptions(timeout_s=timeout, upnp=upnp),
                    on_result=say if progress else None)
 
 

@@ -7,6 +7,7 @@ import asyncio
 import logging
 import sys
 
+from rosnet_tui.cli import number_in
 from rosnet_tui.core.probe_server import DEFAULT_LISTEN, ProbeLimits, parse_listen, run_probe_server
 
 
@@ -15,18 +16,6 @@ def _listen(text: str) -> tuple[str, int]:
         return parse_listen(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _positive(kind: type):
-    def convert(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-        if value <= 0:
-            raise argparse.ArgumentTypeError("must be greater than 0")
-        return value
-    return convert
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -39,12 +28,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "connects back to the address the request came from.")
     p.add_argument("--listen", type=_listen, default=DEFAULT_LISTEN, metavar="ADDR:PORT",
                    help=f"address and port to listen on (default {DEFAULT_LISTEN})")
-    p.add_argument("--connect-timeout", type=_positive(float), default=2.0, metavar="SECONDS",
-                   help="how long one connect-back may take (default 2)")
-    p.add_argument("--rate-limit", type=_positive(int), default=30, metavar="N",
-                   help="port checks allowed per caller address per minute (default 30)")
-    p.add_argument("--max-concurrent", type=_positive(int), default=16, metavar="N",
-                   help="connect-backs in progress at once (default 16)")
+    p.add_argument("--connect-timeout", type=number_in(0.1, 60), default=2.0, metavar="SECONDS",
+                   help="how long one connect-back may take, 0.1-60 seconds (default 2)")
+    p.add_argument("--rate-limit", type=number_in(1, 1_000_000, whole=True), default=30, metavar="N",
+                   help="port checks allowed per caller address per minute, 1-1000000 "
+                        "(default 30)")
+    p.add_argument("--max-concurrent", type=number_in(1, 1024, whole=True), default=16,
+                   metavar="N", help="connect-backs in progress at once, 1-1024 (default 16)")
     p.set_defaults(func=run)
 
 

@@ -36,6 +36,8 @@ from rosnet_tui.core.settings import (
 )
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+MAX_INPUT_BYTES = 16 << 20        # a saved `check --json` is a few hundred KB at most
+MAX_INPUT_DEPTH = 64
 STEPS = STEP_IDS
 STEP_NAMES = STEP_TITLES
 # Settings keys that could hold or point at secrets never go into a report.
@@ -79,6 +81,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"rosnet-tui report: {exc}", file=sys.stderr)
         return EXIT_USAGE
     text = render_json(doc) if args.format == "json" else render_markdown(doc)
+    # Text from a saved file may hold lone surrogates (JSON "\\ud800"): shown escaped.
+    text = text.encode("utf-8", "backslashreplace").decode("utf-8")
     out: Path | None = getattr(args, "output", None)
     if out is None:
         sys.stdout.write(text)
@@ -167,6 +171,16 @@ def run_checks_now(settings: Settings, steps: Iterable[str] | None) -> list[Chec
 
 
 # --------------------------------------------------------------------------- reading saved results
+def _seconds(obj: dict[str, Any], key: str, where: str) -> float:
+    value = obj.get(key)
+    if value is None:
+        return 0.0
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not 0 <= value <= 86400 or value != value:
+        raise ReportError(f"{where}: \"{key}\" must be a number of seconds (0 to 86400)")
+    return float(value)
+
+
 def _result_from_json(obj: Any, where: str) -> CheckResult:
     if not isinstance(obj, dict) or not isinstance(obj.get("id"), str):
         raise ReportError(f"{where}: each check needs at least an \"id\" and a \"status\"")
@@ -182,36 +196,66 @@ def _result_from_json(obj: Any, where: str) -> CheckResult:
         id=cid, step=str(obj.get("step") or cid.split(".")[0]), status=status,
         summary=str(obj.get("summary") or ""),
         evidence=[str(e) for e in evidence] if isinstance(evidence, list) else [str(evidence)],
-        duration_s=float(obj.get("duration_s") or 0.0),
-        timeout_s=float(obj.get("timeout_s") or 0.0),
+        duration_s=_seconds(obj, "duration_s", where),
+        timeout_s=_seconds(obj, "timeout_s", where),
         data=data if isinstance(data, dict) else {})
 
 
 def load_results_json(path: Path) -> tuple[list[CheckResult], Settings | None, dict[str, Any]]:
     """Results from `check --json` output or a JSON report; also its settings and header."""
+    from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
+
+    text = _read_input(path)
     try:
-        text = sys.stdin.read() if str(path) == "-" else path.expanduser().read_text("utf-8")
-    except OSError as exc:
-        raise ReportError(f"cannot read {path}: {exc.strerror or exc}") from None
-    except UnicodeDecodeError:
-        raise ReportError(f"{path} is not UTF-8 text") from None
-    try:
-        obj = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ReportError(f"{path} is not JSON (line {exc.lineno}: {exc.msg}); expected the "
-                          "output of `rosnet-tui check --json`") from None
+        obj = loads_bounded(text, max_depth=MAX_INPUT_DEPTH, unique_keys=False)
+    except JsonInputError as exc:
+        raise ReportError(f"{path} is not JSON we can use ({exc}); expected the output of "
+                          "`rosnet-tui check --json`") from None
     if not isinstance(obj, dict) or not isinstance(obj.get("checks"), list):
         raise ReportError(f"{path}: expected {{\"checks\": [...]}} as written by "
                           "`rosnet-tui check --json`")
     results = [_result_from_json(c, f"{path}, check {i + 1}")
                for i, c in enumerate(obj["checks"])]
-    settings = settings_from_dict(obj["settings"]) if isinstance(obj.get("settings"),
-                                                                 dict) else None
+    try:
+        settings = settings_from_dict(obj["settings"]) if isinstance(obj.get("settings"),
+                                                                     dict) else None
+    except ReportError as exc:
+        raise ReportError(f"{path}: {exc}") from None
     meta: dict[str, Any] = dict(obj.get("report") or {}) if isinstance(obj.get("report"),
                                                                        dict) else {}
     if isinstance(obj.get("environment"), dict):
         meta["environment"] = ros_environment(obj["environment"])
     return results, settings, meta
+
+
+def _read_input(path: Path) -> str:
+    """The text of *path* ('-': standard input), bounded: a regular file (or stdin) of at most
+    MAX_INPUT_BYTES; a FIFO, a device or a folder is refused without reading."""
+    import stat
+
+    if str(path) == "-":
+        data = sys.stdin.buffer.read(MAX_INPUT_BYTES + 1)
+    else:
+        try:
+            fd = os.open(path.expanduser(), os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+        except OSError as exc:
+            raise ReportError(f"cannot read {path}: {exc.strerror or exc}") from None
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode):
+                raise ReportError(f"{path} is not a regular file")
+            with os.fdopen(os.dup(fd), "rb") as f:
+                data = f.read(MAX_INPUT_BYTES + 1)
+        except OSError as exc:
+            raise ReportError(f"cannot read {path}: {exc.strerror or exc}") from None
+        finally:
+            os.close(fd)
+    if len(data) > MAX_INPUT_BYTES:
+        raise ReportError(f"{path} is too big (over {MAX_INPUT_BYTES} bytes) for saved results")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ReportError(f"{path} is not UTF-8 text") from None
 
 
 # --------------------------------------------------------------------------- settings, no secrets
@@ -232,21 +276,43 @@ def public_settings(settings: Settings) -> dict[str, Any]:
 
 
 def settings_from_dict(d: dict[str, Any]) -> Settings:
-    """Settings back from :func:`public_settings` (unknown keys ignored)."""
-    def pick(cls: type, raw: Any) -> Any:
+    """Settings back from :func:`public_settings` (unknown keys ignored). Raises ReportError
+    for a value of the wrong type or one the settings file would refuse."""
+    def pick(cls: type, raw: Any, section: str) -> Any:
         if not isinstance(raw, dict):
             return cls() if cls is not Peer else None
-        names = {f.name for f in dataclasses.fields(cls)}
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        kept = {}
+        for k, v in raw.items():
+            if k not in fields:
+                continue
+            proto = cls.__annotations__.get(k, "")
+            want: tuple[type, ...] = {"str": (str,), "int": (int,), "float": (int, float),
+                                      "list[str]": (list,)}.get(str(proto), (object,))
+            if isinstance(v, bool) or not isinstance(v, want) or (
+                    want == (list,) and not all(isinstance(x, str) for x in v)):
+                raise ReportError(f"settings: {section}.{k} has the wrong type")
+            kept[k] = v
         try:
-            return cls(**{k: v for k, v in raw.items() if k in names})
+            return cls(**kept)
         except TypeError:
             return None
 
-    peers = [pick(Peer, p) for p in d.get("peer") or d.get("peers") or []]
-    return Settings(this=pick(ThisComponent, d.get("this")),
-                    peers=[p for p in peers if p is not None],
-                    ros=pick(RosSettings, d.get("ros")), probe=pick(ProbeSettings, d.get("probe")),
-                    checks=pick(CheckSettings, d.get("checks")))
+    raw_peers = d.get("peer") or d.get("peers") or []
+    if not isinstance(raw_peers, list):
+        raise ReportError("settings: peer must be a list")
+    peers = [pick(Peer, p, "peer") for p in raw_peers]
+    s = Settings(this=pick(ThisComponent, d.get("this"), "this"),
+                 peers=[p for p in peers if p is not None],
+                 ros=pick(RosSettings, d.get("ros"), "ros"),
+                 probe=pick(ProbeSettings, d.get("probe"), "probe"),
+                 checks=pick(CheckSettings, d.get("checks"), "checks"))
+    for key, why in s.problems():
+        # incomplete is fine (the advice then knows fewer names); wrong is not
+        if why.endswith("is required") or why.startswith(("a member needs", "give the peer")):
+            continue
+        raise ReportError(f"settings: {key}: {why}")
+    return s
 
 
 def ros_environment(environ: dict[str, Any] | os._Environ) -> dict[str, str]:

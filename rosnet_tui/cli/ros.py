@@ -1,4 +1,9 @@
-"""`rosnet-tui ros apply|export`: ROS_MASTER_URI for this component's role, in ~/.bashrc."""
+"""`rosnet-tui ros apply|export`: the ROS environment for this component's role, in ~/.bashrc.
+
+ROS 1: ROS_MASTER_URI. ROS 2 ([ros] version = 2): RMW_IMPLEMENTATION, ROS_DOMAIN_ID and the
+Zenoh router's config (ZENOH_ROUTER_CONFIG_URI and the JSON5 file it names), or client mode for a
+lone node; all files in one undoable apply.
+"""
 
 from __future__ import annotations
 
@@ -23,6 +28,7 @@ from rosnet_tui.cli.hosts import (
     write_preview,
 )
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import ros2
 from rosnet_tui.core.bashrc import (
     ROS_IP_REASON,
     default_bashrc_path,
@@ -33,6 +39,7 @@ from rosnet_tui.core.bashrc import (
 from rosnet_tui.core.hosts import WriterSettingsError
 
 ROS_CHECKS = ("ros.env",)
+ROS2_CHECKS = ("ros2.env",)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -47,11 +54,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--comment-ros-ip", action="store_true",
                    help="also comment out ROS_IP / ROS_HOSTNAME lines (they break remote "
                         "networks)")
+    a.add_argument("--client", action="store_true",
+                   help="ROS 2, a member without a router of its own: its nodes connect to the "
+                        "master's router in client mode")
+    a.add_argument("--router-config", metavar="PATH", type=Path, default=None,
+                   help="ROS 2: where to write the Zenoh router's config (default: "
+                        "~/.config/rosnet-tui/zenoh-router.json5)")
     a.set_defaults(func=run_apply)
 
     e = rs.add_parser("export", help="print the lines that set up the current shell "
                                      "(eval \"$(rosnet-tui ros export)\")")
     add_config_option(e)
+    e.add_argument("--client", action="store_true",
+                   help="ROS 2: the lines of a lone node in client mode")
     e.set_defaults(func=run_export)
 
 
@@ -77,6 +92,8 @@ def run_apply(args: argparse.Namespace) -> int:
     settings = load_settings_for(args)
     if settings is None:
         return EXIT_USAGE
+    if settings.ros2:
+        return _apply_ros2(args, settings)
     path = Path(args.file).expanduser().absolute() if args.file else default_bashrc_path()
     comment = _decide_comment(args, path)
     try:
@@ -116,8 +133,54 @@ def run_export(args: argparse.Namespace) -> int:
     if settings is None:
         return EXIT_USAGE
     try:
-        for line in shell_lines(settings, os.environ):
+        lines = (ros2.shell_lines(settings, client=args.client) if settings.ros2
+                 else shell_lines(settings, os.environ))
+        for line in lines:
             print(line)
     except WriterSettingsError as exc:
         return report_settings_problems(exc)
+    return EXIT_OK
+
+
+def _apply_ros2(args: argparse.Namespace, settings) -> int:
+    """ROS 2: the ~/.bashrc block and the router's config, previewed, written as one apply."""
+    path = Path(args.file).expanduser().absolute() if args.file else default_bashrc_path()
+    rc = Path(args.router_config).expanduser().absolute() if args.router_config else None
+    try:
+        previews = ros2.previews(settings, path, client=args.client, router_config_path=rc)
+        lines = ros2.shell_lines(settings, client=args.client)
+    except WriterSettingsError as exc:
+        return report_settings_problems(exc)
+    except mf.ManagedFileError as exc:
+        err(f"rosnet-tui: {exc}")
+        return EXIT_FAIL
+    role = ("the master (its router is the hub)" if settings.is_master else
+            f"a member (master: {settings.master_name})")
+    print(f"ROS 2 (rmw_zenoh) settings for {settings.this.name}, {role}:")
+    for p in previews:
+        show_preview(p)
+    changed = [p for p in previews if p.changed]
+    if changed:
+        if args.dry_run:
+            print("Dry run: nothing was written.")
+            return EXIT_OK
+        stop = confirm(args, "Write these changes?")
+        if stop is not None:
+            return stop
+        try:
+            result = mf.apply_previews(previews, state_dir=state_dir_of(args),
+                                       label="ROS 2 environment and Zenoh config")
+        except mf.ManagedFileError as exc:
+            err(f"rosnet-tui: {exc}")
+            return EXIT_FAIL
+        print(f"Wrote {', '.join(str(p.path) for p in changed)}. Backups: "
+              f"{', '.join(str(b) for b in result.backups) or 'none (new files)'}. "
+              "Undo with: rosnet-tui undo")
+    print("New shells get it from the file. For this shell, run:")
+    for line in lines:
+        print(f"  {line}")
+    if not (args.client and not settings.is_master):
+        print("Then start the router: ros2 run rmw_zenoh_cpp rmw_zenohd")
+    if not args.no_checks:
+        rerun_checks(ROS2_CHECKS, settings, bashrc_path=path, state_dir=state_dir_of(args))
     return EXIT_OK

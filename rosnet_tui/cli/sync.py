@@ -13,13 +13,21 @@ import json
 import logging
 import os
 import pwd
-import shlex
 import sys
 import time
 from pathlib import Path
 
 import rosnet_tui
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, config_path
+from rosnet_tui.cli import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    config_path,
+    number_in,
+    state_dir_problem,
+)
+from rosnet_tui.core import privilege
 
 UNIT_NAME = "rosnet-tui-sync.service"
 
@@ -41,8 +49,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     _service_options(p)
     p.add_argument("--once", action="store_true",
                    help="one round (publish, read, apply, check), then exit (for cron or tests)")
-    p.add_argument("--interval", type=float, metavar="S", default=None,
-                   help="public-IP poll interval in seconds (default: sync.interval_s, 60)")
+    p.add_argument("--unmap-on-stop", action="store_true",
+                   help="when stopped, remove the forwards `rosnet-tui router map` made on the "
+                        "modem (they are renewed while the service runs)")
+    p.add_argument("--interval", type=number_in(1, 86400), metavar="S", default=None,
+                   help="public-IP poll interval in seconds, 1-86400 (default: "
+                        "sync.interval_s, 60)")
     p.add_argument("-v", "--verbose", action="store_true", help="log every step (debug)")
     p.add_argument("-q", "--quiet", action="store_true", help="log only warnings and errors")
     p.set_defaults(func=run_service)
@@ -128,14 +140,16 @@ def run_service(args: argparse.Namespace) -> int:
     from rosnet_tui.core.sync.service import SyncError, SyncService, install_signal_handlers
 
     _setup_logging(args)
-    if args.interval is not None and not 1 <= args.interval <= 86400:
-        _err("rosnet-tui sync: --interval must be between 1 and 86400 seconds")
+    bad_dir = state_dir_problem(_state_dir(args))
+    if bad_dir:
+        _err(f"rosnet-tui sync: {bad_dir}")
         return EXIT_USAGE
     hosts = Path(args.hosts_file).expanduser().absolute() if args.hosts_file else DEFAULT_HOSTS_PATH
     try:
         service = SyncService(config_path(args), state_dir=_state_dir(args), hosts_path=hosts,
                               bashrc_path=_bashrc(args), run_checks=not args.no_checks,
-                              interval_s=args.interval, save_learned=not args.no_save_settings)
+                              interval_s=args.interval, save_learned=not args.no_save_settings,
+                              unmap_on_stop=args.unmap_on_stop)
     except SyncError as exc:
         _err(f"rosnet-tui sync: {exc}")
         return EXIT_USAGE
@@ -207,7 +221,8 @@ def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
     """The unit file's text and the notes to show with it."""
     cfg = config_path(args).expanduser().absolute()
     notes: list[str] = []
-    argv = [sys.executable, "-m", "rosnet_tui", "--config", str(cfg), "sync"]
+    # This very install by its absolute path: systemd starts it with a clean environment.
+    argv = privilege.self_argv(["--config", str(cfg), "sync"])
     if args.state_dir:
         argv += ["--state-dir", str(_state_dir(args))]
     elif not user:
@@ -258,6 +273,30 @@ def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
         lines.append("Environment=" + _systemd_quote(f"PYTHONPATH={root}"))
     lines += ["", "[Install]", f"WantedBy={'default.target' if user else 'multi-user.target'}", ""]
     return "\n".join(lines), notes
+
+
+def sudo_install_argv(args: argparse.Namespace) -> list[str]:
+    """The sudo command that writes this same unit as root.
+
+    Everything that depends on who runs it is spelled out: this install's interpreter by its
+    absolute path (sudo's secure_path has no ~/.local/bin) and the settings file (under sudo ~ is
+    root's home); the state dir and the shell file follow the settings file's owner, as here.
+    """
+    a = ["--config", str(config_path(args).expanduser().absolute()), "sync", "install-service"]
+    if args.unit_dir:
+        a += ["--unit-dir", str(_unit_dir(args))]
+    if args.state_dir:
+        a += ["--state-dir", str(_state_dir(args))]
+    if args.hosts_file:
+        a += ["--hosts-file", str(Path(args.hosts_file).expanduser().absolute())]
+    if args.no_bashrc:
+        a.append("--no-bashrc")
+    elif args.bashrc:
+        a += ["--bashrc", str(Path(args.bashrc).expanduser().absolute())]
+    for flag in ("no_checks", "no_save_settings", "yes"):
+        if getattr(args, flag):
+            a.append("--" + flag.replace("_", "-"))
+    return privilege.sudo_argv(a)
 
 
 def _unit_dir(args: argparse.Namespace) -> Path:
@@ -316,8 +355,11 @@ def run_install(args: argparse.Namespace) -> int:
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, text, mode=0o644)
     except PermissionError:
-        _err(f"rosnet-tui: this user may not write {path}; run it with sudo: "
-             f"sudo {shlex.join([sys.executable, '-m', 'rosnet_tui', *sys.argv[1:]])}")
+        if args.user:
+            _err(f"rosnet-tui: this user may not write {path}")
+        else:
+            _err(f"rosnet-tui: this user may not write {path}; run it with sudo: "
+                 f"{privilege.format_command(sudo_install_argv(args))}")
         return EXIT_FAIL
     except OSError as exc:
         _err(f"rosnet-tui: cannot write {path}: {exc.strerror}")

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, add_config_option
+from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, state_dir_problem
 from rosnet_tui.cli.hosts import (
     HOSTS_CHECKS,
     confirm,
@@ -20,6 +20,7 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings
+from rosnet_tui.core.upnp.journal import describe as describe_forward
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -54,6 +55,10 @@ def _settings_quietly(args: argparse.Namespace) -> Settings | None:
 
 def run(args: argparse.Namespace) -> int:
     sd = state_dir_of(args)
+    bad_dir = state_dir_problem(sd)
+    if bad_dir:
+        err(f"rosnet-tui undo: {bad_dir}")
+        return EXIT_USAGE
     try:
         plan = mf.plan_undo(sd, entry_id=args.expect_entry)
     except mf.NothingToUndoError as exc:
@@ -67,10 +72,13 @@ def run(args: argparse.Namespace) -> int:
     for f in e.files:
         what = "put back as it was" if f.existed else "removed (rosnet-tui created it)"
         print(f"  {f.path}: {what}")
+    forwards = [m for m in e.mappings if m.get("state") == "made"]
+    for m in forwards:
+        print(f"  the forward {describe_forward(m)}: removed from the modem")
     diff = plan.diff()
     if diff:
         sys.stdout.write(diff)
-    else:
+    elif e.files:
         print("The files are already as they were before that change.")
     if plan.conflicts and not args.force:
         err("rosnet-tui: changed by someone else since rosnet-tui wrote it: "
@@ -80,8 +88,8 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         print("Dry run: nothing was restored.")
         return EXIT_OK
-    if diff:
-        stop = confirm(args, "Restore these files?")
+    if diff or forwards:
+        stop = confirm(args, "Restore these files?" if diff else "Remove these forwards?")
         if stop is not None:
             return stop
     if plan.needs_privilege:
@@ -95,8 +103,13 @@ def run(args: argparse.Namespace) -> int:
         except mf.ManagedFileError as exc:
             err(f"rosnet-tui: {exc}")
             return EXIT_FAIL
-        print(f"Restored: {', '.join(str(p) for p in result.files)}")
-    if not args.no_checks:
+        if result.files:
+            print(f"Restored: {', '.join(str(p) for p in result.files)}")
+        for line in result.forwards:
+            print(line)
+    if not args.no_checks and e.mappings:
+        rerun_checks(("router.upnp", "router.port_open"), _settings_quietly(args), state_dir=sd)
+    elif not args.no_checks:
         settings = _settings_quietly(args)
         paths = [Path(f.path) for f in e.files]
         hosts = [p for p in paths if p == DEFAULT_HOSTS_PATH or p.name == "hosts"]

@@ -14,7 +14,7 @@ NO_SCREEN_TERMS = ("dumb", "unknown", "")
 
 
 def run_wizard(args: argparse.Namespace) -> int:
-    from rosnet_tui.core.settings import Settings, SettingsError, load_settings
+    from rosnet_tui.core.settings import SettingsError, load_settings, new_settings
 
     path = config_path(args)
     try:
@@ -41,7 +41,7 @@ def run_wizard(args: argparse.Namespace) -> int:
 
     from rosnet_tui.ui.app import AppDeps, RosnetApp
 
-    app = RosnetApp(AppDeps(config_path=path, settings=settings or Settings(),
+    app = RosnetApp(AppDeps(config_path=path, settings=settings or new_settings(),
                             open_setup=bool(getattr(args, "setup", False))))
     # Our own loop: leaving does not wait for threads still blocked on a dead network (a check's
     # connect or SSH handshake); asyncio.run() would, for as long as their timeouts.

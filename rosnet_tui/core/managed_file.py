@@ -13,228 +13,73 @@ The flow the UI and the CLI share:
    a verified in-place rewrite where the file is a mount point (``/etc/hosts`` in containers and
    under ``ip netns exec``), where rename fails with EBUSY/EXDEV.
 3. :func:`plan_undo` / :func:`apply_undo` put the files of the last apply back, byte for byte.
+
+An in-place rewrite cannot be atomic, so it is journaled: the old and the new bytes go to a
+journal file beside the target first (``.NAME.rosnet-tui.DEV-INODE.inplace``, fsynced, locked by
+the writer while it writes), then the target is rewritten, then the journal is removed. A writer
+killed at any moment leaves the old content, the new one, or a mix of the two with its journal:
+the next read through :func:`read_bytes` (every preview, apply and undo) completes the write. Temp
+files of killed writers (beside the target, in the state dir) are removed by the next run.
 """
 
 from __future__ import annotations
 
 import contextlib
 import difflib
-import errno
 import fcntl
-import hashlib
 import json
 import os
 import re
 import secrets
 import stat
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
-BEGIN_MARKER = "# BEGIN rosnet-tui"
-END_MARKER = "# END rosnet-tui"
-ABSENT = "absent"  # the digest of a file that does not exist
-LOCK_TIMEOUT_S = 10.0
+# The block text and the file writing live in their own modules; their names are ours too.
+from rosnet_tui.core.managed_text import (  # noqa: F401 (re-exported)
+    _MARKER_RE,
+    ABSENT,
+    BEGIN_MARKER,
+    END_MARKER,
+    DamagedBlockError,
+    LineChange,
+    ManagedFileError,
+    NothingToUndoError,
+    PermissionNeededError,
+    StalePreviewError,
+    UndoConflictError,
+    compose_block,
+    decode,
+    detect_newline,
+    encode,
+    extract_block,
+    file_digest,
+    find_block,
+    line_content,
+    split_lines,
+)
+from rosnet_tui.core.managed_write import (  # noqa: F401 (re-exported)
+    INPLACE_DIR,
+    INPLACE_MAGIC,
+    LOCK_TIMEOUT_S,
+    MAX_FILE_BYTES,
+    WriteOutcome,
+    _fsync_dir,
+    _write_all,
+    can_write,
+    is_mount_point,
+    read_bytes,
+    recover_in_place,
+    sweep_state_dir,
+    write_file,
+)
+
 JOURNAL_KEEP = 100  # applies remembered for undo; older ones (and their backups) are dropped
 
-_MARKER_RE = re.compile(r"^[ \t]*#[ \t]*(BEGIN|END)[ \t]+rosnet-tui(?:[ \t]|$)")
-_TMP_RE = re.compile(r"^\.(?P<name>.+)\.rosnet-tui\.(?P<pid>\d+)\.[0-9a-f]+\.tmp$")
-
-# Test hook: called between the fsync of the temp file and the rename (crash tests set it).
-_before_rename: Callable[[], None] | None = None
-# Test hook: called between the in-place write and its truncation (crash tests set it).
-_before_truncate: Callable[[], None] | None = None
-
-
-# --------------------------------------------------------------------------- errors
-class ManagedFileError(Exception):
-    """A file we will not or could not write; the message says why, in plain words."""
-
-
-class DamagedBlockError(ManagedFileError):
-    """The file has a BEGIN without END (or the reverse, or two blocks): we do not guess."""
-
-
-class StalePreviewError(ManagedFileError):
-    """The file changed between the preview and the apply."""
-
-
-class PermissionNeededError(ManagedFileError):
-    """This user may not write the file (use the sudo command from rosnet_tui.core.privilege)."""
-
-    def __init__(self, message: str, paths: Sequence[Path] = ()) -> None:
-        super().__init__(message)
-        self.paths = list(paths)
-
-
-class NothingToUndoError(ManagedFileError):
-    """The journal holds no apply that has not been undone yet."""
-
-
-class UndoConflictError(ManagedFileError):
-    """A file was changed by someone else after our apply; undoing would lose that change."""
-
-
-# --------------------------------------------------------------------------- text helpers
-def decode(data: bytes) -> str:
-    """Bytes to text that encodes back to the very same bytes (undecodable bytes survive)."""
-    return data.decode("utf-8", "surrogateescape")
-
-
-def encode(text: str) -> bytes:
-    return text.encode("utf-8", "surrogateescape")
-
-
-def file_digest(data: bytes | None) -> str:
-    """The digest a preview carries: sha256 of the bytes, or ``absent`` for a missing file."""
-    return ABSENT if data is None else hashlib.sha256(data).hexdigest()
-
-
-def split_lines(text: str) -> list[str]:
-    """Lines with their terminators; only ``\\n`` ends a line (a ``\\r`` before it stays with it)."""
-    if not text:
-        return []
-    lines = text.split("\n")
-    out = [line + "\n" for line in lines[:-1]]
-    if lines[-1]:
-        out.append(lines[-1])
-    return out
-
-
-def line_content(line: str) -> str:
-    """A line without its terminator (``\\n`` or ``\\r\\n``)."""
-    if line.endswith("\n"):
-        line = line[:-1]
-        if line.endswith("\r"):
-            line = line[:-1]
-    return line
-
-
-def detect_newline(text: str | None) -> str:
-    """``\\r\\n`` when most lines of *text* end that way, else ``\\n``."""
-    if not text:
-        return "\n"
-    crlf = text.count("\r\n")
-    return "\r\n" if crlf and crlf * 2 >= text.count("\n") else "\n"
-
-
-def find_block(lines: Sequence[str]) -> tuple[int, int] | None:
-    """Indexes of our BEGIN and END lines, or None when the file has no block.
-
-    Raises DamagedBlockError for a BEGIN without END, an END without BEGIN, or a second block.
-    """
-    begin = end = None
-    for i, line in enumerate(lines):
-        m = _MARKER_RE.match(line_content(line))
-        if not m:
-            continue
-        if m.group(1) == "BEGIN":
-            if begin is not None:
-                raise DamagedBlockError(
-                    f"line {i + 1} starts a second rosnet-tui block (the first starts at line "
-                    f"{begin + 1}); remove one of them by hand, then try again")
-            begin = i
-        else:
-            if begin is None:
-                raise DamagedBlockError(
-                    f"line {i + 1} ends a rosnet-tui block that never began; remove the stray "
-                    f"'{END_MARKER}' line by hand, then try again")
-            if end is not None:
-                raise DamagedBlockError(
-                    f"line {i + 1} ends the rosnet-tui block a second time; remove the stray "
-                    f"'{END_MARKER}' line by hand, then try again")
-            end = i
-    if begin is None:
-        return None
-    if end is None:
-        raise DamagedBlockError(
-            f"the rosnet-tui block that starts at line {begin + 1} has no '{END_MARKER}' line; "
-            "fix the file by hand (add the END line or remove the block), then try again")
-    return begin, end
-
-
-def extract_block(text: str | None) -> list[str] | None:
-    """The lines between our markers (no terminators), or None when there is no block."""
-    lines = split_lines(text or "")
-    span = find_block(lines)
-    if span is None:
-        return None
-    return [line_content(x) for x in lines[span[0] + 1:span[1]]]
-
-
-def compose_block(text: str | None, body: Sequence[str], *, position: str = "end",
-                  replace_lines: Mapping[int, str] | None = None) -> str:
-    """*text* with our block set to *body* (lines without terminators); nothing else changes.
-
-    An existing block is replaced where it stands, in its own line endings. A new block goes at
-    the top (``position="top"``: first match wins, as in /etc/hosts) or at the end (``"end"``: last
-    assignment wins, as in ~/.bashrc), in the file's dominant line ending. *replace_lines* maps
-    0-based indexes of lines outside the block to new content (terminator kept): the only way a
-    line outside our block changes, used to comment lines out when the user agreed.
-    """
-    for line in body:
-        if "\n" in line or "\r" in line or _MARKER_RE.match(line):
-            raise ValueError(f"a block line may not hold a newline or a marker: {line!r}")
-    text = text or ""
-    lines = split_lines(text)
-    span = find_block(lines)
-    replace_lines = dict(replace_lines or {})
-    for i, new in replace_lines.items():
-        if not 0 <= i < len(lines) or (span and span[0] <= i <= span[1]):
-            raise ValueError(f"line index {i} is not a line outside the block")
-        if "\n" in new or "\r" in new:
-            raise ValueError("a replacement line may not hold a newline")
-        old = lines[i]
-        lines[i] = new + old[len(line_content(old)):]
-    if span is not None:
-        begin_line, end_line = lines[span[0]], lines[span[1]]
-        nl = begin_line[len(line_content(begin_line)):] or detect_newline(text)
-        block = [x + nl for x in (BEGIN_MARKER, *body, END_MARKER)]
-        if not end_line.endswith("\n"):
-            block[-1] = END_MARKER  # the block was the end of a file without a final newline
-        return "".join(lines[:span[0]] + block + lines[span[1] + 1:])
-    nl = detect_newline(text)
-    block = [x + nl for x in (BEGIN_MARKER, *body, END_MARKER)]
-    if position == "top":
-        return "".join(block + lines)
-    if position != "end":
-        raise ValueError(f"position must be 'top' or 'end', not {position!r}")
-    if lines and not lines[-1].endswith("\n"):
-        block[0] = nl + block[0]
-    return "".join(lines + block)
-
-
-@dataclass(frozen=True)
-class LineChange:
-    """A line outside our block that we offer to change (comment out), and why."""
-
-    index: int      # 0-based line index in the file
-    old: str        # the line as it is (no terminator)
-    new: str        # what it would become (no terminator)
-    why: str        # the reason, shown to the user before asking
-
-    @property
-    def lineno(self) -> int:
-        return self.index + 1
-
-
 # --------------------------------------------------------------------------- preview
-def read_bytes(path: Path) -> bytes | None:
-    """The file's bytes, or None when it does not exist. Other errors: ManagedFileError."""
-    try:
-        return Path(path).read_bytes()
-    except FileNotFoundError:
-        return None
-    except IsADirectoryError:
-        raise ManagedFileError(f"{path} is a folder, not a file") from None
-    except PermissionError:
-        raise PermissionNeededError(f"this user may not read {path}", [Path(path)]) from None
-    except OSError as exc:
-        raise ManagedFileError(f"cannot read {path}: {exc.strerror}") from None
-
-
 @dataclass(frozen=True)
 class Preview:
     """What a write would do to one file: old and new bytes (None = no file) and why."""
@@ -308,211 +153,6 @@ def preview_block(path: Path, body: Sequence[str], *, position: str = "end", lab
     return Preview(path, old, new, label, tuple(notes), new_mode)
 
 
-# --------------------------------------------------------------------------- writing
-def is_mount_point(path: Path) -> bool:
-    """True when *path* is itself a mount point (a bind-mounted file such as a netns /etc/hosts)."""
-    try:
-        real = os.path.realpath(path)
-        with open("/proc/self/mountinfo", encoding="utf-8", errors="replace") as f:
-            for line in f:
-                parts = line.split()
-                if len(parts) > 4 and _unescape_mount(parts[4]) == real:
-                    return True
-    except OSError:
-        pass
-    return False
-
-
-def _unescape_mount(s: str) -> str:
-    return re.sub(r"\\([0-7]{3})", lambda m: chr(int(m.group(1), 8)), s)
-
-
-def can_write(path: Path) -> bool:
-    """Whether this process can write *path* by one of our strategies (no privilege needed)."""
-    if os.geteuid() == 0:
-        return True
-    try:
-        real = Path(os.path.realpath(path))
-        if real.exists():
-            return os.access(real, os.W_OK)  # rename if the folder allows it, else in place
-        parent = real.parent
-        while not parent.exists() and parent != parent.parent:
-            parent = parent.parent
-        return os.access(parent, os.W_OK | os.X_OK)
-    except OSError:
-        return False
-
-
-@dataclass
-class WriteOutcome:
-    path: Path
-    in_place: bool
-    deleted: bool = False
-
-
-def _fsync_dir(folder: Path) -> None:
-    try:
-        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def _copy_xattrs(src: Path, fd: int) -> None:
-    """Best effort: keep extended attributes (an SELinux label on /etc/hosts, for one)."""
-    try:
-        names = os.listxattr(src)
-    except OSError:
-        return
-    for name in names:
-        try:
-            os.setxattr(fd, name, os.getxattr(src, name))
-        except OSError:
-            pass
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as f:
-            return f.read().rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
-    except OSError:
-        return False
-
-
-def _remove_stale_temps(folder: Path, name: str) -> None:
-    """Remove temp files that writers killed before their rename left behind."""
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return
-    for e in entries:
-        m = _TMP_RE.match(e.name)
-        if m and m.group("name") == name and not _pid_alive(int(m.group("pid"))):
-            with contextlib.suppress(OSError):
-                os.unlink(e.path)
-
-
-def _write_all(fd: int, data: bytes) -> None:
-    view = memoryview(data)
-    off = 0
-    while off < len(data):
-        off += os.pwrite(fd, view[off:], off)
-
-
-def _write_in_place(real: Path, data: bytes) -> None:
-    """Rewrite an existing file through its own inode (mount points, hard links, other owners).
-
-    Not atomic: the caller has a backup. Read back to verify; on mismatch put the old bytes back.
-    New content shorter than the old is written padded with newlines to the old length first, so
-    a crash before the truncation leaves the new content and blank lines, never a tail of old
-    bytes after it.
-    """
-    old = real.read_bytes()
-    padded = data + b"\n" * (len(old) - len(data)) if len(data) < len(old) else data
-    fd = os.open(real, os.O_WRONLY | os.O_NOFOLLOW)
-    try:
-        _write_all(fd, padded)
-        os.fsync(fd)
-        if _before_truncate is not None:
-            _before_truncate()
-        os.ftruncate(fd, len(data))
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-    if real.read_bytes() != data:
-        fd = os.open(real, os.O_WRONLY | os.O_NOFOLLOW)
-        try:
-            _write_all(fd, old)
-            os.ftruncate(fd, len(old))
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        raise ManagedFileError(f"{real}: the content read back differs from what was written; "
-                               "the previous content was put back")
-
-
-def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: int | None,
-                    xattr_src: Path | None) -> None:
-    folder = real.parent
-    tmp = folder / f".{real.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
-    try:
-        try:
-            _write_all(fd, data)
-            if uid is not None or gid is not None:
-                try:
-                    os.fchown(fd, -1 if uid is None else uid, -1 if gid is None else gid)
-                except PermissionError:
-                    pass  # a normal user's own file: owner is already right
-            os.fchmod(fd, mode)
-            if xattr_src is not None:
-                _copy_xattrs(xattr_src, fd)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        if _before_rename is not None:
-            _before_rename()
-        os.replace(tmp, real)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    _fsync_dir(folder)
-
-
-def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
-               uid: int | None = None, gid: int | None = None,
-               new_mode: int = 0o644) -> WriteOutcome:
-    """Write *data* to *path* safely (None deletes it); keeps mode, owner and xattrs.
-
-    Symlinks are followed (a dotfile linked into a repo stays a link). Rename when possible;
-    in place for mount points (or when rename fails with EBUSY/EXDEV), hard links, files owned by
-    another user that we may write, and files in folders we may not write.
-    """
-    real = Path(os.path.realpath(path))
-    try:
-        st: os.stat_result | None = os.stat(real)
-    except FileNotFoundError:
-        st = None
-    if st is not None and not stat.S_ISREG(st.st_mode):
-        raise ManagedFileError(f"{path} is not a regular file")
-    if data is None:
-        if st is not None:
-            os.unlink(real)
-            _fsync_dir(real.parent)
-        return WriteOutcome(Path(path), False, deleted=True)
-    if st is None:
-        real.parent.mkdir(parents=True, exist_ok=True)
-        _remove_stale_temps(real.parent, real.name)
-        _write_renaming(real, data, new_mode if mode is None else mode, uid, gid, None)
-        return WriteOutcome(Path(path), False)
-    mode = stat.S_IMODE(st.st_mode) if mode is None else mode
-    uid = st.st_uid if uid is None else uid
-    gid = st.st_gid if gid is None else gid
-    euid = os.geteuid()
-    in_place = (is_mount_point(real) or st.st_nlink > 1
-                or (euid != 0 and st.st_uid != euid)
-                or not os.access(real.parent, os.W_OK | os.X_OK))
-    if not in_place:
-        _remove_stale_temps(real.parent, real.name)
-        try:
-            _write_renaming(real, data, mode, uid, gid, real)
-            return WriteOutcome(Path(path), False)
-        except OSError as exc:
-            if exc.errno not in (errno.EBUSY, errno.EXDEV):
-                raise
-    _write_in_place(real, data)
-    if stat.S_IMODE(os.stat(real).st_mode) != mode:
-        with contextlib.suppress(OSError):
-            os.chmod(real, mode)
-    return WriteOutcome(Path(path), True)
-
-
 # --------------------------------------------------------------------------- journal
 @dataclass
 class JournalFile:
@@ -536,18 +176,25 @@ class JournalEntry:
     files: list[JournalFile]
     undone: str | None = None
     version: int = 1
+    # Port forwards made on the modem (rosnet_tui.core.upnp.journal): no files, undone by
+    # removing them from the modem they were made on.
+    mappings: list[dict] = field(default_factory=list)
 
     def to_json(self) -> dict:
-        return {"version": self.version, "id": self.id, "created": self.created,
-                "label": self.label, "undone": self.undone,
-                "files": [f.__dict__ for f in self.files]}
+        d = {"version": self.version, "id": self.id, "created": self.created,
+             "label": self.label, "undone": self.undone,
+             "files": [f.__dict__ for f in self.files]}
+        if self.mappings:
+            d["mappings"] = self.mappings
+        return d
 
     @classmethod
     def from_json(cls, d: dict) -> JournalEntry:
         return cls(id=str(d["id"]), created=str(d.get("created", "")),
                    label=str(d.get("label", "")), undone=d.get("undone"),
                    files=[JournalFile(**f) for f in d.get("files", [])],
-                   version=int(d.get("version", 1)))
+                   version=int(d.get("version", 1)),
+                   mappings=[m for m in d.get("mappings") or [] if isinstance(m, dict)])
 
 
 @dataclass
@@ -606,14 +253,15 @@ def _write_private(path: Path, data: bytes, owner: tuple[int, int] | None) -> No
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
     try:
         try:
+            fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
             _write_all(fd, data)
             if owner:
                 with contextlib.suppress(OSError):
                     os.fchown(fd, *owner)
             os.fsync(fd)
+            os.replace(tmp, path)
         finally:
             os.close(fd)
-        os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
@@ -656,6 +304,11 @@ def journal_entries(state_dir: Path | None = None) -> list[JournalEntry]:
         names = sorted(n for n in os.listdir(folder) if re.fullmatch(r"\d{6,}\.json", n))
     except FileNotFoundError:
         return []
+    except NotADirectoryError:
+        raise ManagedFileError(f"{folder.parent} is not a folder: it cannot be the state "
+                               "dir") from None
+    except OSError as exc:
+        raise ManagedFileError(f"cannot read the journal in {folder}: {exc.strerror}") from None
     for n in names:
         try:
             out.append(JournalEntry.from_json(json.loads((folder / n).read_text("utf-8"))))
@@ -711,7 +364,11 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
     sd = _state_dir(state_dir)
     owner = _owner_for(sd)
     with _locked(sd, owner):
+        sweep_state_dir(sd)
         for p in previews:
+            # an in-place write of this file cut short, journaled in the state dir
+            with contextlib.suppress(OSError):
+                recover_in_place(p.path, journal_dir=sd / INPLACE_DIR)
             _check_fresh(p)
         entry = JournalEntry(_next_id(sd), _now(), label or "; ".join(p.label for p in todo if p.label), [])
         bdir = sd / "backups" / entry.id
@@ -735,11 +392,19 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
         done: list[int] = []
         try:
             for i, p in enumerate(todo):
-                outcome = write_file(p.path, p.new, new_mode=p.new_mode)
+                outcome = write_file(p.path, p.new, new_mode=p.new_mode,
+                                     journal_dir=sd / INPLACE_DIR)
                 entry.files[i].in_place = outcome.in_place
                 result.files.append(outcome)
                 done.append(i)
         except BaseException as exc:
+            # The file being written when it failed may be half written (in place): put back
+            # too (its journal is completed first), so no file keeps an apply marked undone.
+            cut = len(done)
+            if cut < len(todo):
+                with contextlib.suppress(Exception):
+                    if file_digest(read_bytes(todo[cut].path)) != entry.files[cut].before:
+                        done = [*done, cut]
             _roll_back(sd, entry, done)
             entry.undone = _now() + " (rolled back: the apply failed)"
             with contextlib.suppress(Exception):
@@ -804,7 +469,8 @@ def _restore_one(sd: Path, f: JournalFile) -> None:
     if data is not None and file_digest(data) != f.before:
         raise ManagedFileError(f"the backup {b} is damaged (digest mismatch); "
                                f"{f.path} was left as it is")
-    write_file(Path(f.real_path), data, mode=f.mode, uid=f.uid, gid=f.gid)
+    write_file(Path(f.real_path), data, mode=f.mode, uid=f.uid, gid=f.gid,
+               journal_dir=sd / INPLACE_DIR)
 
 
 def _roll_back(sd: Path, entry: JournalEntry, done: Iterable[int]) -> None:
@@ -836,6 +502,7 @@ class UndoResult:
     entry_id: str
     label: str
     files: list[Path]
+    forwards: list[str] = field(default_factory=list)  # what happened to the entry's forwards
 
 
 def last_entry(state_dir: Path | None = None) -> JournalEntry | None:
@@ -854,8 +521,11 @@ def plan_undo(state_dir: Path | None = None, *, entry_id: str | None = None) -> 
     if entry_id is not None and entry.id != entry_id:
         raise StalePreviewError(f"the last change is now #{entry.id}, not #{entry_id}; "
                                 "look at the new preview and try again")
+    sweep_state_dir(sd)
     previews, conflicts = [], []
     for f in entry.files:
+        with contextlib.suppress(OSError):
+            recover_in_place(Path(f.real_path), journal_dir=sd / INPLACE_DIR)
         current = read_bytes(Path(f.real_path))
         b = _backup_path(sd, f)
         target = b.read_bytes() if b else None
@@ -887,6 +557,11 @@ def apply_undo(plan: UndoPlan, *, force: bool = False) -> UndoResult:
             raise StalePreviewError("the journal changed since the undo preview; try again")
         for p in plan.previews:
             _check_fresh(p)
+        forwards: list[str] = []
+        if plan.entry.mappings:  # forwards on the modem: removed there (bounded), or refused
+            from rosnet_tui.core.upnp.journal import undo_mappings
+
+            forwards = undo_mappings(plan.entry, force=force)
         restored = []
         for p, f in zip(plan.previews, plan.entry.files, strict=True):
             if p.changed:
@@ -896,7 +571,7 @@ def apply_undo(plan: UndoPlan, *, force: bool = False) -> UndoResult:
             restored.append(Path(f.path))
         plan.entry.undone = _now()
         _save_entry(sd, plan.entry, owner)
-        return UndoResult(plan.entry.id, plan.entry.label, restored)
+        return UndoResult(plan.entry.id, plan.entry.label, restored, forwards)
 
 
 def undo_last(state_dir: Path | None = None, *, force: bool = False) -> UndoResult:

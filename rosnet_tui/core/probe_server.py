@@ -32,7 +32,7 @@ CHECK_PORT_MIN, CHECK_PORT_MAX = 1024, 65535
 _PORT_PATH = re.compile(r"^/port/([^/]*)$")
 _REASONS = {200: "OK", 400: "Bad Request", 404: "Not Found", 405: "Method Not Allowed",
             408: "Request Timeout", 429: "Too Many Requests", 431: "Request Header Fields Too Large",
-            503: "Service Unavailable"}
+            500: "Internal Server Error", 503: "Service Unavailable"}
 
 
 @dataclass
@@ -214,7 +214,8 @@ class ProbeServer:
                 raise _BadRequest(431, "too many headers")
             if not line.endswith(b"\n"):
                 raise _BadRequest(400, "incomplete request")
-        parts = lines[0].decode("latin-1").split()
+        # Split on spaces only: str.split() would also split on Latin-1 NBSP (0xA0) and others.
+        parts = [x for x in lines[0].decode("latin-1").rstrip("\r\n").split(" ") if x]
         if len(parts) != 3 or not parts[2].startswith("HTTP/"):
             raise _BadRequest(400, "malformed request line")
         method, target, _ = parts
@@ -241,6 +242,9 @@ class ProbeServer:
                     status, ctype, body, extra = self._error(exc.status, exc.message)
                 except asyncio.TimeoutError:
                     status, ctype, body, extra = self._error(408, "request not received in time")
+                except Exception as exc:  # noqa: BLE001 - a bug answers 500, never an empty reply
+                    note = f"internal error: {type(exc).__name__}"
+                    status, ctype, body, extra = self._error(500, "internal error")
             await self._respond(writer, status, ctype, body, extra)
         except (ConnectionError, OSError, asyncio.TimeoutError):
             status = 0
@@ -266,7 +270,9 @@ class ProbeServer:
         if not m:
             return (*self._error(404, "unknown path (try /ip or /port/N)"), "")
         raw = m.group(1)
-        if not raw.isdigit() or not CHECK_PORT_MIN <= int(raw) <= CHECK_PORT_MAX:
+        # ASCII digits only: str.isdigit() is also true for '²', '³' ..., which int() refuses.
+        if not (raw.isascii() and raw.isdigit() and len(raw) <= 5) \
+                or not CHECK_PORT_MIN <= int(raw) <= CHECK_PORT_MAX:
             return (*self._error(400, f"port must be a number between {CHECK_PORT_MIN} and "
                                       f"{CHECK_PORT_MAX}"), "")
         port = int(raw)

@@ -88,6 +88,11 @@ def _connection_notes(conn: str, ip: str, mac: str, page: str) -> list[str]:
 
 
 def _exposure(settings: Settings) -> list[str]:
+    if settings.ros2:
+        return [f"ROS 2 (rmw_zenoh) has no authentication by default: whoever reaches TCP "
+                f"{settings.ros.zenoh_port} of the master joins the ROS network. Restrict the "
+                "forward to the members' public IPs if the modem can; SSH keys only.",
+                "- Remove the forwarding when the robot is not in use."]
     sources = [f"{p.public_ip} ({p.name})" for p in settings.peers if p.public_ip]
     allow = (f"allow only the peers' public IPs: {', '.join(sources)}" if sources
              else "allow only the peers' public IPs")
@@ -125,23 +130,30 @@ def build_router_card(settings: Settings, net: LocalNet | None = None) -> Router
                        "'default via' address in 'ip route'.")
     page = f"http://{net.gateway}/" if net.gateway else ""
     to = ip or "(local IP)"
-    forwards = [
-        ForwardRule("TCP", PORT_RANGE, to, PORT_RANGE, True,
-                    "ROS (master, nodes) and the test port"),
-        ForwardRule("UDP", PORT_RANGE, to, PORT_RANGE, False,
-                    "only for UDP transports; ROS 1 topics use TCP"),
-        ForwardRule("TCP", "22", to, "22", False, "SSH from the peers (keys only)"),
-    ]
+    from rosnet_tui.core.forwarding import ports_to_forward
+
+    forwards = [ForwardRule(f.protocol, f.ports, to, f.ports, f.required, f.why)
+                for f in ports_to_forward(settings)]
     role = "ROS master" if settings.is_master else "ROS member"
     return RouterCard(
         component=t.name, role=role, connection=t.connection, interface=net.interface or t.interface,
         local_ip=ip, mac=net.mac, gateway=net.gateway, modem_page=page, forwards=forwards,
-        dmz_host=to, reservation_ip=to, reservation_mac=net.mac or "(MAC, see below)",
+        dmz_host="" if settings.ros2 else to, reservation_ip=to, reservation_mac=net.mac or "(MAC, see below)",
         connection_notes=_connection_notes(t.connection, ip, net.mac, page),
         exposure_warning=_exposure(settings), warnings=warnings, missing=missing,
-        verify=[f"Then run the Router step's checks: a listener on the test port "
-                f"({settings.probe.port}) and an outside port check must report Open. Repeat "
-                "with other ports in the range."])
+        verify=_verify(settings))
+
+
+def _verify(settings: Settings) -> list[str]:
+    if settings.ros2 and not settings.is_master:
+        return ["ROS 2 member: nothing to forward here (no DMZ either); its router connects out "
+                "to the master's. The port test is skipped on a member."]
+    if settings.ros2:
+        return [f"Then run the Router step's checks: TCP {settings.ros.zenoh_port} tested from "
+                "outside must reach the router (ROS 2 needs no other port)."]
+    return [f"Then run the Router step's checks: a listener on the test port "
+            f"({settings.probe.port}) and an outside port check must report Open. Repeat "
+            "with other ports in the range."]
 
 
 # --------------------------------------------------------------------------- rendering
@@ -179,8 +191,9 @@ def _render_text(card: RouterCard, width: int) -> str:
         row = f"   {r.protocol:<6}{r.external_ports:<15}{r.internal_ip:<17}{r.internal_ports:<12}"
         out.append((row + need).rstrip())
         out += _wrap(r.note, width, " " * 9)
-    out += _wrap(f"Or, instead of these rules: DMZ host = {card.dmz_host} (forwards every "
-                 "port, below 1024 too).", width, "   ")
+    if card.dmz_host:  # ROS 2 forwards one port: no DMZ
+        out += _wrap(f"Or, instead of these rules: DMZ host = {card.dmz_host} (forwards every "
+                     "port, below 1024 too).", width, "   ")
     out += ["", "2. DHCP reservation (LAN / DHCP settings)"]
     out += _wrap(f"Reserve IP {card.reservation_ip} for MAC {card.reservation_mac}"
                  f"{f' ({card.component})' if card.component else ''}. Without it the "
@@ -222,8 +235,9 @@ def _render_markdown(card: RouterCard, width: int) -> str:
         out.append(f"| {r.protocol} | {r.external_ports} | {r.internal_ip} | "
                    f"{r.internal_ports} | {need} |")
     out.append("")
-    out += _wrap(f"Or, instead of these rules: DMZ host = {card.dmz_host} (forwards every port, "
-                 "below 1024 too).", width)
+    if card.dmz_host:
+        out += _wrap(f"Or, instead of these rules: DMZ host = {card.dmz_host} (forwards every "
+                     "port, below 1024 too).", width)
     out += ["", "### 2. DHCP reservation", ""]
     out += _wrap(f"Reserve IP {card.reservation_ip} for MAC {card.reservation_mac}. Without it "
                  "the forwarding breaks when the modem hands this machine another address.", width)

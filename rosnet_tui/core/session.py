@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings, default_state_dir, save_settings
-from rosnet_tui.core.steps import STEP_BY_ID
+from rosnet_tui.core.steps import STEP_BY_ID, step_for
 from rosnet_tui.core.ui_state import UiState, local_time
 
 if TYPE_CHECKING:
@@ -120,11 +120,11 @@ class WizardSession:
 
     # ------------------------------------------------------------------ checks
     def specs(self, step: str) -> list[CheckSpec]:
-        """The checks of *step* (the registry's are imported on first use: the first screen
-        needs only their names)."""
+        """The checks of *step* for the settings' ROS version (ros.* or ros2.*); the registry's
+        are imported on first use (the first screen needs only their names)."""
         if step not in self._specs:
             self._specs[step] = self.specs_for(step)
-        return self._specs[step]
+        return [c for c in self._specs[step] if c.applies(self.settings)]
 
     def specs_loaded(self, step: str) -> bool:
         return step in self._specs or self.specs_for is not _default_specs
@@ -132,7 +132,7 @@ class WizardSession:
     def check_rows(self, step: str) -> list[tuple[str, str]]:
         """(id, title) of every check of *step*, without importing the checks if they are not
         loaded yet (the title is then the id; the screens show short labels anyway)."""
-        declared = list(STEP_BY_ID[step].check_ids)
+        declared = list(step_for(step, self.settings).check_ids)
         if not self.specs_loaded(step):
             return [(cid, cid) for cid in declared]
         specs = self.specs(step)
@@ -179,7 +179,7 @@ class WizardSession:
         out = {}
         for s in STEP_IDS:
             ids = ([c.id for c in self.specs(s)] if self.specs_loaded(s)
-                   else list(STEP_BY_ID[s].check_ids))
+                   else list(step_for(s, self.settings).check_ids))
             out[s] = aggregate([self.check_state(cid)[0] for cid in ids])
         return out
 

@@ -7,269 +7,61 @@ comments and layout of a hand-edited file.
 
 from __future__ import annotations
 
-import ipaddress
+import fcntl
 import os
 import re
+import stat
 import sys
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
+
+from rosnet_tui.core import tempfiles
+from rosnet_tui.core.settings_model import (  # noqa: F401 (the model; re-exported)
+    _NAME_RE,
+    _SSH_USER_RE,
+    CONNECTIONS,
+    DEFAULT_PORT_CHECK_URL,
+    DEFAULT_PUBLIC_IP_URLS,
+    DOMAIN_ID_MAX,
+    FIELD_SHOWN_CHARS,
+    MAX_NESTING,
+    MAX_SETTINGS_BYTES,
+    PORT_MAX,
+    PORT_MIN,
+    PROFILES,
+    RESERVED_NAMES,
+    RESERVED_PREFIXES,
+    ROLES,
+    ROS_VERSIONS,
+    SHOWN_VALUE_CHARS,
+    SYNC_STORES,
+    ZENOH_PORT_DEFAULT,
+    CheckSettings,
+    Peer,
+    ProbeSettings,
+    RosSettings,
+    Settings,
+    SettingsError,
+    SyncSettings,
+    ThisComponent,
+    _number_within,
+    default_ros_version,
+    new_settings,
+    shown,
+    validate_domain_id,
+    validate_ip,
+    validate_name,
+    validate_port,
+    validate_ros_version,
+    validate_ssh_user,
+    validate_url,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
-
-ROLES = ("master", "member")
-CONNECTIONS = ("corporate", "home", "telecom")
-PROFILES = ("remote", "office", "portable")
-PORT_MIN, PORT_MAX = 1024, 65000
-DEFAULT_PUBLIC_IP_URLS = ("https://ifconfig.co/ip",)
-DEFAULT_PORT_CHECK_URL = "https://ifconfig.co"
-
-_NAME_RE = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*$")
-_SSH_USER_RE = re.compile(r"^[a-z_][a-z0-9_.-]{0,31}$", re.IGNORECASE)
-
-
-class SettingsError(Exception):
-    """A settings file that cannot be used: says where (line, key) and why."""
-
-    def __init__(self, message: str, *, path: Path | None = None, line: int | None = None,
-                 key: str | None = None) -> None:
-        self.message = message
-        self.path = path
-        self.line = line
-        self.key = key
-        super().__init__(str(self))
-
-    def __str__(self) -> str:
-        where = []
-        if self.path is not None:
-            where.append(str(self.path))
-        if self.line is not None:
-            where.append(f"line {self.line}")
-        if self.key is not None:
-            where.append(f"key '{self.key}'")
-        return (": ".join([", ".join(where), self.message]) if where else self.message)
-
-
-# --------------------------------------------------------------------------- validators
-# Names /etc/hosts already gives to this machine itself: a component called so would be looked up
-# as this machine (localhost, the ip6-* set of Debian-like systems).
-RESERVED_NAMES = ("localhost", "localhost.localdomain", "broadcasthost")
-RESERVED_PREFIXES = ("ip6-",)
-
-
-def shown(value: str, limit: int = 24) -> str:
-    """*value* quoted for a message, cut to *limit* characters (a paste can be kilobytes)."""
-    value = " ".join(str(value).split())
-    return f"'{value}'" if len(value) <= limit else f"'{value[:limit - 3]}...'"
-
-
-def validate_name(value: str) -> str | None:
-    """Return why *value* is not a usable network name, or None when it is."""
-    if not value:
-        return "a name is required"
-    if any(c.isspace() for c in value):
-        return "a name cannot contain spaces"
-    if len(value) > 253 or not _NAME_RE.match(value):
-        return "use letters, digits and '-' only (like turtlebot or sami-laptop)"
-    if value.replace(".", "").isdigit():
-        return "a name cannot be only digits"
-    low = value.lower()
-    if low in RESERVED_NAMES or low.startswith(RESERVED_PREFIXES):
-        return f"{shown(value)} is reserved for this machine itself in /etc/hosts: pick another"
-    return None
-
-
-def validate_ip(value: str, *, required: bool = True) -> str | None:
-    """Return why *value* is not an IPv4 address, or None when it is (or is empty and optional)."""
-    if not value:
-        return "an IP address is required" if required else None
-    try:
-        addr = ipaddress.ip_address(value)
-    except ValueError:
-        return f"{shown(value)} is not an IP address (expected four numbers like 192.168.1.10)"
-    if addr.version != 4:
-        return "use an IPv4 address: the procedure's port forwarding is for IPv4"
-    if addr.is_unspecified or addr.is_multicast or str(addr) == "255.255.255.255":
-        return f"{value} cannot be a component's address"
-    return None
-
-
-def validate_port(value: int | str, *, lo: int = PORT_MIN, hi: int = PORT_MAX) -> str | None:
-    """Return why *value* is not a port in lo..hi, or None when it is."""
-    try:
-        port = int(str(value).strip())
-    except ValueError:
-        return f"{shown(value)} is not a port number"
-    if not lo <= port <= hi:
-        return f"the port must be between {lo} and {hi}"
-    return None
-
-
-def validate_ssh_user(value: str) -> str | None:
-    if value and not _SSH_USER_RE.match(value):
-        return f"{shown(value)} is not a valid user name"
-    return None
-
-
-def validate_url(value: str) -> str | None:
-    if not re.match(r"^https?://[^\s/]+", value or ""):
-        return f"'{value}' is not an http:// or https:// URL"
-    return None
-
-
-# --------------------------------------------------------------------------- model
-@dataclass
-class ThisComponent:
-    name: str = ""
-    role: str = "master"
-    connection: str = "home"
-    profile: str = "remote"
-    local_ip: str = ""
-    public_ip: str = ""
-    interface: str = ""
-    office_ip: str = ""      # this component's address on the office LAN (profile "office")
-    portable_ip: str = ""    # ... and on the portable hotspot's LAN (profile "portable")
-
-
-@dataclass
-class Peer:
-    name: str
-    local_ip: str = ""
-    public_ip: str = ""
-    ssh_user: str = ""
-    ssh_port: int = 22
-    office_ip: str = ""      # the peer's address on the office LAN (default: local_ip)
-    portable_ip: str = ""    # the peer's address on the portable LAN (default: local_ip)
-
-
-@dataclass
-class RosSettings:
-    master: str = ""
-    port: int = 11311
-
-
-@dataclass
-class ProbeSettings:
-    port: int = 12345
-    public_ip_urls: list[str] = field(default_factory=lambda: list(DEFAULT_PUBLIC_IP_URLS))
-    port_check_url: str = DEFAULT_PORT_CHECK_URL
-
-
-@dataclass
-class CheckSettings:
-    timeout_s: float = 3.0
-
-
-SYNC_STORES = ("folder", "dns")
-
-
-@dataclass
-class SyncSettings:
-    store: str = "folder"            # "folder" | "dns"
-    folder: str = ""                 # folder store: the shared folder
-    interval_s: float = 60           # public-IP poll interval
-    dns_server: str = ""             # dns store: the server taking RFC 2136 updates
-    zone: str = ""                   # dns store: the zone holding NAME.ZONE A records
-    tsig_key_file: str = ""          # dns store: BIND-style TSIG key file
-
-
-@dataclass
-class Settings:
-    this: ThisComponent = field(default_factory=ThisComponent)
-    peers: list[Peer] = field(default_factory=list)
-    ros: RosSettings = field(default_factory=RosSettings)
-    probe: ProbeSettings = field(default_factory=ProbeSettings)
-    checks: CheckSettings = field(default_factory=CheckSettings)
-    sync: SyncSettings = field(default_factory=SyncSettings)
-    # Whether the file had a [sync] table (so saving does not add one the user never asked for).
-    has_sync: bool = field(default=False, compare=False, repr=False)
-
-    def peer(self, name: str) -> Peer | None:
-        return next((p for p in self.peers if p.name == name), None)
-
-    @property
-    def is_master(self) -> bool:
-        return self.this.role == "master"
-
-    @property
-    def master_name(self) -> str:
-        return self.ros.master or (self.this.name if self.is_master else "")
-
-    def problems(self) -> list[tuple[str, str]]:
-        """Everything that keeps these settings from being complete: (key, reason) pairs."""
-        out: list[tuple[str, str]] = []
-
-        def add(key: str, why: str | None) -> None:
-            if why:
-                out.append((key, why))
-
-        t = self.this
-        add("this.name", validate_name(t.name))
-        add("this.role", None if t.role in ROLES else f"must be one of {', '.join(ROLES)}")
-        add("this.connection", None if t.connection in CONNECTIONS
-            else f"must be one of {', '.join(CONNECTIONS)}")
-        add("this.profile", None if t.profile in PROFILES
-            else f"must be one of {', '.join(PROFILES)}")
-        add("this.local_ip", validate_ip(t.local_ip, required=False))
-        add("this.public_ip", validate_ip(t.public_ip, required=False))
-        add("this.office_ip", validate_ip(t.office_ip, required=False))
-        add("this.portable_ip", validate_ip(t.portable_ip, required=False))
-        names = {t.name}
-        folded = {t.name.lower(): "this component"}
-        for i, p in enumerate(self.peers):
-            k = f"peer[{i + 1}]"
-            add(f"{k}.name", validate_name(p.name))
-            if p.name.lower() in folded:  # names are looked up without regard to case
-                same = folded[p.name.lower()]
-                add(f"{k}.name", f"{shown(p.name)} is this component's own name"
-                    if same == "this component" else
-                    f"the name {shown(p.name)} is used twice (names ignore case)")
-            folded.setdefault(p.name.lower(), p.name)
-            names.add(p.name)
-            add(f"{k}.local_ip", validate_ip(p.local_ip, required=False))
-            add(f"{k}.public_ip", validate_ip(p.public_ip, required=False))
-            add(f"{k}.office_ip", validate_ip(p.office_ip, required=False))
-            add(f"{k}.portable_ip", validate_ip(p.portable_ip, required=False))
-            if not p.local_ip and not p.public_ip:
-                add(f"{k}.public_ip", "give the peer a local IP, a public IP, or both")
-            add(f"{k}.ssh_user", validate_ssh_user(p.ssh_user))
-            add(f"{k}.ssh_port", validate_port(p.ssh_port, lo=1, hi=65535))
-        if self.ros.master:
-            add("ros.master", validate_name(self.ros.master))
-            if self.ros.master not in names:
-                add("ros.master", f"'{self.ros.master}' is neither this component nor a peer")
-            elif t.role == "master" and self.ros.master != t.name:
-                add("ros.master", "this component is the master, so ros.master must be its own name")
-            elif t.role == "member" and self.ros.master == t.name:
-                add("ros.master", "this component is a member, so ros.master must name a peer")
-        elif t.role == "member":
-            add("ros.master", "a member needs the name of the master")
-        add("ros.port", validate_port(self.ros.port, lo=1, hi=65535))
-        add("probe.port", validate_port(self.probe.port))
-        for url in self.probe.public_ip_urls:
-            add("probe.public_ip_urls", validate_url(url))
-        add("probe.port_check_url", validate_url(self.probe.port_check_url))
-        if not 0.1 <= float(self.checks.timeout_s) <= 120:
-            add("checks.timeout_s", "must be between 0.1 and 120 seconds")
-        y = self.sync
-        add("sync.store", None if y.store in SYNC_STORES
-            else f"must be one of {', '.join(SYNC_STORES)}")
-        if not 1 <= float(y.interval_s) <= 86400:
-            add("sync.interval_s", "must be between 1 and 86400 seconds")
-        if y.dns_server:
-            add("sync.dns_server", validate_ip(y.dns_server))
-        if y.zone:
-            zone = y.zone.rstrip(".")
-            add("sync.zone", validate_name(zone) if zone else "a zone name is required")
-        return out
-
-    @property
-    def complete(self) -> bool:
-        return not self.problems()
-
 
 # --------------------------------------------------------------------------- paths
 def default_config_path() -> Path:
@@ -288,7 +80,7 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
              "public_ip": str, "interface": str, "office_ip": str, "portable_ip": str},
     "peer": {"name": str, "local_ip": str, "public_ip": str, "ssh_user": str, "ssh_port": int,
              "office_ip": str, "portable_ip": str},
-    "ros": {"master": str, "port": int},
+    "ros": {"master": str, "port": int, "version": int, "zenoh_port": int, "domain_id": int},
     "probe": {"port": int, "public_ip_urls": list, "port_check_url": str},
     "checks": {"timeout_s": (int, float)},
     "sync": {"store": str, "folder": str, "interval_s": (int, float), "dns_server": str,
@@ -298,11 +90,16 @@ _TYPE_WORDS = {str: "a string in quotes", int: "a whole number", list: "a list [
                (int, float): "a number"}
 
 
+def _lines(text: str) -> list[str]:
+    """The lines as TOML counts them: only LF ends a line (U+2028, VT, FF ... do not)."""
+    return text.split("\n")
+
+
 def _locate(text: str, table: str, key: str | None, index: int = 0) -> int | None:
     """Find the 1-based line of *key* in [table] (the *index*-th [[table]]), by a light scan."""
     current, seen = None, -1
     header = re.compile(r"^\s*(\[\[?)\s*([A-Za-z0-9_.-]+)\s*\]\]?")
-    for n, line in enumerate(text.splitlines(), 1):
+    for n, line in enumerate(_lines(text), 1):
         m = header.match(line)
         if m:
             current = m.group(2)
@@ -329,23 +126,126 @@ def _check_table(text: str, path: Path | None, table: str, data: Any, index: int
             raise SettingsError(f"unknown key (known keys in [{table}]: {known})", path=path,
                                 line=_locate(text, table, key, index), key=full)
         want = schema[key]
-        ok = isinstance(value, want) and not (want is int and isinstance(value, bool))
+        ok = isinstance(value, want) and not isinstance(value, bool)
         if not ok:
             raise SettingsError(f"must be {_TYPE_WORDS[want]}", path=path,
                                 line=_locate(text, table, key, index), key=full)
 
 
+_HEADER_RE = re.compile(r"^\s*(\[\[?)\s*([A-Za-z0-9_.\"' -]+?)\s*\]\]?\s*(?:#.*)?$")
+_KEY_RE = re.compile(r"^\s*([A-Za-z0-9_.\"' -]+?)\s*=")
+
+
+def _key_at(text: str, lineno: int) -> str | None:
+    """The dotted key (table.key) whose value is on line *lineno*, by a light scan."""
+    table = None
+    lines = _lines(text)
+    for line in lines[:lineno - 1]:
+        m = _HEADER_RE.match(line)
+        if m:
+            table = m.group(2).strip().strip("\"'")
+    m = _KEY_RE.match(lines[lineno - 1]) if 0 < lineno <= len(lines) else None
+    if not m:
+        return table
+    key = m.group(1).strip().strip("\"'")
+    return f"{table}.{key}" if table else key
+
+
+def _nesting(text: str, limit: int = MAX_NESTING) -> int | None:
+    """The line where arrays/inline tables nest deeper than *limit* (None: they do not).
+
+    Checked before parsing: the parser recurses once per level, and a few hundred brackets
+    would exhaust Python's stack. Strings and comments are skipped."""
+    depth, line, i, n = 0, 1, 0, len(text)
+    at_line_start = True
+    while i < n:
+        c = text[i]
+        if c == "\n":
+            line += 1
+            at_line_start = True
+            i += 1
+            continue
+        if c in " \t":
+            i += 1
+            continue
+        if c == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        if text.startswith(('"""', "'''"), i):
+            end = text.find(text[i:i + 3], i + 3)
+            end = n if end < 0 else end + 3
+            line += text.count("\n", i, end)
+            i = end
+            at_line_start = False
+            continue
+        if c in "\"'":
+            j = i + 1
+            while j < n and text[j] != c and text[j] != "\n":
+                j += 2 if c == '"' and text[j] == "\\" else 1
+            i = j + 1 if j < n and text[j] == c else j
+            at_line_start = False
+            continue
+        if c in "[{" and not (at_line_start and depth == 0 and c == "["):
+            depth += 1
+            if depth > limit:
+                return line
+        elif c in "]}" and depth > 0:
+            depth -= 1
+        elif at_line_start and depth == 0 and c == "[":
+            j = text.find("\n", i)       # a table header: skip it whole
+            i = n if j < 0 else j
+            continue
+        at_line_start = False
+        i += 1
+    return None
+
+
+_TWICE_RE = re.compile(r"Cannot (?:declare|overwrite|mutate)[^()]*\(([^)]*)\)")
+
+
+def _toml_problem(text: str, exc: tomllib.TOMLDecodeError, path: Path | None) -> SettingsError:
+    """A TOML syntax error in words: the line, and for the usual slips what to write instead."""
+    line = getattr(exc, "lineno", None)
+    msg = getattr(exc, "msg", None) or str(exc)
+    if line is None:
+        m = re.search(r"line (\d+)", str(exc))
+        line = int(m.group(1)) if m else None
+    for n, ln in enumerate(_lines(text), 1):
+        m = _HEADER_RE.match(ln)
+        if m and m.group(1) == "[" and m.group(2).strip() == "peer":
+            return SettingsError("peers are written as [[peer]] (two brackets), one table per "
+                                 "peer", path=path, line=n, key="peer")
+    m = _TWICE_RE.search(msg)
+    if m:
+        name = ".".join(x.strip().strip("'\"") for x in m.group(1).split(",") if x.strip())
+        if name:
+            return SettingsError(f"[{name}] or its key is written twice: each table and key "
+                                 "once (peers: one [[peer]] table each)", path=path, line=line,
+                                 key=name)
+    return SettingsError(f"not valid TOML: {msg}", path=path, line=line)
+
+
 def parse_settings(text: str, path: Path | None = None) -> Settings:
     """Parse and validate the text of a settings file. Raises SettingsError only."""
+    if text.startswith("\ufeff"):
+        raise SettingsError("the file starts with a byte-order mark (U+FEFF): save it as UTF-8 "
+                            "without one", path=path, line=1)
+    deep = _nesting(text)
+    if deep is not None:
+        raise SettingsError(f"values nested more than {MAX_NESTING} levels deep", path=path,
+                            line=deep, key=_key_at(text, deep))
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        line = getattr(exc, "lineno", None)
-        msg = getattr(exc, "msg", None) or str(exc)
-        if line is None:
-            m = re.search(r"line (\d+)", str(exc))
-            line = int(m.group(1)) if m else None
-        raise SettingsError(f"not valid TOML: {msg}", path=path, line=line) from None
+        raise _toml_problem(text, exc, path) from None
+    except RecursionError:
+        raise SettingsError("values nested too deeply", path=path) from None
+    except ValueError as exc:  # an integer of more than 4,300 digits
+        m = re.search(r"[0-9_]{300,}", text)
+        line = text.count("\n", 0, m.start()) + 1 if m else None
+        raise SettingsError(f"a value cannot be read ({shown(exc, 80)})", path=path, line=line,
+                            key=_key_at(text, line) if line else None) from None
     for top in raw:
         if top not in _SCHEMA:
             raise SettingsError(f"unknown section (known: {', '.join('[' + s + ']' for s in _SCHEMA)})",
@@ -367,6 +267,8 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
     if "ros" in raw:
         _check_table(text, path, "ros", raw["ros"])
         s.ros = replace(s.ros, **raw["ros"])
+    if "version" not in raw.get("ros", {}):
+        s.ros.version = default_ros_version()  # files from before ROS 2 keep working
     if "probe" in raw:
         _check_table(text, path, "probe", raw["probe"])
         urls = raw["probe"].get("public_ip_urls", s.probe.public_ip_urls)
@@ -397,16 +299,48 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
     return s
 
 
-def load_settings(path: Path) -> Settings | None:
-    """Load the settings file at *path*; None when it does not exist yet."""
+def read_settings_text(path: Path) -> str | None:
+    """The text of the settings file at *path*, None when it does not exist. Bounded: anything
+    but a regular file (a FIFO, a device such as /dev/zero behind a link, a folder) is refused
+    without reading, and so is a file over MAX_SETTINGS_BYTES. Raises SettingsError."""
     try:
-        text = path.read_text(encoding="utf-8")
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC)
     except FileNotFoundError:
         return None
-    except UnicodeDecodeError:
-        raise SettingsError("the file is not UTF-8 text", path=path) from None
     except OSError as exc:
         raise SettingsError(f"cannot read the file: {exc.strerror}", path=path) from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise SettingsError("not a regular file (a folder, a FIFO or a device?): a settings "
+                                "file is a text file", path=path)
+        if st.st_size > MAX_SETTINGS_BYTES:
+            raise SettingsError(f"too big ({st.st_size} bytes; a settings file is a few KB, at "
+                                f"most {MAX_SETTINGS_BYTES})", path=path)
+        chunks, total = [], 0
+        while total <= MAX_SETTINGS_BYTES:
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+        if total > MAX_SETTINGS_BYTES:
+            raise SettingsError(f"too big (over {MAX_SETTINGS_BYTES} bytes)", path=path)
+    except OSError as exc:
+        raise SettingsError(f"cannot read the file: {exc.strerror}", path=path) from None
+    finally:
+        os.close(fd)
+    try:
+        return b"".join(chunks).decode("utf-8")
+    except UnicodeDecodeError:
+        raise SettingsError("the file is not UTF-8 text", path=path) from None
+
+
+def load_settings(path: Path) -> Settings | None:
+    """Load the settings file at *path*; None when it does not exist yet."""
+    text = read_settings_text(path)
+    if text is None:
+        return None
     return parse_settings(text, path)
 
 
@@ -423,7 +357,10 @@ def _table_values(s: Settings) -> dict[str, dict[str, Any]]:
     for k in ("local_ip", "public_ip", "interface", "office_ip", "portable_ip"):
         if getattr(t, k):
             this[k] = getattr(t, k)
-    ros: dict[str, Any] = {"master": s.ros.master or s.master_name, "port": s.ros.port}
+    ros: dict[str, Any] = {"version": s.ros.version, "master": s.ros.master or s.master_name,
+                           "port": s.ros.port}
+    if s.ros2 or s.ros.zenoh_port != ZENOH_PORT_DEFAULT or s.ros.domain_id:
+        ros.update(zenoh_port=s.ros.zenoh_port, domain_id=s.ros.domain_id)
     probe = {"port": s.probe.port, "public_ip_urls": list(s.probe.public_ip_urls),
              "port_check_url": s.probe.port_check_url}
     y = s.sync
@@ -512,6 +449,8 @@ def _merge_table(doc: Any, name: str, values: dict[str, Any]) -> None:
 def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
     """Write *text* to *path* atomically: a temp file in the same folder, fsync, rename."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    # What a killed writer of this file left: removed (ours, its writer gone, not locked).
+    tempfiles.sweep(path.parent, tempfiles.ATOMIC_TMP, path.name)
     # An unpredictable name, created exclusively and never through a link.
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{os.urandom(4).hex()}")
     if mode is None:
@@ -522,10 +461,11 @@ def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, mode)
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+            fcntl.flock(f.fileno(), fcntl.LOCK_EX)   # ours until renamed
             f.write(text)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+            os.replace(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)
@@ -548,10 +488,7 @@ def save_settings(s: Settings, path: Path) -> None:
     Refuses (SettingsError) to overwrite an existing file that does not parse: the user's text is
     never replaced without their say-so.
     """
-    try:
-        previous = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        previous = None
+    previous = read_settings_text(path)
     if previous is not None:
         parse_settings(previous, path)  # raises on a malformed file: never clobber it
     atomic_write_text(path, render_settings(s, previous))

@@ -19,7 +19,6 @@ advisor can say what to fix. paramiko is blocking; it runs in daemon threads (se
 from __future__ import annotations
 
 import asyncio
-import base64
 import contextlib
 import errno
 import logging
@@ -32,6 +31,24 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from rosnet_tui.core.known_hosts import (  # noqa: F401 (host keys; re-exported)
+    _KEY_FILE_KIND,
+    MAX_KNOWN_HOSTS_BYTES,
+    SYSTEM_KNOWN_HOSTS,
+    KnownHostKeys,
+    _hosts_match,
+    _key_blob,
+    _known_host_keys,
+    _known_keys,
+    _pattern_matches,
+    _read_known_hosts,
+    host_key_name,
+    key_fingerprint,
+    known_hosts_files,
+    ssh_dir,
+    trust_host_key,
+    verify_commands,
+)
 from rosnet_tui.core.settings import Peer
 
 if TYPE_CHECKING:
@@ -42,7 +59,6 @@ logging.getLogger("paramiko").addHandler(logging.NullHandler())
 
 FAILURES = ("network", "resolve", "host_key_unknown", "host_key_changed", "auth", "sshd",
             "no_user", "timeout")
-SYSTEM_KNOWN_HOSTS = Path("/etc/ssh/ssh_known_hosts")
 KEY_FILES = ("id_ed25519", "id_ecdsa", "id_rsa")
 _POLL_S = 0.02
 
@@ -131,78 +147,6 @@ class SshOptions:
     timeout_s: float = 3.0
 
 
-# --------------------------------------------------------------------------- host keys
-def ssh_dir(opts: SshOptions | None) -> Path:
-    d = getattr(opts, "ssh_dir", None) if opts is not None else None
-    return Path(d) if d else Path(os.path.expanduser("~")) / ".ssh"
-
-
-def known_hosts_files(opts: SshOptions | None) -> list[Path]:
-    files = getattr(opts, "known_hosts_files", None) if opts is not None else None
-    if files:
-        return [Path(f) for f in files]
-    return [ssh_dir(opts) / "known_hosts", SYSTEM_KNOWN_HOSTS]
-
-
-def host_key_name(name: str, port: int) -> str:
-    """The known_hosts spelling of a host: ``name`` on port 22, ``[name]:port`` otherwise."""
-    return name if port == 22 else f"[{name}]:{port}"
-
-
-def _known_keys(files: list[Path], lookup: str) -> dict[str, paramiko.PKey]:
-    import paramiko
-
-    found: dict[str, paramiko.PKey] = {}
-    for f in files:
-        hk = paramiko.HostKeys()
-        try:
-            hk.load(str(f))
-        except (OSError, paramiko.SSHException, ValueError):
-            continue
-        entry = hk.lookup(lookup)
-        if entry:
-            for ktype in entry.keys():
-                found.setdefault(ktype, entry[ktype])
-    return found
-
-
-def trust_host_key(opts: SshOptions | None, name: str, port: int, host_key: str) -> Path:
-    """Append *host_key* ("<type> <base64>", as in SshResult.host_key) for *name* to known_hosts.
-
-    Call this only after the user compared the fingerprint; it never replaces an existing entry
-    (a changed key must be removed by the user, ``ssh-keygen -R NAME``). Returns the file written.
-    """
-    ktype, _, b64 = host_key.strip().partition(" ")
-    base64.b64decode(b64.split()[0], validate=True)  # refuse garbage
-    path = ssh_dir(opts) / "known_hosts"
-    if _known_keys([path], host_key_name(name, port)).get(ktype) is not None:
-        raise ValueError(f"{path} already has a {ktype} key for {name}; remove it first "
-                         f"(ssh-keygen -R {host_key_name(name, port)})")
-    path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
-    line = f"{host_key_name(name, port)} {ktype} {b64.split()[0]}\n"
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o600)
-    with os.fdopen(fd, "a", encoding="utf-8") as f:
-        if f.tell() > 0:
-            with open(path, "rb") as r:
-                r.seek(-1, os.SEEK_END)
-                if r.read(1) != b"\n":
-                    f.write("\n")
-        f.write(line)
-    return path
-
-
-_KEY_FILE_KIND = {"ssh-ed25519": "ed25519", "ssh-rsa": "rsa", "ssh-dss": "dsa"}
-
-
-def verify_commands(name: str, port: int, key_type: str = "ssh-ed25519", user: str = "") -> str:
-    """How a user can check a fingerprint themselves, and accept it with plain ssh."""
-    kind = _KEY_FILE_KIND.get(key_type, "ecdsa" if key_type.startswith("ecdsa") else "ed25519")
-    p = f" -p {port}" if port != 22 else ""
-    login = f"{user}@{name}" if user else name
-    return (f"compare with `ssh-keygen -lf /etc/ssh/ssh_host_{kind}_key.pub` run on {name} itself "
-            f"(or `ssh-keyscan{p} {name} | ssh-keygen -lf -` from here); if it matches, accept it "
-            f"by running `ssh{p} {login}` once, or in rosnet-tui")
-
 
 # --------------------------------------------------------------------------- connecting
 class _Holder:
@@ -228,6 +172,7 @@ class _Holder:
 class _Conn:
     result: SshResult
     transport: paramiko.Transport | None = None
+    said: str = ""                # notes on known_hosts, carried into the command's result
 
 
 def _fail(failure: str, detail: str, *, fingerprint: str | None = None,
@@ -307,7 +252,9 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
     if holder.cancelled:
         sock.close()
         return _fail("timeout", "cancelled", address=addr)
-    known = _known_keys(known_hosts_files(opts), host_key_name(name, port))
+    info = _known_host_keys(known_hosts_files(opts), host_key_name(name, port))
+    known = info.keys
+    said = f" (known_hosts: {'; '.join(info.notes)})" if info.notes else ""
     try:
         t = paramiko.Transport(sock)
         holder.transport = t
@@ -336,6 +283,14 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
                      address=addr)
     fp, ktype = key.fingerprint, key.get_name()
     key_text = f"{ktype} {key.get_base64()}"
+    blob = key.asbytes()
+    if blob in info.revoked:
+        t.close()
+        return _fail("host_key_changed",
+                     f"the host key of {name} ({ktype} {fp}) is REVOKED in known_hosts "
+                     f"(@revoked): refused. Its keys must be replaced on {name}, then the new "
+                     f"key verified: " + verify_commands(name, port, ktype, user) + said,
+                     fingerprint=fp, host_key=key_text, address=addr)
     if ktype not in known:
         t.close()
         if known:
@@ -344,20 +299,21 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
                          f"known_hosts has a {others} key for {name} but the server now offers a "
                          f"{ktype} key ({fp}); refused. If {name} was reinstalled, remove the old "
                          f"entry (ssh-keygen -R {host_key_name(name, port)}) and verify the new one: "
-                         + verify_commands(name, port, ktype, user),
+                         + verify_commands(name, port, ktype, user) + said,
                          fingerprint=fp, host_key=key_text, address=addr)
         return _fail("host_key_unknown",
                      f"the host key of {name} is not in known_hosts: {ktype} {fp}; not trusted "
-                     f"until you confirm it: " + verify_commands(name, port, ktype, user),
+                     f"until you confirm it: " + verify_commands(name, port, ktype, user) + said,
                      fingerprint=fp, host_key=key_text, address=addr)
-    if known[ktype] != key:
+    if blob not in known[ktype]:
         t.close()
         return _fail("host_key_changed",
-                     f"the host key of {name} CHANGED: known_hosts has {known[ktype].fingerprint}, "
+                     f"the host key of {name} CHANGED: known_hosts has "
+                     f"{', '.join(info.fingerprints(ktype))}, "
                      f"the server shows {fp}; refused (a reinstall, or someone in the middle). "
                      f"If you know why, remove the old entry with ssh-keygen -R "
                      f"{host_key_name(name, port)} and verify the new one: "
-                     + verify_commands(name, port, ktype, user),
+                     + verify_commands(name, port, ktype, user) + said,
                      fingerprint=fp, host_key=key_text, address=addr)
     keys, notes = _load_keys(opts)
     if not keys:
@@ -383,8 +339,8 @@ def _connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
             break
         if t.is_authenticated():
             return _Conn(SshResult(True, None, "", "", None,
-                                   f"logged in to {name} ({addr}) as {user} with a key",
-                                   fp, key_text, addr), t)
+                                   f"logged in to {name} ({addr}) as {user} with a key" + said,
+                                   fp, key_text, addr), t, said)
     t.close()
     if holder.cancelled or time.monotonic() >= deadline:
         return _fail("timeout", f"no login to {name} within the timeout", fingerprint=fp,
@@ -426,6 +382,7 @@ class SshSession:
         self.result = conn.result
         self.timeout = timeout
         self._transport = conn.transport
+        self._said = conn.said
         self._chan: paramiko.Channel | None = None
         self._out = bytearray()
         self._err = bytearray()
@@ -523,6 +480,7 @@ class SshSession:
         status = self._chan.recv_exit_status() if self._chan.exit_status_ready() else None
         detail = (f"ran on {self.peer.name} as {self.peer.ssh_user}, exit status {status}"
                   if status is not None else f"the session with {self.peer.name} closed")
+        detail += self._said
         return SshResult(status is not None, status, self.stdout, self.stderr,
                          None if status is not None else "sshd", detail,
                          self.result.fingerprint, self.result.host_key, self.result.address)

@@ -8,7 +8,7 @@ the CLI and report render the same text.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from rosnet_tui.core.procedure import STEP_IDS, STEP_TITLES, step_number
 from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
@@ -40,6 +40,8 @@ def _name(s: Settings) -> str:
 
 # --------------------------------------------------------------------------- step 1: ISP
 def configure_isp(s: Settings) -> str:
+    if s.ros2:
+        return configure_isp_ros2(s)
     c = s.this.connection
     parts: list[str] = []
     if c == "corporate":
@@ -85,6 +87,8 @@ def configure_isp(s: Settings) -> str:
 
 # --------------------------------------------------------------------------- step 2: router
 def configure_router(s: Settings) -> str:
+    if s.ros2:
+        return configure_router_ros2(s)
     ip = _this_ip(s)
     parts: list[str] = []
     if s.this.connection == "corporate":
@@ -130,11 +134,18 @@ def configure_linux(s: Settings) -> str:
         "easier to solve on a shared LAN first.",
         "**To verify:** ping, SSH and a TCP chat work by name, started from either side.",
     ]
+    if s.ros2:
+        parts[-1] = (f"**To verify (ROS 2):** ping and SSH by name, and the one connection ROS 2 "
+                     f"needs: from each member, by name, to the master's router port "
+                     f"(`{s.master_name or 'master'}:{s.ros.zenoh_port}`). Nothing connects to a "
+                     "member, so its inbound chat is skipped.")
     return "\n\n".join(parts)
 
 
 # --------------------------------------------------------------------------- step 4: ROS
 def configure_ros(s: Settings) -> str:
+    if s.ros2:
+        return configure_ros2(s)
     port = s.ros.port
     if s.is_master:
         uri = f"http://{_name(s)}:{port}"
@@ -159,6 +170,97 @@ def configure_ros(s: Settings) -> str:
         "from the laptop, and the camera in rviz (compressed or mono images spare the link).",
     ]
     return "\n\n".join(parts)
+
+
+# --------------------------------------------------------------------------- ROS 2 (rmw_zenoh)
+def _master_word(s: Settings) -> str:
+    return s.master_name or "<master>"
+
+
+def configure_isp_ros2(s: Settings) -> str:
+    c, port = s.this.connection, s.ros.zenoh_port
+    kind = {"corporate": "**Corporate or university network.** Ask the network administrator",
+            "home": "**Home connection.** You manage the modem yourself",
+            "telecom": "**Telecom (mobile hotspot or tethered phone).** Ask the carrier's "
+                       "networking department (not first-line support)"}[c]
+    if s.is_master:
+        need = (f"*{_name(s)}* is the ROS 2 master: its Zenoh router is the hub every member "
+                f"connects to, so this connection must accept **one** incoming TCP port "
+                f"({port}) and needs a public IP. {kind}: is port forwarding allowed, and is the "
+                "public IP really yours (not shared by carrier-grade NAT, 100.64.0.0/10)?")
+        cg = ("**Carrier-grade NAT on the master** makes it unreachable. Make another "
+              "component with a public address the master (under ROS 2 the master is only the "
+              "hub), or, when every site is behind carrier NAT, run a Zenoh router on a small "
+              "server with a public address (a VPS) and let every component's router connect "
+              "to it.")
+    else:
+        need = (f"*{_name(s)}* is a member: its router only connects **out** to the master's "
+                f"(*{_master_word(s)}*), so this connection needs no port forwarding and no "
+                "public IP of its own; any internet access works, carrier-grade NAT included.")
+        cg = ("A changing public IP does not matter here either; only the master's address "
+              "must be known (address sync keeps it right).")
+    return "\n\n".join([need, cg, "**To verify:** this machine reaches the internet and learns "
+                                  "its public IP."])
+
+
+def configure_router_ros2(s: Settings) -> str:
+    port = s.ros.zenoh_port
+    if not s.is_master:
+        return (f"**Nothing to forward on {_name(s)}'s modem.** Under ROS 2 over rmw_zenoh only "
+                f"the master's modem forwards a port (TCP {port}); a member's router connects "
+                "out, as a browser does. Leave forwarding and DMZ off here.\n\n"
+                "**To verify:** the port test is skipped on a member; the ROS step proves "
+                "the link.")
+    ip = _this_ip(s)
+    return "\n\n".join([
+        "Open the modem's web page (usually its gateway address in a browser), firewall or "
+        "port-forwarding section. Then:\n\n"
+        f"1. Forward **TCP {port}** (one port, no range, no UDP) to **{ip}**.\n"
+        f"2. Reserve **{ip}** for this machine in the modem's DHCP settings.\n"
+        f"3. The router (`rmw_zenohd`) must listen on an IPv4 address: `tcp/0.0.0.0:{port}` "
+        "(the ROS step writes that config).",
+        f"**Exposure.** Whoever reaches TCP {port} joins this ROS 2 network: rmw_zenoh has no "
+        "authentication by default. Allow only your members' addresses if the modem can.",
+        f"**To verify:** TCP {port} tested from outside reaches the router (or our stand-in "
+        "listener while the router is not running)."])
+
+
+def configure_ros2(s: Settings) -> str:
+    port, master = s.ros.zenoh_port, _master_word(s)
+    head = ["**ROS 2 over rmw_zenoh**: a Zenoh router on every component, one TCP port on the "
+            "master. DDS (ROS 2's default) cannot cross the modems: its discovery is multicast "
+            "and its data goes to private addresses."]
+    if s.is_master:
+        head.append(f"*{_name(s)}* is the master: its router listens on `tcp/0.0.0.0:{port}` "
+                    "(IPv4: rmw_zenohd's default `tcp/[::]` fails on hosts without IPv6) and "
+                    "every member's router connects to it.")
+    else:
+        head.append(f"*{_name(s)}* is a member: its router connects to `tcp/{master}:{port}` "
+                    f"(the hosts file maps *{master}* to the master's public IP; address sync "
+                    "keeps it right) and its nodes stay on it.")
+    block = "\n".join(["export RMW_IMPLEMENTATION=rmw_zenoh_cpp",
+                       f"export ROS_DOMAIN_ID={s.ros.domain_id}",
+                       "export ZENOH_ROUTER_CONFIG_URI=~/.config/rosnet-tui/zenoh-router.json5"])
+    head.append(f"In `~/.bashrc` (`rosnet-tui ros apply` writes it and the router's config):"
+                f"\n\n```\n{block}\n```\n\nThen run `ros2 run rmw_zenoh_cpp rmw_zenohd`, "
+                "and start the nodes as usual.")
+    if not s.is_master:
+        head.append(f"**A lone node** (no router here): client mode, straight to the master "
+                    f"(`ros apply --client`): `ZENOH_CONFIG_OVERRIDE='mode=\"client\";"
+                    f"connect/endpoints=[\"tcp/{master}:{port}\"]'`. Never peer mode: the "
+                    "router passes no data between two peers (graph seen, no data).")
+    head.append("**Same distro everywhere.** Humble next to Jazzy or later discovers but drops "
+                "every message. On Humble, ZENOH_CONFIG_OVERRIDE needs rmw_zenoh 0.1.2: use a "
+                "config file (ZENOH_SESSION_CONFIG_URI) before that.")
+    head.append("**To verify:** the master's router answers by name, the graph shows every "
+                "component's nodes, and a message goes through both ways.")
+    return "\n\n".join(head)
+
+
+ROS2_CHECK_IDS = ("ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in")
+ROS2_EXPECTED = ("Every component's Zenoh router links to the master's router through its one "
+                 "forwarded port; every component's nodes are seen, and each can publish and "
+                 "subscribe.")
 
 
 STEPS: tuple[Step, ...] = (
@@ -186,3 +288,28 @@ STEPS: tuple[Step, ...] = (
 
 STEP_BY_ID = {s.id: s for s in STEPS}
 assert tuple(STEP_BY_ID) == STEP_IDS, "the steps are listed in the procedure's order"
+
+
+def step_for(step_id: str, settings: Settings) -> Step:
+    """The step as *settings*' ROS version has it (ROS 2: the ros2.* checks and expectation)."""
+    step = STEP_BY_ID[step_id]
+    if not settings.ros2:
+        return step
+    master = settings.is_master
+    port = settings.ros.zenoh_port
+    if step_id == "isp":
+        return replace(step, expected=(
+            f"The provider allows one incoming TCP port ({port}) and the modem has a public IP "
+            "the members can reach." if master else
+            "This machine reaches the internet; nothing needs to reach it (any connection "
+            "works, carrier-grade NAT included)."))
+    if step_id == "router":  # the modem's own word on the forward (router.upnp) is ROS 2's
+        return replace(step, check_ids=(*step.check_ids, "router.upnp"), expected=(
+            f"TCP {port}, tested from outside the modem, reaches this component's Zenoh router."
+            if master else "Nothing to forward: this member's router connects out to the "
+                           "master's."))
+    if step_id == "linux":
+        return replace(step, expected=(
+            "The components ping each other by name and open SSH sessions by name; every member "
+            f"reaches the master's router port ({port}) by name."))
+    return replace(step, expected=ROS2_EXPECTED, check_ids=ROS2_CHECK_IDS)

@@ -29,6 +29,8 @@ class WritePlan:
     sudo_command: Callable[[mf.Preview, bool], list[str]] | None = None
     after: tuple[str, ...] = ()       # checks to re-run after a write
     footnote: str = ""
+    # More files written in the same apply (one undo restores all), for the option's answer.
+    companions: Callable[[bool], list[mf.Preview]] = lambda _option: []
 
 
 @dataclass(frozen=True)
@@ -67,8 +69,31 @@ def hosts_plan(settings: Settings, paths: WritePaths) -> WritePlan:
         after=("linux.hosts", "linux.resolve"))
 
 
+def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:
+    """ROS 2: the ~/.bashrc block and the Zenoh router's config file, in one apply."""
+    from rosnet_tui.core import ros2
+
+    def make(client: bool) -> list[mf.Preview]:
+        return ros2.previews(settings, paths.bashrc_path, client=client)
+
+    member = not settings.is_master
+    return WritePlan(
+        title=f"Write the ROS 2 environment to {paths.bashrc_path}",
+        explain="A marked block at the end of the file, and the router's own config file "
+                f"({ros2.default_router_config_path()}); one undo restores both:",
+        make_preview=lambda client: make(client)[0],
+        companions=lambda client: make(client)[1:],
+        option_label=("no router on this machine: its nodes connect to the master's router in "
+                      "client mode") if member else "",
+        after=("ros2.env",),
+        footnote="Then start the router: ros2 run rmw_zenoh_cpp rmw_zenohd (the master's first). "
+                 "For the shell you are in now: " + "; ".join(ros2.shell_lines(settings)))
+
+
 def ros_plan(settings: Settings, paths: WritePaths) -> WritePlan:
     """Write the ROS environment block of ~/.bashrc (the ROS step)."""
+    if settings.ros2:
+        return ros2_plan(settings, paths)
     from rosnet_tui.core import bashrc
 
     def ros_ip_lines() -> int:
@@ -92,7 +117,7 @@ PLANS: dict[str, Callable[[Settings, WritePaths], WritePlan]] = {
 }
 
 # The checks an undo may change.
-UNDO_AFFECTS = ("linux.hosts", "linux.resolve", "ros.env")
+UNDO_AFFECTS = ("linux.hosts", "linux.resolve", "ros.env", "ros2.env", "router.upnp")
 
 
 def write_plan(step_id: str, settings: Settings, paths: WritePaths) -> WritePlan | None:

@@ -20,7 +20,7 @@ from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.session import _default_specs as registry_specs
 from rosnet_tui.core.settings import Settings, default_state_dir
-from rosnet_tui.core.steps import STEP_BY_ID
+from rosnet_tui.core.steps import step_for
 from rosnet_tui.ui.keys import OrderedKeys
 from rosnet_tui.ui.messages import Navigate, SettingsSaved
 from rosnet_tui.ui.step_screen import StepScreen
@@ -106,7 +106,7 @@ class RosnetApp(OrderedKeys, App[int]):
         self._catch_signals()
         self.set_class(self.size.width >= self.WIDE_AT, "wide")
         for step_id in STEP_IDS:
-            screen = StepScreen(STEP_BY_ID[step_id], self.session)
+            screen = StepScreen(step_for(step_id, self.session.settings), self.session)
             self.install_screen(screen, name=f"step-{step_id}")
         self.push_screen(f"step-{self.current_step}")
         if self.deps.open_setup or not self.session.settings.complete or self.session.draft():

@@ -23,10 +23,11 @@ expect, what to configure on this component, and live checks.
  s      set-up: this machine, peers  c       cancel running checks (any step)
  a      the advisor: what to do      e/Enter evidence and advice of a check
  w      write the configuration      g       go to the step of the cause
- u      undo the last write          z       zoom the focused pane, or back
- Tab    next pane                    k       review an unknown SSH host key
- q      quit (Ctrl+Q anywhere)       Ctrl+L  draw the whole screen again
- ?      this help                    Ctrl+Z  suspend (fg brings it back)
+ u      undo the last write/forward  z       zoom the focused pane, or back
+ m      modem forwards it (Router)   k       review an unknown SSH host key
+ Tab    next pane                    Ctrl+L  draw the whole screen again
+ q      quit (Ctrl+Q anywhere)       Ctrl+Z  suspend (fg brings it back)
+ ?      this help
 
 Set-up: Tab and Shift+Tab move, Ctrl+N adds a peer, Ctrl+S saves, Esc or F10
 goes back. Keys typed ahead on a slow link are applied in the order typed.

@@ -50,17 +50,20 @@ class PeerNameValidator(Validator):
             others = screen.names_in_use(self.row) if isinstance(screen, SetupScreen) else {}
             same = others.get(value.lower())
             if same == "this component":
-                why = f"{S.shown(value)} is this component's own name"
+                why = f"'{S.shown(value, S.FIELD_SHOWN_CHARS)}' is this component's own name"
             elif same:
-                why = f"{S.shown(value)} is already a peer (names ignore case)"
+                why = f"'{S.shown(value, S.FIELD_SHOWN_CHARS)}' is already a peer (names ignore case)"
         return self.failure(why) if why else self.success()
 
 
 CONNECTION_OPTIONS = [("Telecom (mobile hotspot)", "telecom"), ("Home", "home"),
                       ("Corporate / university", "corporate")]
-ROLE_OPTIONS = [("ROS master (runs roscore)", "master"), ("Member", "member")]
+ROLE_OPTIONS = [("ROS master (roscore / the Zenoh hub)", "master"), ("Member", "member")]
+ROS_VERSION_OPTIONS = [("ROS 2 (rmw_zenoh: one forwarded port)", 2), ("ROS 1 (roscore)", 1)]
 PROFILE_OPTIONS = [("Remote (peers by public IP)", "remote"), ("Office LAN", "office"),
                    ("Portable hotspot LAN", "portable")]
+SELECT_OPTIONS = {"this-role": ROLE_OPTIONS, "this-connection": CONNECTION_OPTIONS,
+                  "this-profile": PROFILE_OPTIONS, "ros-version": ROS_VERSION_OPTIONS}
 
 
 class PeerRow(Horizontal):
@@ -159,6 +162,20 @@ class SetupScreen(Screen[bool]):
                 yield OrderedInput(str(s.probe.port), id="probe-port", compact=True, type="integer",
                             validators=[CoreValidator(S.validate_port)])
             yield Label("", id="probe-port-error", classes="field-error")
+            with Horizontal(classes="field"):
+                yield Label("ROS", classes="field-label")
+                yield Select(ROS_VERSION_OPTIONS, value=s.ros.version if s.ros.version in (1, 2)
+                             else 1, allow_blank=False, id="ros-version", compact=True)
+            with Horizontal(classes="field", id="zenoh-field"):
+                yield Label("Zenoh port", classes="field-label")
+                yield OrderedInput(str(s.ros.zenoh_port), id="ros-zenoh-port", compact=True,
+                                   type="integer", validators=[CoreValidator(S.validate_port)])
+            yield Label("", id="ros-zenoh-port-error", classes="field-error")
+            with Horizontal(classes="field", id="domain-field"):
+                yield Label("Domain id", classes="field-label")
+                yield OrderedInput(str(s.ros.domain_id), id="ros-domain-id", compact=True,
+                                   type="integer", validators=[CoreValidator(S.validate_domain_id)])
+            yield Label("", id="ros-domain-id-error", classes="field-error")
             with Horizontal(classes="field", id="master-field"):
                 yield Label("ROS master", classes="field-label")
                 yield OrderedInput(s.ros.master if t.role == "member" else "",
@@ -241,8 +258,10 @@ class SetupScreen(Screen[bool]):
             try:
                 if isinstance(widget, Input):
                     widget.value = str(value)
-                elif isinstance(widget, Select):
-                    widget.value = value
+                elif isinstance(widget, Select):  # kept as text: back to the option's value
+                    options = SELECT_OPTIONS.get(wid, [])
+                    widget.value = next((v for _label, v in options if str(v) == str(value)),
+                                        value)
             except Exception:
                 continue  # a value the field refuses: it keeps the saved one
         peers = draft.get("peers")
@@ -278,6 +297,7 @@ class SetupScreen(Screen[bool]):
 
     # ------------------------------------------------------------------ events
     @on(Select.Changed, "#this-role")
+    @on(Select.Changed, "#ros-version")
     def _role_changed(self) -> None:
         self._update_role()
 
@@ -289,6 +309,10 @@ class SetupScreen(Screen[bool]):
         is_member = self.query_one("#this-role", Select).value == "member"
         self.query_one("#master-field").display = is_member
         self.query_one("#ros-master-error").display = is_member
+        ros2 = self.query_one("#ros-version", Select).value == 2  # only what the version needs
+        for wid in ("#zenoh-field", "#ros-zenoh-port-error", "#domain-field",
+                    "#ros-domain-id-error"):
+            self.query_one(wid).display = ros2
 
     @on(Input.Changed)
     def _input_changed(self, event: Input.Changed) -> None:
@@ -371,7 +395,18 @@ class SetupScreen(Screen[bool]):
         port = int(port_text) if why is None else old.probe.port
         if why:
             problems.append(("probe.port", why))
-        settings = replace(old, this=this, peers=peers, ros=replace(old.ros, master=master),
+        version = int(self.query_one("#ros-version", Select).value or 1)
+        ros = replace(old.ros, master=master, version=version)
+        if version == 2:
+            for key, wid, check in (("zenoh_port", "ros-zenoh-port", S.validate_port),
+                                    ("domain_id", "ros-domain-id", S.validate_domain_id)):
+                text = val(wid)
+                why = check(text)
+                if why:
+                    problems.append((f"ros.{key}", why))
+                else:
+                    ros = replace(ros, **{key: int(text)})
+        settings = replace(old, this=this, peers=peers, ros=ros,
                            probe=replace(old.probe, port=port))
         problems += settings.problems()
         # Blank is fine when this machine's address can be detected at each run.
@@ -395,7 +430,9 @@ class SetupScreen(Screen[bool]):
             why = f"peer {idx + 1}: {why}"
         else:
             target = {"this.name": "#this-name", "this.local_ip": "#this-local-ip",
-                      "probe.port": "#probe-port", "ros.master": "#ros-master"}.get(key)
+                      "probe.port": "#probe-port", "ros.master": "#ros-master",
+                      "ros.zenoh_port": "#ros-zenoh-port",
+                      "ros.domain_id": "#ros-domain-id"}.get(key)
             label_id = f"{target}-error" if target else None
         if label_id:
             label = self.query_one(label_id, Label)

@@ -12,7 +12,7 @@ from textual.screen import Screen
 from textual.widgets import Static
 
 from rosnet_tui.core.session import NOT_RUN, RUNNING, WizardSession
-from rosnet_tui.core.steps import Step
+from rosnet_tui.core.steps import Step, step_for
 from rosnet_tui.ui.messages import Navigate
 from rosnet_tui.ui.widgets import CheckList, KeyBar, PlainHeader, StepBar
 
@@ -40,6 +40,7 @@ class StepScreen(Screen):
         Binding("e", "toggle_evidence", "Evidence"),
         Binding("w", "write", "Write"),
         Binding("u", "undo", "Undo write", show=False),
+        Binding("m", "map_forward", "Modem"),  # the Router step only (check_action)
         Binding("k", "trust_key", "Review host key", show=False),
         Binding("g", "go_finding", "Go to cause", show=False),
         Binding("z", "zoom", "Zoom pane", show=False),
@@ -52,6 +53,7 @@ class StepScreen(Screen):
         self.config_source = ""  # the Markdown the Configuration pane shows
 
     def compose(self) -> ComposeResult:
+        self.step = step_for(self.step.id, self.session.settings)  # settings may have changed
         yield PlainHeader()
         yield StepBar(self.step.id, id="step-bar")
         with Container(id="panes"):
@@ -89,7 +91,13 @@ class StepScreen(Screen):
         self.sub_title = f"{t.name or '?'} · {t.role} · {t.connection} · {t.profile}"
 
     def refresh_config(self) -> None:
-        """Settings changed: re-render the tailored configuration."""
+        """Settings changed: re-render the tailored configuration (and, when the ROS version
+        changed, the step's list of checks)."""
+        self.step = step_for(self.step.id, self.session.settings)
+        self.query_one("#expected-text", Static).update(self.step.expected)
+        rows = self.session.check_rows(self.step.id)
+        if [cid for cid, _title in rows] != list(self.query_one(CheckList).rows):
+            self.run_worker(self._replace_check_list(rows), exclusive=False)
         if self.step.id == "router":
             self._render_card()
         else:
@@ -97,10 +105,33 @@ class StepScreen(Screen):
             self.query_one("#config-text", Static).update(_markdown(self.config_source))
         self.refresh_subtitle()
 
+    async def _replace_check_list(self, rows: list[tuple[str, str]]) -> None:
+        """The ROS version changed: a new list of checks (the old one removed first: the new
+        one takes its ids)."""
+        old = self.query_one("#check-list", CheckList)
+        parent = old.parent
+        had_focus = self.focused is not None and (self.focused is old
+                                                  or old in self.focused.ancestors)
+        await old.remove()
+        if parent is not None:
+            new = CheckList(rows, advice=self.session.findings_for, id="check-list")
+            await parent.mount(new)
+            if had_focus:
+                self.query_one("#check-table").focus()
+            self._sync_results()
+
     def _render_card(self) -> None:
         pane = self.query_one("#config-pane")
         width = pane.scrollable_content_region.width or 76
-        self.query_one("#router-card", Static).update(self.session.router_card_text(width - 3))
+        text = self.session.router_card_text(width - 3)
+        _state, upnp = self.session.check_state("router.upnp")  # the modem's own word, if asked
+        said: list[str] = []
+        if upnp is not None:
+            from rosnet_tui.core.upnp.forwards import card_lines
+
+            said = card_lines(upnp.data)
+        self.query_one("#router-card", Static).update(("\n".join(said) + "\n\n" if said else "")
+                                                      + text)
 
     def on_resize(self) -> None:
         if self.step.id == "router":
@@ -164,7 +195,22 @@ class StepScreen(Screen):
             return self.step.id in ("linux", "ros")
         if action == "trust_key":
             return self.step.id == "linux"
+        if action == "map_forward":
+            return self.step.id == "router"
         return True
+
+    def action_map_forward(self) -> None:
+        """Let the modem forward what this component needs (UPnP IGD, PCP, NAT-PMP)."""
+        from rosnet_tui.ui.map_screen import MapScreen
+
+        def done(mapped: bool | None) -> None:
+            if mapped:
+                self.run_specs([s for s in self.specs if s.id in ("router.upnp",
+                                                                  "router.port_open")])
+
+        settings = self.session.runtime_settings()
+        self.app.push_screen(MapScreen(settings, self.session.state_dir,
+                                       float(settings.checks.timeout_s)), done)
 
     def action_write(self) -> None:
         from rosnet_tui.ui.write_screen import WriteScreen
@@ -281,6 +327,8 @@ class StepScreen(Screen):
                 ids.discard(result.id)
                 session.set_check_state(result.id, result.status.value, result)
                 self._sync_results()
+                if result.id == "router.upnp":
+                    self._render_card()
         finally:
             for cid in ids:  # cancelled before a verdict: back to "not run"
                 session.set_check_state(cid, NOT_RUN, None)

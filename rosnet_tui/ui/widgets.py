@@ -168,6 +168,7 @@ SHORT_TITLES = {
     "router.port_free": "Test port free",
     "router.listener": "Our listener up",
     "router.port_open": "Ports open from outside",
+    "router.upnp": "Modem forwards (UPnP)",
     "linux.hosts": "Hosts file entries",
     "linux.resolve": "Names resolve",
     "linux.ping": "Ping by name",
@@ -179,6 +180,11 @@ SHORT_TITLES = {
     "ros.node_uris": "Node addresses reachable",
     "ros.pubsub_out": "Publish here, peer hears",
     "ros.pubsub_in": "Peer publishes, we hear",
+    "ros2.env": "ROS 2 environment",
+    "ros2.router": "Master's Zenoh router",
+    "ros2.graph": "Every node seen",
+    "ros2.pubsub_out": "Publish here, peer hears",
+    "ros2.pubsub_in": "Peer publishes, we hear",
 }
 TITLE_MAX = 24
 

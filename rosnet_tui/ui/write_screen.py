@@ -20,6 +20,7 @@ from textual.widgets import Button, Checkbox, Static
 
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import privilege
+from rosnet_tui.core.upnp.journal import describe as describe_forward
 from rosnet_tui.core.write_plans import WritePlan
 from rosnet_tui.ui.widgets import KeyBar
 
@@ -85,7 +86,8 @@ class WriteScreen(ModalScreen[bool]):
             self.query_one("#write-apply", Button).disabled = True
             return
         p = self.preview
-        diff = p.diff()
+        self.companions = self.plan.companions(self.option)  # more files in the same apply
+        diff = "".join([p.diff(), *(c.diff() for c in self.companions)])
         self.query_one("#write-diff", Static).update(
             diff_text(diff) if diff else
             f"{p.path} already holds this configuration: nothing to write.")
@@ -97,8 +99,10 @@ class WriteScreen(ModalScreen[bool]):
             notes.append(f"Apply writes {p.path} (backup kept; `rosnet-tui undo` reverts).")
         if self.plan.footnote:
             notes.append(self.plan.footnote)
+        notes += [f"Apply writes {c.path} too." for c in self.companions if c.changed]
         status.update("\n".join(notes))
-        self.query_one("#write-apply", Button).disabled = not p.changed
+        self.query_one("#write-apply", Button).disabled = not (
+            p.changed or any(c.changed for c in self.companions))
 
     @on(Button.Pressed, "#write-cancel")
     def action_cancel(self) -> None:
@@ -107,7 +111,8 @@ class WriteScreen(ModalScreen[bool]):
     @on(Button.Pressed, "#write-apply")
     def action_apply(self) -> None:
         p = self.preview
-        if p is None or not p.changed:
+        extra = [c for c in getattr(self, "companions", []) if c.changed]
+        if p is None or not (p.changed or extra):
             return
         state_dir = self.state_dir
         try:
@@ -123,6 +128,8 @@ class WriteScreen(ModalScreen[bool]):
                                 "else was changed.", severity="error", timeout=8)
                     self.refresh_preview()
                     return
+            elif extra:
+                mf.apply_previews([p, *extra], state_dir=state_dir, label=self.plan.title)
             else:
                 mf.apply_preview(p, state_dir=state_dir)
         except mf.StalePreviewError:
@@ -167,7 +174,10 @@ class UndoScreen(ModalScreen[bool]):
             self.query_one("#write-apply", Button).disabled = True
             return
         diff = self.plan.diff()
-        self.query_one("#write-diff", Static).update(diff_text(diff) if diff else "")
+        forwards = [f"Remove the forward {describe_forward(m)}" for m in self.plan.entry.mappings
+                    if m.get("state") == "made"]
+        self.query_one("#write-diff", Static).update(diff_text(diff) if diff else
+                                                     Text("\n".join(forwards)))
         notes = [f"Changed since by someone else: {c}" for c in self.plan.conflicts]
         if self.plan.conflicts:
             notes.append("Undo would lose those changes: run `rosnet-tui undo --force` if you "
@@ -206,5 +216,7 @@ class UndoScreen(ModalScreen[bool]):
         except mf.ManagedFileError as exc:
             self.notify(f"Not undone: {exc}", severity="error", timeout=10)
             return
-        self.notify("Restored the files of the last write.", timeout=5)
+        self.notify("Removed the forwards of the last change from the modem."
+                    if self.plan.entry.mappings else "Restored the files of the last write.",
+                    timeout=5)
         self.dismiss(True)

@@ -29,7 +29,7 @@ FINDINGS = HERE / "advise_findings.json"
 IDS = HERE / "rule_ids.txt"
 MARKDOWN = HERE / "TROUBLESHOOTING.md"
 LOG_ENV = "ROSNET_TUI_GOLDEN_LOG"
-TEST_FILES = ("tests/test_advisor.py", "tests/test_report.py")
+TEST_FILES = ("tests/test_advisor.py", "tests/test_report.py", "tests/test_advisor_ros2.py")
 
 
 def install() -> None:

@@ -12,6 +12,10 @@ Main API (see Lab's docstrings): wrap, run, spawn, kill, output, wait_output, ro
 config_path, settings, hosts_path, write_hosts, bashrc_path, home, env, ros_env, talker,
 listener, start_roscore, stop_roscore, master_answers, listening, wait_listening, call_in,
 variant, reset, set_robot_wan, public_ip, log_path, destroy.
+
+On top of it: ``tests/lab/ros2.py`` (Ros2World: the ROS 2 network over real Zenoh routers) and
+``tests/lab/upnp.py`` (UpnpModem: Debian's real miniupnpd in the robot's modem, UPnP IGD, PCP and
+NAT-PMP, with stund on the internet side and an optional second LAN host).
 """
 
 from .lab import Lab, LabUnavailable, lab_available

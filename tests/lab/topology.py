@@ -109,10 +109,24 @@ def sysctl_script(host: str) -> str:
     ])
 
 
+ZENOH_PORT = 7447
+
+
 def forward_rules(side: str, mode: str) -> list[str]:
-    """The modem's port-forwarding (DNAT) rules, for chain RNL_PF of the nat table."""
+    """The modem's port-forwarding (DNAT) rules, for chain RNL_PF of the nat table.
+
+    Modes: healthy (22 and 1024-65000, ROS 1), wrong (the same, to a local IP nobody has), none;
+    and for ROS 2: ros2 (TCP 22 and TCP 7447 only: the master's router) and ssh (TCP 22 only:
+    the SSH path the checks use to run the peer's side; no ROS traffic comes in).
+    """
     if mode == "none":
         return []
+    if mode in ("ros2", "ssh"):
+        rules = [f"-A RNL_PF -p tcp --dport 22 -j DNAT --to-destination {LOCAL_IP[side]}"]
+        if mode == "ros2":
+            rules.append(f"-A RNL_PF -p tcp --dport {ZENOH_PORT} -j DNAT --to-destination "
+                         f"{LOCAL_IP[side]}")
+        return rules
     target = LOCAL_IP[side] if mode == "healthy" else WRONG_FORWARD[side]
     return [f"-A RNL_PF -p tcp --dport 22 -j DNAT --to-destination {target}",
             f"-A RNL_PF -p tcp --dport 1024:65000 -j DNAT --to-destination {target}",

@@ -8,7 +8,7 @@ import sys
 import time
 
 from rosnet_tui.cli import main
-from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_write as mw
 
 MARK = "ROSNET-TEST: about to rename"
 
@@ -19,5 +19,5 @@ def _pause() -> None:
 
 
 if __name__ == "__main__":
-    mf._before_rename = _pause
+    mw._before_rename = _pause
     sys.exit(main(sys.argv[1:]))

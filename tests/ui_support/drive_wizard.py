@@ -42,8 +42,7 @@ async def drive(config: Path, state_dir: Path) -> dict:
         bar = app.screen.query_one("#step-bar")
         for step in STEPS:
             out["bar"][step.id] = bar._label(step.id)
-        out["findings"] = [{"rule": f.rule, "severity": f.severity}
-                           for f in app.session.findings]
+        out["findings"] = [{"rule": f.rule, "severity": f.severity} for f in app.session.findings]
     return out
 
 

@@ -184,6 +184,7 @@ def cgnat_text(ev: Evidence) -> tuple[str, list[str], list[str]]:
     pub = ev.data("isp.public_ip").get("public_ip") or "the public address"
     if d.get("cgnat"):
         seen = (f"the modem's WAN address is {wan}" if wan else
+                "the modem itself reports no public address of its own" if wan == "" else
                 f"the route out passes a carrier NAT address ({hop})" if hop else
                 "the route out passes a carrier NAT")
         meaning = (f"Carrier-grade NAT: {seen}, not the public address {pub}. The carrier shares "

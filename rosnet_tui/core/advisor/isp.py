@@ -191,5 +191,7 @@ def _cgnat(ev: Evidence) -> list[Hit]:
     d = ev.data("isp.cgnat")
     if not (d.get("cgnat") or d.get("double_nat")):
         return []
+    if ev.s.ros2 and d.get("cgnat"):
+        return []  # ROS 2: ros2.cgnat says what carrier NAT means for this role
     meaning, acts, evid = cgnat_text(ev)
     return [Hit(meaning, acts, severity=ev.sev("isp.cgnat", "warn"), evidence=evid)]

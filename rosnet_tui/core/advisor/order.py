@@ -31,11 +31,16 @@ RULE_ORDER: tuple[str, ...] = (
     "table1.listener_up_closed.forwarding",   # cause (c) }
     # step 1 again: carrier NAT on its own (after Table 1, whose cause (b) supersedes it)
     "isp.cgnat",
+    "ros2.cgnat",                           # ROS 2: carrier NAT matters on the master only
     # step 2: the router's other checks
     "router.local_ip.differs",
     "router.port_in_use",
     "router.port_open.partial",
     "router.port_open.no_verdict",
+    "ros2.port.not_forwarded",              # ROS 2: Table 1 read on the master's zenoh_port
+    "router.upnp.conflict",                 # the modem's own word (UPnP IGD, PCP, NAT-PMP)
+    "router.upnp.cgnat",
+    "router.upnp.missing",
     # step 3: Linux
     "linux.name.loopback",
     "linux.name.wrong",
@@ -64,6 +69,16 @@ RULE_ORDER: tuple[str, ...] = (
     "ros.pubsub.out_fails",
     "ros.pubsub.in_fails",
     "ros.pubsub.both_fail",
+    # step 4: ROS 2 over rmw_zenoh
+    "ros2.env.dds",
+    "ros2.env.domain",
+    "ros2.env.distro",
+    "ros2.router.not_running",
+    "ros2.router.loopback",
+    "ros2.router.ipv6_only",
+    "ros2.peer_mode",
+    "ros2.link.missing",
     # security (step 2: what the forwarding exposes)
+    "security.zenoh_exposed",
     "security.exposed",
 )

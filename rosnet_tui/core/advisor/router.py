@@ -428,6 +428,8 @@ def _port_no_verdict(ev: Evidence) -> list[Hit]:
       "the peers, forward only while needed.",
       "router", "security")
 def _exposed(ev: Evidence) -> list[Hit]:
+    if ev.s.ros2:
+        return []  # ROS 2: one port, security.zenoh_exposed
     d = ev.data("router.port_open")
     reach = [p["port"] for p in d.get("ports") or [] if isinstance(p, Mapping) and p.get("reachable")]
     if d.get("test_port_open") is True and d.get("test_port") and d["test_port"] not in reach:

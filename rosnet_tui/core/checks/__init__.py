@@ -62,19 +62,31 @@ class CheckSpec:
     func: CheckFunc
     # Seconds this check may take, as a multiple of the context's timeout (some do several probes).
     timeout_factor: float = 1.0
+    # The ROS version the check belongs to (1: roscore, 2: rmw_zenoh); None: every version.
+    ros: int | None = None
+
+    def applies(self, settings: Settings) -> bool:
+        """Whether this check belongs to *settings*' ROS version ([ros] version)."""
+        return self.ros is None or self.ros == settings.ros.version
+
+    def not_applicable(self, settings: Settings) -> str:
+        """Why the check is skipped under *settings* (the SKIP result's summary)."""
+        other = {1: "ROS 1 (roscore)", 2: "ROS 2 over rmw_zenoh"}
+        return (f"skipped: this check is for {other.get(self.ros or 0, '?')}, and the settings say "
+                f"{other.get(settings.ros.version, '?')} ([ros] version = {settings.ros.version})")
 
 
 REGISTRY: dict[str, CheckSpec] = {}
 
 
-def check(id: str, step: str, title: str, timeout_factor: float = 1.0
+def check(id: str, step: str, title: str, timeout_factor: float = 1.0, ros: int | None = None
           ) -> Callable[[CheckFunc], CheckFunc]:
-    """Register a check function under *id* for *step*."""
+    """Register a check function under *id* for *step* (*ros*: only for that ROS version)."""
     if step not in STEP_IDS:
         raise ValueError(f"unknown step {step!r}")
 
     def deco(func: CheckFunc) -> CheckFunc:
-        REGISTRY[id] = CheckSpec(id, step, title, func, timeout_factor)
+        REGISTRY[id] = CheckSpec(id, step, title, func, timeout_factor, ros)
         return func
 
     return deco
@@ -90,12 +102,15 @@ def load_builtin_checks() -> None:
             importlib.import_module(f"{__name__}.{mod.name}")
 
 
-def checks_for(steps: Iterable[str] | None = None) -> list[CheckSpec]:
-    """The registered checks of *steps* (all steps when None), in step order then id order."""
+def checks_for(steps: Iterable[str] | None = None, settings: Settings | None = None
+               ) -> list[CheckSpec]:
+    """The registered checks of *steps* (all steps when None), in step order then id order;
+    with *settings*, only those of its ROS version."""
     load_builtin_checks()
     wanted = list(steps) if steps else list(STEP_IDS)
     order = {s: i for i, s in enumerate(STEP_IDS)}
-    specs = [c for c in REGISTRY.values() if c.step in wanted]
+    specs = [c for c in REGISTRY.values() if c.step in wanted
+             and (settings is None or c.applies(settings))]
     return sorted(specs, key=lambda c: (order[c.step], list(REGISTRY).index(c.id)))
 
 
@@ -103,6 +118,9 @@ async def run_check(spec: CheckSpec, ctx: CheckContext) -> CheckResult:
     """Run one check under its timeout; always returns a result."""
     timeout = ctx.timeout_s * spec.timeout_factor
     start = time.monotonic()
+    if not spec.applies(ctx.settings):
+        return CheckResult(spec.id, spec.step, Status.SKIP, spec.not_applicable(ctx.settings), [],
+                           0.0, timeout, {})
     try:
         outcome = await asyncio.wait_for(spec.func(ctx), timeout)
     except asyncio.TimeoutError:

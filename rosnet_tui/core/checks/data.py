@@ -66,8 +66,8 @@ class IspPublicIpData(TypedDict, total=False):
 
 
 class IspCgnatData(TypedDict, total=False):
-    wan_ip: str | None   # the modem's internet-side address as it told over UPnP (None: not asked)
-    method: Literal["none", "upnp", "traceroute"]  # how the verdict was reached
+    wan_ip: str | None   # the modem's internet-side address as it told (UPnP IGD, NAT-PMP; "": it reports none; None: not told)
+    method: Literal["none", "upnp", "traceroute"]  # how the verdict was reached ("upnp": the modem's own word)
     cgnat: bool          # carrier-grade NAT (100.64.0.0/10) seen on the way out
     double_nat: bool     # a second private NAT seen on the way out
     hop: str | None      # the address that shows the NAT (None: no NAT seen)
@@ -108,6 +108,44 @@ class RouterPortOpenData(TypedDict, total=False):
     test_port: int          # the test port (probe.port)
     test_port_open: bool | None  # the test port is open from outside (None: could not be tested)
     public_ip: str | None   # the address tested (None: unknown)
+    # ROS 2 (the master's modem forwards TCP zenoh_port only; test_port_open is then left out):
+    zenoh_port: int         # the master's Zenoh router port
+    zenoh_port_open: bool | None  # open from outside (None: could not be tested)
+    zenoh_listener: Literal["router", "ours", "none"]  # who answered on it during the test
+
+
+# ---- step 2, the modem's own word (rosnet_tui/core/checks/router_upnp.py)
+class UpnpForwardRow(TypedDict, total=False):
+    protocol: str          # "TCP" | "UDP"
+    external_port: int     # the port on the modem's internet side
+    internal_client: str   # where the modem forwards it (this machine's local IP here)
+    internal_port: int     # the port there
+    description: str       # the forward's label on the modem
+    lease_s: int           # seconds of lease left (0: no expiry)
+    ours: bool             # made by rosnet-tui (recorded, or labelled rosnet-tui)
+
+
+class UpnpConflict(TypedDict, total=False):
+    port: int              # a port this component needs
+    internal_client: str   # the other machine the modem forwards it to
+    description: str       # that forward's label on the modem
+
+
+class RouterUpnpData(TypedDict, total=False):
+    protocol: Literal["upnp", "pcp", "natpmp"] | None  # what rosnet-tui would map with (None: no modem)
+    protocols: list[str]   # every protocol the modem answered
+    gateway: str | None    # the modem asked (the default gateway)
+    external_ip: str | None  # its external address as it reports it ("": none; None: not told)
+    wan: Literal["public", "private", "shared", "none", "unknown"]  # what kind of address that is
+    cgnat: bool            # the modem's own word points to carrier-grade NAT (no or shared address)
+    needed: list[int]      # the TCP ports the settings call for (ROS 2 master: zenoh_port)
+    present: list[int]     # needed ports the modem forwards to this machine
+    missing: list[int]     # needed ports it does not forward
+    conflicts: list[UpnpConflict]  # needed ports it forwards to another machine
+    forwards: list[UpnpForwardRow]  # the modem's forwards that point at this machine (UPnP only)
+    can_list: bool         # the protocol can list forwards (UPnP IGD; not NAT-PMP or PCP)
+    range_needed: bool     # ROS 1: the whole range is needed, which no protocol maps
+    tried: list[str]       # what was asked and what came back, in words
 
 
 # ---- step 3, Linux (rosnet_tui/core/checks/linux.py)
@@ -215,6 +253,88 @@ class RosPubsubData(PubsubPeer, total=False):
     peers: dict[str, PubsubPeer]  # every peer's exchange, by peer name
 
 
+# ---- step 4, ROS 2 over rmw_zenoh (rosnet_tui/core/checks/ros2.py)
+class Ros2EnvData(TypedDict, total=False):
+    rmw: str | None           # RMW_IMPLEMENTATION in the environment (None: not set)
+    bashrc_rmw: str | None    # RMW_IMPLEMENTATION exported in ~/.bashrc (None: not there)
+    rmw_ok: bool              # rmw_zenoh_cpp in both places
+    dds: bool                 # no RMW_IMPLEMENTATION, or a DDS one: DDS cannot cross the modems
+    domain_id: str | None     # ROS_DOMAIN_ID as set (environment first, then ~/.bashrc; None: unset = 0)
+    expected_domain_id: int   # [ros] domain_id
+    domain_ok: bool           # the domain id matches the settings
+    distro: str | None        # ROS_DISTRO here (None: not set: no ROS 2 sourced)
+    peer_distros: dict[str, str | None]  # by peer name: its ROS_DISTRO over SSH (None: unknown)
+    distro_mismatch: list[str]  # peers whose ROS_DISTRO differs from ours
+    client_mode: bool         # nodes here connect to the master in client mode (no router here)
+    override: str | None      # ZENOH_CONFIG_OVERRIDE (None: not set)
+    router_config: str | None  # the file ZENOH_ROUTER_CONFIG_URI names (None: not set)
+    router_listen: list[str]  # listen endpoints of that file
+    router_connect: list[str]  # connect endpoints of that file
+    config_problems: list[str]  # what is wrong in the override or the router's config, in words
+    warnings: list[str]       # localhost_only, discovery_localhost, dds_settings,
+    #                           session_config (what was found; see the evidence)
+
+
+class LocalRouter(TypedDict, total=False):
+    reachable: bool           # a Zenoh session opened on this machine's router
+    endpoint: str             # where it was looked for
+    zid: str | None           # its Zenoh id
+    version: str | None       # its Zenoh version (from its admin space)
+    routers: list[str]        # ids of the routers it has sessions with (a member's: the master's)
+    failure: str | None       # why no session opened
+
+
+class Ros2RouterData(TypedDict, total=False):
+    role: Literal["master", "member"]  # this component's role
+    endpoint: str             # tcp/<master>:<zenoh_port>
+    address: str | None       # the master's name resolved here (None: it does not resolve)
+    reachable: bool           # a Zenoh session opened on the master's router
+    failure: Literal["resolve", "refused", "timeout", "unreachable", "not_zenoh", "open"] | None  # why not reachable
+    router_zid: str | None    # the master's router's Zenoh id
+    router_version: str | None  # its Zenoh version (None: admin space off)
+    locators: list[str]       # what it says it listens on
+    listening: list[str]      # master: the addresses zenoh_port is listened on here (psutil)
+    listen_problem: Literal["loopback", "ipv6_only", "not_running"] | None  # master: why the forward cannot reach it
+    ipv6: bool                # this host has IPv6 (tcp/[::] needs it)
+    remote_peers: list[str]   # sessions in *peer* mode attached to the master's router from
+    #                           another machine (lone nodes that should be clients)
+    local_router: LocalRouter  # this machine's own router (every component runs one)
+
+
+class GraphNode(TypedDict, total=False):
+    name: str                 # the node's fully qualified name (/ns/name)
+    zid: str                  # the Zenoh session it lives in
+    component: str | None     # the component it runs on, when known (None: unknown)
+    humble: bool              # its topics carry Humble's TypeHashNotSupported
+
+
+class Ros2GraphData(TypedDict, total=False):
+    nodes: list[GraphNode]    # the nodes seen from here (rosnet-tui's probes left out)
+    topics: list[list[str]]   # [topic, type] of every publisher and subscription seen
+    seen_from: list[str]      # where the graph was read: "here", then peers' names
+    missing: list[str]        # components whose nodes (or probe node) are not seen from here
+    probe_seen: dict[str, bool]  # by peer name: its probe node is seen here
+    ours_seen: dict[str, bool]   # by peer name: our probe node is seen there
+    mixed_hashes: bool        # Humble nodes (TypeHashNotSupported) next to Jazzy-or-later ones
+
+
+Ros2Hop = Literal["our_router", "master_router", "peer_router", "peer_subscriber",
+                  "our_subscriber", "data_dropped"]
+
+
+class Ros2PubsubPeer(TypedDict, total=False):
+    peer: str                 # the peer on the other side of the exchange
+    ok: bool                  # the message arrived (with rmw_zenoh's attachment)
+    failed_hop: Ros2Hop | None  # where it broke (None: it did not, or the peer side could not run)
+    graph_seen: bool | None   # the receiving side saw the sender's publisher token
+    detail: str | None        # the last thing seen at the failed hop
+
+
+class Ros2PubsubData(Ros2PubsubPeer, total=False):
+    # The keys above describe the worst peer's exchange ("" as peer when none could run).
+    peers: dict[str, Ros2PubsubPeer]  # every peer's exchange, by peer name
+
+
 DATA: dict[str, type] = {
     "isp.internet": IspInternetData,
     "isp.public_ip": IspPublicIpData,
@@ -223,6 +343,7 @@ DATA: dict[str, type] = {
     "router.port_free": RouterPortFreeData,
     "router.listener": RouterListenerData,
     "router.port_open": RouterPortOpenData,
+    "router.upnp": RouterUpnpData,
     "linux.hosts": LinuxHostsData,
     "linux.resolve": LinuxResolveData,
     "linux.ping": LinuxPingData,
@@ -234,6 +355,11 @@ DATA: dict[str, type] = {
     "ros.node_uris": RosNodeUrisData,
     "ros.pubsub_out": RosPubsubData,
     "ros.pubsub_in": RosPubsubData,
+    "ros2.env": Ros2EnvData,
+    "ros2.router": Ros2RouterData,
+    "ros2.graph": Ros2GraphData,
+    "ros2.pubsub_out": Ros2PubsubData,
+    "ros2.pubsub_in": Ros2PubsubData,
 }
 
 

@@ -1,8 +1,8 @@
 """Step 1, ISP: is there internet, what is our public IP (and does it change), is there carrier NAT.
 
 Traffic goes only to the endpoints the settings name (``probe.public_ip_urls``,
-``probe.port_check_url``), plus, for ``isp.cgnat``, a UPnP question to the modem on the LAN when
-``ctx.upnp`` allows it. HTTP ignores proxy variables: a proxy would answer with its own address.
+``probe.port_check_url``), plus, for ``isp.cgnat``, a question to the modem on the LAN (UPnP IGD,
+NAT-PMP or PCP, :mod:`rosnet_tui.core.upnp`) when ``ctx.upnp`` allows it. HTTP ignores proxy variables: a proxy would answer with its own address.
 """
 
 from __future__ import annotations
@@ -279,54 +279,11 @@ async def ttl_probe(target: str, max_hops: int, timeout: float) -> list[Hop]:
     return out
 
 
-SSDP_ADDR = ("239.255.255.250", 1900)
-_IGD_TYPES = ("urn:schemas-upnp-org:device:InternetGatewayDevice:1",
-              "urn:schemas-upnp-org:device:InternetGatewayDevice:2")
+def _ask_modem(timeout: float, notes: list[str]):
+    """The modem's own word on its external address (UPnP IGD, NAT-PMP or PCP), or None."""
+    from rosnet_tui.core.upnp.modem import find_modem
 
-
-async def ssdp_find_igd(timeout: float) -> str | None:
-    """Ask the LAN (SSDP multicast, TTL 2) whether an internet gateway answers; its LOCATION.
-
-    miniupnpc's own discovery always takes seconds when nobody answers, so this quick question
-    decides whether asking miniupnpc is worth it.
-    """
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        s.setblocking(False)
-        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 2)
-        for st in _IGD_TYPES:
-            msg = (f"M-SEARCH * HTTP/1.1\r\nHOST: {SSDP_ADDR[0]}:{SSDP_ADDR[1]}\r\n"
-                   f"MAN: \"ssdp:discover\"\r\nMX: 1\r\nST: {st}\r\n\r\n")
-            try:
-                s.sendto(msg.encode(), SSDP_ADDR)
-            except OSError:
-                return None
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            try:
-                data, _addr = s.recvfrom(2048)
-            except (BlockingIOError, InterruptedError):
-                await asyncio.sleep(0.02)
-                continue
-            except OSError:
-                return None
-            for line in data.decode("latin-1").splitlines():
-                if line.lower().startswith("location:"):
-                    return line.split(":", 1)[1].strip()
-        return None
-    finally:
-        s.close()
-
-
-def _upnp_wan_ip(delay_ms: int) -> str:
-    import miniupnpc
-
-    u = miniupnpc.UPnP()
-    u.discoverdelay = delay_ms
-    if u.discover() <= 0:
-        raise LookupError("no UPnP device answered")
-    u.selectigd()
-    return str(u.externalipaddress())
+    return find_modem(timeout, notes=notes)
 
 
 def _route_source(target: str) -> tuple[str, str]:
@@ -366,22 +323,22 @@ async def check_cgnat(ctx: CheckContext) -> Outcome:
         if not ctx.upnp:
             evidence.append("UPnP: not asked (turned off for this run)")
             return None
-        location = await ssdp_find_igd(min(0.8, total * 0.25))
-        if location is None:
-            evidence.append("UPnP: no internet gateway answered on the LAN")
-            return None
-        evidence.append(f"UPnP: a gateway answered ({location})")
-        delay = int(min(0.5, total * 0.2) * 1000)
+        notes: list[str] = []
         try:
-            ip = await run_blocking(_upnp_wan_ip, delay, timeout=max(total * 0.6, 0.5))
+            modem = await run_blocking(_ask_modem, min(total * 0.45, 2.0), notes,
+                                       timeout=max(total * 0.6, 0.5))
         except asyncio.TimeoutError:
             evidence.append("UPnP: the modem did not finish answering in time")
             return None
-        except Exception as exc:  # noqa: BLE001 - miniupnpc raises bare Exception
-            evidence.append(f"UPnP: {exc or 'no answer'}")
+        if modem is None:
+            evidence.append("UPnP IGD, PCP, NAT-PMP: no modem answered on the LAN")
             return None
-        evidence.append(f"UPnP: the modem reports its WAN address is {ip}")
-        return ip or None
+        if modem.external_ip is None:
+            evidence.append(f"{modem.describe()}, but did not tell its external address")
+            return None
+        evidence.append(f"{modem.describe()}: its external address is "
+                        f"{modem.external_ip or '(none: it reports no public address)'}")
+        return modem.external_ip
 
     async def trace() -> list[Hop] | None:
         if target is None:
@@ -409,8 +366,26 @@ async def check_cgnat(ctx: CheckContext) -> Outcome:
         return hops
 
     wan_ip, hops = await asyncio.gather(upnp(), trace())
+    if wan_ip == "":  # the modem answers but has no public address: its own word for carrier NAT
+        data.update(wan_ip="", method="upnp")
+        if hops:
+            data["hops"] = [h.ip for h in hops]
+            _st, _summary, seen = judge_path(hops, target or "", data.get("source"))
+        else:
+            seen = {}
+        status, summary, updates = judge_no_wan(seen)
+        data.update(updates)
+        return Outcome(status, summary, evidence, data)
     if wan_ip:
         data.update(wan_ip=wan_ip, method="upnp")
+        if hops:  # a modem can learn a public address from outside (STUN): the path has the say
+            p_status, p_summary, seen = judge_path(hops, target or "", data.get("source"))
+            if seen.get("cgnat") or seen.get("double_nat"):
+                evidence.append(f"the modem reports {wan_ip} as its address, but the path out "
+                                "shows NAT beyond it (a modem can learn the outside address, "
+                                "e.g. by STUN)")
+                data.update(seen, method="traceroute", hops=[h.ip for h in hops])
+                return Outcome(p_status, p_summary, evidence, data)
         public_ip = None
         if is_public_v4(wan_ip):
             public_ip = await fetch_public_ip(ctx, max(total - (time.monotonic() - start), 0.5))
@@ -449,6 +424,18 @@ def judge_wan(wan_ip: str, public_ip: str | None) -> tuple[Status, str, dict]:
         return (Status.WARN, f"NAT beyond the modem: its WAN address is {wan_ip} but the internet "
                              f"sees {public_ip}", {"double_nat": True, "hop": wan_ip})
     return Status.PASS, f"no carrier NAT: the modem holds the public address {wan_ip}", {}
+
+
+def judge_no_wan(path: dict) -> tuple[Status, str, dict]:
+    """Verdict when the modem reports no external address (miniupnpd does behind carrier NAT,
+    where other modems report their 100.64.x address); *path* is what the path probe saw."""
+    if path.get("double_nat"):
+        return (Status.WARN, "double NAT: the modem reports no public address of its own, and the "
+                             f"router after it ({path.get('hop')}) is private; that router must "
+                             "forward too", {"double_nat": True, "hop": path.get("hop")})
+    return (Status.WARN, "carrier-grade NAT: the modem reports no public address of its own (the "
+                         "provider's NAT is in front of it); port forwarding on this modem cannot "
+                         "be reached from the internet", {"cgnat": True, "hop": path.get("hop")})
 
 
 def judge_path(hops: list[Hop], target: str, source: str | None) -> tuple[Status, str, dict]:

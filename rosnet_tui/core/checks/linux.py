@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import budget, python_command, shq, ssh_peers
+from rosnet_tui.core.checks.probes import budget, chat_ros2, python_command, shq, ssh_peers
 from rosnet_tui.core.hosts import HostsEntry, hosts_entries
 from rosnet_tui.core.listener import ECHO, GREETING
 from rosnet_tui.core.procedure import is_ip, is_loopback
@@ -413,6 +413,8 @@ def _ssh_failure(res: SshResult, peer: Peer) -> tuple[bool, str, list[str]]:
 
 @check("linux.chat_out", "linux", "Chat by name: we connect to the peer", 3.0)
 async def check_chat_out(ctx: CheckContext) -> Outcome:
+    if ctx.settings.ros2:  # ROS 2 over rmw_zenoh: only the way to the master's router matters
+        return await chat_ros2(ctx, out=True)
     me = ctx.settings.this.name or "this component"
 
     async def one(peer: Peer, total: float) -> tuple[bool, str | None, list[str]]:
@@ -494,6 +496,8 @@ async def check_chat_out(ctx: CheckContext) -> Outcome:
 
 @check("linux.chat_in", "linux", "Chat by name: the peer connects to us", 3.0)
 async def check_chat_in(ctx: CheckContext) -> Outcome:
+    if ctx.settings.ros2:  # ROS 2 over rmw_zenoh: only the way to the master's router matters
+        return await chat_ros2(ctx, out=False)
     me = ctx.settings.this.name
     if not me:
         return Outcome(Status.SKIP, "this component has no name in the settings yet",

@@ -15,13 +15,17 @@ import ipaddress
 import shlex
 import time
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 from urllib.parse import urljoin, urlsplit
 
 from rosnet_tui import __version__
+from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext
 from rosnet_tui.core.checks.data import view
+from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer, Settings
-from rosnet_tui.core.ssh import SshResult, run_blocking
+from rosnet_tui.core.ssh import SshResult, resolve_ipv4, run_blocking, ssh_run
 
 MAX_BODY = 64 * 1024
 
@@ -186,3 +190,180 @@ def stderr_tail(res: SshResult) -> str:
     """The last lines the peer's program wrote on stderr, on one line."""
     tail = (res.stderr or "").strip().splitlines()[-3:]
     return " | ".join(tail)
+
+
+# --------------------------------------------------------------------------- ROS 2 (rmw_zenoh)
+# Shared by the ros2.* checks (checks/ros2.py and checks/ros2_graph.py).
+ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()   # the peer program, fed to `python3 -`
+
+
+def zenoh_env(ctx: CheckContext) -> dict[str, str]:
+    """The ROS 2 variables nodes started here get (environment, then ~/.bashrc)."""
+    return zenohproto.ros_env(ctx.env, str(ctx.bashrc_path))
+
+
+def node_domain(ctx: CheckContext) -> int:
+    """The ROS_DOMAIN_ID nodes started here use (unset: 0); ros2.env compares it with the settings."""
+    value = zenoh_env(ctx).get("ROS_DOMAIN_ID", "").strip() or "0"
+    return int(value) if value.isdigit() else ctx.settings.ros.domain_id
+
+
+def node_endpoint(ctx: CheckContext) -> tuple[str, str]:
+    """(endpoint, 'router'|'client'): where a ROS 2 node started here connects."""
+    return zenohproto.peer_endpoint(zenoh_env(ctx), ros2.local_endpoint())
+
+
+async def open_zenoh(endpoint: str, t: float, how: str = "client"
+                     ) -> tuple[Any | None, str | None]:
+    """A Zenoh session on *endpoint* within *t* s: (session, None) or (None, why not). *how* is
+    node_endpoint()'s answer (a node's way in: a peer of a router, or client), or "client"."""
+    mode = zenohproto.session_mode(how)
+    try:
+        return await run_blocking(zenohproto.open_client, endpoint, t, mode, timeout=t + 0.4), None
+    except asyncio.TimeoutError:
+        return None, f"no Zenoh session within {t + 0.4:.1f} s"
+    except zenohproto.ZenohMissing:
+        return None, "eclipse-zenoh is not installed for this Python (pip install eclipse-zenoh)"
+    except zenohproto.OpenFailed as exc:
+        return None, str(exc)
+
+
+async def close_zenoh(session: Any) -> None:
+    if session is not None:
+        with contextlib.suppress(Exception):
+            await run_blocking(session.close, timeout=1.0)
+
+
+def ros2_peers(ctx: CheckContext) -> list[Peer]:
+    """Peers to run the other side on (those with an SSH user), the master first."""
+    s = ctx.settings
+    return sorted(ssh_peers(s), key=lambda p: p.name != s.master_name)
+
+
+def zenoh_peer_problem(res: SshResult, peer: Peer, rep: dict | None) -> str | None:
+    """Why the peer's zenoh program gave no usable report (None: it did)."""
+    if res.failure and res.failure != "timeout" and rep is None:
+        return f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
+    if res.exit_status == 127:
+        return f"{peer.name} has no python3 (exit status 127)"
+    if rep is not None and rep.get("error") == "no_zenoh":
+        return f"{peer.name}'s python3 has no eclipse-zenoh (pip install eclipse-zenoh there)"
+    if rep is None:
+        return (f"the probe on {peer.name} gave no report "
+                f"({stderr_tail(res) or res.detail or 'no output'})")
+    return None
+
+
+def router_links(info: dict) -> list[str]:
+    """Ids of the routers a router (its admin space *info*) has sessions with."""
+    return [x["zid"] for x in info.get("sessions") or [] if x.get("whatami") == "router"]
+
+
+# --------------------------------------------------------------------------- ROS 2: the Linux chats
+_ROS2_CONNECT = r"""
+import socket, sys
+name = sys.argv[1]; port = int(sys.argv[2]); t = float(sys.argv[3])
+try:
+    ip = socket.gethostbyname(name)
+except Exception as e:
+    print("RESOLVE-ERROR %s" % e); sys.exit(2)
+print("RESOLVED %s" % ip); sys.stdout.flush()
+try:
+    socket.create_connection((ip, port), timeout=t).close()
+except Exception as e:
+    print("CONNECT-ERROR %s" % e); sys.exit(3)
+print("CONNECTED")
+"""
+
+
+def _listening_here(port: int) -> bool:
+    """Whether a process listens on TCP *port* here (the master's router, normally)."""
+    import psutil  # noqa: PLC0415
+
+    try:
+        return any(c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == port
+                   for c in psutil.net_connections(kind="tcp"))
+    except (psutil.AccessDenied, OSError):
+        return False
+
+
+async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
+    """linux.chat_out / linux.chat_in under ROS 2 (they call it first thing).
+
+    Under ROS 2 only one connection crosses the modems: from each member, by name, to the
+    master's router port. So the chat toward the master is a TCP connection by name to
+    turtlebot:<zenoh_port> (made here on a member; made by each member over SSH on the master),
+    and the other direction is skipped: members accept nothing."""
+    s = ctx.settings
+    data: dict[str, Any] = {"peers": {}}
+    port, me = s.ros.zenoh_port, s.this.name or "this component"
+    if out == s.is_master:
+        why = (f"{me} is the ROS 2 master: it never connects to the members (their routers "
+               "connect in to it; linux.chat_in tests that way)" if out else
+               f"{me} is a ROS 2 member: it accepts no connections (its router connects out "
+               "to the master's; linux.chat_out tests that way)")
+        return Outcome(Status.SKIP, f"skipped: {why}", [], data)
+    t = budget(ctx, "linux.chat_in" if not out else "linux.chat_out") * 0.8
+    if out:
+        master = s.master_name
+        addrs, err = await resolve_ipv4(master, min(1.0, t * 0.3))
+        if not addrs:
+            data["peers"][master] = {"ok": False, "failure": "resolve"}
+            return Outcome(Status.FAIL, f"{master} does not resolve here: {err}", [], data)
+        ok, line = await _tcp_connect(addrs[0], port, t * 0.6)
+        data["peers"][master] = {"ok": ok, "failure": None if ok else "connect"}
+        ev = [f"{master} -> {addrs[0]}", line]
+        if ok:
+            return Outcome(Status.PASS, f"{me} reaches {master}:{port} by name (the master's "
+                                        "router port, through its modem)", ev, data)
+        return Outcome(Status.FAIL, f"{me} cannot connect to {master}:{port} by name "
+                                    f"({addrs[0]}): the master's modem does not forward TCP "
+                                    f"{port}, or nothing listens there", ev, data)
+    peers = ssh_peers(s)
+    for p in s.peers:
+        if not p.ssh_user:
+            data["peers"][p.name] = {"ok": False, "failure": "no_user"}
+    if not peers:
+        return Outcome(Status.SKIP, "no peer has an SSH user in the settings (peer.ssh_user), so "
+                                    "the members' side cannot be run from here", data=data)
+    async with contextlib.AsyncExitStack() as stack:
+        if not await run_blocking(_listening_here, port, timeout=1.0):
+            with contextlib.suppress(OSError):
+                await stack.enter_async_context(ctx.listeners.hold(port))
+        cmd = python_command(_ROS2_CONNECT, me, str(port), f"{t * 0.5:.1f}")
+        got = await asyncio.gather(*(ssh_run(ctx.ssh, p, cmd, timeout=t,
+                                             connect_timeout=t * 0.5) for p in peers))
+    ev: list[str] = []
+    bad: list[str] = []
+    for p, res in zip(peers, got, strict=True):
+        text = res.stdout
+        if "CONNECTED" in text:
+            data["peers"][p.name] = {"ok": True, "failure": None}
+            ev.append(f"{p.name} connected to {me}:{port} by name ({text.split()[1]})")
+            continue
+        failure = ("peer_resolve" if "RESOLVE-ERROR" in text else "connect" if text else
+                   f"ssh:{res.failure or 'sshd'}")
+        data["peers"][p.name] = {"ok": False, "failure": failure}
+        ev.append(f"{p.name}: {text.strip() or res.detail}")
+        bad.append(f"{p.name} ({failure})")
+    if bad:
+        return Outcome(Status.FAIL, f"members cannot reach {me}:{port} by name: {', '.join(bad)}",
+                       ev, data)
+    return Outcome(Status.PASS, f"every member reaches {me}:{port} by name (the router port)",
+                   ev, data)
+
+
+async def _tcp_connect(host: str, port: int, timeout: float) -> tuple[bool, str]:
+    writer = None
+    try:
+        _r, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
+        return True, f"TCP {host}:{port}: connected"
+    except asyncio.TimeoutError:
+        return False, f"TCP {host}:{port}: no answer within {timeout:.1f} s"
+    except OSError as exc:
+        return False, f"TCP {host}:{port}: {exc.strerror or exc}"
+    finally:
+        if writer is not None:
+            writer.close()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(writer.wait_closed(), 0.5)

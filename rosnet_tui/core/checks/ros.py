@@ -107,7 +107,7 @@ def _judge_uri(s: Settings, uri: str, hosts: set[str]) -> tuple[str, str | None]
     return "fail", f"{host} is not {' or '.join(sorted(hosts)) or 'the master'}"
 
 
-@check("ros.env", "ros", "ROS_MASTER_URI, ROS_IP and ROS_HOSTNAME")
+@check("ros.env", "ros", "ROS_MASTER_URI, ROS_IP and ROS_HOSTNAME", ros=1)
 async def check_env(ctx: CheckContext) -> Outcome:
     s = ctx.settings
     if not s.master_name:
@@ -195,7 +195,7 @@ async def _resolve(host: str, timeout: float) -> tuple[str | None, str | None]:
     return str(infos[0][4][0]), None
 
 
-@check("ros.master", "ros", "The ROS master answers")
+@check("ros.master", "ros", "The ROS master answers", ros=1)
 async def check_master(ctx: CheckContext) -> Outcome:
     uri, why = master_uri(ctx)
     if uri is None:
@@ -292,7 +292,7 @@ def _local_nodes(uri: str, timeout: float, include: list[str]) -> dict[str, Any]
     return rosproto.check_node_uris(uri, timeout, include=include)
 
 
-@check("ros.node_uris", "ros", "Every node's address is reachable", FACTOR_NODE_URIS)
+@check("ros.node_uris", "ros", "Every node's address is reachable", FACTOR_NODE_URIS, ros=1)
 async def check_node_uris(ctx: CheckContext) -> Outcome:
     uri, why = master_uri(ctx)
     data: dict[str, Any] = {"unreachable": [], "checked": 0, "from": []}
@@ -575,11 +575,13 @@ async def _pubsub(ctx: CheckContext, direction: str) -> Outcome:
     return Outcome(status, summary, evidence, data)
 
 
-@check("ros.pubsub_out", "ros", "A message published here reaches the peer", FACTOR_PUBSUB)
+@check("ros.pubsub_out", "ros", "A message published here reaches the peer", FACTOR_PUBSUB,
+       ros=1)
 async def check_pubsub_out(ctx: CheckContext) -> Outcome:
     return await _pubsub(ctx, "out")
 
 
-@check("ros.pubsub_in", "ros", "A message published on the peer reaches us", FACTOR_PUBSUB)
+@check("ros.pubsub_in", "ros", "A message published on the peer reaches us", FACTOR_PUBSUB,
+       ros=1)
 async def check_pubsub_in(ctx: CheckContext) -> Outcome:
     return await _pubsub(ctx, "in")

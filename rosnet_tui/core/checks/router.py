@@ -278,6 +278,8 @@ async def _probe_echoip(ctx: CheckContext, port: int, timeout: float) -> tuple[b
 @check("router.port_open", "router", "Ports are open from outside (port forwarding works)", 3.0)
 async def check_port_open(ctx: CheckContext) -> Outcome:
     s = ctx.settings
+    if s.ros2:  # ROS 2 over rmw_zenoh: one port, on the master only (see below)
+        return await _port_open_ros2(ctx)
     total = budget(ctx, "router.port_open") * 0.9
     loop = asyncio.get_running_loop()
     start = loop.time()
@@ -397,3 +399,88 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
     n = len(ports)
     return Outcome(Status.PASS, f"{n} port{'s' if n > 1 else ''} open {where} "
                                 f"({', '.join(map(str, ports))})", evidence, data)
+
+
+# --------------------------------------------------------------------------- ROS 2 (rmw_zenoh)
+async def _port_open_ros2(ctx: CheckContext) -> Outcome:
+    """router.port_open under [ros] version = 2: only the master's modem forwards anything, TCP
+    zenoh_port to its router; a member needs no forwarding (its router connects out)."""
+    s = ctx.settings
+    zport, test_port = s.ros.zenoh_port, s.probe.port
+    data: dict[str, Any] = {"ports": [], "test_port": test_port, "public_ip": None,
+                            "zenoh_port": zport, "zenoh_port_open": None, "zenoh_listener": "none"}
+    if not s.is_master:
+        return Outcome(Status.SKIP, f"skipped: {s.this.name or 'this component'} is a ROS 2 "
+                                    "member: its router connects out to the master's, so its "
+                                    "modem needs no forwarding at all", [], data)
+    total = budget(ctx, "router.port_open") * 0.9
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+
+    def left() -> float:
+        return max(total - (loop.time() - start), 0.2)
+
+    evidence: list[str] = []
+    ours: dict[int, TestListener | None] = {}
+    async with contextlib.AsyncExitStack() as stack:
+        if await run_blocking(listening_locally, zport, timeout=1.0):
+            data["zenoh_listener"] = "router"
+            evidence.append(f"TCP {zport}: a process listens here (the Zenoh router)")
+        else:
+            with contextlib.suppress(OSError):
+                ours[zport] = await stack.enter_async_context(ctx.listeners.hold(zport))
+                data["zenoh_listener"] = "ours"
+                evidence.append(f"TCP {zport}: no router listens; our listener stands in for it")
+        with contextlib.suppress(OSError):
+            ours[test_port] = await stack.enter_async_context(ctx.listeners.hold(test_port))
+        ports = [zport, test_port]
+        peer = next(iter(ssh_peers(s)), None) if s.this.profile == "remote" else None
+        public_ip = await fetch_public_ip(ctx, min(left() * 0.25, 3.0)) or s.this.public_ip or None
+        data["public_ip"] = public_ip
+        outcomes: dict[int, tuple[bool | None, str]] = {}
+        via = "echoip"
+        if peer is not None and public_ip:
+            raw, why = await _probe_from_peer(ctx, peer, public_ip, ports,
+                                              t_connect=min(max(left() * 0.35, 0.5), 3.0),
+                                              total=left() * 0.9)
+            if raw is None:
+                evidence.append(why + "; asking the port checker instead")
+            else:
+                via = f"peer:{peer.name}"
+                for p in ports:
+                    state, text = raw.get(p, ("error", "no result"))
+                    lst = ours.get(p)
+                    if state == "open" and lst is not None and lst.token not in text:
+                        outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: accepted, but not "
+                                              "by this machine: forwarded to another one")
+                    elif state == "open":
+                        outcomes[p] = (True, f"{peer.name} -> {public_ip}:{p}: open")
+                    elif state == "timeout":
+                        outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: no answer "
+                                              "(dropped: no forwarding or a firewall)")
+                    else:
+                        outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: {text}"
+                                       + _explain_connect_error(text))
+        if not outcomes:
+            got = await asyncio.gather(*(_probe_echoip(ctx, p, left() * 0.9) for p in ports))
+            outcomes.update(zip(ports, got, strict=True))
+    for p in ports:
+        reachable, line = outcomes[p]
+        data["ports"].append({"port": p, "reachable": reachable, "via": via,
+                              "listener": p in ours or (p == zport and
+                                                        data["zenoh_listener"] == "router")})
+        evidence.append(line + ("" if p == zport else " (the test port: not needed for ROS 2)"))
+    zopen = outcomes[zport][0]
+    data["zenoh_port_open"] = zopen
+    where = f"from {via[5:]}" if via.startswith("peer:") else "by the port checker"
+    who = {"router": "the Zenoh router listens", "ours": "our listener stands in for the router",
+           "none": "nothing could listen"}[data["zenoh_listener"]]
+    if zopen is None:
+        return Outcome(Status.FAIL, f"could not test TCP {zport} from outside: {outcomes[zport][1]}",
+                       evidence, data)
+    if not zopen:
+        return Outcome(Status.FAIL, f"TCP {zport} (the master's Zenoh router) is closed {where} "
+                                    f"while {who} here: the modem does not forward it to "
+                                    f"{s.this.local_ip or 'this machine'}", evidence, data)
+    return Outcome(Status.PASS, f"TCP {zport} is open {where} ({who}); ROS 2 needs no other "
+                                "port", evidence, data)

@@ -39,12 +39,16 @@ class RunOptions:
     ssh: SshOptions = field(default_factory=SshOptions)
 
 
-def select(steps: Iterable[str] | None = None, ids: Iterable[str] | None = None
-           ) -> list[CheckSpec]:
+def select(steps: Iterable[str] | None = None, ids: Iterable[str] | None = None,
+           settings: Settings | None = None) -> list[CheckSpec]:
     """The checks of *steps* (every step when both are None), or exactly *ids* (unknown ids are
-    left out), in registry order."""
+    left out), in registry order.
+
+    With *settings*, a step's list follows its ROS version (ros.* for 1, ros2.* for 2); ids asked
+    for by name are kept, and a check of the other version then skips, saying why.
+    """
     if ids is None:
-        return checks_for(steps)
+        return checks_for(steps, settings)
     load_builtin_checks()
     wanted = set(ids)
     return [s for s in checks_for(None) if s.id in wanted]

@@ -258,6 +258,10 @@ class DnsStore:
                     except RecordError as exc:
                         out.refused.append(Refusal(f"{qname} TXT", n, str(exc)))
                         continue
+                    except Exception as exc:  # noqa: BLE001 - one bad RR never stops the others
+                        out.refused.append(Refusal(f"{qname} TXT", n, "cannot be read as a "
+                                                   f"record ({type(exc).__name__})"))
+                        continue
                     if rec is not None:
                         cands.append(Candidate(rec, f"{qname} TXT"))
             out.add_copies(n, cands, own_name)

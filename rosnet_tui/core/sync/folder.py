@@ -150,6 +150,8 @@ class FolderStore:
                 result = exc
             except OSError as exc:
                 result = RecordError(f"cannot read it: {exc.strerror}")
+            except Exception as exc:  # noqa: BLE001 - one bad file never stops the others
+                result = RecordError(f"cannot be read as a record ({type(exc).__name__})")
         self._cache[entry.path] = _Cached(key, result)
         return result
 

@@ -1,14 +1,19 @@
 """Address records: what each component publishes about itself, and how copies are judged.
 
 One record per component: its name, local IP, public IP, role, a sequence number that grows with
-every new content, a timestamp and the record format version. Stores (a shared folder, DNS) hold
-copies that may be partial, stale or in conflict; :func:`parse_record` refuses anything malformed
-(it is never applied) and :func:`choose_best` picks among valid copies: the highest ``seq``, then
-the newest ``timestamp``.
+every new content, a timestamp and the record format version; optionally ``seq_epoch``, the time
+(whole seconds since 1970) at which the component started counting ``seq`` (absent: 0). A
+component that lost its counter starts again at 1 with a later ``seq_epoch``. Stores (a shared
+folder, DNS) hold copies that may be partial, stale or in conflict; :func:`parse_record` refuses
+anything malformed (it is never applied; it raises RecordError and nothing else, whatever the
+bytes) and :func:`choose_best` picks among valid copies: the highest ``(seq_epoch, seq)``, then
+the newest ``timestamp``. :func:`successor_problem` says whether a record may follow the one
+already applied (a lower seq is an old copy, unless a verified counter restart).
 """
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import json
 import math
@@ -18,13 +23,21 @@ from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from typing import Any
 
+from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
 from rosnet_tui.core.settings import ROLES, validate_ip, validate_name
 
 RECORD_VERSION = 1
 MAX_RECORD_BYTES = 4096
 MAX_SEQ = 2**53                   # what a JSON number holds exactly everywhere
 MAX_FUTURE_S = 24 * 3600          # a record from further in the future is refused (clock or forgery)
+MAX_FUTURE_GUESS = 4102444800.0   # 2100-01-01: the span in which a number in another unit is named
 MIN_TIMESTAMP = 946684800.0       # 2000-01-01: anything older is not a real clock
+MAX_TIMESTAMP = 253402300799.0    # 9999-12-31T23:59:59Z: the last second datetime can show
+MAX_DEPTH = 16                    # arrays/objects inside each other (a record needs 1)
+# Never a component's public address: private (RFC 1918) and carrier-grade NAT (RFC 6598) space.
+# The documentation ranges (192.0.2.0/24, 198.51.100.0/24, 203.0.113.0/24) stay valid: labs use them.
+NOT_PUBLIC = tuple(ipaddress.ip_network(n) for n in
+                   ("10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16", "100.64.0.0/10"))
 _FIELDS = ("version", "name", "role", "local_ip", "public_ip", "seq", "timestamp")
 
 
@@ -41,12 +54,16 @@ class Record:
     seq: int
     timestamp: float              # seconds since the epoch (UTC)
     version: int = RECORD_VERSION
+    seq_epoch: int = 0            # when this component started counting seq (0: not said)
 
     # ------------------------------------------------------------------ forms
     def to_json(self) -> dict[str, Any]:
-        return {"version": self.version, "name": self.name, "role": self.role,
-                "local_ip": self.local_ip, "public_ip": self.public_ip, "seq": self.seq,
-                "timestamp": format_time(self.timestamp)}
+        d = {"version": self.version, "name": self.name, "role": self.role,
+             "local_ip": self.local_ip, "public_ip": self.public_ip, "seq": self.seq,
+             "timestamp": format_time(self.timestamp)}
+        if self.seq_epoch:
+            d["seq_epoch"] = self.seq_epoch
+        return d
 
     def to_text(self) -> str:
         """The record file's text: small, stable key order, one trailing newline."""
@@ -62,8 +79,8 @@ class Record:
             other.name, other.local_ip, other.public_ip, other.role)
 
     @property
-    def rank(self) -> tuple[int, int]:
-        return (self.seq, millis(self.timestamp))
+    def rank(self) -> tuple[int, int, int]:
+        return (self.seq_epoch, self.seq, millis(self.timestamp))
 
     def next(self, *, local_ip: str, public_ip: str, role: str,
              now: float | None = None) -> Record:
@@ -77,9 +94,14 @@ class Record:
 
 
 def new_record(name: str, *, local_ip: str, public_ip: str, role: str, seq: int = 1,
-               now: float | None = None) -> Record:
-    """A fresh record (validated: raises RecordError when it would be refused by peers)."""
-    rec = Record(name, local_ip, public_ip, role, seq, now if now is not None else time.time())
+               now: float | None = None, seq_epoch: int = 0) -> Record:
+    """A fresh record (validated: raises RecordError when it would be refused by peers).
+
+    A component that starts counting again (it lost its last seq) passes ``seq_epoch`` = the
+    whole second it started counting, so peers that applied a higher seq of the old counter
+    accept the new one."""
+    rec = Record(name, local_ip, public_ip, role, seq, now if now is not None else time.time(),
+                 seq_epoch=seq_epoch)
     check_record(rec)
     return rec
 
@@ -97,14 +119,40 @@ def format_time(ts: float) -> str:
     return dt.strftime("%Y-%m-%dT%H:%M:%S.") + f"{ms:03d}Z"
 
 
+def show_time(ts: float) -> str:
+    """A timestamp for a message: ISO 8601 when datetime can show it, else the number."""
+    if MIN_TIMESTAMP <= ts <= MAX_TIMESTAMP:
+        with contextlib.suppress(ValueError, OverflowError, OSError):
+            return format_time(ts)
+    return f"{ts:.6g}"
+
+
 def parse_time(value: Any) -> float:
-    """Seconds since the epoch from an ISO 8601 string (UTC 'Z' or an offset) or a number."""
+    """Seconds since the epoch from an ISO 8601 string (UTC 'Z' or an offset) or a number of
+    seconds. Raises RecordError (never anything else) for anything that is not a plausible
+    time: another unit (milliseconds, as JavaScript writes), an overflow, a non-finite number."""
     if isinstance(value, bool):
         raise RecordError("timestamp must be a time, not true/false")
     if isinstance(value, (int, float)):
-        ts = float(value)
+        try:
+            ts = float(value)
+        except OverflowError:
+            ts = math.inf if value > 0 else -math.inf
+        if math.isnan(ts):
+            raise RecordError("timestamp is not a finite number")
+        if ts > MAX_TIMESTAMP:
+            for unit, factor in (("milliseconds", 1e3), ("microseconds", 1e6),
+                                 ("nanoseconds", 1e9)):
+                if MIN_TIMESTAMP * factor <= ts <= MAX_FUTURE_GUESS * factor:
+                    raise RecordError(f"timestamp {ts:.6g} looks like {unit} since 1970; a "
+                                      "record gives seconds, or an ISO 8601 time (...Z)")
+            raise RecordError(f"timestamp {ts:.6g} is not a plausible time")
+        if ts < MIN_TIMESTAMP:
+            raise RecordError(f"timestamp {ts:.6g} is before the year 2000")
     elif isinstance(value, str):
         text = value.strip()
+        if len(text) > 64:
+            raise RecordError(f"timestamp {value[:40]!r}... is not an ISO 8601 time")
         if text.endswith(("Z", "z")):
             text = text[:-1] + "+00:00"
         try:
@@ -113,7 +161,10 @@ def parse_time(value: Any) -> float:
             raise RecordError(f"timestamp {value[:40]!r} is not an ISO 8601 time") from None
         if dt.tzinfo is None:
             raise RecordError(f"timestamp {value[:40]!r} has no time zone (write it in UTC, ...Z)")
-        ts = dt.timestamp()
+        try:
+            ts = dt.timestamp()
+        except (OverflowError, ValueError, OSError):
+            raise RecordError(f"timestamp {value[:40]!r} is not a plausible time") from None
     else:
         raise RecordError("timestamp is missing or not a time")
     if not math.isfinite(ts):
@@ -122,12 +173,16 @@ def parse_time(value: Any) -> float:
 
 
 # --------------------------------------------------------------------------- validation
-def address_problem(value: str) -> str | None:
-    """Why *value* cannot be a component's address in a record (None: it can)."""
+def address_problem(value: str, *, public: bool = False) -> str | None:
+    """Why *value* cannot be a component's address in a record (None: it can); with *public*,
+    as its public address (no private or carrier-grade NAT space)."""
     why = validate_ip(value, required=True)
     if why:
         return why
     a = ipaddress.ip_address(value)
+    if public and any(a in net for net in NOT_PUBLIC):
+        kind = "carrier-grade NAT" if a in NOT_PUBLIC[3] else "private (LAN)"
+        return f"{value} is a {kind} address, never a public one"
     if a.is_loopback:
         return f"{value} is a loopback address"
     if a.is_link_local:
@@ -151,16 +206,27 @@ def check_record(rec: Record, *, now: float | None = None) -> None:
         raise RecordError("the record has no address at all")
     for key in ("local_ip", "public_ip"):
         value = getattr(rec, key)
-        if value and (why := address_problem(value)):
+        if value and (why := address_problem(value, public=key == "public_ip")):
             raise RecordError(f"{key}: {why}")
     if isinstance(rec.seq, bool) or not isinstance(rec.seq, int) or not 0 <= rec.seq <= MAX_SEQ:
         raise RecordError(f"seq must be a whole number from 0 to {MAX_SEQ}")
     now = time.time() if now is None else now
-    if rec.timestamp < MIN_TIMESTAMP:
-        raise RecordError(f"timestamp {format_time(rec.timestamp)} is before the year 2000")
-    if rec.timestamp > now + MAX_FUTURE_S:
-        raise RecordError(f"timestamp {format_time(rec.timestamp)} is more than a day in the "
+    ts = rec.timestamp
+    if not isinstance(ts, (int, float)) or isinstance(ts, bool) or math.isnan(ts):
+        raise RecordError("timestamp is not a finite number")
+    if ts < MIN_TIMESTAMP:
+        raise RecordError(f"timestamp {show_time(ts)} is before the year 2000")
+    if ts > now + MAX_FUTURE_S:
+        raise RecordError(f"timestamp {show_time(ts)} is more than a day in the "
                           "future (a wrong clock, or a forged record)")
+    e = rec.seq_epoch
+    if isinstance(e, bool) or not isinstance(e, int) or not (e == 0 or MIN_TIMESTAMP <= e
+                                                             <= MAX_TIMESTAMP):
+        raise RecordError("seq_epoch must be 0 or a whole number of seconds since 1970 "
+                          "(from the year 2000 on)")
+    if e > ts + 1:
+        raise RecordError(f"seq_epoch {show_time(e)} is after the record's own timestamp "
+                          f"{show_time(ts)} (counting cannot begin after it was written)")
 
 
 def parse_record(data: bytes | str | Mapping[str, Any], *, expect_name: str | None = None,
@@ -183,11 +249,7 @@ def parse_record(data: bytes | str | Mapping[str, Any], *, expect_name: str | No
             raise RecordError(f"too big ({len(data)} characters)")
         if not data.strip():
             raise RecordError("empty (a partial copy?)")
-        try:
-            data = json.loads(data)
-        except ValueError as exc:
-            raise RecordError(f"not valid JSON ({exc.msg} at character {exc.pos}; "
-                              "a partial copy?)") from None
+        data = loads_json(data)
     if not isinstance(data, Mapping):
         raise RecordError("not a JSON object")
     missing = [k for k in _FIELDS if k not in data]
@@ -202,13 +264,58 @@ def parse_record(data: bytes | str | Mapping[str, Any], *, expect_name: str | No
     seq = data["seq"]
     if isinstance(seq, bool) or not isinstance(seq, int):
         raise RecordError("seq must be a whole number")
+    epoch = data.get("seq_epoch", 0)
+    if isinstance(epoch, bool) or not isinstance(epoch, int):
+        raise RecordError("seq_epoch must be a whole number of seconds since 1970")
     rec = Record(name=data["name"].strip(), local_ip=data["local_ip"].strip(),
                  public_ip=data["public_ip"].strip(), role=data["role"].strip(), seq=seq,
-                 timestamp=parse_time(data["timestamp"]), version=version)
+                 timestamp=parse_time(data["timestamp"]), version=version, seq_epoch=epoch)
     check_record(rec, now=now)
     if expect_name is not None and rec.name.lower() != expect_name.lower():
         raise RecordError(f"it names {rec.name!r}, not {expect_name!r}")
     return rec
+
+
+def loads_json(text: str) -> Any:
+    """Decode a record's JSON text: RecordError (only) for anything that is not plain JSON of
+    bounded depth, with each key once."""
+    try:
+        return loads_bounded(text, max_depth=MAX_DEPTH)
+    except JsonInputError as exc:
+        raise RecordError(f"{exc} (a partial copy, or not a record?)") from None
+
+
+# --------------------------------------------------------------------------- successors
+def successor_problem(prev: Record | None, rec: Record) -> str | None:
+    """Why *rec* may not replace *prev*, the record of the same component applied before
+    (None: it may).
+
+    A higher seq of the same counter follows; the very same record is no change. A lower (or
+    equal, with other content) seq is an old or forged copy. A higher ``seq_epoch`` says the
+    component started counting again: believed only when that start is not before *prev* was
+    written (its own clock wrote both), so an old copy cannot pass for a restart.
+    """
+    if prev is None:
+        return None
+    if rec.seq_epoch < prev.seq_epoch:
+        return (f"it counts from an earlier start ({show_time(rec.seq_epoch) if rec.seq_epoch else 'none'}) "
+                f"than the record #{prev.seq} already applied ({show_time(prev.seq_epoch)}): an "
+                "old copy")
+    if rec.seq_epoch > prev.seq_epoch:
+        if rec.seq_epoch < math.floor(prev.timestamp):
+            return (f"it says its counter started again at {show_time(rec.seq_epoch)}, before "
+                    f"the record #{prev.seq} already applied was written "
+                    f"({show_time(prev.timestamp)}): not a believable restart")
+        return None
+    if rec.seq > prev.seq:
+        return None
+    if rec.seq == prev.seq and rec.rank == prev.rank and rec.same_content(prev):
+        return None
+    if rec.seq == prev.seq:
+        return (f"#{rec.seq} was already applied with other content or time: a conflicting "
+                "copy")
+    return (f"#{rec.seq} of {show_time(rec.timestamp)} is older than #{prev.seq} already applied"
+            " (an old copy)")
 
 
 # --------------------------------------------------------------------------- choosing
@@ -221,7 +328,8 @@ class Candidate:
 
 
 def choose_best(candidates: Iterable[Candidate]) -> tuple[Candidate | None, list[str]]:
-    """The copy to use: highest seq, then newest timestamp; plus notes on conflicting copies.
+    """The copy to use: highest (seq_epoch, seq), then newest timestamp; plus notes on
+    conflicting copies.
 
     Ties (same seq and timestamp) with different content are a real conflict: the one from the
     source that sorts first wins (the plain ``NAME.json`` before ``NAME.sync-conflict-...``), so
@@ -230,8 +338,8 @@ def choose_best(candidates: Iterable[Candidate]) -> tuple[Candidate | None, list
     cands = list(candidates)
     if not cands:
         return None, []
-    best = sorted(cands, key=lambda c: (-c.record.seq, -millis(c.record.timestamp),
-                                        len(c.source), c.source))[0]
+    best = sorted(cands, key=lambda c: (-c.record.seq_epoch, -c.record.seq,
+                                        -millis(c.record.timestamp), len(c.source), c.source))[0]
     notes = []
     for c in cands:
         if c is not best and c.record.rank == best.record.rank \

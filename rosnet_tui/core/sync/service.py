@@ -6,6 +6,10 @@ address (every round; netlink wakes the loop at once on a change), poll the publ
 read the store, publish our record when its content changed, and when anything changed apply the
 new hosts set (and the ROS block) through the safe writer, then run the affected checks.
 
+While the service runs, a watched shared folder wakes the loop as soon as a peer's record is
+complete (:mod:`.folder_watch`), and the public-IP lookup and the checks run on threads of their
+own, so neither a slow what-is-my-IP service nor a peer that does not answer delays a record.
+
 Failures never undo a good configuration: an unreachable store, no internet or a refused write
 keeps the last good state, backs off (bounded) and is logged once, with the recovery logged too.
 """
@@ -14,29 +18,23 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import fcntl
 import logging
+import math
 import os
-import selectors
-import signal
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core.bashrc import master_uri, preview_bashrc
 from rosnet_tui.core.hosts import (
     DEFAULT_HOSTS_PATH,
-    PROFILE_TITLES,
-    WriterSettingsError,
-    find_hosts_conflicts,
 )
-from rosnet_tui.core.settings import Settings, SettingsError, load_settings, save_settings
+from rosnet_tui.core.settings import Settings, SettingsError, load_settings
+from rosnet_tui.core.upnp.forwards import Renewer
 
+from .applied import applied_path, load_applied, save_applied
 from .backoff import Backoff, backoff_cap
-from .plan import Plan, PlanError, check_complete, plan_hosts
+from .plan import Plan
 from .records import (
     Candidate,
     Record,
@@ -45,88 +43,38 @@ from .records import (
     format_time,
     new_record,
     parse_record,
+    successor_problem,
 )
+from .service_apply import RECHECK_AFTER_S, ApplyMixin  # noqa: F401
+from .service_loop import LoopMixin, install_signal_handlers  # noqa: F401
 from .status import (
-    ALIVE_EVERY_S,
     MAX_REFUSED,
     empty_status,
     load_status,
-    save_status,
-    state_owner,
-    sync_dir,
 )
 from .store import RecordStore, StoreConfigError, StoreError, make_store
-from .watcher import LocalAddress, NetlinkMonitor, PublicLookup, lookup_public_ip, observe_local
-
-AFFECTED_CHECKS = ("linux.hosts", "linux.resolve", "linux.ssh", "ros.master")
-VERIFY_EVERY_S = 30.0        # look at the hosts file again even when nothing changed
-HEARTBEAT_S = 3600.0         # republish an unchanged record this often (its age then says alive)
-RECHECK_AFTER_S = (5.0, 15.0, 45.0)   # re-run failing checks after a change, then give up
-DEBOUNCE_S = 0.3             # netlink: wait for the burst of messages of one change to end
-FORCED_GAP_S = 2.0           # a network change asks for the public IP at most this often
-MAX_WAIT_S = 5.0
+from .watcher import LocalAddress, PublicLookup, lookup_public_ip, observe_local
+from .workers import (  # noqa: F401 (re-exported)
+    AFFECTED_CHECKS,
+    DEBOUNCE_S,
+    FOLDER_SETTLE_S,
+    FORCED_GAP_S,
+    HEARTBEAT_S,
+    MAX_WAIT_S,
+    VERIFY_EVERY_S,
+    WORKER_STOP_S,
+    RoundResult,
+    SyncError,
+    _ServiceLock,
+    _Worker,
+    read_period,
+    run_affected_checks,
+)
 
 log = logging.getLogger("rosnet_tui.sync")
 
 
-class SyncError(Exception):
-    """The service cannot start (settings, store configuration, another instance)."""
-
-
-def read_period(interval_s: float) -> float:
-    """How often peers' records are read: a quarter of the poll interval, 0.25 .. 1 s."""
-    return min(1.0, max(0.25, float(interval_s) / 4))
-
-
-@dataclass
-class RoundResult:
-    ok: bool
-    applied: bool
-    errors: dict[str, str]
-
-
-class _ServiceLock:
-    """One sync service per state dir: an flock held while it runs."""
-
-    def __init__(self, state_dir: Path) -> None:
-        self.path = sync_dir(state_dir) / "service.lock"
-        self.fd: int | None = None
-
-    def acquire(self) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        try:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
-        except OSError as exc:
-            raise SyncError(f"cannot open the lock {self.path}: {exc.strerror} (is the service "
-                            "running as another user?)") from None
-        owner = state_owner(self.path.parent.parent)
-        if owner:
-            with contextlib.suppress(OSError):
-                os.fchown(fd, *owner)
-                os.chown(self.path.parent, *owner)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            try:
-                other = os.read(fd, 32).decode(errors="replace").strip()
-            except OSError:
-                other = "?"
-            os.close(fd)
-            raise SyncError(f"another rosnet-tui sync is running with this state dir "
-                            f"(pid {other or '?'}; lock {self.path})") from None
-        os.ftruncate(fd, 0)
-        os.write(fd, f"{os.getpid()}\n".encode())
-        self.fd = fd
-
-    def release(self) -> None:
-        if self.fd is not None:
-            with contextlib.suppress(OSError):
-                os.ftruncate(self.fd, 0)
-            os.close(self.fd)
-            self.fd = None
-
-
-class SyncService:
+class SyncService(ApplyMixin, LoopMixin):
     """See the module docstring. Build it, then :meth:`run` (a service) or :meth:`run_once`."""
 
     def __init__(self, config_path: Path, *, state_dir: Path,
@@ -135,7 +83,8 @@ class SyncService:
                  store: RecordStore | None = None,
                  local_source: Callable[[Settings], LocalAddress] = observe_local,
                  public_source: Callable[[Settings], PublicLookup] | None = None,
-                 save_learned: bool = True, netlink: bool = True) -> None:
+                 save_learned: bool = True, netlink: bool = True,
+                 watch_folder: bool = True, unmap_on_stop: bool = False) -> None:
         self.config_path = Path(config_path)
         self.state_dir = Path(state_dir)
         self.hosts_path = Path(hosts_path)
@@ -147,6 +96,10 @@ class SyncService:
             lambda s: lookup_public_ip(s, self.state_dir, max(1.0, float(s.checks.timeout_s))))
         self.save_learned = save_learned
         self.use_netlink = netlink
+        self.use_folder_watch = watch_folder
+        self.unmap_on_stop = unmap_on_stop       # remove our forwards on the modem when stopped
+        self.forwards = Renewer(self.state_dir, log)  # our forwards' leases (router map)
+        self._folder_watched = False             # the loop watches the store's folder now
         self._store_fixed = store is not None
         self.store: RecordStore | None = store
         self._store_key: Any = None
@@ -171,6 +124,10 @@ class SyncService:
         self.next_verify = now
         self.recheck_at: float | None = None
         self._recheck_left: list[float] = []
+        self._checks: _Worker | None = None         # the checks' thread while run() runs
+        self._lookups: _Worker | None = None        # the public-IP lookup's thread, likewise
+        self._public_busy = False                   # a lookup is under way on that thread
+        self._public_answered = False               # a lookup has answered (or failed) once
         self._last_plan: Plan | None = None
         self.backoff = {k: Backoff() for k in ("settings", "public_ip", "store", "apply",
                                                "round")}
@@ -198,6 +155,13 @@ class SyncService:
         except BaseException:
             self.close()
             raise
+        # The record of each peer applied before (this run or an earlier one): a copy that does
+        # not follow it (a lower seq) is refused, and it stands until a successor comes.
+        self._applied = load_applied(self.state_dir)
+        for p in self.settings.peers if self.settings else []:
+            prev = self._applied.get(p.name.lower())
+            if prev is not None:
+                self.peers[p.name] = Candidate(prev, "the record applied before (state dir)")
 
     # ================================================================== settings and store
     @property
@@ -311,18 +275,22 @@ class SyncService:
         if force_public:
             # at once, but not more often than every FORCED_GAP_S (a flapping link)
             self.next_public = min(self.next_public, self._last_public_poll + FORCED_GAP_S)
-        if time.monotonic() >= self.next_public:
+        if time.monotonic() >= self.next_public and not self._public_busy:
             self._last_public_poll = time.monotonic()
             self._poll_public(self._last_public_poll)
         if time.monotonic() >= self.next_fetch:
             self._fetch(time.monotonic())
-        if self._fetched_once and time.monotonic() >= self.next_publish:
+        # the first answer of the lookup comes first (not a stale address published, applied)
+        first_lookup = self._public_busy and not self._public_answered
+        if self._fetched_once and time.monotonic() >= self.next_publish and not first_lookup:
             self._publish(time.monotonic())
         mono = time.monotonic()
-        if (self.dirty or mono >= self.next_verify) and mono >= self.next_apply:
+        if (self.dirty or mono >= self.next_verify) and mono >= self.next_apply \
+                and not first_lookup:
             applied = self._apply(mono)
         if self.recheck_at is not None and time.monotonic() >= self.recheck_at:
             self._recheck()
+        self.forwards.tick(self.settings, background=self._lookups is not None)
         self._save_status()
         errors = {k: v["message"] for k, v in self.status["errors"].items()}
         return RoundResult(not errors, applied, errors)
@@ -355,11 +323,31 @@ class SyncService:
         own.update(local_ip=local.local_ip, interface=local.interface, gateway=local.gateway)
 
     def _poll_public(self, mono: float) -> None:
+        """Ask for the public IP: on the lookup's thread while the service runs (the answer
+        comes back to :meth:`_take_public`), here and now otherwise."""
         assert self.settings is not None
+        self.next_public = math.inf     # a wish for an earlier poll meanwhile lowers it
+        if self._lookups is not None:
+            self._public_busy = True
+            self._lookups.submit(mono, copy.deepcopy(self.settings))
+            return
+        self._take_public(mono, self._lookup_public(self.settings))
+
+    def _lookup_public(self, settings: Settings) -> PublicLookup:
         try:
-            lk = self.public_source(self.settings)
+            return self.public_source(settings)
         except Exception as exc:  # noqa: BLE001
-            lk = PublicLookup(None, f"the lookup failed: {type(exc).__name__}: {exc}")
+            return PublicLookup(None, f"the lookup failed: {type(exc).__name__}: {exc}")
+
+    def _take_public(self, mono: float, lk: PublicLookup | None) -> None:
+        """The answer of the lookup started at *mono*."""
+        self._public_busy = False
+        self._public_answered = True
+        wished = self.next_public       # inf, or an earlier poll asked for meanwhile
+        self._public_answer(mono, lk or PublicLookup(None, "the lookup failed (see the log)"))
+        self.next_public = min(self.next_public, wished)
+
+    def _public_answer(self, mono: float, lk: PublicLookup) -> None:
         self.status["own"]["public_checked_at"] = time.time()
         if not lk.ip:
             keep = self._known_public() or "none known"
@@ -398,7 +386,7 @@ class SyncService:
             return
         self.backoff["store"].succeed()
         self._clear_error("store", f"the store answers again ({self.store.describe()})")
-        self.next_fetch = mono + read_period(self.interval_s)
+        self.next_fetch = mono + self._read_period()
         now = time.time()
         for r in res.refused:
             if not self._remember(("refused", r.source, r.why)):
@@ -420,6 +408,15 @@ class SyncService:
         self._take_own(res.own_copies)
         self._fetched_once = True
 
+    def _read_period(self) -> float:
+        """A watched folder wakes the loop when a record changes: read it every interval_s
+        besides (a safety net). The DNS store is polled every interval_s (each read is a query to
+        a name server, often a provider's, from every member). A folder that cannot be watched
+        is read every read_period() (a local read costs nothing)."""
+        if self._folder_watched or getattr(self.store, "kind", "") == "dns":
+            return max(read_period(self.interval_s), self.interval_s)
+        return read_period(self.interval_s)
+
     def _take_peer(self, name: str, cand: Candidate, now: float) -> None:
         old = self.peers.get(name)
         rec = cand.record
@@ -427,12 +424,22 @@ class SyncService:
         peer_status["seen_at"] = now
         if old is not None and rec == old.record:
             return
-        if old is not None and rec.rank < old.record.rank and rec.rank[1] <= old.record.rank[1]:
-            self._once(("older", name, rec.seq), logging.WARNING,
-                       "%s: the store holds an older record (#%d, %s) than the one already seen "
-                       "(#%d); keeping the newer", cand.source, rec.seq,
-                       format_time(rec.timestamp), old.record.seq)
+        prev = self._applied.get(name.lower()) or (old.record if old is not None else None)
+        why = successor_problem(prev, rec)
+        if why is not None:
+            assert prev is not None
+            self._once(("older", name, rec.rank, prev.rank), logging.WARNING,
+                       "refused the record %s (%s): %s; keeping #%d of %s (if %s really "
+                       "started counting again, remove its entry from %s)", cand.source, name,
+                       why, prev.seq, format_time(prev.timestamp), name,
+                       applied_path(self.state_dir))
             return
+        self._applied[name.lower()] = rec
+        try:
+            save_applied(self.state_dir, self._applied)
+        except OSError as exc:
+            self._once(("applied", str(exc)), logging.WARNING,
+                       "cannot keep the applied records in the state dir: %s", exc)
         if old is None:
             log.info("record of %s: %s (from %s)", name, rec.describe(), cand.source)
         elif old.record.same_content(rec):
@@ -491,8 +498,10 @@ class SyncService:
             if self.own is not None and self.own.name == name:
                 rec = self.own.next(local_ip=local, public_ip=public, role=role, now=now)
             else:
+                # No earlier record of ours anywhere: counting starts again, said by seq_epoch.
                 rec = new_record(name, local_ip=local, public_ip=public, role=role,
-                                 seq=(self.own.seq + 1) if self.own else 1, now=now)
+                                 seq=(self.own.seq + 1) if self.own else 1, now=now,
+                                 seq_epoch=self.own.seq_epoch if self.own else int(now))
             check_record(rec)
         except RecordError as exc:
             self._error("publish", f"this component's own record would be refused by peers: "
@@ -522,323 +531,3 @@ class SyncService:
                     log.info("removed this component's stale copies: %s", ", ".join(gone))
 
     # ------------------------------------------------------------------ applying
-    def _plan(self) -> Plan:
-        assert self.settings is not None
-        return plan_hosts(self.settings, local_ip=self.local.local_ip if self.local else "",
-                          public_ip=self._known_public(),
-                          records={n: c.record for n, c in self.peers.items()})
-
-    def _apply(self, mono: float) -> bool:
-        """Write the hosts set (and the ROS block) when they differ from the files; True if
-        something was written."""
-        self.next_verify = mono + VERIFY_EVERY_S
-        plan = self._plan()
-        self._last_plan = plan
-        try:
-            old = mf.read_bytes(self.hosts_path)
-            text = mf.decode(old) if old is not None else None
-            check_complete(plan, text)
-            body = plan.body()
-            notes = [f"line {c.lineno} '{c.old.strip()}' {c.why}" for c in
-                     find_hosts_conflicts(text, plan.settings, plan.profile)]
-            previews = [mf.preview_block(self.hosts_path, body, position="top",
-                                         label=f"hosts: {plan.profile} set", notes=notes,
-                                         new_mode=0o644, current=old, use_current=True)]
-        except (PlanError, WriterSettingsError, mf.ManagedFileError) as exc:
-            self.next_apply = self._fail("apply", f"{exc}; the hosts file is left as it is", mono)
-            return False
-        for n in notes:
-            self._once(("conflict", n), logging.WARNING, "%s: %s (rosnet-tui hosts apply "
-                       "--comment-conflicts fixes it, with your consent)", self.hosts_path, n)
-        if self.bashrc_path is not None:
-            try:
-                previews.append(preview_bashrc(plan.settings, self.bashrc_path))
-            except (WriterSettingsError, mf.ManagedFileError) as exc:
-                self._once(("bashrc", str(exc)), logging.WARNING,
-                           "%s is left as it is: %s", self.bashrc_path, exc)
-        self._update_peer_status(plan)
-        changed = [p for p in previews if p.changed]
-        if not changed:
-            self.dirty = False
-            self.backoff["apply"].succeed()
-            self._clear_error("apply")
-            return False
-        summary = self._summary(plan, text)
-        diff = "".join(p.diff() for p in changed)
-        log.info("applying: %s\n%s", summary, diff.rstrip("\n"))
-        try:
-            result = mf.apply_previews(previews, state_dir=self.state_dir, label=f"sync: {summary}")
-        except mf.StalePreviewError as exc:
-            log.info("%s; trying again", exc)
-            self.next_apply = mono + 0.2
-            return False
-        except mf.PermissionNeededError as exc:
-            self.next_apply = self._fail("apply", f"{exc} (run the sync service as root: "
-                                                  "rosnet-tui sync install-service)", mono)
-            return False
-        except mf.ManagedFileError as exc:
-            self.next_apply = self._fail("apply", f"{exc}; the files are left as they were", mono)
-            return False
-        self.dirty = False
-        self.backoff["apply"].succeed()
-        self._clear_error("apply", "writing works again")
-        backups = ", ".join(str(b) for b in result.backups) or "none (new file)"
-        log.info("wrote %s (journal #%s, backup %s; 'rosnet-tui undo' puts it back)",
-                 ", ".join(str(p.path) for p in changed), result.entry_id, backups)
-        self.status["profile"] = plan.profile
-        self.status["last_change"] = {"at": time.time(), "summary": summary, "diff": diff,
-                                      "journal": result.entry_id, "checks": []}
-        self._status_dirty = True
-        self._save_learned(plan)
-        self._save_status()
-        if self.do_checks:
-            self._run_checks(plan)
-            self._recheck_left = list(RECHECK_AFTER_S)
-            self._schedule_recheck()
-        return True
-
-    def _summary(self, plan: Plan, old_text: str | None) -> str:
-        from rosnet_tui.core.checks.linux import parse_hosts
-
-        try:
-            body = mf.extract_block(old_text) or []
-        except mf.DamagedBlockError:
-            body = []
-        before: dict[str, str] = {}
-        for _, ip, names in parse_hosts("\n".join(body)):
-            for n in names:
-                before.setdefault(n.lower(), ip)
-        parts = []
-        for e in plan.entries:
-            was = before.get(e.name.lower())
-            if was is None:
-                parts.append(f"{e.name} -> {e.ip} (new)")
-            elif was != e.ip:
-                parts.append(f"{e.name} {was} -> {e.ip}")
-        if not parts:
-            parts.append("the block rewritten (same addresses)")
-        return f"{'; '.join(parts)} [{PROFILE_TITLES[plan.profile].split(' (')[0]} set]"
-
-    def _update_peer_status(self, plan: Plan) -> None:
-        self.status["profile"] = plan.profile
-        for c in plan.choices:
-            p = self.status["peers"].setdefault(c.name, {})
-            if p.get("address") != c.address or p.get("where") != c.where:
-                p.update(address=c.address, where=c.where, why=c.why)
-                self._status_dirty = True
-
-    def _save_learned(self, plan: Plan) -> None:
-        """Keep the observed addresses in the settings file too, so `check`, `hosts apply` and
-        the wizard agree with the hosts file (comments and layout kept)."""
-        if not self.save_learned:
-            return
-        try:
-            fresh = load_settings(self.config_path)
-        except SettingsError as exc:
-            self._once(("learned", str(exc)), logging.WARNING,
-                       "the settings file was not updated: %s", exc)
-            return
-        if fresh is None:
-            return
-        learned = plan.learned
-        changes = []
-        for key in ("local_ip", "public_ip", "profile"):
-            new = getattr(learned.this, key)
-            if new and getattr(fresh.this, key) != new:
-                changes.append(f"this.{key} {getattr(fresh.this, key) or '-'} -> {new}")
-                setattr(fresh.this, key, new)
-        for p in fresh.peers:
-            lp = next((x for x in learned.peers if x.name == p.name), None)
-            if lp is None or p.name not in self.peers:
-                continue
-            for key in ("local_ip", "public_ip"):
-                new = getattr(lp, key)
-                if new and getattr(p, key) != new:
-                    changes.append(f"{p.name}.{key} {getattr(p, key) or '-'} -> {new}")
-                    setattr(p, key, new)
-        if not changes:
-            return
-        try:
-            st = os.stat(self.config_path)
-            save_settings(fresh, self.config_path)
-            if os.geteuid() == 0 and (st.st_uid, st.st_gid) != (0, 0):
-                with contextlib.suppress(OSError):
-                    os.chown(self.config_path, st.st_uid, st.st_gid)
-            with contextlib.suppress(OSError):
-                st2 = os.stat(self.config_path)
-                self._settings_key = (st2.st_mtime_ns, st2.st_size, st2.st_ino)
-                self.settings = fresh
-        except (SettingsError, OSError) as exc:
-            self._once(("learned", str(exc)), logging.WARNING,
-                       "the settings file was not updated: %s", exc)
-            return
-        log.info("settings updated (%s): %s", self.config_path, "; ".join(changes))
-
-    # ------------------------------------------------------------------ checks
-    def _run_checks(self, plan: Plan) -> None:
-        results = run_affected_checks(plan.settings, hosts_path=self.hosts_path,
-                                      bashrc_path=self.bashrc_path, state_dir=self.state_dir)
-        bad = [r for r in results if r["status"] == "fail"]
-        for r in results:
-            level = logging.WARNING if r["status"] == "fail" else logging.INFO
-            log.log(level, "check %-4s %s: %s", r["status"].upper(), r["id"], r["summary"])
-        if self.status.get("last_change") is not None:
-            self.status["last_change"]["checks"] = results
-            self.status["last_change"]["checked_at"] = time.time()
-        if not bad:
-            self._recheck_left = []
-        self._status_dirty = True
-
-    def _schedule_recheck(self) -> None:
-        changes = self.status.get("last_change") or {}
-        failing = any(c["status"] == "fail" for c in changes.get("checks") or [])
-        if failing and self._recheck_left:
-            self.recheck_at = time.monotonic() + self._recheck_left.pop(0)
-        else:
-            self.recheck_at = None
-
-    def _recheck(self) -> None:
-        self.recheck_at = None
-        if self._last_plan is None:
-            return
-        log.info("running the failing checks again")
-        self._run_checks(self._last_plan)
-        self._schedule_recheck()
-
-    # ------------------------------------------------------------------ status
-    def _save_status(self, force: bool = False) -> None:
-        now = time.time()
-        if not (force or self._status_dirty or now - self._alive_saved > ALIVE_EVERY_S):
-            return
-        self.status["alive_at"] = now
-        try:
-            save_status(self.state_dir, self.status)
-        except OSError as exc:
-            self._once(("status", str(exc)), logging.WARNING, "cannot save the status: %s", exc)
-            return
-        self._status_dirty = False
-        self._alive_saved = now
-
-    # ================================================================== running
-    def stop(self) -> None:
-        """Ask the loop to stop (safe from a signal handler or another thread)."""
-        self._stop = True
-        with contextlib.suppress(OSError):
-            os.write(self._wake_w, b"x")
-
-    def _next_wake(self) -> float:
-        apply_due = self.next_apply if self.dirty else max(self.next_apply, self.next_verify)
-        cands = [self.next_public, self.next_fetch, apply_due]
-        if self.recheck_at is not None:
-            cands.append(self.recheck_at)
-        return min(cands)
-
-    def _start(self, lock: _ServiceLock) -> None:
-        lock.acquire()
-        assert self.settings is not None
-        self.status.update(pid=os.getpid(), started_at=time.time(), stopped_at=None)
-        s = self.settings
-        log.info("sync for %s (%s): %s; public IP every %g s, peers read every %g s; hosts file "
-                 "%s%s", s.this.name, s.this.role, self.store.describe() if self.store else "?",
-                 self.interval_s, read_period(self.interval_s), self.hosts_path,
-                 f", ROS block in {self.bashrc_path}" if self.bashrc_path else "")
-
-    def _finish(self, lock: _ServiceLock) -> None:
-        self.status["stopped_at"] = time.time()
-        self._save_status(force=True)
-        lock.release()
-
-    def run_once(self) -> RoundResult:
-        """One full round (the public IP asked now), for cron and tests."""
-        lock = _ServiceLock(self.state_dir)
-        self._start(lock)
-        try:
-            return self.round(force_public=True)
-        finally:
-            self._finish(lock)
-            self.close()
-
-    def run(self) -> int:
-        """Run until :meth:`stop` (SIGTERM/SIGINT through :func:`install_signal_handlers`)."""
-        lock = _ServiceLock(self.state_dir)
-        self._start(lock)
-        monitor = NetlinkMonitor.open() if self.use_netlink else None
-        if self.use_netlink and monitor is None:
-            log.info("no netlink here: local address changes are seen within %g s",
-                     read_period(self.interval_s))
-        sel = selectors.DefaultSelector()
-        sel.register(self._wake_r, selectors.EVENT_READ, "wake")
-        if monitor is not None:
-            sel.register(monitor.fileno(), selectors.EVENT_READ, "netlink")
-        force_public = True
-        try:
-            while not self._stop:
-                try:
-                    self.round(force_public=force_public)
-                except Exception:  # a bug must not kill the service: log it, keep going
-                    log.exception("unexpected error in a sync round; going on")
-                    self._error("round", "an unexpected error (see the log); retrying")
-                    pause = self.backoff["round"].fail()
-                    self.next_fetch = self.next_apply = time.monotonic() + pause
-                else:
-                    if self.backoff["round"].succeed():
-                        self._clear_error("round")
-                force_public = False
-                if self._stop:
-                    break
-                timeout = min(MAX_WAIT_S, max(0.02, self._next_wake() - time.monotonic()))
-                for key, _ in sel.select(timeout):
-                    if key.data == "wake":
-                        with contextlib.suppress(OSError):
-                            os.read(self._wake_r, 64)
-                    elif monitor is not None and monitor.drain():
-                        deadline = time.monotonic() + DEBOUNCE_S
-                        while time.monotonic() < deadline and not self._stop:
-                            if sel.select(max(0.0, deadline - time.monotonic())):
-                                monitor.drain()
-                        log.info("the kernel reports a link, address or route change")
-                        force_public = True
-        finally:
-            sel.close()
-            if monitor is not None:
-                monitor.close()
-            log.info("sync stopped")
-            self._finish(lock)
-            self.close()
-        return 0
-
-    def close(self) -> None:
-        for fd in (self._wake_r, self._wake_w):
-            with contextlib.suppress(OSError):
-                os.close(fd)
-        self._wake_r = self._wake_w = -1
-
-
-def install_signal_handlers(service: SyncService) -> None:
-    """SIGTERM and SIGINT (Ctrl-C) stop the service cleanly after the current step."""
-    def handler(signum: int, frame: Any) -> None:
-        log.info("stopping (%s)", signal.Signals(signum).name)
-        service.stop()
-
-    signal.signal(signal.SIGTERM, handler)
-    signal.signal(signal.SIGINT, handler)
-
-
-# --------------------------------------------------------------------------- the checks
-def run_affected_checks(settings: Settings, *, hosts_path: Path, bashrc_path: Path | None,
-                        state_dir: Path, ids: tuple[str, ...] = AFFECTED_CHECKS,
-                        ) -> list[dict[str, Any]]:
-    """Run the checks a hosts/ROS change affects (concurrently, each under its timeout):
-    [{"id", "status", "summary"}] in *ids* order."""
-    from rosnet_tui.core.checks.runner import RunOptions, run_now, select
-
-    specs = select(ids=ids)
-    env = dict(os.environ)
-    with contextlib.suppress(WriterSettingsError):
-        env["ROS_MASTER_URI"] = master_uri(settings)
-    for v in ("ROS_IP", "ROS_HOSTNAME"):
-        env.pop(v, None)
-    opts = RunOptions(hosts_path=hosts_path, state_dir=state_dir, env=env, upnp=False,
-                      bashrc_path=bashrc_path)
-    got = run_now(copy.deepcopy(settings), specs, opts)
-    return [{"id": r.id, "status": r.status.value, "summary": r.summary} for r in got]

@@ -1,0 +1,353 @@
+"""Step 4 for ROS 2 over rmw_zenoh: the environment (ros2.env) and the master's router
+(ros2.router). The graph and live publish/subscribe are in :mod:`.ros2_graph`.
+
+Every probe is a real Zenoh session (eclipse-zenoh) that behaves as an rmw_zenoh node does on the
+wire (:mod:`rosnet_tui.core.zenohproto`). Questions to a peer run the same module over SSH
+(``python3 -`` fed its source): the peer needs python3 (with eclipse-zenoh for sessions).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from pathlib import Path
+from typing import Any
+
+import psutil
+
+from rosnet_tui.core import ros2, zenohproto
+from rosnet_tui.core.checks import CheckContext, check
+from rosnet_tui.core.checks.probes import (
+    ZENOH_SOURCE,
+    budget,
+    close_zenoh,
+    node_endpoint,
+    open_zenoh,
+    python_stdin_command,
+    ros2_peers,
+    router_links,
+    zenoh_env,
+    zenoh_peer_problem,
+)
+from rosnet_tui.core.procedure import is_loopback
+from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.settings import Peer
+from rosnet_tui.core.ssh import resolve_ipv4, run_blocking, ssh_run
+
+FACTOR_ROUTER = 1.0
+DDS_VARS = ("CYCLONEDDS_URI", "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",
+            "ROS_STATIC_PEERS", "RMW_CONNEXT_INITIAL_PEERS")
+
+
+# --------------------------------------------------------------------------- ros2.env
+def _read_router_config(path: str) -> tuple[dict | None, str | None]:
+    p = Path(path.removeprefix("file://"))
+    try:
+        with open(p, encoding="utf-8", errors="replace") as fh:
+            text = fh.read(256 * 1024)
+    except OSError as exc:
+        return None, f"cannot read {p}: {exc.strerror or exc}"
+    try:
+        data = ros2.loads_json5(text)
+    except ValueError as exc:
+        return None, f"{p} is not valid JSON5: {exc}"
+    return (data, None) if isinstance(data, dict) else (None, f"{p} is not a JSON5 object")
+
+
+async def _peer_infos(ctx: CheckContext, t: float) -> dict[str, dict | str]:
+    peers = ros2_peers(ctx)
+    cmd = python_stdin_command("info")
+    got = await asyncio.gather(*(ssh_run(ctx.ssh, p, cmd, stdin=ZENOH_SOURCE, timeout=t) for p in peers))
+    out: dict[str, dict | str] = {}
+    for p, res in zip(peers, got, strict=True):
+        rep = zenohproto.parse_report(res.stdout)
+        out[p.name] = rep if rep is not None else (zenoh_peer_problem(res, p, None) or "no report")
+    return out
+
+
+@check("ros2.env", "ros", "RMW_IMPLEMENTATION, ROS_DOMAIN_ID, ROS_DISTRO and Zenoh config", 1.0,
+       ros=2)
+async def check_env(ctx: CheckContext) -> Outcome:
+    s = ctx.settings
+    env = zenoh_env(ctx)
+    rc = zenohproto.read_exports(str(ctx.bashrc_path))
+    infos_task = asyncio.ensure_future(_peer_infos(ctx, max(0.5, budget(ctx, "ros2.env") * 0.8)))
+    fails: list[str] = []
+    warns: list[str] = []
+    ev: list[str] = []
+    codes: list[str] = []
+    rmw, rc_rmw = ctx.env.get("RMW_IMPLEMENTATION"), rc.get("RMW_IMPLEMENTATION")
+    ev.append(f"RMW_IMPLEMENTATION: environment {rmw or 'not set'}, {ctx.bashrc_path} "
+              f"{rc_rmw or 'not set'}")
+    used = rmw or rc_rmw
+    dds = used != ros2.RMW_ZENOH
+    if not used:
+        fails.append("RMW_IMPLEMENTATION is not set, so ROS 2 uses DDS, whose discovery and data "
+                     "do not cross the modems; export RMW_IMPLEMENTATION=rmw_zenoh_cpp")
+    elif used != ros2.RMW_ZENOH:
+        fails.append(f"RMW_IMPLEMENTATION={used} (DDS): its discovery and data do not cross the "
+                     "modems; use rmw_zenoh_cpp")
+    elif rmw != rc_rmw:
+        where = f"not in {ctx.bashrc_path}" if not rc_rmw else "not in this shell"
+        warns.append(f"RMW_IMPLEMENTATION=rmw_zenoh_cpp is {where}: new shells (or this one) "
+                     "will differ; `rosnet-tui ros apply` writes it, `source ~/.bashrc` loads it")
+    dom = env.get("ROS_DOMAIN_ID")
+    domain_ok = (dom or "0").strip() == str(s.ros.domain_id)
+    ev.append(f"ROS_DOMAIN_ID={dom if dom is not None else 'not set (0)'}; the settings say "
+              f"{s.ros.domain_id}")
+    if not domain_ok:
+        fails.append(f"ROS_DOMAIN_ID is {dom or '0 (not set)'}, the settings say "
+                     f"{s.ros.domain_id}: nodes in different domains never see each other")
+    distro = env.get("ROS_DISTRO")
+    ev.append(f"ROS_DISTRO={distro or 'not set'}")
+    client = False
+    override = env.get("ZENOH_CONFIG_OVERRIDE")
+    problems: list[str] = []
+    if override:
+        values, bad = ros2.parse_override(override)
+        ev.append(f"ZENOH_CONFIG_OVERRIDE={override}")
+        problems += [f"ZENOH_CONFIG_OVERRIDE: {b}" for b in bad]
+        client = values.get("mode") in ("client", "peer") and bool(values.get("connect/endpoints"))
+        problems += ros2.override_problems(s, values)
+        if client and (distro or "").lower() in ros2.DISTROS_WITHOUT_OVERRIDE:
+            warns.append("on Humble, ZENOH_CONFIG_OVERRIDE works only from rmw_zenoh 0.1.2: "
+                         "use ZENOH_SESSION_CONFIG_URI with a config file if nodes ignore it")
+    rc_path = env.get("ZENOH_ROUTER_CONFIG_URI")
+    listen: list[str] = []
+    connect: list[str] = []
+    if rc_path:
+        cfg, why = _read_router_config(rc_path)
+        if cfg is None:
+            problems.append(f"ZENOH_ROUTER_CONFIG_URI: {why}")
+        else:
+            listen = ros2.endpoints_of(ros2.config_value(cfg, "listen/endpoints"), "router")
+            connect = ros2.endpoints_of(ros2.config_value(cfg, "connect/endpoints"), "router")
+            ev.append(f"router config {rc_path}: listen {listen or 'default'}, connect "
+                      f"{connect or 'nothing'}")
+    elif not client:
+        listen = list(ros2.UPSTREAM_LISTEN)
+        ev.append("ZENOH_ROUTER_CONFIG_URI not set: rmw_zenohd uses its defaults (listen "
+                  "tcp/[::]:7447, connect nothing)")
+    if not client:
+        problems += ros2.router_config_problems(s, listen, connect, ros2.ipv6_available())
+    for name, code, why in (("ROS_LOCALHOST_ONLY", "localhost_only", "keeps nodes on this machine"),
+                            ("ROS_AUTOMATIC_DISCOVERY_RANGE", "discovery_localhost",
+                             "limits discovery to this machine")):
+        value = ctx.env.get(name) or rc.get(name)
+        if value and value.upper() in ("1", "LOCALHOST", "TRUE"):
+            codes.append(code)
+            warns.append(f"{name}={value} {why}; remove it")
+    leftovers = [v for v in DDS_VARS if ctx.env.get(v) or rc.get(v)]
+    if leftovers:
+        codes.append("dds_settings")
+        warns.append(f"DDS settings ({', '.join(leftovers)}) do nothing under rmw_zenoh; remove "
+                     "them to avoid confusion")
+    infos = await infos_task
+    peer_distros: dict[str, str | None] = {}
+    mismatch: list[str] = []
+    for name, info in infos.items():
+        if isinstance(info, str):
+            peer_distros[name] = None
+            ev.append(f"{name}: not asked ({info})")
+            continue
+        pd = (info.get("env") or {}).get("ROS_DISTRO")
+        peer_distros[name] = pd
+        ev.append(f"{name}: ROS_DISTRO={pd or 'not set'}, RMW_IMPLEMENTATION="
+                  f"{(info.get('env') or {}).get('RMW_IMPLEMENTATION') or 'not set'}")
+        if pd and distro and pd.lower() != distro.lower():
+            mismatch.append(name)
+    if mismatch:
+        pairs = ", ".join(f"{n} runs {peer_distros[n]}" for n in mismatch)
+        fails.append(f"ROS_DISTRO differs: here {distro}, {pairs}. Mixed distros (Humble next to "
+                     "Jazzy or later) discover each other but drop every message")
+    if not distro:
+        warns.append("ROS_DISTRO is not set: no ROS 2 is sourced here (source "
+                     "/opt/ros/<distro>/setup.bash in ~/.bashrc)")
+    fails += problems
+    data = {"rmw": rmw, "bashrc_rmw": rc_rmw, "rmw_ok": rmw == rc_rmw == ros2.RMW_ZENOH,
+            "dds": dds, "domain_id": dom, "expected_domain_id": s.ros.domain_id,
+            "domain_ok": domain_ok, "distro": distro, "peer_distros": peer_distros,
+            "distro_mismatch": mismatch, "client_mode": client, "override": override,
+            "router_config": rc_path, "router_listen": listen, "router_connect": connect,
+            "config_problems": problems, "warnings": codes}
+    if fails:
+        return Outcome(Status.FAIL, "; ".join(fails), ev + [f"warning: {w}" for w in warns], data)
+    if warns:
+        return Outcome(Status.WARN, "; ".join(warns), ev, data)
+    mode = "client mode to the master's router" if client else "a router on this component"
+    return Outcome(Status.PASS, f"rmw_zenoh_cpp, domain {s.ros.domain_id}, {distro}, {mode}",
+                   ev, data)
+
+
+# --------------------------------------------------------------------------- ros2.router
+async def _tcp(host: str, port: int, t: float) -> tuple[str | None, str]:
+    """(None, 'connected') or (failure kind, words) of a plain TCP connect."""
+    writer = None
+    try:
+        _r, writer = await asyncio.wait_for(asyncio.open_connection(host, port), t)
+        return None, "connected"
+    except asyncio.TimeoutError:
+        return "timeout", f"no answer within {t:.1f} s (dropped: no forwarding, or a firewall)"
+    except ConnectionRefusedError:
+        return "refused", "connection refused (forwarded, but nothing listens there)"
+    except OSError as exc:
+        kind = "unreachable" if "unreachable" in str(exc).lower() or "no route" in str(exc).lower() \
+            else "refused"
+        return kind, exc.strerror or str(exc)
+    finally:
+        if writer is not None:
+            writer.close()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(writer.wait_closed(), 0.3)
+
+
+def _listening(port: int) -> list[str]:
+    try:
+        conns = psutil.net_connections(kind="tcp")
+    except (psutil.AccessDenied, OSError):
+        return []
+    return sorted({c.laddr.ip for c in conns if c.status == psutil.CONN_LISTEN and c.laddr
+                   and c.laddr.port == port})
+
+
+def _remote_peers(info: dict, local: set[str]) -> list[str]:
+    """Addresses of other machines with sessions attached in peer mode ("N from ADDRESS")."""
+    count: dict[str, int] = {}
+    for x in info.get("sessions") or []:
+        if x.get("whatami") != "peer":
+            continue
+        hosts = [ln.split("/", 1)[-1].rsplit(":", 1)[0].strip("[]") for ln in x.get("links") or []]
+        for h in hosts:
+            if h and not is_loopback(h) and h not in local:
+                count[h] = count.get(h, 0) + 1
+                break
+    return [f"{n} from {h}" for h, n in count.items()]
+
+
+@check("ros2.router", "ros", "The master's Zenoh router answers by name", FACTOR_ROUTER, ros=2)
+async def check_router(ctx: CheckContext) -> Outcome:
+    s = ctx.settings
+    t = budget(ctx, "ros2.router")
+    deadline = time.monotonic() + t - 0.1
+    name, port = s.master_name, s.ros.zenoh_port
+    endpoint = ros2.master_endpoint(s)
+    role = "master" if s.is_master else "member"
+    ipv6 = ros2.ipv6_available()
+    data: dict[str, Any] = {"role": role, "endpoint": endpoint, "reachable": False,
+                            "address": None, "failure": None, "ipv6": ipv6, "remote_peers": []}
+    if not name:
+        return Outcome(Status.SKIP, "skipped: no master is named in the settings (ros.master)",
+                       [], data)
+    ev: list[str] = []
+    node_ep, how = node_endpoint(ctx)
+    local_task = None
+    if not s.is_master and how == "router":
+        local_task = asyncio.ensure_future(open_zenoh(node_ep, max(0.2, t * 0.3)))
+    if s.is_master:
+        data["listening"] = await run_blocking(_listening, port, timeout=1.0)
+        ev.append(f"TCP {port} listened on here: {', '.join(data['listening']) or 'nothing'}")
+    addrs, err = await resolve_ipv4(name, min(1.0, t * 0.25))
+    if not addrs:
+        data["failure"] = "resolve"
+        if local_task:
+            await close_zenoh((await local_task)[0])
+        return Outcome(Status.FAIL, f"the master's name {name} does not resolve here ({err}): add "
+                                    "it to /etc/hosts (Linux step)", ev, data)
+    data["address"] = addrs[0]
+    ev.append(f"{name} resolves to {addrs[0]}")
+    kind, words = await _tcp(addrs[0], port, max(0.2, min(t * 0.4, deadline - time.monotonic())))
+    ev.append(f"TCP {addrs[0]}:{port}: {words}")
+    session = info = None
+    if kind is None:
+        session, why = await open_zenoh(endpoint, max(0.2, min(t * 0.4, deadline - time.monotonic())))
+        if session is None:
+            kind = "not_zenoh"
+            ev.append(f"Zenoh session on {endpoint}: {why}")
+        else:
+            info = await run_blocking(zenohproto.router_info, session,
+                                      max(0.1, min(0.8, deadline - time.monotonic())),
+                                      timeout=max(0.2, deadline - time.monotonic()))
+    await close_zenoh(session)
+    data["failure"] = kind
+    local: dict[str, Any] = {"reachable": False, "endpoint": node_ep, "zid": None,
+                             "version": None, "routers": [], "failure": None}
+    if local_task is not None:
+        ls, lwhy = await local_task
+        if ls is not None:
+            li = await run_blocking(zenohproto.router_info, ls, 0.5, timeout=1.0)
+            await close_zenoh(ls)
+            local.update(reachable=True, zid=li.get("zid"), version=li.get("version"),
+                         routers=router_links(li))
+            ev.append(f"this machine's router at {node_ep}: {li.get('zid')} "
+                      f"{li.get('version') or ''}, linked to router(s) {local['routers'] or 'none'}")
+        else:
+            local["failure"] = lwhy
+            ev.append(f"this machine's router at {node_ep}: {lwhy}")
+        data["local_router"] = local
+    if s.is_master:
+        lst = data["listening"]
+        problem = None
+        if not lst:
+            problem = "not_running"
+            cfg_listen = [e for e in _router_config_listen(ctx) if ros2.listen_problem(e, ipv6)
+                          == "ipv6_only"]
+            if cfg_listen and not ipv6:
+                problem = "ipv6_only"
+        elif all(is_loopback(a) for a in lst):
+            problem = "loopback"
+        data["listen_problem"] = problem
+    if info:
+        data.update(reachable=True, router_zid=info.get("zid"), router_version=info.get("version"),
+                    locators=info.get("locators") or [])
+        mine = {s.this.local_ip} if s.is_master else {(s.peer(name) or Peer(name)).local_ip}
+        data["remote_peers"] = _remote_peers(info, {m for m in mine if m})
+        ev.append(f"Zenoh router {info.get('zid')} answers at {endpoint}"
+                  + (f", version {info['version']}" if info.get("version") else
+                     " (admin space off: no version)")
+                  + (f", listening on {', '.join(info.get('locators') or [])}"
+                     if info.get("locators") else ""))
+    elif kind is None:
+        data.update(reachable=True, router_zid=None)
+    if not data["reachable"]:
+        where = "here" if s.is_master else f"on {name}"
+        hint = {"refused": f"is rmw_zenohd running {where}?",
+                "timeout": f"is TCP {port} forwarded to {name} on its modem?",
+                "unreachable": "no route to that address",
+                "not_zenoh": "something else answers on that port"}.get(kind or "", "")
+        if s.is_master and data.get("listen_problem") == "ipv6_only":
+            hint = (f"the router's config listens on tcp/[::]:{port} and this host has no IPv6, "
+                    f"so rmw_zenohd cannot start: listen on tcp/0.0.0.0:{port}")
+        return Outcome(Status.FAIL, f"no Zenoh router at {endpoint} ({addrs[0]}): {words}"
+                                    + (f"; {hint}" if hint else ""), ev, data)
+    if s.is_master and data.get("listen_problem") == "loopback":
+        return Outcome(Status.FAIL, f"the router listens on loopback only ({', '.join(data['listening'])}"
+                                    f"): the modem's forward of TCP {port} cannot reach it; "
+                                    f"listen on tcp/0.0.0.0:{port}", ev, data)
+    if local_task is not None and not local["reachable"]:
+        return Outcome(Status.FAIL, f"the master's router answers at {endpoint}, but this "
+                                    f"machine's own router does not ({local['failure']}): start "
+                                    "it (ros2 run rmw_zenoh_cpp rmw_zenohd), or run the nodes "
+                                    "here in client mode", ev, data)
+    if local_task is not None and data.get("router_zid") and \
+            data["router_zid"] not in local["routers"]:
+        return Outcome(Status.FAIL, f"this machine's router is not linked to the master's router "
+                                    f"({data['router_zid']}): its config must connect to "
+                                    f"{endpoint} (ZENOH_ROUTER_CONFIG_URI; `rosnet-tui ros apply`)",
+                       ev, data)
+    if data["remote_peers"]:
+        return Outcome(Status.WARN, "the master's router has node(s) attached in peer mode from "
+                                    f"another machine ({', '.join(data['remote_peers'])}): they "
+                                    "see the graph but get no data; run them in client mode, "
+                                    "or give their machine a router", ev, data)
+    ver = f" ({data['router_version']})" if data.get("router_version") else ""
+    return Outcome(Status.PASS, f"the master's Zenoh router{ver} answers at {endpoint} "
+                                f"({addrs[0]})", ev, data)
+
+
+def _router_config_listen(ctx: CheckContext) -> list[str]:
+    path = zenoh_env(ctx).get("ZENOH_ROUTER_CONFIG_URI")
+    if not path:
+        return list(ros2.UPSTREAM_LISTEN)
+    cfg, _ = _read_router_config(path)
+    return ros2.endpoints_of(ros2.config_value(cfg or {}, "listen/endpoints"), "router")

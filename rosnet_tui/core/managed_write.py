@@ -1,0 +1,466 @@
+"""Writing one file safely: atomic rename, or a journaled in-place rewrite where the file is a
+mount point, and recovery of an in-place write that was cut short.
+
+An in-place rewrite cannot be atomic, so it is journaled: the old and the new bytes go to a
+journal file beside the target first (``.NAME.rosnet-tui.DEV-INODE.inplace``, fsynced, locked by
+the writer while it writes), then the target is rewritten, then the journal is removed. A writer
+killed at any moment leaves the old content, the new one, or a mix of the two with its journal:
+the next read through :func:`read_bytes` completes the write.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import hashlib
+import json
+import os
+import re
+import secrets
+import stat
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from rosnet_tui.core import tempfiles
+from rosnet_tui.core.managed_text import ManagedFileError, PermissionNeededError
+
+LOCK_TIMEOUT_S = 10.0
+_TMP_RE = tempfiles.MANAGED_TMP
+INPLACE_MAGIC = b"rosnet-tui in-place journal 1\n"
+# Where an in-place write journals when the target's folder may not be written.
+INPLACE_DIR = "inplace"
+
+# Test hook: called between the fsync of the temp file and the rename (crash tests set it).
+_before_rename: Callable[[], None] | None = None
+# Test hook: called between the in-place write and its truncation (crash tests set it).
+_before_truncate: Callable[[], None] | None = None
+
+
+# --------------------------------------------------------------------------- preview
+def read_bytes(path: Path) -> bytes | None:
+    """The file's bytes, or None when it does not exist. Other errors: ManagedFileError.
+
+    An in-place write that was cut short (its journal is still beside the file) is completed
+    first when this process may write the file; otherwise the bytes it will have once
+    completed are returned."""
+    try:
+        effective = recover_in_place(Path(path))
+        real = Path(os.path.realpath(path))
+        _remove_stale_temps(real.parent, real.name)
+        if effective is not None:
+            return effective
+        return _read_regular(Path(path))
+    except FileNotFoundError:
+        return None
+    except IsADirectoryError:
+        raise ManagedFileError(f"{path} is a folder, not a file") from None
+    except PermissionError:
+        raise PermissionNeededError(f"this user may not read {path}", [Path(path)]) from None
+    except OSError as exc:
+        raise ManagedFileError(f"cannot read {path}: {exc.strerror}") from None
+
+
+MAX_FILE_BYTES = 256 << 20   # hosts files and shell files are far smaller
+
+
+def _read_regular(path: Path) -> bytes:
+    """A regular file's bytes; anything else (a FIFO, a device behind a link) is refused
+    without reading it, as is a file over MAX_FILE_BYTES."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
+        if not stat.S_ISREG(st.st_mode):
+            raise ManagedFileError(f"{path} is not a regular file (a FIFO or a device?); "
+                                   "nothing was read or written")
+        if st.st_size > MAX_FILE_BYTES:
+            raise ManagedFileError(f"{path} is too big ({st.st_size} bytes) to be a file "
+                                   "rosnet-tui edits")
+        with os.fdopen(os.dup(fd), "rb") as f:
+            return f.read()
+    finally:
+        os.close(fd)
+
+
+# --------------------------------------------------------------------------- writing
+def is_mount_point(path: Path) -> bool:
+    """True when *path* is itself a mount point (a bind-mounted file such as a netns /etc/hosts)."""
+    try:
+        real = os.path.realpath(path)
+        with open("/proc/self/mountinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                parts = line.split()
+                if len(parts) > 4 and _unescape_mount(parts[4]) == real:
+                    return True
+    except OSError:
+        pass
+    return False
+
+
+def _unescape_mount(s: str) -> str:
+    return re.sub(r"\\([0-7]{3})", lambda m: chr(int(m.group(1), 8)), s)
+
+
+def can_write(path: Path) -> bool:
+    """Whether this process can write *path* by one of our strategies (no privilege needed)."""
+    if os.geteuid() == 0:
+        return True
+    try:
+        real = Path(os.path.realpath(path))
+        if real.exists():
+            return os.access(real, os.W_OK, effective_ids=True)  # rename if the folder allows it, else in place
+        parent = real.parent
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        return os.access(parent, os.W_OK | os.X_OK, effective_ids=True)
+    except OSError:
+        return False
+
+
+@dataclass
+class WriteOutcome:
+    path: Path
+    in_place: bool
+    deleted: bool = False
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _copy_xattrs(src: Path, fd: int) -> None:
+    """Best effort: keep extended attributes (an SELinux label on /etc/hosts, for one)."""
+    try:
+        names = os.listxattr(src)
+    except OSError:
+        return
+    for name in names:
+        try:
+            os.setxattr(fd, name, os.getxattr(src, name))
+        except OSError:
+            pass
+
+
+def _remove_stale_temps(folder: Path, name: str) -> None:
+    """Remove temp files that writers killed before their rename left behind."""
+    tempfiles.sweep(folder, tempfiles.MANAGED_TMP, name)
+
+
+def sweep_state_dir(state_dir: Path) -> list[str]:
+    """Remove the temp files killed writers left in the state dir (journal entries, backups,
+    status files); the names removed."""
+    sd = Path(state_dir)
+    removed = tempfiles.sweep(sd / "journal", tempfiles.PRIVATE_TMP)
+    with contextlib.suppress(OSError), os.scandir(sd / "backups") as it:
+        for e in it:
+            if e.is_dir(follow_symlinks=False):
+                removed += tempfiles.sweep(Path(e.path), tempfiles.PRIVATE_TMP)
+    for folder in (sd, sd / "sync"):
+        removed += tempfiles.sweep(folder, tempfiles.ATOMIC_TMP)
+    removed += tempfiles.sweep(sd / "inplace", tempfiles.MANAGED_TMP)
+    return removed
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    off = 0
+    while off < len(data):
+        off += os.pwrite(fd, view[off:], off)
+
+
+# --------------------------------------------------------------------------- in-place journal
+def _journal_name(real: Path, st: os.stat_result) -> str:
+    return f".{real.name}.rosnet-tui.{st.st_dev:x}-{st.st_ino:x}.inplace"
+
+
+def _journal_bytes(real: Path, st: os.stat_result, old: bytes, new: bytes) -> bytes:
+    head = {"path": str(real), "dev": st.st_dev, "ino": st.st_ino,
+            "old_len": len(old), "old_sha256": hashlib.sha256(old).hexdigest(),
+            "new_len": len(new), "new_sha256": hashlib.sha256(new).hexdigest()}
+    return INPLACE_MAGIC + json.dumps(head, sort_keys=True).encode() + b"\n" + old + new
+
+
+def _parse_journal(data: bytes) -> tuple[dict, bytes, bytes] | None:
+    """(header, old, new) of an in-place journal, or None when it is not a whole, valid one."""
+    if not data.startswith(INPLACE_MAGIC):
+        return None
+    nl = data.find(b"\n", len(INPLACE_MAGIC))
+    if nl < 0:
+        return None
+    try:
+        head = json.loads(data[len(INPLACE_MAGIC):nl])
+        old_len, new_len = int(head["old_len"]), int(head["new_len"])
+    except (ValueError, TypeError, KeyError):
+        return None
+    body = data[nl + 1:]
+    if old_len < 0 or new_len < 0 or len(body) != old_len + new_len:
+        return None
+    old, new = body[:old_len], body[old_len:]
+    if hashlib.sha256(old).hexdigest() != head.get("old_sha256") \
+            or hashlib.sha256(new).hexdigest() != head.get("new_sha256"):
+        return None
+    return head, old, new
+
+
+def _common_prefix(a: bytes, b: bytes) -> int:
+    n = min(len(a), len(b))
+    lo, step = 0, 1 << 16
+    while lo < n:                                 # whole blocks first, then bytes
+        hi = min(n, lo + step)
+        if a[lo:hi] != b[lo:hi]:
+            break
+        lo = hi
+    while lo < n and a[lo] == b[lo]:
+        lo += 1
+    return lo
+
+
+def _is_torn(cur: bytes, old: bytes, new: bytes) -> bool:
+    """Whether *cur* is what rewriting *old* with *new* in place leaves when cut short: the new
+    bytes up to some point, the old ones after it (not yet truncated, or extended)."""
+    k = _common_prefix(cur, new)
+    return cur[k:] == old[k:]
+
+
+def _rewrite(real: Path, data: bytes) -> None:
+    fd = os.open(real, os.O_WRONLY | os.O_NOFOLLOW)
+    try:
+        _write_all(fd, data)
+        os.fsync(fd)
+        if _before_truncate is not None:
+            _before_truncate()
+        os.ftruncate(fd, len(data))
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def recover_in_place(path: Path, *, journal_dir: Path | None = None,
+                     wait_s: float = LOCK_TIMEOUT_S) -> bytes | None:
+    """Complete an in-place write of *path* that was cut short, from its journal (beside the
+    file, or in *journal_dir*).
+
+    Returns None when there is nothing to do (no journal: read the file as it is) or when the
+    write was completed here; when this process may not write the file (a user previewing what
+    root's service left), the bytes the file will hold once completed. A journal whose writer is
+    still at work (it holds the journal's lock) is waited for, up to *wait_s*. The file is
+    changed only when it holds the journal's old bytes, its new ones, or a mix that only that
+    write leaves; after anyone else's change the journal is dropped and the file left alone.
+    Raises OSError (FileNotFoundError when *path* does not exist).
+    """
+    real = Path(os.path.realpath(path))
+    st = os.stat(real)
+    name = _journal_name(real, st)
+    jpaths = [real.parent / name] + ([Path(journal_dir) / name] if journal_dir else [])
+    for jpath in jpaths:
+        got = _recover_from(real, st, jpath, wait_s)
+        if got is not None:
+            return got
+    return None
+
+
+def _recover_from(real: Path, st: os.stat_result, jpath: Path, wait_s: float) -> bytes | None:
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            jfd = os.open(jpath, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+        except OSError:
+            return None                       # none (the usual case), or not ours to read
+        try:
+            try:
+                fcntl.flock(jfd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    return None               # a live writer: it finishes its own write
+                time.sleep(0.02)
+                continue
+            jst = os.fstat(jfd)
+            try:
+                if os.stat(jpath).st_ino != jst.st_ino:
+                    continue                  # replaced while we waited: look again
+            except FileNotFoundError:
+                return None                   # its writer finished and removed it
+            # Trust only a journal of root or of this user, that nobody else may change.
+            if jst.st_uid not in (0, os.geteuid()) or jst.st_mode & 0o022 \
+                    or not stat.S_ISREG(jst.st_mode):
+                return None
+            with os.fdopen(os.dup(jfd), "rb") as f:
+                parsed = _parse_journal(f.read(2 * st.st_size + (64 << 20)))
+            cur = real.read_bytes()
+            target = None
+            if parsed is not None and parsed[0].get("path") == str(real) \
+                    and (parsed[0].get("dev"), parsed[0].get("ino")) == (st.st_dev, st.st_ino):
+                _, old, new = parsed
+                if cur in (new, old) or _is_torn(cur, old, new):
+                    target = new
+            effective = target if target is not None and target != cur else None
+            if not (os.access(real, os.W_OK, effective_ids=True) and os.access(jpath.parent, os.W_OK | os.X_OK, effective_ids=True)):
+                return effective              # a user reading what root will complete
+            try:
+                if effective is not None:
+                    _rewrite(real, effective)
+                    if real.read_bytes() != effective:
+                        return effective      # not completed: the journal stays for later
+                os.unlink(jpath)
+            except OSError:
+                return effective              # e.g. a read-only mount: same as not allowed
+            _fsync_dir(jpath.parent)
+            return None
+        finally:
+            os.close(jfd)
+
+
+def _write_in_place(real: Path, data: bytes, journal_dir: Path | None = None) -> None:
+    """Rewrite an existing file through its own inode (mount points, hard links, other owners).
+
+    Journaled (see the module docstring): a kill at any moment leaves the old bytes, the new
+    ones, or a state the next :func:`read_bytes` completes. Read back to verify; on a mismatch
+    the old bytes are put back. The journal goes beside the file, or into *journal_dir* when
+    the file's folder may not be written (then only a write through the same state dir
+    completes it); with neither, the write is not journaled.
+    """
+    recover_in_place(real, journal_dir=journal_dir)
+    old = real.read_bytes()
+    st = os.stat(real)
+    folder = real.parent if os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True) else journal_dir
+    if folder is not None and folder == journal_dir:
+        try:
+            os.makedirs(folder, mode=0o700, exist_ok=True)
+        except OSError:
+            folder = None
+    jfd: int | None = None
+    jpath: Path | None = None
+    if folder is not None:
+        jpath = Path(folder) / _journal_name(real, st)
+        tmp = Path(folder) / f".{real.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+        jfd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW,
+                      stat.S_IMODE(st.st_mode) & 0o644)
+        try:
+            fcntl.flock(jfd, fcntl.LOCK_EX)   # held until the write is done (or we die)
+            _write_all(jfd, _journal_bytes(real, st, old, data))
+            os.fsync(jfd)
+            os.rename(tmp, jpath)
+            _fsync_dir(Path(folder))
+        except BaseException:
+            os.close(jfd)
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+    try:
+        ok = False
+        try:
+            _rewrite(real, data)
+            ok = real.read_bytes() == data
+        except Exception:
+            with contextlib.suppress(Exception):
+                _put_back(real, old, jpath)
+            raise
+        if not ok:
+            _put_back(real, old, jpath)
+            raise ManagedFileError(f"{real}: the content read back differs from what was "
+                                   "written; the previous content was put back")
+        if jpath is not None:
+            os.unlink(jpath)
+            _fsync_dir(jpath.parent)
+    finally:
+        if jfd is not None:
+            os.close(jfd)
+
+
+def _put_back(real: Path, old: bytes, jpath: Path | None) -> None:
+    """After a failed in-place write: the old bytes again, and the journal dropped."""
+    _rewrite(real, old)
+    if jpath is not None and real.read_bytes() == old:
+        os.unlink(jpath)
+
+
+def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: int | None,
+                    xattr_src: Path | None) -> None:
+    folder = real.parent
+    tmp = folder / f".{real.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
+            _write_all(fd, data)
+            if uid is not None or gid is not None:
+                try:
+                    os.fchown(fd, -1 if uid is None else uid, -1 if gid is None else gid)
+                except PermissionError:
+                    pass  # a normal user's own file: owner is already right
+            os.fchmod(fd, mode)
+            if xattr_src is not None:
+                _copy_xattrs(xattr_src, fd)
+            os.fsync(fd)
+            if _before_rename is not None:
+                _before_rename()
+            os.replace(tmp, real)
+        finally:
+            os.close(fd)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    _fsync_dir(folder)
+
+
+def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
+               uid: int | None = None, gid: int | None = None,
+               new_mode: int = 0o644, journal_dir: Path | None = None) -> WriteOutcome:
+    """Write *data* to *path* safely (None deletes it); keeps mode, owner and xattrs.
+
+    Symlinks are followed (a dotfile linked into a repo stays a link). Rename when possible;
+    in place for mount points (or when rename fails with EBUSY/EXDEV), hard links, files owned by
+    another user that we may write, and files in folders we may not write.
+    """
+    real = Path(os.path.realpath(path))
+    try:
+        st: os.stat_result | None = os.stat(real)
+    except FileNotFoundError:
+        st = None
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        raise ManagedFileError(f"{path} is not a regular file")
+    if data is None:
+        if st is not None:
+            os.unlink(real)
+            _fsync_dir(real.parent)
+        return WriteOutcome(Path(path), False, deleted=True)
+    if st is None:
+        real.parent.mkdir(parents=True, exist_ok=True)
+        _remove_stale_temps(real.parent, real.name)
+        _write_renaming(real, data, new_mode if mode is None else mode, uid, gid, None)
+        return WriteOutcome(Path(path), False)
+    mode = stat.S_IMODE(st.st_mode) if mode is None else mode
+    uid = st.st_uid if uid is None else uid
+    gid = st.st_gid if gid is None else gid
+    euid = os.geteuid()
+    in_place = (is_mount_point(real) or st.st_nlink > 1
+                or (euid != 0 and st.st_uid != euid)
+                or not os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True))
+    if not in_place:
+        _remove_stale_temps(real.parent, real.name)
+        try:
+            _write_renaming(real, data, mode, uid, gid, real)
+            return WriteOutcome(Path(path), False)
+        except OSError as exc:
+            if exc.errno not in (errno.EBUSY, errno.EXDEV):
+                raise
+    _remove_stale_temps(real.parent, real.name)
+    _write_in_place(real, data, journal_dir)
+    if stat.S_IMODE(os.stat(real).st_mode) != mode:
+        with contextlib.suppress(OSError):
+            os.chmod(real, mode)
+    return WriteOutcome(Path(path), True)

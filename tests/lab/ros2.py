@@ -1,0 +1,186 @@
+"""The lab as a ROS 2 network over rmw_zenoh (no ROS 2 distribution installs here).
+
+``with Ros2World(lab) as w:`` turns the built lab into the ROS 2 path of the product and back:
+
+- a real Zenoh router (eclipse-zenoh in router mode, what ``rmw_zenohd`` is) on each computer,
+  started from the JSON5 config file ``rosnet-tui ros apply`` writes: on the robot (the master,
+  turtlebot) listening on ``tcp/0.0.0.0:7447``; on the laptop (sami, a member) connecting out to
+  ``tcp/turtlebot:7447``, which the laptop's hosts file maps to the robot's public IP;
+- the robot's modem forwards TCP 7447 (the router) and TCP 22; the laptop's modem forwards TCP 22
+  only. SSH is the path the checks use to run the peer's side of an exchange; no ROS traffic
+  needs it, and the ``member_unforwarded`` variant takes it away;
+- ~/.bashrc on both: RMW_IMPLEMENTATION, ROS_DOMAIN_ID, ROS_DISTRO, ZENOH_ROUTER_CONFIG_URI;
+- stand-in nodes (tests/lab/ros2_scripts/node.py) behave on the wire as rmw_zenoh nodes do.
+
+Leaving the block stops the routers and nodes and puts the ROS 1 lab back (lab.reset()).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from . import topology
+from .lab import Lab, _write_in_place
+from .topology import ADDR, COMPUTERS
+
+SCRIPTS = Path(__file__).resolve().parent / "ros2_scripts"
+ZROUTER = SCRIPTS / "zrouter.py"
+NODE = SCRIPTS / "node.py"
+ROS2_IDS = ["ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in"]
+
+
+class Ros2World:
+    def __init__(self, lab: Lab, distro: str = "jazzy") -> None:
+        self.lab = lab
+        self.distro = distro
+        self.routers: dict[str, subprocess.Popen] = {}
+        self.nodes: list[subprocess.Popen] = []
+        self.bash_extra: dict[str, dict[str, str]] = {h: {} for h in COMPUTERS}
+
+    # ------------------------------------------------------------------ settings and files
+    def settings(self, host: str, **ros: Any):
+        s = self.lab.settings(host)
+        return replace(s, ros=replace(s.ros, version=2, zenoh_port=topology.ZENOH_PORT,
+                                      domain_id=0, **ros))
+
+    def config_path(self, host: str, **ros: Any) -> Path:
+        from rosnet_tui.core.settings import atomic_write_text, render_settings
+
+        path = self.lab.home(host) / ".config" / "rosnet-tui" / "config.toml"
+        atomic_write_text(path, render_settings(self.settings(host, **ros)), mode=0o644)
+        return path
+
+    def router_config_path(self, host: str) -> Path:
+        return self.lab.home(host) / ".config" / "rosnet-tui" / "zenoh-router.json5"
+
+    def write_router_config(self, host: str, text: str | None = None) -> Path:
+        from rosnet_tui.core import ros2
+
+        path = self.router_config_path(host)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text if text is not None else ros2.render_router_config(self.settings(host)))
+        return path
+
+    def exports(self, host: str) -> dict[str, str]:
+        out = {"RMW_IMPLEMENTATION": "rmw_zenoh_cpp", "ROS_DOMAIN_ID": "0",
+               "ROS_DISTRO": self.distro,
+               "ZENOH_ROUTER_CONFIG_URI": str(self.router_config_path(host))}
+        out.update(self.bash_extra[host])
+        return {k: v for k, v in out.items() if v != ""}
+
+    def write_bashrc(self, host: str, **extra: str) -> None:
+        """~/.bashrc of *host* with the ROS 2 exports (*extra* adds or, with "", removes)."""
+        self.bash_extra[host].update(extra)
+        lines = [f"# ~/.bashrc of {topology.HOSTNAMES[host]} (rosnet-tui network lab, ROS 2)"]
+        lines += [f"export {k}='{v}'" if " " in v or '"' in v else f"export {k}={v}"
+                  for k, v in self.exports(host).items()]
+        _write_in_place(self.lab.bashrc_path(host), "\n".join(lines) + "\n")
+
+    def env(self, host: str) -> dict[str, str]:
+        """*host*'s environment as a shell that sourced its ~/.bashrc has it."""
+        env = self.lab.env(host)
+        env.update(self.exports(host))
+        return env
+
+    def forward(self, robot: str = "ros2", laptop: str = "ssh") -> None:
+        self.lab._set_forwarding("robot", robot)
+        self.lab._set_forwarding("laptop", laptop)
+
+    # ------------------------------------------------------------------ processes
+    def start_router(self, host: str, port: int = 7447, timeout: float = 15.0) -> subprocess.Popen:
+        self.stop_router(host)
+        log = open(self.lab.log_path(f"zrouter-{host}"), "w")  # noqa: SIM115
+        proc = self.lab.spawn(host, [sys.executable, str(ZROUTER),
+                                     str(self.router_config_path(host))],
+                              stdout=log, stderr=subprocess.STDOUT)
+        log.close()
+        self.routers[host] = proc
+        if not self.lab.wait_listening(host, port, timeout=timeout, proc=proc):
+            raise RuntimeError(f"the Zenoh router on {host} did not start: "
+                               + self.lab.log_path(f"zrouter-{host}").read_text()[-2000:])
+        return proc
+
+    def stop_router(self, host: str) -> None:
+        proc = self.routers.pop(host, None)
+        if proc is not None:
+            self.lab.kill(proc, grace=1.0)
+
+    def node(self, host: str, role: str, *, connect: str = "tcp/127.0.0.1:7447",
+             mode: str = "peer", topic: str = "/chatter", name: str | None = None,
+             domain: int = 0, distro: str | None = None) -> subprocess.Popen:
+        """A stand-in rmw_zenoh node on *host*; waits (bounded) until its session is open."""
+        argv = [sys.executable, str(NODE), role, "--connect", connect, "--mode", mode,
+                "--topic", topic, "--domain", str(domain), "--distro", distro or self.distro]
+        if name:
+            argv += ["--name", name]
+        proc = self.lab.spawn(host, argv)
+        self.nodes.append(proc)
+        if not self.lab.wait_output(proc, r"NODE \S+", timeout=10):
+            raise RuntimeError(f"stand-in node on {host} did not start: {self.lab.output(proc)}")
+        return proc
+
+    def check(self, host: str, *, step: str = "ros", config: Path | None = None,
+              env: dict[str, str] | None = None, timeout: float = 90) -> dict[str, dict]:
+        """`rosnet-tui check --json --step STEP` on *host*: {check id: entry}."""
+        r = self.lab.rosnet(host, "check", "--json", "--step", step, "--config",
+                            str(config or self.config_path(host)),
+                            env=env or self.env(host), timeout=timeout)
+        assert r.stdout.strip(), r.stderr
+        return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+
+    # ------------------------------------------------------------------ the world
+    def __enter__(self) -> Ros2World:
+        self.lab.reset()
+        try:
+            self.forward()
+            for h in COMPUTERS:
+                self.config_path(h)
+                self.write_router_config(h)
+                self.write_bashrc(h)
+            self.start_router("robot")
+            self.start_router("laptop")
+        except BaseException:
+            self.__exit__()
+            raise
+        return self
+
+    def healthy(self) -> None:
+        """Back to the healthy ROS 2 network (after a variant inside the block)."""
+        for p in self.nodes:
+            self.lab.kill(p, grace=0.5)
+        self.nodes.clear()
+        self.bash_extra = {h: {} for h in COMPUTERS}
+        self.forward()
+        for h in COMPUTERS:
+            self.lab.write_hosts(h, topology.hosts_text(h))
+            self.config_path(h)
+            self.write_router_config(h)
+            self.write_bashrc(h)
+            if h not in self.routers or self.routers[h].poll() is not None:
+                self.start_router(h)
+
+    def __exit__(self, *exc: Any) -> None:
+        for p in self.nodes:
+            self.lab.kill(p, grace=0.5)
+        self.nodes.clear()
+        for h in list(self.routers):
+            self.stop_router(h)
+        self.lab.reset()
+        for h in COMPUTERS:
+            self.lab.config_path(h)
+            self.router_config_path(h).unlink(missing_ok=True)
+
+
+def explain(results: dict[str, dict]) -> str:
+    return "\n".join(f"{c['id']}: {c['status']} ({c.get('duration_s', 0):.2f} s) - {c['summary']}"
+                     + "".join(f"\n    {e}" for e in c["evidence"])
+                     + "".join(f"\n  -> {a['meaning']}" for a in c.get("advice") or [])
+                     for c in results.values())
+
+
+__all__ = ["ADDR", "ROS2_IDS", "Ros2World", "explain"]

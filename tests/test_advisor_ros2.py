@@ -1,0 +1,137 @@
+"""The advisor's ROS 2 rules over check results shaped as the ros2.* checks report them
+(recorded into the golden inputs by tests/golden/record.py, next to the ROS 1 cases)."""
+
+from __future__ import annotations
+
+from rosnet_tui.core.advisor import advise
+from rosnet_tui.core.results import CheckResult, Status
+from tests.test_ros2 import master, member
+
+
+def r(cid: str, status: str, data: dict, step: str = "ros", summary: str = "s") -> CheckResult:
+    return CheckResult(cid, step, Status(status), summary, [], 0.1, 3.0, data)
+
+
+def ids(findings) -> list[str]:
+    return [f.rule for f in findings]
+
+
+def test_dds_is_explained_with_what_to_do_instead():
+    fs = advise([r("ros2.env", "fail", {"dds": True, "rmw": None, "bashrc_rmw": None})], member())
+    f = next(f for f in fs if f.rule == "ros2.env.dds")
+    assert "multicast" in f.meaning and "rmw_zenoh" in " ".join(f.actions)
+
+
+def test_router_refused_from_a_member_means_not_running():
+    fs = advise([r("ros2.router", "fail", {"failure": "refused", "endpoint": "tcp/turtlebot:7447",
+                                           "address": "203.0.113.2", "reachable": False})],
+                member())
+    assert ids(fs)[0] == "ros2.router.not_running" and "turtlebot" in fs[0].meaning
+
+
+def test_router_timeout_from_a_member_means_the_forward_is_missing():
+    fs = advise([r("ros2.router", "fail", {"failure": "timeout", "endpoint": "tcp/turtlebot:7447",
+                                           "address": "203.0.113.2", "reachable": False}),
+                 r("ros2.pubsub_out", "fail", {"ok": False, "failed_hop": "master_router",
+                                               "peer": "turtlebot"})], member())
+    f = next(f for f in fs if f.rule == "ros2.port.not_forwarded")
+    assert "TCP 7447" in f.actions[0] and "ros2.pubsub_out" in f.check_ids
+    assert "ros2.link.missing" not in ids(fs)
+
+
+def test_master_port_test_closed_reads_table_1_for_zenoh_port():
+    fs = advise([r("router.port_open", "fail", {"zenoh_port": 7447, "zenoh_port_open": False,
+                                                "zenoh_listener": "router", "ports": []},
+                   "router")], master())
+    assert "ros2.port.not_forwarded" in ids(fs) and "security.exposed" not in ids(fs)
+    fs = advise([r("router.port_open", "pass", {"zenoh_port": 7447, "zenoh_port_open": True,
+                                                "zenoh_listener": "router", "ports": []},
+                   "router")], master())
+    assert "security.zenoh_exposed" in ids(fs) and "security.exposed" not in ids(fs)
+
+
+def test_loopback_and_ipv6_listen_problems():
+    fs = advise([r("ros2.router", "fail", {"listen_problem": "loopback", "listening": ["127.0.0.1"],
+                                           "reachable": True})], master())
+    assert "ros2.router.loopback" in ids(fs)
+    fs = advise([r("ros2.router", "fail", {"listen_problem": "ipv6_only", "listening": [],
+                                           "ipv6": False, "reachable": False})], master())
+    assert "ros2.router.ipv6_only" in ids(fs)
+
+
+def test_peer_mode_and_distro_mismatch_are_told_apart():
+    dropped = r("ros2.pubsub_out", "fail", {"ok": False, "failed_hop": "data_dropped",
+                                            "peer": "turtlebot", "graph_seen": True})
+    fs = advise([dropped, r("ros2.router", "warn", {"remote_peers": ["1 from 198.51.100.2"],
+                                                    "reachable": True})], member())
+    assert "ros2.peer_mode" in ids(fs)
+    fs = advise([dropped, r("ros2.env", "fail", {"distro": "jazzy", "distro_mismatch": ["turtlebot"],
+                                                 "peer_distros": {"turtlebot": "humble"}})],
+                member())
+    assert "ros2.env.distro" in ids(fs) and "ros2.peer_mode" not in ids(fs)
+
+
+def test_domain_mismatch_is_named_from_either_side():
+    fs = advise([r("ros2.env", "fail", {"domain_ok": False, "domain_id": "5"})], member())
+    assert "ros2.env.domain" in ids(fs)
+    fs = advise([r("ros2.pubsub_out", "fail", {"ok": False, "failed_hop": "peer_subscriber",
+                                               "detail": "the peer's nodes use ROS_DOMAIN_ID 5, "
+                                                         "ours 0", "peer": "sami"})], master())
+    assert "ros2.env.domain" in ids(fs)
+
+
+def test_carrier_nat_matters_on_the_master_only():
+    cg = r("isp.cgnat", "warn", {"cgnat": True, "double_nat": False, "hop": "100.64.0.1",
+                                 "method": "traceroute"}, "isp")
+    fs = advise([cg], master())
+    f = next(f for f in fs if f.rule == "ros2.cgnat")
+    assert f.severity == "fail" and "VPS" in " ".join(f.actions) and "isp.cgnat" not in ids(fs)
+    fs = advise([cg], member())
+    f = next(f for f in fs if f.rule == "ros2.cgnat")
+    assert f.severity == "info" and "does not matter" in f.meaning
+
+
+def test_an_unlinked_member_router_is_named():
+    fs = advise([r("ros2.graph", "fail", {"missing": ["turtlebot"]}),
+                 r("ros2.pubsub_in", "fail", {"ok": False, "failed_hop": "peer_router",
+                                              "peer": "sami", "detail": "no link"})], master())
+    assert "ros2.link.missing" in ids(fs)
+
+
+def test_ros1_rules_stay_quiet_on_ros2_results():
+    fs = advise([r("ros2.env", "pass", {"dds": False, "domain_ok": True})], member())
+    assert not [f for f in fs if f.rule.startswith("ros.")]
+
+
+# Cases for tests/test_advisor.py's CASES (every rule fires on its case and stays silent on the
+# healthy ROS 1 network): rule id -> () -> (results by id, settings).
+def _case(settings, *results: CheckResult):
+    return lambda: ({x.id: x for x in results}, settings())
+
+
+ROS2_CASES = {
+    "ros2.env.dds": _case(member, r("ros2.env", "fail", {"dds": True, "rmw": None})),
+    "ros2.env.domain": _case(member, r("ros2.env", "fail", {"domain_ok": False,
+                                                            "domain_id": "5"})),
+    "ros2.env.distro": _case(member, r("ros2.env", "fail", {
+        "distro": "jazzy", "distro_mismatch": ["turtlebot"],
+        "peer_distros": {"turtlebot": "humble"}})),
+    "ros2.router.not_running": _case(member, r("ros2.router", "fail", {
+        "failure": "refused", "endpoint": "tcp/turtlebot:7447", "address": "203.0.113.2"})),
+    "ros2.router.loopback": _case(master, r("ros2.router", "fail", {
+        "listen_problem": "loopback", "listening": ["127.0.0.1"]})),
+    "ros2.router.ipv6_only": _case(master, r("ros2.router", "fail", {
+        "listen_problem": "ipv6_only", "listening": [], "ipv6": False})),
+    "ros2.peer_mode": _case(member, r("ros2.router", "warn", {
+        "remote_peers": ["1 from 198.51.100.2"], "reachable": True})),
+    "ros2.link.missing": _case(master, r("ros2.pubsub_in", "fail", {
+        "ok": False, "failed_hop": "peer_router", "peer": "sami", "detail": "no link"})),
+    "ros2.port.not_forwarded": _case(master, r("router.port_open", "fail", {
+        "zenoh_port": 7447, "zenoh_port_open": False, "zenoh_listener": "router", "ports": []},
+        "router")),
+    "ros2.cgnat": _case(master, r("isp.cgnat", "warn", {
+        "cgnat": True, "double_nat": False, "hop": "100.64.0.1", "method": "traceroute"}, "isp")),
+    "security.zenoh_exposed": _case(master, r("router.port_open", "pass", {
+        "zenoh_port": 7447, "zenoh_port_open": True, "zenoh_listener": "router", "ports": []},
+        "router")),
+}

@@ -1,0 +1,214 @@
+"""ROS 2 over rmw_zenoh, without the lab: settings, the wire format, the written configuration,
+the steps text, which checks a version runs, and address sync leaving the ROS 2 block alone."""
+
+from __future__ import annotations
+
+import json
+import struct
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from rosnet_tui.core import ros2, zenohproto
+from rosnet_tui.core.checks.runner import select
+from rosnet_tui.core.forwarding import ports_to_forward, required_ports
+from rosnet_tui.core.settings import (
+    Peer,
+    RosSettings,
+    Settings,
+    SettingsError,
+    ThisComponent,
+    parse_settings,
+    render_settings,
+)
+from rosnet_tui.core.steps import STEP_BY_ID, step_for
+
+
+def member(**ros) -> Settings:
+    return Settings(this=ThisComponent(name="sami", role="member", local_ip="192.168.1.10"),
+                    peers=[Peer(name="turtlebot", public_ip="203.0.113.2", ssh_user="robot")],
+                    ros=RosSettings(master="turtlebot", version=2, **ros))
+
+
+def master(**ros) -> Settings:
+    return Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1"),
+                    peers=[Peer(name="sami", public_ip="198.51.100.2", ssh_user="me")],
+                    ros=RosSettings(master="turtlebot", version=2, **ros))
+
+
+# --------------------------------------------------------------------------- settings
+def test_files_without_version_keep_working_and_take_the_environment(monkeypatch):
+    text = ('[this]\nname = "sami"\nrole = "member"\n[[peer]]\nname = "turtlebot"\n'
+            'public_ip = "203.0.113.2"\n[ros]\nmaster = "turtlebot"\nport = 11311\n')
+    monkeypatch.delenv("ROS_VERSION", raising=False)
+    assert parse_settings(text).ros.version == 1
+    monkeypatch.setenv("ROS_VERSION", "2")
+    s = parse_settings(text)
+    assert s.ros.version == 2 and s.ros.zenoh_port == 7447 and s.ros.domain_id == 0
+    assert parse_settings(render_settings(s)).ros == s.ros
+
+
+@pytest.mark.parametrize("line, key", [("version = 3", "ros.version"),
+                                       ("zenoh_port = 80", "ros.zenoh_port"),
+                                       ("zenoh_port = 65001", "ros.zenoh_port"),
+                                       ("domain_id = 233", "ros.domain_id"),
+                                       ("domain_id = -1", "ros.domain_id"),
+                                       ('domain_id = "0"', "ros.domain_id")])
+def test_bad_ros2_keys_are_refused_with_the_key(line, key):
+    with pytest.raises(SettingsError) as exc:
+        parse_settings(f'[this]\nname = "a"\n[ros]\n{line}\n')
+    assert exc.value.key == key and exc.value.line == 4
+
+
+def test_a_bad_key_exits_2_with_one_line(tmp_path):
+    import subprocess
+    import sys
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[this]\nname = "a"\n[ros]\nversion = 7\n')
+    r = subprocess.run([sys.executable, "-m", "rosnet_tui", "check", "--config", str(cfg)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "ros.version" in r.stderr and "Traceback" not in r.stderr
+
+
+# --------------------------------------------------------------------------- which checks
+def test_the_ros_step_lists_the_checks_of_the_version():
+    one = [c.id for c in select(["ros"], settings=replace(member(), ros=RosSettings(
+        master="turtlebot")))]
+    two = [c.id for c in select(["ros"], settings=member())]
+    assert one == ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in"]
+    assert two == ["ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in"]
+    assert step_for("ros", member()).check_ids == tuple(two)
+    assert STEP_BY_ID["ros"].check_ids == tuple(one)
+
+
+def test_forwarding_per_version_and_role():
+    assert [p.ports for p in required_ports(master())] == ["7447"]
+    assert required_ports(member()) == []
+    assert [p.ports for p in required_ports(master(zenoh_port=17447))] == ["17447"]
+    one = replace(master(), ros=RosSettings(master="turtlebot"))
+    assert [(p.protocol, p.ports) for p in required_ports(one)] == [("TCP", "1024-65000")]
+    assert all(not p.required for p in ports_to_forward(member()))
+
+
+# --------------------------------------------------------------------------- wire format
+def test_keys_tokens_payloads_and_attachments_have_rmw_zenohs_layout():
+    assert zenohproto.topic_key(0, "/chatter") == (
+        "0/chatter/std_msgs::msg::dds_::String_/RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db"
+        "1288021743503259e948f6b1a18")
+    node = zenohproto.node_token(3, "abc", "7", "talker", "/robot1")
+    assert node == "@ros2_lv/3/abc/7/7/NN/%/%robot1/talker"
+    pub = zenohproto.endpoint_token(0, "abc", "7", "8", "MP", "talker", "/chatter")
+    assert pub.startswith("@ros2_lv/0/abc/7/8/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/")
+    tok = zenohproto.parse_token(pub)
+    assert (tok["kind"], tok["topic"], tok["name"], tok["namespace"]) == ("MP", "/chatter",
+                                                                         "talker", "/")
+    assert zenohproto.parse_token("@ros2_lv/0/a") is None
+    payload = zenohproto.encode_string("hi")
+    assert payload == b"\x00\x01\x00\x00\x03\x00\x00\x00hi\x00"
+    assert zenohproto.decode_string(payload) == "hi"
+    att = zenohproto.encode_attachment(5, 123, bytes(range(16)))
+    assert len(att) == 33 and att[16] == 16 and struct.unpack_from("<qq", att) == (5, 123)
+    assert zenohproto.decode_attachment(att) == (5, 123, bytes(range(16)))
+    assert zenohproto.decode_attachment(att[:32]) is None
+
+
+def test_the_peer_program_says_when_zenoh_is_missing(tmp_path):
+    import subprocess
+    import sys
+    src = Path(zenohproto.__file__).read_text()
+    shadow = tmp_path / "zenoh.py"
+    shadow.write_text("raise ImportError('no zenoh here')\n")
+    r = subprocess.run([sys.executable, "-", "sub", "--timeout", "1"], input=src,
+                       capture_output=True, text=True, timeout=30, cwd=tmp_path,
+                       env={"PYTHONPATH": str(tmp_path), "HOME": str(tmp_path),
+                            "PATH": "/usr/bin:/bin"})
+    rep = zenohproto.parse_report(r.stdout)
+    assert r.returncode == zenohproto.NO_ZENOH_EXIT and rep["error"] == "no_zenoh", r.stderr
+
+
+# --------------------------------------------------------------------------- configuration
+def test_router_configs_per_role():
+    m, s = ros2.router_config(master()), ros2.router_config(member())
+    assert m["listen"]["endpoints"] == ["tcp/0.0.0.0:7447"] and m["connect"]["endpoints"] == []
+    assert s["connect"]["endpoints"] == ["tcp/turtlebot:7447"]
+    other = ros2.router_config(master(zenoh_port=17447))["listen"]["endpoints"]
+    assert other == ["tcp/0.0.0.0:17447", "tcp/127.0.0.1:7447"]
+    text = ros2.render_router_config(member())
+    assert text.startswith(ros2.MANAGED_HEADER) and ros2.loads_json5(text) == s
+    assert ros2.router_config_problems(member(), ["tcp/[::]:7447"], [], True)
+    assert "no IPv6" in ros2.router_config_problems(master(), ["tcp/[::]:7447"], [], False)[0]
+    assert "loopback" in ros2.router_config_problems(master(), ["tcp/127.0.0.1:7447"], [], True)[0]
+    assert ros2.router_config_problems(master(), ["tcp/0.0.0.0:7447"], [], False) == []
+
+
+def test_override_parsing_and_the_lone_node_rules():
+    values, bad = ros2.parse_override(ros2.client_override(member()))
+    assert bad == [] and values == {"mode": "client", "connect/endpoints": ["tcp/turtlebot:7447"]}
+    assert ros2.override_problems(member(), values) == []
+    peer, _ = ros2.parse_override('mode="peer";connect/endpoints=["tcp/turtlebot:7447"]')
+    assert "peers connected straight" in ros2.override_problems(member(), peer)[0]
+    assert ros2.parse_override("mode")[1]
+
+
+def test_ros_apply_writes_both_files_and_refuses_a_foreign_config(tmp_path):
+    from rosnet_tui.core import managed_file as mf
+
+    rc, bashrc = tmp_path / "router.json5", tmp_path / "bashrc"
+    bashrc.write_text("# mine\n")
+    ps = ros2.previews(member(), bashrc, router_config_path=rc, distro="jazzy")
+    mf.apply_previews(ps, state_dir=tmp_path / "state")
+    text = bashrc.read_text()
+    assert text.startswith("# mine\n# BEGIN rosnet-tui") and f"ZENOH_ROUTER_CONFIG_URI={rc}" in text
+    assert json.loads(rc.read_text().split("\n", 4)[4])["connect"]["endpoints"] == [
+        "tcp/turtlebot:7447"]
+    client = ros2.previews(member(), bashrc, client=True, router_config_path=rc, distro="jazzy")
+    assert len(client) == 1 and "ZENOH_CONFIG_OVERRIDE='mode=\"client\"" in client[0].new.decode()
+    humble = ros2.previews(member(), bashrc, client=True, distro="humble",
+                           session_config_path=tmp_path / "s.json5")
+    assert "ZENOH_SESSION_CONFIG_URI" in humble[0].new.decode() and len(humble) == 2
+    mf.undo_last(tmp_path / "state")
+    assert bashrc.read_text() == "# mine\n" and not rc.exists()
+    rc.write_text("{ mode: 'router' }  // my own\n")
+    with pytest.raises(mf.ManagedFileError, match="not written by rosnet-tui"):
+        ros2.previews(member(), bashrc, router_config_path=rc)
+
+
+def test_steps_text_per_role():
+    assert "Nothing to forward" in STEP_BY_ID["router"].configure(member())
+    assert "TCP 7447" in STEP_BY_ID["router"].configure(master())
+    assert "carrier-grade NAT included" in STEP_BY_ID["isp"].configure(member())
+    assert "VPS" in STEP_BY_ID["isp"].configure(master())
+    ros = STEP_BY_ID["ros"].configure(member())
+    assert "tcp/turtlebot:7447" in ros and "client mode" in ros and "Humble" in ros
+    assert "tcp/0.0.0.0:7447" in STEP_BY_ID["ros"].configure(master())
+
+
+# --------------------------------------------------------------------------- address sync
+def test_address_sync_leaves_the_ros2_block_alone(tmp_path):
+    """Sync rewrites the master's hosts line; under ROS 2 that is all (the router dials the
+    master by name), and it must not put a ROS 1 ROS_MASTER_URI block over the ROS 2 one."""
+    from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core.sync.service import SyncService
+    from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
+
+    s = replace(member(), sync=replace(member().sync, folder=str(tmp_path / "shared")))
+    (tmp_path / "shared").mkdir()
+    cfg = tmp_path / "config.toml"
+    cfg.write_text(render_settings(s))
+    bashrc, hosts = tmp_path / "bashrc", tmp_path / "hosts"
+    hosts.write_text("127.0.0.1\tlocalhost\n")
+    bashrc.write_text("# mine\n")
+    mf.apply_previews(ros2.previews(s, bashrc, router_config_path=tmp_path / "r.json5",
+                                    distro="jazzy"), state_dir=tmp_path / "st")
+    before = bashrc.read_text()
+    svc = SyncService(cfg, state_dir=tmp_path / "state", hosts_path=hosts, bashrc_path=bashrc,
+                      local_source=lambda _s: LocalAddress("eth0", "192.168.1.10", "192.168.1.1"),
+                      public_source=lambda _s: PublicLookup("198.51.100.2", "test"),
+                      netlink=False, run_checks=False)
+    svc.next_fetch = svc.next_publish = svc.next_apply = 0.0
+    res = svc.round()
+    assert res.ok and res.applied
+    assert "203.0.113.2\tturtlebot" in hosts.read_text().replace(" ", "\t") or \
+        "turtlebot" in hosts.read_text()
+    assert bashrc.read_text() == before, bashrc.read_text()
