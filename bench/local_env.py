@@ -191,15 +191,18 @@ def local_world():
 
 
 def spawn_app(world: LocalWorld, *, config: Path | None = None, cols: int = 80,
-              rows: int = 24) -> PtyProcess:
+              rows: int = 24, term: str = "xterm-256color", args: tuple[str, ...] = (),
+              no_color: bool = False) -> PtyProcess:
     argv = [sys.executable, "-m", "rosnet_tui"]
     if config is not None:
         argv += ["--config", str(config)]
-    return PtyProcess(argv, world.env(), cols=cols, rows=rows, cwd=str(REPO))
+    argv += list(args)
+    return PtyProcess(argv, world.env(), cols=cols, rows=rows, cwd=str(REPO), term=term,
+                      no_color=no_color)
 
 
 def spawn_bare(world: LocalWorld | None, updates: int = 4, cols: int = 80,
-               rows: int = 24) -> PtyProcess:
+               rows: int = 24, term: str = "xterm-256color") -> PtyProcess:
     env = world.env() if world is not None else base_env()
     return PtyProcess([sys.executable, "-m", "bench.bare_app", str(updates)], env, cols=cols,
-                      rows=rows, cwd=str(REPO))
+                      rows=rows, cwd=str(REPO), term=term)

@@ -53,10 +53,14 @@ class PtyProcess:
     """A program under a pty of *cols* x *rows*; everything it writes is kept with read times."""
 
     def __init__(self, argv: list[str], env: dict[str, str], *, cols: int = 80, rows: int = 24,
-                 cwd: str | None = None) -> None:
+                 cwd: str | None = None, term: str = "xterm-256color",
+                 no_color: bool = False) -> None:
         env = dict(env)
-        env.update(TERM="xterm-256color", COLUMNS=str(cols), LINES=str(rows))
+        env.update(TERM=term, COLUMNS=str(cols), LINES=str(rows))
         env.pop("NO_COLOR", None)
+        env.pop("COLORTERM", None)
+        if no_color:
+            env["NO_COLOR"] = "1"
         master, slave = os.openpty()
         fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", rows, cols, 0, 0))
         self.chunks: list[Chunk] = []

@@ -142,7 +142,8 @@ DEMO_RESULTS_ROS2 = [
 
 
 async def _shoot_ros2(out: Path, width: int, height: int) -> list[Path]:
-    """The ROS 2 path: the router step (one port, the card) and the ROS step, checks passed."""
+    """The ROS 2 path: the router step (one port, the card) and the ROS step, checks passed,
+    then the set-up."""
     from rosnet_tui.ui.app import AppDeps, RosnetApp
 
     written: list[Path] = []
@@ -161,6 +162,11 @@ async def _shoot_ros2(out: Path, width: int, height: int) -> list[Path]:
                 path = out / f"ros2-step-{number}-{step}-{width}x{height}.svg"
                 app.save_screenshot(filename=path.name, path=str(out))
                 written.append(path)
+            await pilot.press("s")  # the set-up: the ROS version and only its fields
+            await pilot.pause()
+            path = out / f"ros2-setup-{width}x{height}.svg"
+            app.save_screenshot(filename=path.name, path=str(out))
+            written.append(path)
     return written
 
 

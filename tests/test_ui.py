@@ -192,8 +192,8 @@ async def test_checks_stream_live_and_the_ui_stays_responsive(tmp_path):
         assert rows["isp.slow"].state == "warn"
         assert rows["isp.hangs"].state == "fail"
         assert "timed out" in rows["isp.hangs"].result.summary
-        bar = app.screen.query_one("#step-item-isp")
-        assert bar.has_class("-fail") and "[x]" in str(bar.render())
+        bar = app.screen.query_one("#step-bar")
+        assert bar._states["isp"] == "fail" and "1 ISP [x]" in str(bar.render())
 
 
 async def test_cancel_puts_unfinished_checks_back_to_not_run(tmp_path):
@@ -224,8 +224,9 @@ async def test_evidence_expands_for_the_highlighted_check(tmp_path):
         await pilot.pause(0.2)
         await pilot.press("e")
         await pilot.pause()
-        box = app.screen.query_one("#evidence")
-        assert box.display and "reachable: false" in str(box.render())
+        box = app.screen.query_one("#evidence-box")
+        text = app.screen.query_one("#evidence")
+        assert box.display and "reachable: false" in str(text.render())
         assert isinstance(app.screen.focused, DataTable)
         await pilot.press("enter")  # Enter toggles too
         await pilot.pause()

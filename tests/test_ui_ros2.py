@@ -35,3 +35,51 @@ async def test_switching_to_ros2_in_setup_changes_the_ros_step(tmp_path):
         await pilot.press("2")
         await pilot.pause()
         assert "7447" in app.session.router_card_text(76)
+
+
+async def test_ros2_fields_in_a_burst_equal_slow_typing(tmp_path):
+    """The ROS version picked and the Zenoh fields it reveals typed in one burst (issue 12's
+    burst-safe keys): the same screen and saved settings as typed slowly."""
+    from tests.test_ui_burst import compare
+    from tests.test_ui_burst import complete_settings as burst_settings
+
+    keys = ["tab"] * 6 + ["enter", "up", "enter", "tab", "backspace", "7448", "tab",
+                          "backspace", "5", "ctrl+s"]  # a field's text is selected as it is entered
+    state = await compare(tmp_path, burst_settings(), keys, open_setup=True)
+    assert state["screen"] == "StepScreen", state
+    saved = load_settings(tmp_path / "burst" / "config.toml")
+    assert (saved.ros.version, saved.ros.zenoh_port, saved.ros.domain_id) == (2, 7448, 5)
+
+
+async def test_an_unsaved_ros_version_comes_back_with_the_draft(tmp_path):
+    """The set-up draft keeps the version as text; the next session selects ROS 2 again."""
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("s")
+        await pilot.pause()
+        app.screen.query_one("#ros-version", Select).value = 2
+        await pilot.pause()
+        app.screen.keep_draft()
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        assert app.screen.query_one("#ros-version", Select).value == 2
+        assert app.screen.query_one("#zenoh-field").display
+
+
+async def test_a_step_first_shown_after_the_switch_is_the_ros2_step(tmp_path):
+    """Switching to ROS 2 before the ROS step was ever shown: that step still came up with
+    ROS 1's expected outcome (its Step was made when the app started)."""
+    app = make_app(tmp_path, complete_settings(), specs=lambda step: select([step]))
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("s")
+        await pilot.pause()
+        app.screen.query_one("#ros-version", Select).value = 2
+        await pilot.pause()
+        await pilot.press("ctrl+s")
+        await pilot.pause()
+        await pilot.press("4")
+        await pilot.pause()
+        step = app.screen
+        assert list(step.query_one(CheckList).rows)[0] == "ros2.env"
+        assert "Zenoh" in str(step.query_one("#expected-text").render())

@@ -42,3 +42,20 @@ async def test_a_ros2_member_needs_nothing(tmp_path):
                  ros=RosSettings(master="turtlebot", version=2))
     text, disabled = await _shown(s, tmp_path)
     assert "Nothing to forward" in text and disabled
+
+
+async def test_the_map_window_says_how_it_closes_and_q_closes_it(tmp_path):
+    """Like every window of the wizard (issue 12): its own key bar, Esc and a second key (q)."""
+    s = Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1"))
+    app = _Host(MapScreen(s, tmp_path / "state", timeout=1.0))
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause(0.2)
+        bar = str(app.screen.query_one("KeyBar").render())
+        assert "Esc/q" in bar and "Cancel" in bar
+        assert str(app.screen.query_one("#write-apply", Button).label) == "[Map]"
+        await pilot.press("y")  # ROS 1: nothing to map, y does nothing
+        await pilot.pause()
+        assert isinstance(app.screen, MapScreen)
+        await pilot.press("q")
+        await pilot.pause()
+        assert not isinstance(app.screen, MapScreen)

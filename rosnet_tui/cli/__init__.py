@@ -161,6 +161,10 @@ def load_settings_or_say(args: argparse.Namespace, *, complete: bool = False):
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv:  # the wizard, as most people start it: no parser to build
+        from rosnet_tui.cli.wizard import run_wizard
+
+        return run_wizard(argparse.Namespace(config=None, setup=False, command=None))
     parser = build_parser(argv)
     args = parser.parse_args(argv)
     if args.command is None:

@@ -5,8 +5,12 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import threading
 
-from rosnet_tui.cli import EXIT_USAGE, config_path
+from rosnet_tui.cli import EXIT_FAIL, EXIT_USAGE, config_path
+
+# Terminals that cannot draw a full-screen program.
+NO_SCREEN_TERMS = ("dumb", "unknown", "")
 
 
 def run_wizard(args: argparse.Namespace) -> int:
@@ -24,11 +28,46 @@ def run_wizard(args: argparse.Namespace) -> int:
         print("rosnet-tui: the wizard needs a terminal. Headless, use "
               "'rosnet-tui check' (see --help).", file=sys.stderr)
         return EXIT_USAGE
+    term = os.environ.get("TERM", "")
+    if term in NO_SCREEN_TERMS:
+        print(f"rosnet-tui: this terminal (TERM={term or 'unset'}) cannot show the wizard; "
+              "'rosnet-tui check' runs the same checks as plain text (or set TERM, e.g. "
+              "TERM=xterm).", file=sys.stderr)
+        return EXIT_USAGE
     if os.geteuid() == 0 and not os.environ.get("ROSNET_TUI_ALLOW_ROOT"):
         print("rosnet-tui: note: running as root is not needed; files that need root are "
               "written through sudo.", file=sys.stderr)
+    import asyncio
+
     from rosnet_tui.ui.app import AppDeps, RosnetApp
 
     app = RosnetApp(AppDeps(config_path=path, settings=settings or new_settings(),
                             open_setup=bool(getattr(args, "setup", False))))
-    return app.run() or 0
+    # Our own loop: leaving does not wait for threads still blocked on a dead network (a check's
+    # connect or SSH handshake); asyncio.run() would, for as long as their timeouts.
+    loop = asyncio.new_event_loop()
+    asyncio.set_event_loop(loop)
+    result = app.run(loop=loop)
+    code = app.return_code or 0
+    if code == 1:  # Textual has printed the error; a crash never exits 0
+        print("rosnet-tui: the wizard stopped on an error (above). Results and an unsaved "
+              "set-up were kept: run rosnet-tui again to go on.", file=sys.stderr)
+        code = EXIT_FAIL
+    elif not code:
+        code = int(result or 0)
+    return _leave(loop, code)
+
+
+def _leave(loop, code: int) -> int:
+    """Return *code*, or end the process at once when threads are still blocked on the network
+    (their results are no longer wanted; everything worth keeping is already written)."""
+    executor = getattr(loop, "_default_executor", None)
+    if executor is not None:
+        executor.shutdown(wait=False, cancel_futures=True)
+    busy = [t for t in threading.enumerate()
+            if t is not threading.main_thread() and t.is_alive() and not t.daemon]
+    if busy:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code

@@ -7,22 +7,22 @@ layer that shows it, and tests can build one without an app.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rosnet_tui.core.checks import CheckContext, CheckSpec
-from rosnet_tui.core.netinfo import LocalNet, with_detected
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.settings import Settings, atomic_write_text, default_state_dir, save_settings
-from rosnet_tui.core.steps import STEP_BY_ID
-from rosnet_tui.core.write_plans import WritePaths, WritePlan, write_plan
+from rosnet_tui.core.settings import Settings, default_state_dir, save_settings
+from rosnet_tui.core.steps import STEP_BY_ID, step_for
+from rosnet_tui.core.ui_state import UiState, local_time
 
 if TYPE_CHECKING:
     from rosnet_tui.core.advisor import Finding
+    from rosnet_tui.core.checks import CheckContext, CheckSpec
+    from rosnet_tui.core.netinfo import LocalNet
+    from rosnet_tui.core.write_plans import WritePaths, WritePlan
 
 # A check's state in the wizard: the four result statuses plus two of the wizard's own.
 NOT_RUN, RUNNING = "not run", "running"
@@ -62,27 +62,82 @@ class WizardSession:
     specs_for: Callable[[str], list[CheckSpec]] = _default_specs
     # Tests hand in their own context factory; None: the runner's everyday context.
     context_factory: Callable[[Settings], CheckContext] | None = None
-    detected: LocalNet = field(default_factory=LocalNet)
+    # How this machine's network is found out (interfaces, default route): asked once, when
+    # something needs it, since saved settings usually say it already.
+    detect_net: Callable[[], LocalNet] | None = None
+    _detected: LocalNet | None = field(default=None, init=False, repr=False)
     findings: list[Finding] = field(default_factory=list)
     _states: dict[str, tuple[str, CheckResult | None]] = field(default_factory=dict, init=False,
                                                                repr=False)
     _specs: dict[str, list[CheckSpec]] = field(default_factory=dict, init=False, repr=False)
+    # What survives the session (ui.json): results as they land, findings, the set-up draft.
+    ui_state: UiState = field(init=False, repr=False)
+    _restored: dict[str, str] = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.ui_state = UiState(self.state_dir)
+        for cid, (result, at) in self.ui_state.results().items():
+            self._states[cid] = (result.status.value, result)
+            self._restored[cid] = at
+        if self._restored:
+            self.findings = list(self.ui_state.findings())  # type: ignore[arg-type]
 
     # ------------------------------------------------------------------ settings
+    @property
+    def detected(self) -> LocalNet:
+        """This machine's interface, address and gateway (found out on first use)."""
+        if self._detected is None:
+            from rosnet_tui.core.netinfo import LocalNet, detect_local_net
+
+            self._detected = (self.detect_net or detect_local_net)() or LocalNet()
+        return self._detected
+
+    @detected.setter
+    def detected(self, net: LocalNet) -> None:
+        self._detected = net
+
     def runtime_settings(self) -> Settings:
         """The saved settings, with what they leave blank filled in from this machine."""
+        t = self.settings.this
+        if t.local_ip and t.interface:  # nothing to fill in: no need to ask the system
+            return self.settings
+        from rosnet_tui.core.netinfo import with_detected
+
         return with_detected(self.settings, self.detected)
 
     def save_settings(self, settings: Settings) -> None:
-        save_settings(settings, self.config_path)
+        """Save *settings*; a file that already says the same is left untouched (not a byte,
+        not its time)."""
+        from rosnet_tui.core.settings import SettingsError, load_settings
+
+        try:
+            same = self.config_path.exists() and load_settings(self.config_path) == settings
+        except SettingsError:
+            same = False
+        if not same:
+            save_settings(settings, self.config_path)
         self.settings = settings
 
     # ------------------------------------------------------------------ checks
     def specs(self, step: str) -> list[CheckSpec]:
-        """The checks of *step* for the settings' ROS version (ros.* or ros2.*)."""
+        """The checks of *step* for the settings' ROS version (ros.* or ros2.*); the registry's
+        are imported on first use (the first screen needs only their names)."""
         if step not in self._specs:
             self._specs[step] = self.specs_for(step)
         return [c for c in self._specs[step] if c.applies(self.settings)]
+
+    def specs_loaded(self, step: str) -> bool:
+        return step in self._specs or self.specs_for is not _default_specs
+
+    def check_rows(self, step: str) -> list[tuple[str, str]]:
+        """(id, title) of every check of *step*, without importing the checks if they are not
+        loaded yet (the title is then the id; the screens show short labels anyway)."""
+        declared = list(step_for(step, self.settings).check_ids)
+        if not self.specs_loaded(step):
+            return [(cid, cid) for cid in declared]
+        specs = self.specs(step)
+        known = {s.id for s in specs}
+        return [(s.id, s.title) for s in specs] + [(c, c) for c in declared if c not in known]
 
     def make_context(self) -> CheckContext:
         """The context of one round of checks (the one door: core.checks.runner)."""
@@ -100,10 +155,19 @@ class WizardSession:
 
     def set_check_state(self, check_id: str, state: str, result: CheckResult | None) -> None:
         self._states[check_id] = (state, result)
+        self._restored.pop(check_id, None)
         if result is not None or state == NOT_RUN:
             from rosnet_tui.core.advisor import advise  # loaded with the first result
 
             self.findings = advise(self.latest_results(), self.runtime_settings())
+        if result is not None:  # kept at once: a dropped session loses nothing
+            self.ui_state.set_result(result, self.findings)
+
+    def restored_at(self, check_id: str) -> str:
+        """When the shown result of *check_id* came, if it is from an earlier session ('' if
+        it is from this one, or there is none)."""
+        at = self._restored.get(check_id)
+        return local_time(at) if at else ""
 
     def latest_results(self) -> dict[str, CheckResult]:
         return {cid: r for cid, (_state, r) in self._states.items() if r is not None}
@@ -112,8 +176,12 @@ class WizardSession:
         return [f for f in self.findings if check_id in f.check_ids]
 
     def step_states(self) -> dict[str, str]:
-        return {s: aggregate([self.check_state(c.id)[0] for c in self.specs(s)])
-                for s in STEP_IDS}
+        out = {}
+        for s in STEP_IDS:
+            ids = ([c.id for c in self.specs(s)] if self.specs_loaded(s)
+                   else list(step_for(s, self.settings).check_ids))
+            out[s] = aggregate([self.check_state(cid)[0] for cid in ids])
+        return out
 
     # ------------------------------------------------------------------ configuration text
     def configuration_text(self, step_id: str) -> str:
@@ -151,11 +219,15 @@ class WizardSession:
 
     # ------------------------------------------------------------------ writing configuration
     def write_paths(self) -> WritePaths:
+        from rosnet_tui.core.write_plans import WritePaths
+
         return WritePaths(config_path=self.config_path, state_dir=self.state_dir,
                           hosts_path=self.hosts_path, bashrc_path=self.bashrc_path)
 
     def write_plan(self, step_id: str) -> WritePlan | None:
         """What `w` writes on *step_id* (None: the step writes nothing)."""
+        from rosnet_tui.core.write_plans import write_plan
+
         return write_plan(step_id, self.runtime_settings(), self.write_paths())
 
     def trust_host_key(self, name: str, port: int, host_key: str) -> Path:
@@ -164,19 +236,20 @@ class WizardSession:
         return trust_host_key(self.make_context().ssh, name, port, host_key)
 
     # ------------------------------------------------------------------ where the user was
-    def _ui_state_path(self) -> Path:
-        return self.state_dir / "ui.json"
-
     def last_step(self) -> str:
-        try:
-            data = json.loads(self._ui_state_path().read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            return STEP_IDS[0]
-        step = data.get("last_step") if isinstance(data, dict) else None
+        step = self.ui_state.last_step
         return step if step in STEP_IDS else STEP_IDS[0]
 
     def record_step(self, step: str) -> None:
-        try:
-            atomic_write_text(self._ui_state_path(), json.dumps({"last_step": step}) + "\n")
-        except OSError:
-            pass  # remembering the step is a convenience, never a reason to fail
+        self.ui_state.set_last_step(step)  # a convenience: never a reason to fail
+
+    # ------------------------------------------------------------------ the set-up draft
+    def draft(self) -> dict | None:
+        """A set-up form being filled in and not saved yet, from this or an earlier session."""
+        return self.ui_state.draft
+
+    def save_draft(self, fields: dict[str, str], peers: list[dict[str, str]]) -> None:
+        self.ui_state.set_draft(fields, peers)
+
+    def clear_draft(self) -> None:
+        self.ui_state.clear_draft()

@@ -10,14 +10,11 @@ from __future__ import annotations
 import fcntl
 import os
 import re
-import secrets
 import stat
 import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
-
-import tomlkit
 
 from rosnet_tui.core import tempfiles
 from rosnet_tui.core.settings_model import (  # noqa: F401 (the model; re-exported)
@@ -27,11 +24,14 @@ from rosnet_tui.core.settings_model import (  # noqa: F401 (the model; re-export
     DEFAULT_PORT_CHECK_URL,
     DEFAULT_PUBLIC_IP_URLS,
     DOMAIN_ID_MAX,
+    FIELD_SHOWN_CHARS,
     MAX_NESTING,
     MAX_SETTINGS_BYTES,
     PORT_MAX,
     PORT_MIN,
     PROFILES,
+    RESERVED_NAMES,
+    RESERVED_PREFIXES,
     ROLES,
     ROS_VERSIONS,
     SHOWN_VALUE_CHARS,
@@ -384,6 +384,8 @@ def _peer_values(p: Peer) -> dict[str, Any]:
 
 def render_settings(s: Settings, previous_text: str | None = None) -> str:
     """Render *s* as TOML, keeping the comments and order of *previous_text* when given."""
+    import tomlkit  # only when saving: reading needs tomllib alone
+
     try:
         doc = tomlkit.parse(previous_text) if previous_text else None
     except Exception:
@@ -430,6 +432,8 @@ def render_settings(s: Settings, previous_text: str | None = None) -> str:
 
 
 def _merge_table(doc: Any, name: str, values: dict[str, Any]) -> None:
+    import tomlkit
+
     tbl = doc.get(name)
     if tbl is None:
         tbl = tomlkit.table()
@@ -448,7 +452,7 @@ def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
     # What a killed writer of this file left: removed (ours, its writer gone, not locked).
     tempfiles.sweep(path.parent, tempfiles.ATOMIC_TMP, path.name)
     # An unpredictable name, created exclusively and never through a link.
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{secrets.token_hex(4)}")
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{os.urandom(4).hex()}")
     if mode is None:
         try:
             mode = path.stat().st_mode & 0o7777

@@ -76,6 +76,20 @@ class SettingsError(Exception):
 
 
 # --------------------------------------------------------------------------- validators
+# Names /etc/hosts already gives to this machine itself: a component called so would be looked up
+# as this machine (localhost, the ip6-* set of Debian-like systems).
+RESERVED_NAMES = ("localhost", "localhost.localdomain", "broadcasthost")
+RESERVED_PREFIXES = ("ip6-",)
+FIELD_SHOWN_CHARS = 24            # a value echoed by a field's validator (one line at 80 columns)
+
+
+def echoed(value: object) -> str:
+    """*value* as a validator's message quotes it: one line, cut to FIELD_SHOWN_CHARS (a paste
+    can be kilobytes; the reason must stay on the set-up screen's line)."""
+    one = shown(value, 1 << 30)
+    return one if len(one) <= FIELD_SHOWN_CHARS else one[:FIELD_SHOWN_CHARS - 3] + "..."
+
+
 def validate_name(value: str) -> str | None:
     """Return why *value* is not a usable network name, or None when it is."""
     if not value:
@@ -86,6 +100,10 @@ def validate_name(value: str) -> str | None:
         return "use letters, digits and '-' only (like turtlebot or sami-laptop)"
     if value.replace(".", "").isdigit():
         return "a name cannot be only digits"
+    low = value.lower()
+    if low in RESERVED_NAMES or low.startswith(RESERVED_PREFIXES):
+        return (f"'{echoed(value)}' is reserved for this machine itself in "
+                "/etc/hosts: pick another")
     return None
 
 
@@ -96,7 +114,8 @@ def validate_ip(value: str, *, required: bool = True) -> str | None:
     try:
         addr = ipaddress.ip_address(value)
     except ValueError:
-        return f"'{shown(value)}' is not an IP address (expected four numbers like 192.168.1.10)"
+        return (f"'{echoed(value)}' is not an IP address (expected four "
+                "numbers like 192.168.1.10)")
     if addr.version != 4:
         return "use an IPv4 address: the procedure's port forwarding is for IPv4"
     if addr.is_unspecified or addr.is_multicast or str(addr) == "255.255.255.255":
@@ -111,7 +130,7 @@ def validate_port(value: int | str, *, lo: int = PORT_MIN, hi: int = PORT_MAX) -
     try:
         port = value if isinstance(value, int) else int(str(value).strip())
     except ValueError:
-        return f"'{shown(value)}' is not a port number"
+        return f"'{echoed(value)}' is not a port number"
     if not lo <= port <= hi:
         return f"the port must be between {lo} and {hi}"
     return None
@@ -119,13 +138,13 @@ def validate_port(value: int | str, *, lo: int = PORT_MIN, hi: int = PORT_MAX) -
 
 def validate_ssh_user(value: str) -> str | None:
     if value and not _SSH_USER_RE.match(value):
-        return f"'{shown(value)}' is not a valid user name"
+        return f"'{echoed(value)}' is not a valid user name"
     return None
 
 
 def validate_url(value: str) -> str | None:
     if not re.match(r"^https?://[^\s/]+", value or ""):
-        return f"'{shown(value)}' is not an http:// or https:// URL"
+        return f"'{echoed(value)}' is not an http:// or https:// URL"
     return None
 
 
@@ -262,9 +281,11 @@ class Settings:
         for i, p in enumerate(self.peers):
             k = f"peer[{i + 1}]"
             add(f"{k}.name", validate_name(p.name))
-            if p.name.lower() in seen:
-                add(f"{k}.name", f"the name '{shown(p.name)}' is used twice (names are the "
-                                 "same whatever the case)")
+            if p.name.lower() == t.name.lower():
+                add(f"{k}.name", f"the name '{shown(p.name)}' is this component's own name "
+                                 "(used twice; names ignore case)")
+            elif p.name.lower() in seen:
+                add(f"{k}.name", f"the name '{shown(p.name)}' is used twice (names ignore case)")
             names.add(p.name)
             seen.add(p.name.lower())
             add(f"{k}.local_ip", validate_ip(p.local_ip, required=False))

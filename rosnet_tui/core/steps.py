@@ -10,7 +10,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
-from rosnet_tui.core.hosts import hosts_entries
 from rosnet_tui.core.procedure import STEP_IDS, STEP_TITLES, step_number
 from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
 
@@ -141,6 +140,8 @@ def configure_router(s: Settings) -> str:
 # --------------------------------------------------------------------------- step 3: Linux
 def configure_linux(s: Settings) -> str:
     profile = s.this.profile
+    from rosnet_tui.core.hosts import hosts_entries  # with the Linux step, not at start-up
+
     entries = hosts_entries(s, profile)
     width = max((len(e.ip) for e in entries), default=0)
     block = "\n".join(f"{e.ip.ljust(width)}  {e.name}" for e in entries) or "(no entries yet)"
@@ -327,8 +328,8 @@ def step_for(step_id: str, settings: Settings) -> Step:
             "the members can reach." if master else
             "This machine reaches the internet; nothing needs to reach it (any connection "
             "works, carrier-grade NAT included)."))
-    if step_id == "router":
-        return replace(step, expected=(
+    if step_id == "router":  # the modem's own word on the forward (router.upnp) is ROS 2's
+        return replace(step, check_ids=(*step.check_ids, "router.upnp"), expected=(
             f"Nothing to forward on the {settings.this.profile} LAN: every router reaches the "
             "master's directly." if settings.this.profile != "remote" else
             f"TCP {port}, tested from outside the modem, reaches this component's Zenoh router."

@@ -9,16 +9,17 @@ from __future__ import annotations
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Vertical
+from textual.containers import Vertical, VerticalScroll
 from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Header, Static
+from textual.widgets import DataTable, Static
 
 from rosnet_tui.core.advisor import Finding, all_rules
 from rosnet_tui.core.procedure import SEVERITY_WORDS as SEVERITY_WORD
 from rosnet_tui.core.procedure import step_title
 from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.steps import STEP_BY_ID
-from rosnet_tui.ui.widgets import RowTable
+from rosnet_tui.ui.theme import cut
+from rosnet_tui.ui.widgets import KeyBar, PlainHeader, RowTable
 
 
 def _short_step(step_id: str | None) -> str:
@@ -28,9 +29,10 @@ def _short_step(step_id: str | None) -> str:
 
 class AdvisorScreen(Screen[str | None]):
     BINDINGS = [
-        Binding("escape", "close", "Back"),
+        Binding("escape,q,f10", "close", "Back", key_display="Esc/q"),
         Binding("t", "toggle_view", "All rules / findings"),
         Binding("g", "go", "Go to its step"),
+        Binding("z", "zoom", "Zoom", show=False),
     ]
 
     def __init__(self, session: WizardSession, **kwargs) -> None:
@@ -40,12 +42,14 @@ class AdvisorScreen(Screen[str | None]):
         self._rows: list[tuple[str, str, str, str, str | None, bool, str]] = []
 
     def compose(self) -> ComposeResult:
-        yield Header(show_clock=False, icon="")
+        yield PlainHeader()
         with Vertical(id="advisor-body"):
             yield Static("", id="advisor-caption")
             yield RowTable(cursor_type="row", id="advisor-table")
-            yield Static("", id="advisor-detail", markup=False)
-        yield Footer()
+            with VerticalScroll(id="advisor-detail-box", classes="zoomable") as box:
+                box.can_focus = True  # Tab reaches it; the arrows scroll the whole advice
+                yield Static("", id="advisor-detail", markup=False)
+        yield KeyBar()
 
     def on_mount(self) -> None:
         self.title = "rosnet-tui"
@@ -80,19 +84,21 @@ class AdvisorScreen(Screen[str | None]):
         wide = self._wide()
         # Table 1's columns: condition | meaning | action, when the terminal has the room.
         text_cols = ("condition", "meaning", "action") if wide else ("condition",)
-        table.add_column("", key="mark", width=4)
+        table.add_column(Text(""), key="mark", width=4)
         free = max(20, (self.size.width or 80) - 4 - 9 - 12)
         widths = {"condition": free // 3, "meaning": free // 3, "action": free - 2 * (free // 3)} \
             if wide else {"condition": free}
         for col in text_cols:
-            table.add_column(col.capitalize(), key=col, width=widths[col])
-        table.add_column("Go to", key="step", width=9)
+            table.add_column(Text(col.capitalize()), key=col, width=widths[col])
+        table.add_column(Text("Go to"), key="step", width=9)
         for i, (rid, sev, cond, meaning, goto, hit, action) in enumerate(self._rows):
             mark = Text(">>" if (hit and self.show_all) else sev,
                         style="bold" if hit else "")
             cells = {"condition": cond, "meaning": meaning, "action": " ".join(action.split())}
-            table.add_row(mark, *(cells[c] for c in text_cols), _short_step(goto),
-                          key=f"{i}-{rid}")
+            # Cut with an ellipsis to the column (the detail below has it all); Text, never
+            # read as markup.
+            table.add_row(mark, *(Text(cut(cells[c], widths[c])) for c in text_cols),
+                          Text(_short_step(goto)), key=f"{i}-{rid}")
         self._show_detail()
 
     def _wide(self) -> bool:
@@ -136,3 +142,10 @@ class AdvisorScreen(Screen[str | None]):
 
     def action_close(self) -> None:
         self.dismiss(None)
+
+    def action_zoom(self) -> None:
+        """The focused part (the table or the advice) fills the screen; again to restore."""
+        if self.maximized is not None:
+            self.minimize()
+        else:
+            self.maximized = self.focused or self.query_one(DataTable)

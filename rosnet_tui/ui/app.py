@@ -7,29 +7,36 @@ run checks, write plans) and reports back with messages.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from textual.app import App
 from textual.binding import Binding
 
-from rosnet_tui.core.checks import CheckContext, CheckSpec
-from rosnet_tui.core.netinfo import LocalNet, detect_local_net
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.session import WizardSession
+from rosnet_tui.core.session import _default_specs as registry_specs
 from rosnet_tui.core.settings import Settings, default_state_dir
 from rosnet_tui.core.steps import step_for
+from rosnet_tui.ui.keys import OrderedKeys
 from rosnet_tui.ui.messages import Navigate, SettingsSaved
-from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
+from rosnet_tui.ui.terminal import frugal_driver_class
+from rosnet_tui.ui.theme import THEME, linux_console, use_console_glyphs
 from rosnet_tui.ui.widgets import StepBar
 
+if TYPE_CHECKING:
+    from rosnet_tui.core.checks import CheckContext, CheckSpec
+    from rosnet_tui.core.netinfo import LocalNet
 
-def _default_specs(step: str) -> list[CheckSpec]:
-    from rosnet_tui.core.checks.runner import select
 
-    return select([step])
+def detect_local_net() -> LocalNet:
+    from rosnet_tui.core.netinfo import detect_local_net as detect
+
+    return detect()
 
 
 @dataclass
@@ -40,7 +47,7 @@ class AppDeps:
     settings: Settings
     state_dir: Path = field(default_factory=default_state_dir)
     detect_net: Callable[[], LocalNet] = detect_local_net
-    specs_for: Callable[[str], list[CheckSpec]] = _default_specs
+    specs_for: Callable[[str], list[CheckSpec]] = registry_specs
     make_context: Callable[[Settings], CheckContext] | None = None
     open_setup: bool = False
     hosts_path: Path = Path("/etc/hosts")
@@ -50,10 +57,10 @@ class AppDeps:
         return WizardSession(config_path=self.config_path, settings=self.settings,
                              state_dir=self.state_dir, hosts_path=self.hosts_path,
                              bashrc_path=self.bashrc_path, specs_for=self.specs_for,
-                             context_factory=self.make_context)
+                             context_factory=self.make_context, detect_net=self.detect_net)
 
 
-class RosnetApp(App[int]):
+class RosnetApp(OrderedKeys, App[int]):
     CSS_PATH = "app.tcss"
     TITLE = "rosnet-tui"
     ENABLE_COMMAND_PALETTE = False
@@ -69,26 +76,40 @@ class RosnetApp(App[int]):
         Binding("s", "setup", "Set-up"),
         Binding("question_mark", "help", "Help", key_display="?"),
         Binding("q", "leave", "Quit"),
+        Binding("ctrl+z", "suspend_process", "Suspend", show=False, priority=True),
+        Binding("ctrl+l", "redraw", "Redraw", show=False),
     ]
 
     WIDE_AT = 110  # columns from which configuration and verification sit side by side
 
     def __init__(self, deps: AppDeps) -> None:
-        super().__init__()
+        super().__init__(driver_class=None if os.environ.get("ROSNET_TUI_FRUGAL") == "0"
+                         else frugal_driver_class())
+        self._init_ordered_keys()
+        # The theme and the console's glyphs are chosen before the first style is computed
+        # (choosing them later restyles every widget, at start-up).
+        self.register_theme(THEME)
+        self.theme = THEME.name
+        if self.no_color:  # NO_COLOR: the terminal's own colours only (Textual chose its filter
+            from textual.filter import Monochrome, NoColor  # for its default theme: greys)
+
+            self._filters = [NoColor() if isinstance(f, Monochrome) else f for f in self._filters]
+        if linux_console():
+            self.add_class("linux")
+            use_console_glyphs()
         self.deps = deps
         self.session = deps.session()
         self.current_step = self.session.last_step()
 
     # ------------------------------------------------------------------ start-up
     def on_mount(self) -> None:
-        self.session.detected = self.deps.detect_net()
+        self._catch_signals()
         self.set_class(self.size.width >= self.WIDE_AT, "wide")
         for step_id in STEP_IDS:
-            screen = StepScreen(step_for(step_id, self.session.settings), self.session.specs(step_id),
-                                self.session)
+            screen = StepScreen(step_for(step_id, self.session.settings), self.session)
             self.install_screen(screen, name=f"step-{step_id}")
         self.push_screen(f"step-{self.current_step}")
-        if self.deps.open_setup or not self.session.settings.complete:
+        if self.deps.open_setup or not self.session.settings.complete or self.session.draft():
             self.action_setup()
 
     def on_resize(self, event) -> None:
@@ -133,6 +154,8 @@ class RosnetApp(App[int]):
             self.notify("This is the first step.", timeout=3)
 
     def action_setup(self) -> None:
+        from rosnet_tui.ui.setup_screen import SetupScreen  # loaded when first opened
+
         def done(saved: bool | None) -> None:
             if saved:
                 self.notify(f"Settings saved to {self.session.config_path}", timeout=4)
@@ -148,6 +171,75 @@ class RosnetApp(App[int]):
 
     async def action_leave(self) -> None:
         await self.action_quit()
+
+    async def action_quit(self) -> None:
+        self.keep_state()  # Ctrl+Q in the middle of the set-up keeps what was typed
+        await super().action_quit()
+
+    def action_redraw(self) -> None:
+        """Ctrl+L: send the whole screen again (after line noise, or a message over it)."""
+        forget = getattr(self._driver, "forget_screen", None)
+        if forget is not None:
+            forget()
+        self.refresh(repaint=True, layout=True)
+        self.screen.refresh(repaint=True)
+
+    # ------------------------------------------------------------------ leaving
+    def _catch_signals(self) -> None:
+        """SIGTERM and SIGHUP (a dropped SSH session) end the wizard the normal way: what was
+        typed is kept, the terminal is given back as it was."""
+        import asyncio
+        import signal
+
+        if self.is_headless:
+            return
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            try:
+                loop.add_signal_handler(sig, self._on_signal, sig)
+            except (NotImplementedError, RuntimeError, ValueError):
+                pass
+
+    def _on_signal(self, sig: int) -> None:
+        import threading
+
+        self.keep_state()
+        self.exit(return_code=128 + int(sig))
+        # Should leaving hang (the loop blocked), give the terminal back and go anyway.
+        timer = threading.Timer(self.HARD_EXIT_S, self._hard_exit, args=(128 + int(sig),))
+        timer.daemon = True
+        timer.start()
+
+    HARD_EXIT_S = 2.0
+
+    def _hard_exit(self, code: int) -> None:
+        import os
+        import termios
+
+        driver = self._driver
+        try:
+            os.write(2, b"\x1b[<u\x1b[?1000l\x1b[?1003l\x1b[?1006l\x1b[?2004l\x1b[?7h"
+                        b"\x1b[?1049l\x1b[?25h\x1b[m")
+            attrs = getattr(driver, "attrs_before", None)
+            if attrs is not None:
+                termios.tcsetattr(driver.fileno, termios.TCSANOW, attrs)
+        except (OSError, termios.error, AttributeError):
+            pass
+        os._exit(code)
+
+    def keep_state(self) -> None:
+        """Save what is not saved yet (the set-up draft); results are saved as they land."""
+        for screen in self.screen_stack:
+            keep = getattr(screen, "keep_draft", None)
+            if keep is not None:
+                try:
+                    keep()
+                except Exception:  # keeping a draft must never stand in the way of leaving
+                    pass
+
+    def _handle_exception(self, error: Exception) -> None:
+        self.keep_state()  # a crash keeps the draft too
+        super()._handle_exception(error)
 
     def action_advisor(self) -> None:
         from rosnet_tui.ui.advisor_screen import AdvisorScreen

@@ -1,4 +1,4 @@
-"""The help screen: keys, and how the four steps fit together."""
+"""The help screen: every key on one page at 80x24, and how the four steps fit together."""
 
 from __future__ import annotations
 
@@ -6,47 +6,43 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import VerticalScroll
 from textual.screen import ModalScreen
-from textual.widgets import Markdown
+from textual.widgets import Static
+
+from rosnet_tui.ui.widgets import KeyBar
 
 HELP = """\
-# rosnet-tui
+rosnet-tui: keys                                  Esc, q or ? closes this help
 
-Four steps, done on **every** component (robot and laptops) and its own modem:
-**1 ISP** (is forwarding allowed, what is my public IP), **2 Router/modem** (forward the ports),
-**3 Linux** (names in `/etc/hosts`), **4 ROS** (`ROS_MASTER_URI`). Each step shows what to expect,
-what to configure on *this* component, and live checks.
+Four steps, on every component (robot and laptops) and its own modem: 1 ISP
+(is forwarding allowed, the public IP), 2 Router/modem (forward the ports),
+3 Linux (names in /etc/hosts), 4 ROS (ROS_MASTER_URI). Each step shows what to
+expect, what to configure on this component, and live checks.
 
-| key | does |
-|---|---|
-| `1`-`4` | go to a step |
-| `n` / `b` | next / back |
-| `r` | run the step's checks |
-| `R` | re-run the highlighted check |
-| `c` | cancel running checks |
-| `e` or `Enter` | show / hide the evidence and advice of the highlighted check |
-| `a` | the advisor: what the results mean, what to do |
-| `g` | go back to the step where the highlighted check's cause is |
-| `w` | write the configuration (Linux: hosts set; ROS: `ROS_MASTER_URI`) |
-| `u` | undo the last write (or the last forward the modem made) |
-| `m` | let the modem forward the port itself (Router step: UPnP IGD, PCP, NAT-PMP) |
-| `k` | review a peer's unknown SSH host key (Linux step) |
-| `z` | zoom the focused pane (again to restore) |
-| `Tab` | move between panes |
-| `s` | set-up: this component and its peers |
-| `q` | quit (`Ctrl+Q` anywhere) |
+ 1-4    go to a step                 r       run the step's checks
+ n / b  next / back                  R       re-run the highlighted check
+ s      set-up: this machine, peers  c       cancel running checks (any step)
+ a      the advisor: what to do      e/Enter evidence and advice of a check
+ w      write the configuration      g       go to the step of the cause
+ u      undo the last write/forward  z       zoom the focused pane, or back
+ m      modem forwards it (Router)   k       review an unknown SSH host key
+ Tab    next pane                    Ctrl+L  draw the whole screen again
+ q      quit (Ctrl+Q anywhere)       Ctrl+Z  suspend (fg brings it back)
+ ?      this help
 
-Headless, the same checks: `rosnet-tui check --json`.
-
-Press `Esc` to close.
+Set-up: Tab and Shift+Tab move, Ctrl+N adds a peer, Ctrl+S saves, Esc or F10
+goes back. Keys typed ahead on a slow link are applied in the order typed.
+Results, findings and an unsaved set-up survive a dropped session.
+Headless, the same checks: rosnet-tui check --json
 """
 
 
 class HelpScreen(ModalScreen[None]):
-    BINDINGS = [Binding("escape,question_mark,q", "close", "Close")]
+    BINDINGS = [Binding("escape,q,question_mark,f10", "close", "Close", key_display="Esc/q/?")]
 
     def compose(self) -> ComposeResult:
         with VerticalScroll(id="help-body"):
-            yield Markdown(HELP)
+            yield Static(HELP, id="help-text", markup=False)
+        yield KeyBar()
 
     def action_close(self) -> None:
         self.dismiss(None)

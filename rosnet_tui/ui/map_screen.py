@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from rich.text import Text
 from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -19,12 +20,14 @@ from textual.widgets import Button, Static
 from rosnet_tui.core.settings import Settings
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp.wire import ModemError
+from rosnet_tui.ui.widgets import KeyBar
 
 
 class MapScreen(ModalScreen[bool]):
     """Preview -> consent -> map. Dismisses True when the modem made (or renewed) a forward."""
 
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    BINDINGS = [Binding("escape,q,f10", "cancel", "Cancel", key_display="Esc/q"),
+                Binding("y", "map", "Map")]
 
     def __init__(self, settings: Settings, state_dir: Path, timeout: float = 3.0,
                  **kwargs) -> None:
@@ -42,9 +45,10 @@ class MapScreen(ModalScreen[bool]):
                              markup=False)
             yield Static("", id="write-status", markup=False)
             with Horizontal(id="write-buttons"):
-                yield Button("Map", id="write-apply", variant="primary", compact=True,
+                yield Button(Text("[Map]"), id="write-apply", variant="primary", compact=True,
                              disabled=True)
-                yield Button("Cancel", id="write-cancel", compact=True)
+                yield Button(Text("[Cancel]"), id="write-cancel", compact=True)
+        yield KeyBar()
 
     def on_mount(self) -> None:
         self._look()
@@ -72,7 +76,7 @@ class MapScreen(ModalScreen[bool]):
         self.dismiss(False)
 
     @on(Button.Pressed, "#write-apply")
-    def _map(self) -> None:
+    def action_map(self) -> None:
         if self.plan is None or self.plan.blocked or self.plan.modem is None:
             return
         self.query_one("#write-apply", Button).disabled = True

@@ -4,18 +4,21 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import Screen
 from textual.validation import ValidationResult, Validator
-from textual.widgets import Button, Footer, Header, Input, Label, Select, Static
+from textual.widgets import Button, Input, Label, Select, Static
 
 from rosnet_tui.core import settings as S
 from rosnet_tui.core.session import WizardSession
+from rosnet_tui.ui.fields import OrderedInput
 from rosnet_tui.ui.messages import SettingsSaved
-from rosnet_tui.ui.widgets import OrderedInput
+from rosnet_tui.ui.theme import cut
+from rosnet_tui.ui.widgets import KeyBar, PlainHeader
 
 
 class CoreValidator(Validator):
@@ -31,12 +34,36 @@ class CoreValidator(Validator):
         return self.failure(why) if why else self.success()
 
 
+class PeerNameValidator(Validator):
+    """A peer's name: a valid name, not this component's own, not another peer's (names are
+    looked up without regard to case), refused as it is typed."""
+
+    def __init__(self, row: PeerRow) -> None:
+        super().__init__()
+        self.row = row
+
+    def validate(self, value: str) -> ValidationResult:
+        value = value.strip()
+        why = S.validate_name(value)
+        if why is None:
+            screen = self.row.screen if self.row.is_attached else None
+            others = screen.names_in_use(self.row) if isinstance(screen, SetupScreen) else {}
+            same = others.get(value.lower())
+            if same == "this component":
+                why = f"'{S.shown(value, S.FIELD_SHOWN_CHARS)}' is this component's own name"
+            elif same:
+                why = f"'{S.shown(value, S.FIELD_SHOWN_CHARS)}' is already a peer (names ignore case)"
+        return self.failure(why) if why else self.success()
+
+
 CONNECTION_OPTIONS = [("Telecom (mobile hotspot)", "telecom"), ("Home", "home"),
                       ("Corporate / university", "corporate")]
 ROLE_OPTIONS = [("ROS master (roscore / the Zenoh hub)", "master"), ("Member", "member")]
 ROS_VERSION_OPTIONS = [("ROS 2 (rmw_zenoh: one forwarded port)", 2), ("ROS 1 (roscore)", 1)]
 PROFILE_OPTIONS = [("Remote (peers by public IP)", "remote"), ("Office LAN", "office"),
                    ("Portable hotspot LAN", "portable")]
+SELECT_OPTIONS = {"this-role": ROLE_OPTIONS, "this-connection": CONNECTION_OPTIONS,
+                  "this-profile": PROFILE_OPTIONS, "ros-version": ROS_VERSION_OPTIONS}
 
 
 class PeerRow(Horizontal):
@@ -46,7 +73,7 @@ class PeerRow(Horizontal):
     PeerRow { height: 1; }
     PeerRow > Input { width: 1fr; margin-right: 1; }
     PeerRow > .peer-user { width: 12; }
-    PeerRow > Button { width: 5; min-width: 5; }
+    PeerRow > Button { width: 7; min-width: 7; }
     """
 
     def __init__(self, index: int, peer: S.Peer, **kwargs) -> None:
@@ -57,46 +84,54 @@ class PeerRow(Horizontal):
     def compose(self) -> ComposeResult:
         i, p = self.index, self.peer
         yield OrderedInput(p.name, placeholder="name", id=f"peer-{i}-name", compact=True,
-                    validators=[CoreValidator(S.validate_name)], classes="peer-name")
+                           validators=[PeerNameValidator(self)], classes="peer-name")
         yield OrderedInput(p.local_ip, placeholder="local IP", id=f"peer-{i}-local", compact=True,
                     validators=[CoreValidator(S.validate_ip, required=False)])
         yield OrderedInput(p.public_ip, placeholder="public IP", id=f"peer-{i}-public", compact=True,
                     validators=[CoreValidator(S.validate_ip, required=False)])
         yield OrderedInput(p.ssh_user, placeholder="ssh user", id=f"peer-{i}-user", compact=True,
                     validators=[CoreValidator(S.validate_ssh_user)], classes="peer-user")
-        yield Button("del", id=f"peer-{i}-remove", compact=True, classes="peer-remove",
+        yield Button(Text("[del]"), id=f"peer-{i}-remove", compact=True, classes="peer-remove",
                      tooltip="Remove this peer")
 
     def read(self) -> S.Peer:
-        i = self.index
-        val = lambda suffix: self.query_one(f"#peer-{i}-{suffix}", Input).value.strip()  # noqa: E731
-        return replace(self.peer, name=val("name"), local_ip=val("local"), public_ip=val("public"),
-                       ssh_user=val("user"))
+        """The peer as typed so far (its own values until its fields are mounted)."""
+        i, p = self.index, self.peer
+        typed = {w.id: w.value.strip() for w in self.query(Input)}
+        val = lambda suffix, default: typed.get(f"peer-{i}-{suffix}", default)  # noqa: E731
+        return replace(p, name=val("name", p.name), local_ip=val("local", p.local_ip),
+                       public_ip=val("public", p.public_ip), ssh_user=val("user", p.ssh_user))
 
 
 class SetupScreen(Screen[bool]):
     """Who this component is, and who its peers are. Dismisses True when settings were saved."""
 
     BINDINGS = [
-        Binding("escape", "cancel", "Back"),
+        Binding("escape,f10", "cancel", "Back", key_display="Esc/F10"),
         Binding("ctrl+s", "save", "Save"),
         Binding("ctrl+n", "add_peer", "Add peer"),
     ]
+    DRAFT_DELAY_S = 0.3  # typing is kept this soon after the last key
 
     def __init__(self, session: WizardSession, **kwargs) -> None:
         super().__init__(**kwargs)
         self.session = session
         self.detected = session.detected
         self._next_peer = 0
+        self._draft_timer = None
+        self._restored_draft = False
 
     def compose(self) -> ComposeResult:
         s = self.session.settings
         t = s.this
-        local_ip = t.local_ip or self.detected.local_ip
-        yield Header(show_clock=False, icon="")
+        # First run: the detected address, ready to keep. Saved settings keep their blank (the
+        # address is then detected at each run), so saving them unchanged changes nothing.
+        local_ip = t.local_ip or ("" if s.complete else self.detected.local_ip)
+        yield PlainHeader()
         with VerticalScroll(id="setup-form"):
             yield Static("Describe this machine and the components it must reach. Tab moves "
-                         "between fields; Ctrl+S saves.", id="setup-intro")
+                         "between fields; Ctrl+S saves; Esc or F10 goes back without saving.",
+                         id="setup-intro")
             yield Static("This component", classes="section")
             with Horizontal(classes="field"):
                 yield Label("Name", classes="field-label")
@@ -117,8 +152,10 @@ class SetupScreen(Screen[bool]):
                              id="this-profile", compact=True)
             with Horizontal(classes="field"):
                 yield Label("Local IP", classes="field-label")
-                yield OrderedInput(local_ip, placeholder="e.g. 10.10.10.1", id="this-local-ip",
-                            compact=True, validators=[CoreValidator(S.validate_ip)])
+                yield OrderedInput(local_ip, placeholder=self.detected.local_ip or "e.g. 10.10.10.1",
+                                   id="this-local-ip", compact=True,
+                                   validators=[CoreValidator(
+                                       S.validate_ip, required=not self.detected.local_ip)])
             yield Label(self._local_ip_hint(), id="this-local-ip-error", classes="field-hint")
             with Horizontal(classes="field"):
                 yield Label("Test port", classes="field-label")
@@ -152,10 +189,10 @@ class SetupScreen(Screen[bool]):
                     yield self._peer_row(p)
             yield Label("", id="peer-error", classes="field-error")
             with Horizontal(id="setup-buttons"):
-                yield Button("Add peer", id="add-peer", compact=True)
-                yield Button("Save", id="save", variant="primary", compact=True)
-                yield Button("Cancel", id="cancel", compact=True)
-        yield Footer()
+                yield Button(Text("[Add peer]"), id="add-peer", compact=True)
+                yield Button(Text("[Save]"), id="save", variant="primary", compact=True)
+                yield Button(Text("[Cancel]"), id="cancel", compact=True)
+        yield KeyBar()
 
     def _local_ip_hint(self) -> str:
         d = self.detected
@@ -169,17 +206,104 @@ class SetupScreen(Screen[bool]):
         self._next_peer += 1
         return row
 
-    def on_mount(self) -> None:
+    async def on_mount(self) -> None:
         self.title = "rosnet-tui"
         self.sub_title = "set-up"
+        await self._restore_draft()
         self._update_role()
         self.query_one("#this-name", Input).focus()
+
+    # ------------------------------------------------------------------ the draft
+    def form_fields(self) -> tuple[dict[str, str], list[dict[str, str]]]:
+        """Every field as typed: this component's by widget id, and the peers' rows."""
+        fields: dict[str, str] = {}
+        for w in self.query(Input):
+            if w.id and not w.id.startswith("peer-"):
+                fields[w.id] = w.value
+        for sel in self.query(Select):
+            if sel.id and sel.value is not Select.BLANK:
+                fields[sel.id] = str(sel.value)
+        peers = [{"name": p.name, "local_ip": p.local_ip, "public_ip": p.public_ip,
+                  "ssh_user": p.ssh_user} for p in (row.read() for row in self.query(PeerRow))]
+        return fields, peers
+
+    def keep_draft(self) -> None:
+        """Save the form as typed, unless it says what the saved settings say."""
+        if self._draft_timer is not None:
+            self._draft_timer.stop()
+            self._draft_timer = None
+        if not self.is_mounted:
+            return
+        fields, peers = self.form_fields()
+        settings, _problems = self.read_form()
+        if settings == self.session.settings and self.session.config_path.exists():
+            self.session.clear_draft()
+        else:
+            self.session.save_draft(fields, peers)
+
+    def _draft_soon(self) -> None:
+        if self._draft_timer is not None:
+            self._draft_timer.stop()
+        self._draft_timer = self.set_timer(self.DRAFT_DELAY_S, self.keep_draft)
+
+    async def _restore_draft(self) -> None:
+        draft = self.session.draft()
+        if not draft:
+            return
+        for wid, value in draft["fields"].items():
+            try:
+                widget = self.query_one(f"#{wid}")
+            except Exception:
+                continue  # a field this version does not have
+            try:
+                if isinstance(widget, Input):
+                    widget.value = str(value)
+                elif isinstance(widget, Select):  # kept as text: back to the option's value
+                    options = SELECT_OPTIONS.get(wid, [])
+                    widget.value = next((v for _label, v in options if str(v) == str(value)),
+                                        value)
+            except Exception:
+                continue  # a value the field refuses: it keeps the saved one
+        peers = draft.get("peers")
+        if isinstance(peers, list):
+            rows = self.query_one("#peer-rows")
+            await rows.remove_children()
+            for p in peers:
+                if isinstance(p, dict):
+                    peer = S.Peer(name=str(p.get("name", "")), local_ip=str(p.get("local_ip", "")),
+                                  public_ip=str(p.get("public_ip", "")),
+                                  ssh_user=str(p.get("ssh_user", "")))
+                    await rows.mount(self._peer_row(peer))
+        from rosnet_tui.core.ui_state import local_time
+
+        when = local_time(str(draft.get("at", "")))
+        self._restored_draft = True
+        self.notify(f"Back where you were: the set-up typed {when or 'earlier'} and not saved "
+                    "yet. Ctrl+S saves it, Esc discards it.", timeout=8)
+
+    def names_in_use(self, row: PeerRow) -> dict[str, str]:
+        """Lower-cased names taken by this component and the peers other than *row*."""
+        names: dict[str, str] = {}
+        try:
+            names[self.query_one("#this-name", Input).value.strip().lower()] = "this component"
+        except Exception:
+            pass
+        for other in self.query(PeerRow):
+            if other is not row:
+                name = other.read().name.lower()
+                if name:
+                    names.setdefault(name, other.read().name)
+        return names
 
     # ------------------------------------------------------------------ events
     @on(Select.Changed, "#this-role")
     @on(Select.Changed, "#ros-version")
     def _role_changed(self) -> None:
         self._update_role()
+
+    @on(Select.Changed)
+    def _select_changed(self) -> None:
+        self._draft_soon()
 
     def _update_role(self) -> None:
         is_member = self.query_one("#this-role", Select).value == "member"
@@ -192,6 +316,7 @@ class SetupScreen(Screen[bool]):
 
     @on(Input.Changed)
     def _input_changed(self, event: Input.Changed) -> None:
+        self._draft_soon()
         if event.input.id and event.validation_result is not None:
             label = self._error_label(event.input.id)
             if label is not None:
@@ -199,7 +324,7 @@ class SetupScreen(Screen[bool]):
                 msg = "" if ok else "; ".join(event.validation_result.failure_descriptions)
                 if event.input.id == "this-local-ip" and ok:
                     msg = self._local_ip_hint()
-                label.update(msg)
+                label.update(cut(msg, max(20, self.size.width - 16)))
                 label.set_class(not ok, "-shown")
 
     def _error_label(self, input_id: str) -> Label | None:
@@ -211,16 +336,17 @@ class SetupScreen(Screen[bool]):
             return None
 
     @on(Button.Pressed, "#add-peer")
-    def action_add_peer(self) -> None:
+    async def action_add_peer(self) -> None:
         row = self._peer_row(S.Peer(name=""))
-        self.query_one("#peer-rows").mount(row)
-        self.call_after_refresh(lambda: row.query_one(Input).focus())
+        await self.query_one("#peer-rows").mount(row)  # mounted before the next key is read
+        row.query_one(Input).focus()
 
     @on(Button.Pressed, ".peer-remove")
-    def _remove_peer(self, event: Button.Pressed) -> None:
+    async def _remove_peer(self, event: Button.Pressed) -> None:
         row = event.button.parent
         if isinstance(row, PeerRow):
-            row.remove()
+            await row.remove()
+            self._draft_soon()
 
     @on(Button.Pressed, "#save")
     def action_save(self) -> None:
@@ -234,15 +360,21 @@ class SetupScreen(Screen[bool]):
         except S.SettingsError as exc:
             self.notify(str(exc), title="Not saved", severity="error", timeout=10)
             return
+        if self._draft_timer is not None:
+            self._draft_timer.stop()
+        self.session.clear_draft()
         self.app.post_message(SettingsSaved())
         self.dismiss(True)
 
     @on(Button.Pressed, "#cancel")
     def action_cancel(self) -> None:
         if not self.session.settings.complete:
-            self.notify("Fill in this component and save first (Ctrl+Q quits).",
-                        severity="warning")
+            self.notify("Fill in this component and save first (Ctrl+Q quits; what you typed "
+                        "is kept for next time).", severity="warning")
             return
+        if self._draft_timer is not None:
+            self._draft_timer.stop()
+        self.session.clear_draft()  # going back without saving: the draft is dropped
         self.dismiss(False)
 
     # ------------------------------------------------------------------ form -> settings
@@ -254,7 +386,7 @@ class SetupScreen(Screen[bool]):
                        connection=str(self.query_one("#this-connection", Select).value),
                        profile=str(self.query_one("#this-profile", Select).value),
                        local_ip=val("this-local-ip"),
-                       interface=old.this.interface or self.detected.interface)
+                       interface=old.this.interface)
         peers = [row.read() for row in self.query(PeerRow)]
         master = this.name if role == "master" else val("ros-master")
         problems: list[tuple[str, str]] = []
@@ -277,8 +409,10 @@ class SetupScreen(Screen[bool]):
         settings = replace(old, this=this, peers=peers, ros=ros,
                            probe=replace(old.probe, port=port))
         problems += settings.problems()
-        if S.validate_ip(this.local_ip):
-            problems.insert(0, ("this.local_ip", S.validate_ip(this.local_ip) or ""))
+        # Blank is fine when this machine's address can be detected at each run.
+        why = S.validate_ip(this.local_ip, required=not self.detected.local_ip)
+        if why:
+            problems.insert(0, ("this.local_ip", why))
         return settings, problems
 
     def _show_problem(self, key: str, why: str) -> None:
@@ -302,7 +436,7 @@ class SetupScreen(Screen[bool]):
             label_id = f"{target}-error" if target else None
         if label_id:
             label = self.query_one(label_id, Label)
-            label.update(why)
+            label.update(cut(why, max(20, self.size.width - 16)))
             label.set_class(True, "-shown")
         if target:
             self.query_one(target, Input).focus()

@@ -2,46 +2,36 @@
 
 from __future__ import annotations
 
-from rich.markdown import CodeBlock
-from rich.markdown import Markdown as RichMarkdown
-from rich.syntax import Syntax
+from typing import TYPE_CHECKING
+
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Container, Vertical, VerticalScroll
 from textual.screen import Screen
-from textual.widgets import Footer, Header, Static
+from textual.widgets import Static
 
-from rosnet_tui.core.checks import CheckSpec
-from rosnet_tui.core.checks.runner import stream
 from rosnet_tui.core.session import NOT_RUN, RUNNING, WizardSession
-from rosnet_tui.core.steps import Step
-from rosnet_tui.core.upnp.forwards import card_lines
-from rosnet_tui.core.write_plans import UNDO_AFFECTS
+from rosnet_tui.core.steps import Step, step_for
 from rosnet_tui.ui.messages import Navigate
-from rosnet_tui.ui.widgets import CheckList, StepBar
+from rosnet_tui.ui.widgets import CheckList, KeyBar, PlainHeader, StepBar
+
+if TYPE_CHECKING:
+    from rosnet_tui.core.checks import CheckSpec
 
 
-class _CompactCode(CodeBlock):
-    """A code block without the blank lines around it: rows are scarce at 80x24."""
-
-    def __rich_console__(self, console, options):
-        yield Syntax(str(self.text).rstrip(), self.lexer_name, theme=self.theme, word_wrap=True,
-                     padding=(0, 1), background_color="default")
-
-
-class _Markdown(RichMarkdown):
-    elements = {**RichMarkdown.elements, "fence": _CompactCode, "code_block": _CompactCode}
-
-
-def _markdown(text: str) -> RichMarkdown:
+def _markdown(text: str):
     """The configuration text as one renderable: drawn in a single frame, unlike a widget per
     block, which keeps a step's first visit quick over a slow link (bench row 5)."""
-    return _Markdown(text, code_theme="ansi_dark", inline_code_lexer=None, hyperlinks=False)
+    from rosnet_tui.ui.mdlite import render
+
+    return render(text)
 
 
 class StepScreen(Screen):
     """A step of the procedure, with its checks run live in a worker."""
+
+    AUTO_FOCUS = "#check-table"  # focused as the screen is shown: drawn once, already focused
 
     BINDINGS = [
         Binding("r", "run_checks", "Run"),
@@ -50,25 +40,24 @@ class StepScreen(Screen):
         Binding("e", "toggle_evidence", "Evidence"),
         Binding("w", "write", "Write"),
         Binding("u", "undo", "Undo write", show=False),
-        Binding("m", "map_forward", "Modem forwards it", show=False),
+        Binding("m", "map_forward", "Modem"),  # the Router step only (check_action)
         Binding("k", "trust_key", "Review host key", show=False),
         Binding("g", "go_finding", "Go to cause", show=False),
         Binding("z", "zoom", "Zoom pane", show=False),
     ]
 
-    def __init__(self, step: Step, specs: list[CheckSpec], session: WizardSession,
-                 **kwargs) -> None:
+    def __init__(self, step: Step, session: WizardSession, **kwargs) -> None:
         super().__init__(**kwargs)
         self.step = step
-        self.specs = specs
         self.session = session
         self.config_source = ""  # the Markdown the Configuration pane shows
 
     def compose(self) -> ComposeResult:
-        yield Header(show_clock=False, icon="")
+        self.step = step_for(self.step.id, self.session.settings)  # settings may have changed
+        yield PlainHeader()
         yield StepBar(self.step.id, id="step-bar")
         with Container(id="panes"):
-            with Vertical(id="expected-pane", classes="pane") as expected:
+            with VerticalScroll(id="expected-pane", classes="pane") as expected:
                 expected.border_title = f"{self.step.number} {self.step.title}: expected outcome"
                 yield Static(self.step.expected, id="expected-text")
             with Container(id="lower"):
@@ -81,16 +70,13 @@ class StepScreen(Screen):
                         yield Static(_markdown(self.config_source), id="config-text")
                 with Vertical(id="verify-pane", classes="pane") as verify:
                     verify.border_title = "Verification"
-                    known = {s.id for s in self.specs}
-                    rows = [(s.id, s.title) for s in self.specs]
-                    rows += [(cid, cid) for cid in self.step.check_ids if cid not in known]
-                    yield CheckList(rows, advice=self.session.findings_for, id="check-list")
-        yield Footer()
+                    yield CheckList(self.session.check_rows(self.step.id),
+                                    advice=self.session.findings_for, id="check-list")
+        yield KeyBar()
 
     def on_mount(self) -> None:
         if self.step.id == "router":
             self.call_after_refresh(self._render_card)
-        self.query_one("#check-table").focus()
         self.title = "rosnet-tui"
         self.refresh_subtitle()
         self._sync_results()
@@ -107,14 +93,11 @@ class StepScreen(Screen):
     def refresh_config(self) -> None:
         """Settings changed: re-render the tailored configuration (and, when the ROS version
         changed, the step's list of checks)."""
-        from rosnet_tui.core.steps import step_for
-
         self.step = step_for(self.step.id, self.session.settings)
         self.query_one("#expected-text", Static).update(self.step.expected)
-        specs = self.session.specs(self.step.id)
-        if [c.id for c in specs] != [c.id for c in self.specs]:
-            self.specs = specs
-            self.run_worker(self._replace_check_list(specs), exclusive=False)
+        rows = self.session.check_rows(self.step.id)
+        if [cid for cid, _title in rows] != list(self.query_one(CheckList).rows):
+            self.run_worker(self._replace_check_list(rows), exclusive=False)
         if self.step.id == "router":
             self._render_card()
         else:
@@ -122,13 +105,19 @@ class StepScreen(Screen):
             self.query_one("#config-text", Static).update(_markdown(self.config_source))
         self.refresh_subtitle()
 
-    async def _replace_check_list(self, specs: list) -> None:
+    async def _replace_check_list(self, rows: list[tuple[str, str]]) -> None:
+        """The ROS version changed: a new list of checks (the old one removed first: the new
+        one takes its ids)."""
         old = self.query_one("#check-list", CheckList)
         parent = old.parent
+        had_focus = self.focused is not None and (self.focused is old
+                                                  or old in self.focused.ancestors)
         await old.remove()
         if parent is not None:
-            await parent.mount(CheckList([(c.id, c.title) for c in specs],
-                                         advice=self.session.findings_for, id="check-list"))
+            new = CheckList(rows, advice=self.session.findings_for, id="check-list")
+            await parent.mount(new)
+            if had_focus:
+                self.query_one("#check-table").focus()
             self._sync_results()
 
     def _render_card(self) -> None:
@@ -136,7 +125,11 @@ class StepScreen(Screen):
         width = pane.scrollable_content_region.width or 76
         text = self.session.router_card_text(width - 3)
         _state, upnp = self.session.check_state("router.upnp")  # the modem's own word, if asked
-        said = card_lines(upnp.data if upnp is not None else None)
+        said: list[str] = []
+        if upnp is not None:
+            from rosnet_tui.core.upnp.forwards import card_lines
+
+            said = card_lines(upnp.data)
         self.query_one("#router-card", Static).update(("\n".join(said) + "\n\n" if said else "")
                                                       + text)
 
@@ -148,13 +141,30 @@ class StepScreen(Screen):
         """Show the latest known state of every check and every step (shared through the app)."""
         session = self.session
         checks = self.query_one(CheckList)
+        earlier = set()
         for cid in checks.rows:
             state, result = session.check_state(cid)
-            if checks.rows[cid].state != state or checks.rows[cid].result is not result:
-                checks.set_state(cid, state, result)
+            at = session.restored_at(cid)
+            if at:
+                earlier.add(at)
+            row = checks.rows[cid]
+            if row.state != state or row.result is not result or row.at != at:
+                checks.set_state(cid, state, result, at)
+        verify = self.query_one("#verify-pane")
+        title = "Verification" + (f" (results of {min(earlier)}: r runs again)" if earlier else "")
+        if verify.border_title != title:
+            verify.border_title = title
         bar = self.query_one(StepBar)
         for step_id, state in session.step_states().items():
             bar.set_state(step_id, state)
+
+    @property
+    def specs(self) -> list[CheckSpec]:
+        """The step's checks, loaded when first run; the list gains their full titles then."""
+        specs = self.session.specs(self.step.id)
+        if self.is_mounted:
+            self.query_one(CheckList).set_titles(self.session.check_rows(self.step.id))
+        return specs
 
     # ------------------------------------------------------------------ actions
     def action_run_checks(self) -> None:
@@ -167,8 +177,18 @@ class StepScreen(Screen):
             self.run_specs([spec])
 
     def action_cancel_checks(self) -> None:
-        if self.workers.cancel_group(self, "checks"):
-            self.notify("Checks cancelled.", timeout=3)
+        """Cancel the checks running on any step (they may have been started elsewhere)."""
+        steps = []
+        for screen in self.app.screen_stack + list(getattr(self.app, "_installed_screens",
+                                                           {}).values()):
+            if isinstance(screen, StepScreen) and screen.is_mounted and screen not in steps:
+                if screen.workers.cancel_group(screen, "checks"):
+                    steps.append(screen)
+        if steps:
+            names = ", ".join(f"{s.step.number} {s.step.title}" for s in steps)
+            self.notify(f"Cancelled the checks of {names}.", timeout=3)
+        else:
+            self.notify("No checks are running.", timeout=3)
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         if action == "write":
@@ -242,6 +262,7 @@ class StepScreen(Screen):
                              done)
 
     def action_undo(self) -> None:
+        from rosnet_tui.core.write_plans import UNDO_AFFECTS
         from rosnet_tui.ui.write_screen import UndoScreen
 
         def done(undone: bool | None) -> None:
@@ -268,20 +289,22 @@ class StepScreen(Screen):
 
     def on_check_list_evidence_toggled(self, message: CheckList.EvidenceToggled) -> None:
         self.set_class(message.shown, "-evidence")
+        if message.shown:  # the evidence names the check by its full title: load the checks
+            self.specs  # noqa: B018
+            self.query_one(CheckList).refresh_evidence()
 
     def action_zoom(self) -> None:
+        """Zoom the focused pane (the evidence box, or the pane holding the focus); again to
+        restore."""
         if self.maximized is not None:
             self.minimize()
             return
-        focused = self.focused
-        pane = None
-        while focused is not None:
-            if focused.has_class("pane"):
-                pane = focused
-                break
-            focused = focused.parent  # type: ignore[assignment]
-        if pane is not None:
-            self.maximize(pane, container=False)
+        node = self.focused
+        while node is not None and not (node.has_class("pane") or node.has_class("zoomable")):
+            node = node.parent  # type: ignore[assignment]
+        if node is None:
+            node = self.query_one("#verify-pane")
+        self.maximized = node  # containers refuse Screen.maximize(); the property does it
 
     def run_specs(self, specs: list[CheckSpec]) -> None:
         if not specs:
@@ -294,6 +317,8 @@ class StepScreen(Screen):
 
     @work(exclusive=True, exit_on_error=False, group="checks")
     async def _run_worker(self, specs: list[CheckSpec]) -> None:
+        from rosnet_tui.core.checks.runner import stream
+
         session = self.session
         ctx = session.make_context()
         ids = {s.id for s in specs}

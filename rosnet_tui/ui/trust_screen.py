@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -10,12 +11,13 @@ from textual.screen import ModalScreen
 from textual.widgets import Button, Static
 
 from rosnet_tui.core.ssh import verify_commands
+from rosnet_tui.ui.widgets import KeyBar
 
 
 class TrustKeyScreen(ModalScreen[bool]):
     """Dismisses True only when the user chose to trust the key."""
 
-    BINDINGS = [Binding("escape", "refuse", "Do not trust")]
+    BINDINGS = [Binding("escape,q,f10", "refuse", "Do not trust", key_display="Esc/q")]
 
     def __init__(self, name: str, port: int, host_key: str, fingerprint: str, address: str,
                  user: str = "", **kwargs) -> None:
@@ -37,8 +39,9 @@ class TrustKeyScreen(ModalScreen[bool]):
                 + verify_commands(self.peer_name, self.port, ktype, self.user),
                 id="trust-text", markup=False)
             with Horizontal(id="write-buttons"):
-                yield Button("They match: trust", id="trust-yes", variant="warning", compact=True)
-                yield Button("Do not trust", id="trust-no", variant="primary", compact=True)
+                yield Button(Text("[They match: trust]"), id="trust-yes", variant="warning", compact=True)
+                yield Button(Text("[Do not trust]"), id="trust-no", variant="primary", compact=True)
+        yield KeyBar()
 
     def on_mount(self) -> None:
         self.query_one("#trust-no", Button).focus()

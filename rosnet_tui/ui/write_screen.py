@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rich.syntax import Syntax
+from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -22,12 +22,28 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import privilege
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 from rosnet_tui.core.write_plans import WritePlan
+from rosnet_tui.ui.widgets import KeyBar
+
+
+def diff_text(diff: str) -> Text:
+    """A unified diff in the terminal's colours, red kept for failures: added lines green,
+    removed ones yellow, hunk headers in the accent colour; the marks (+ - @@) say it in words
+    too."""
+    out = Text()
+    for line in diff.splitlines():
+        style = ("bold" if line.startswith(("+++", "---")) else
+                 "cyan" if line.startswith("@@") else
+                 "green" if line.startswith("+") else
+                 "yellow" if line.startswith("-") else "")
+        out.append(line + "\n", style=style)
+    return out
 
 
 class WriteScreen(ModalScreen[bool]):
     """Preview -> confirm -> apply. Dismisses True when something was written."""
 
-    BINDINGS = [Binding("escape", "cancel", "Cancel"), Binding("y", "apply", "Apply", show=False)]
+    BINDINGS = [Binding("escape,q,f10", "cancel", "Cancel", key_display="Esc/q"),
+                Binding("y", "apply", "Apply")]
 
     def __init__(self, plan: WritePlan, state_dir: Path, **kwargs) -> None:
         super().__init__(**kwargs)
@@ -46,8 +62,9 @@ class WriteScreen(ModalScreen[bool]):
                 yield Static("", id="write-diff")
             yield Static("", id="write-status", markup=False)
             with Horizontal(id="write-buttons"):
-                yield Button("Apply", id="write-apply", variant="primary", compact=True)
-                yield Button("Cancel", id="write-cancel", compact=True)
+                yield Button(Text("[Apply]"), id="write-apply", variant="primary", compact=True)
+                yield Button(Text("[Cancel]"), id="write-cancel", compact=True)
+        yield KeyBar()
 
     def on_mount(self) -> None:
         self.refresh_preview()
@@ -72,7 +89,7 @@ class WriteScreen(ModalScreen[bool]):
         self.companions = self.plan.companions(self.option)  # more files in the same apply
         diff = "".join([p.diff(), *(c.diff() for c in self.companions)])
         self.query_one("#write-diff", Static).update(
-            Syntax(diff, "diff", theme="ansi_dark", word_wrap=True) if diff else
+            diff_text(diff) if diff else
             f"{p.path} already holds this configuration: nothing to write.")
         notes = list(p.notes)
         if p.changed and p.needs_privilege and self.plan.sudo_command is not None:
@@ -130,7 +147,7 @@ class WriteScreen(ModalScreen[bool]):
 class UndoScreen(ModalScreen[bool]):
     """Show what undoing the last apply does, and do it on confirmation."""
 
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    BINDINGS = [Binding("escape,q,f10", "cancel", "Cancel", key_display="Esc/q")]
 
     def __init__(self, state_dir: Path, **kwargs) -> None:
         super().__init__(**kwargs)
@@ -144,8 +161,9 @@ class UndoScreen(ModalScreen[bool]):
                 yield Static("", id="write-diff")
             yield Static("", id="write-status", markup=False)
             with Horizontal(id="write-buttons"):
-                yield Button("Undo", id="write-apply", variant="primary", compact=True)
-                yield Button("Cancel", id="write-cancel", compact=True)
+                yield Button(Text("[Undo]"), id="write-apply", variant="primary", compact=True)
+                yield Button(Text("[Cancel]"), id="write-cancel", compact=True)
+        yield KeyBar()
 
     def on_mount(self) -> None:
         status = self.query_one("#write-status", Static)
@@ -158,9 +176,8 @@ class UndoScreen(ModalScreen[bool]):
         diff = self.plan.diff()
         forwards = [f"Remove the forward {describe_forward(m)}" for m in self.plan.entry.mappings
                     if m.get("state") == "made"]
-        self.query_one("#write-diff", Static).update(
-            Syntax(diff, "diff", theme="ansi_dark", word_wrap=True) if diff else
-            "\n".join(forwards))
+        self.query_one("#write-diff", Static).update(diff_text(diff) if diff else
+                                                     Text("\n".join(forwards)))
         notes = [f"Changed since by someone else: {c}" for c in self.plan.conflicts]
         if self.plan.conflicts:
             notes.append("Undo would lose those changes: run `rosnet-tui undo --force` if you "

@@ -39,9 +39,9 @@ async def drive(config: Path, state_dir: Path) -> dict:
             out["steps"][step.id] = {cid: {"state": r.state,
                                            "summary": r.result.summary if r.result else ""}
                                      for cid, r in rows.items()}
+        bar = app.screen.query_one("#step-bar")
         for step in STEPS:
-            item = app.screen.query_one(f"#step-item-{step.id}")
-            out["bar"][step.id] = str(item.render())
+            out["bar"][step.id] = bar._label(step.id)
         out["findings"] = [{"rule": f.rule, "severity": f.severity} for f in app.session.findings]
     return out
 

@@ -1,0 +1,154 @@
+"""Keys in the order they were typed, whatever the link does to their timing.
+
+On a laggy SSH link several keys arrive in one read. Textual hands each key to the focused widget
+at once, but a key bound to an action (Tab, Ctrl+N, Ctrl+S, a digit on a step screen...) runs its
+action only after the event has travelled back up to the app, and a new screen or widget is
+mounted later still: the keys behind it land in the wrong field, or on the wrong screen.
+
+:class:`OrderedKeys` (a mixin for the App) queues the keys of a burst and lets the next one go only
+when the app is idle again: every message queue of the app and of the screen's widgets empty and
+waited on, the screen mounted, nothing waiting for the next refresh. That is exactly the state in
+which a slowly typed key arrives, so a burst has the effect of the same keys typed slowly.
+
+It also reads an unbound Alt+key as what it almost always is on a slow link: Escape followed at
+once by the key (the terminal cannot tell them apart).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections import deque
+
+from textual import events
+from textual.keys import _character_to_key
+
+# At most this long for the app to settle after a key before the next goes anyway: a key is never
+# held for ever, even if some widget keeps its queue busy.
+SETTLE_LIMIT_S = 2.0
+_POLL_S = 0.002
+
+
+def _pump_idle(pump) -> bool:
+    """True when *pump* (a message pump) has nothing queued and waits for its next message."""
+    queue = pump._message_queue
+    if not queue.empty():
+        return False
+    waiters = getattr(queue.ready_event, "_waiters", None)
+    if waiters is None:  # another asyncio: emptiness is the best we can tell
+        return True
+    return bool(waiters) or pump._closed or pump._closing
+
+
+def split_alt(event: events.Key) -> list[events.Key]:
+    """Escape then the key, for an ``alt+`` key event (the caller decides whether it is bound)."""
+    char = event.character
+    if not event.key.startswith("alt+") or not char or len(char) != 1 or not char.isprintable():
+        return [event]
+    key = char if char.isalnum() else _character_to_key(char)
+    return [events.Key("escape", "\x1b"), events.Key(key, char)]
+
+
+# After Escape, these begin a longer sequence (CSI, SS3, OSC, DCS...): never split there.
+_SEQUENCE_STARTS = "[O]P_^X"
+
+
+def escape_first_parser():
+    """Textual's terminal-input parser, reading Escape followed at once by a character as Escape
+    and then that character (imported with the driver).
+
+    Textual maps some Escape+character pairs to other keys, as macOS Option combinations do: Esc 1
+    is read as '¡', Esc Tab as Shift+Tab, Esc Backspace as Ctrl+W. On a slow link Escape and the
+    next key often arrive together, so help stayed open and the key was lost.
+    """
+    from textual._xterm_parser import XTermParser
+
+    class EscapeFirstParser(XTermParser):
+        def _sequence_to_key_events(self, sequence: str, alt: bool = False):
+            if (len(sequence) == 2 and sequence[0] == "\x1b"
+                    and sequence[1] not in _SEQUENCE_STARTS and sequence[1] != "\x1b"):
+                yield events.Key("escape", "\x1b")
+                yield from super()._sequence_to_key_events(sequence[1])
+                return
+            yield from super()._sequence_to_key_events(sequence, alt)
+
+    return EscapeFirstParser
+
+
+class OrderedKeys:
+    """App mixin: keys take effect one after the other, each once the app has settled."""
+
+    _pending_keys: deque[events.Key]
+    _key_task: asyncio.Task | None = None
+
+    def _init_ordered_keys(self) -> None:
+        self._pending_keys = deque()
+        self._key_task = None
+
+    def keys_pending(self) -> int:
+        """Keys received and not yet handed on (tests wait for 0)."""
+        return len(self._pending_keys) + (1 if self._key_task and not self._key_task.done()
+                                          else 0)
+
+    # ------------------------------------------------------------------ idle
+    def _settled(self, *, inside_app: bool = False) -> bool:
+        """Whether a key typed now would meet the app at rest."""
+        app = self  # type: ignore[assignment]
+        try:
+            screen = app.screen  # type: ignore[attr-defined]
+        except Exception:
+            return True
+        if not screen.is_mounted or screen._callbacks:
+            return False
+        if inside_app:  # the app is handling the key itself: its queue must be empty
+            if not app._message_queue.empty():  # type: ignore[attr-defined]
+                return False
+        elif not _pump_idle(app):
+            return False
+        for node in screen.walk_children(with_self=True):
+            if not node.is_mounted or not _pump_idle(node):
+                return False
+        return True
+
+    def _is_bound(self, key: str) -> bool:
+        try:
+            chain = self.screen._binding_chain  # type: ignore[attr-defined]
+        except Exception:
+            return False
+        return any(key in bindings.key_to_bindings for _node, bindings in chain)
+
+    # ------------------------------------------------------------------ intake
+    def _take_key(self, event: events.Key) -> bool:
+        """Queue a key from the terminal; True when it may be handled right now (in order, with
+        the app at rest), False when it waits its turn."""
+        keys = [event]
+        if event.key.startswith("alt+") and not self._is_bound(event.key):
+            keys = split_alt(event)
+        if len(keys) == 1 and not self._pending_keys and (
+                self._key_task is None or self._key_task.done()) and self._settled(inside_app=True):
+            return True
+        self._pending_keys.extend(keys)
+        if self._key_task is None or self._key_task.done():
+            self._key_task = asyncio.create_task(self._release_keys())
+        return False
+
+    async def _release_keys(self) -> None:
+        while self._pending_keys:
+            deadline = time.monotonic() + SETTLE_LIMIT_S
+            while not self._settled() and time.monotonic() < deadline:
+                await asyncio.sleep(_POLL_S)
+            app = self  # type: ignore[assignment]
+            if not self._pending_keys or app._exit or app._closing or app._closed:
+                break
+            event = self._pending_keys.popleft()
+            released = events.Key(event.key, event.character)
+            released._rosnet_released = True  # type: ignore[attr-defined]
+            self.post_message(released)  # type: ignore[attr-defined]
+            await asyncio.sleep(0)  # let it be picked up before settling again
+
+    async def on_event(self, event: events.Event) -> None:
+        if (isinstance(event, events.Key) and not event.is_forwarded
+                and not getattr(event, "_rosnet_released", False)
+                and not self._take_key(event)):
+            return  # queued: it comes back, released, when its turn comes
+        await super().on_event(event)  # type: ignore[misc]

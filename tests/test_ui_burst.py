@@ -1,0 +1,252 @@
+"""A burst of keys (a mobile SSH link delivers several in one read) has the same effect as the
+same keys typed slowly, on every screen and widget (issue 12).
+
+Each test drives two apps with the same keys: one key at a time, waiting for the app to settle
+after each ("slow"), and every key posted at once ("burst", what the terminal driver does with one
+read holding several keys). The screens, the focused widget, the field values and the saved
+settings must be equal.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import unicodedata
+from pathlib import Path
+
+import pytest
+from textual import events
+from textual.keys import _character_to_key, _get_unicode_name_from_key
+from textual.widgets import Input, Select
+
+from rosnet_tui.core.checks import CheckContext, CheckSpec
+from rosnet_tui.core.netinfo import LocalNet
+from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.settings import Peer, Settings, ThisComponent, load_settings
+from rosnet_tui.ui.app import AppDeps, RosnetApp
+
+NET = LocalNet("wlan0", "10.10.10.1", "10.10.10.254", "02:00:00:00:0a:01", "255.255.255.0")
+
+
+def complete_settings() -> Settings:
+    s = Settings()
+    s.this = ThisComponent(name="turtlebot", role="master", connection="telecom",
+                           local_ip="10.10.10.1")
+    s.peers = [Peer("sami", "192.168.1.10", "198.51.100.2", "ops")]
+    s.ros.master = "turtlebot"
+    return s
+
+
+async def _quick(ctx: CheckContext) -> Outcome:
+    return Outcome(Status.PASS, "fine", ["saw it"])
+
+
+async def _fails(ctx: CheckContext) -> Outcome:
+    return Outcome(Status.FAIL, "broken", ["it broke"])
+
+
+def demo_specs(step: str) -> list[CheckSpec]:
+    return [CheckSpec(f"{step}.one", step, "First check", _quick),
+            CheckSpec(f"{step}.two", step, "Second check", _fails),
+            CheckSpec(f"{step}.three", step, "Third check", _quick)]
+
+
+def make_app(tmp_path: Path, settings: Settings | None, **kw) -> RosnetApp:
+    deps = AppDeps(config_path=tmp_path / "config.toml", settings=settings or Settings(),
+                   state_dir=tmp_path / "state", detect_net=lambda: NET,
+                   specs_for=kw.pop("specs_for", lambda step: []),
+                   make_context=lambda s: CheckContext(settings=s, timeout_s=2.0), **kw)
+    return RosnetApp(deps)
+
+
+def key_event(key: str) -> events.Key:
+    """The event Textual's driver makes for *key* (a character or a key name)."""
+    if len(key) == 1 and not key.isalnum():
+        key = _character_to_key(key)
+    try:
+        char = unicodedata.lookup(_get_unicode_name_from_key(key))
+    except KeyError:
+        char = key if len(key) == 1 else None
+    return events.Key(key, char)
+
+
+def expand(keys: list[str]) -> list[str]:
+    """"abc" -> "a", "b", "c"; key names (tab, ctrl+n...) stay whole."""
+    out: list[str] = []
+    for k in keys:
+        if len(k) > 1 and ("+" in k or k in KEY_NAMES):
+            out.append(k)
+        else:
+            out.extend(k)
+    return out
+
+
+KEY_NAMES = {"tab", "enter", "escape", "backspace", "down", "up", "left", "right", "home",
+             "end", "question_mark", "space", "shift+tab", "pageup", "pagedown", "f10"}
+
+
+async def settle(app: RosnetApp, pilot, seconds: float = 3.0) -> None:
+    """Let the app work until every key it received has been handled and it is idle."""
+    end = asyncio.get_running_loop().time() + seconds
+    while asyncio.get_running_loop().time() < end:
+        await pilot.pause(0.02)
+        if not getattr(app, "keys_pending", lambda: False)():
+            break
+    await pilot.pause(0.05)
+    await pilot.pause()
+
+
+async def drive(app: RosnetApp, keys: list[str], burst: bool, size=(80, 24)) -> dict:
+    """Type *keys* (slowly or in one burst) and describe the state they leave."""
+    async with app.run_test(size=size) as pilot:
+        await settle(app, pilot)
+        if burst:
+            for k in expand(keys):
+                app.post_message(key_event(k))
+        else:
+            for k in expand(keys):
+                app.post_message(key_event(k))
+                await settle(app, pilot)
+        await settle(app, pilot)
+        return describe(app)
+
+
+def describe(app: RosnetApp) -> dict:
+    screen = app.screen
+    state: dict = {"screen": type(screen).__name__, "step": getattr(screen, "step", None)
+                   and screen.step.id, "focused": app.focused and app.focused.id,
+                   "running": app.is_running}
+    for w in screen.query(Input):
+        state[f"input:{w.id}"] = w.value
+    for w in screen.query(Select):
+        state[f"select:{w.id}"] = w.value
+    return state
+
+
+def saved(tmp_path: Path):
+    s = load_settings(tmp_path / "config.toml")
+    return None if s is None else (s.this, s.peers, s.ros, s.probe.port)
+
+
+async def compare(tmp_path: Path, settings: Settings | None, keys: list[str], **kw) -> dict:
+    (tmp_path / "slow").mkdir()
+    (tmp_path / "burst").mkdir()
+    specs_for = kw.pop("specs_for", None)
+    extra = {"specs_for": specs_for} if specs_for else {}
+    slow = await drive(make_app(tmp_path / "slow", settings, **extra, **kw), keys, burst=False)
+    fast = await drive(make_app(tmp_path / "burst", settings, **extra, **kw), keys, burst=True)
+    assert fast == slow
+    assert saved(tmp_path / "burst") == saved(tmp_path / "slow")
+    return slow
+
+
+# ---------------------------------------------------------------------------------- set-up
+async def test_setup_name_tab_address_in_a_burst(tmp_path):
+    """The issue's first report: `sami`, Tab, `192.168.1.10` in one burst."""
+    state = await compare(tmp_path, None, ["sami", "tab", "tab", "tab", "tab", "192.168.1.10"])
+    assert state["input:this-name"] == "sami"
+    assert state["input:this-local-ip"].endswith("192.168.1.10")
+
+
+async def test_setup_backspaces_stay_in_their_field(tmp_path):
+    state = await compare(tmp_path, None, ["robot", "backspace", "backspace", "tab",
+                                           "shift+tab", "X"])
+    assert state["focused"] == "this-name"
+
+
+async def test_first_run_burst_with_a_new_peer_saves_it(tmp_path):
+    """robot1, Ctrl+N, sami, Tab, address, Tab, address, Backspace, 3, Ctrl+S: crashed with
+    NoMatches '#peer-0-name' and exited 0."""
+    keys = ["robot1", "ctrl+n", "sami", "tab", "192.168.1.10", "tab", "198.51.100.2",
+            "backspace", "3", "ctrl+s"]
+    state = await compare(tmp_path, None, keys)
+    assert state["screen"] == "StepScreen" and state["running"]
+    s = load_settings(tmp_path / "burst" / "config.toml")
+    assert s is not None and s.this.name == "robot1"
+    assert [(p.name, p.local_ip, p.public_ip) for p in s.peers] == [
+        ("sami", "192.168.1.10", "198.51.100.3")]
+
+
+async def test_ctrl_n_then_typing_goes_to_the_new_peer(tmp_path):
+    state = await compare(tmp_path, complete_settings(), ["ctrl+n", "ops2", "tab", "10.1.1.1"],
+                          open_setup=True)
+    assert state["input:this-name"] == "turtlebot"
+    assert state["input:peer-1-name"] == "ops2"
+
+
+async def test_setup_save_then_n_keeps_the_name(tmp_path):
+    """--setup with complete settings, Ctrl+S then `n`: the saved name became `n`."""
+    state = await compare(tmp_path, complete_settings(), ["ctrl+s", "n"], open_setup=True)
+    assert state["screen"] == "StepScreen" and state["step"] == "router"
+    s = load_settings(tmp_path / "burst" / "config.toml")
+    assert s is not None and s.this.name == "turtlebot"
+
+
+async def test_select_enter_down_enter(tmp_path):
+    """A burst Enter, Down, Enter on a select chose nothing."""
+    state = await compare(tmp_path, complete_settings(), ["tab", "enter", "down", "enter"],
+                          open_setup=True)
+    assert state["select:this-role"] == "member"
+
+
+async def test_setup_escape_closes_and_digits_go_to_the_step(tmp_path):
+    state = await compare(tmp_path, complete_settings(), ["escape", "3"], open_setup=True)
+    assert state["screen"] == "StepScreen" and state["step"] == "linux"
+
+
+# ---------------------------------------------------------------------------------- steps
+@pytest.mark.parametrize("keys", [
+    ["2", "r", "down", "e"],
+    ["n", "n", "b", "4", "1"],
+    ["3", "r", "end", "enter", "z"],
+    ["s", "escape", "2"],
+    ["a", "escape", "4"],
+    ["question_mark", "escape", "3"],
+    ["question_mark", "q", "n"],
+])
+async def test_step_keys_in_a_burst(tmp_path, keys):
+    await compare(tmp_path, complete_settings(), keys, specs_for=demo_specs)
+
+
+async def test_escape_read_as_alt_key_closes_help_then_acts(tmp_path):
+    """Escape followed at once by `3` reaches Textual as alt+3: it is Escape, then 3."""
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await settle(app, pilot)
+        app.post_message(key_event("question_mark"))
+        await settle(app, pilot)
+        assert type(app.screen).__name__ == "HelpScreen"
+        app.post_message(events.Key("alt+3", "3"))
+        await settle(app, pilot)
+        assert type(app.screen).__name__ == "StepScreen" and app.screen.step.id == "linux"
+
+
+async def test_alt_letter_in_a_field_is_escape_then_letter(tmp_path):
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await settle(app, pilot)
+        app.post_message(key_event("s"))  # the set-up
+        await settle(app, pilot)
+        assert type(app.screen).__name__ == "SetupScreen"
+        app.post_message(events.Key("alt+2", "2"))  # Escape closes it, 2 goes to step 2
+        await settle(app, pilot)
+        assert type(app.screen).__name__ == "StepScreen" and app.screen.step.id == "router"
+
+
+@pytest.mark.parametrize("typed,keys", [
+    ("?\x1b1n", ["question_mark", "escape", "1", "n"]),  # Esc 1 was read as '¡'
+    ("\x1b\t", ["escape", "tab"]),                        # was Shift+Tab
+    ("\x1b\x7f", ["escape", "backspace"]),                # was Ctrl+W
+    ("ab\x1bq", ["a", "b", "escape", "q"]),               # was Alt+Q
+    ("3\x1b[B4", ["3", "down", "4"]),                     # real sequences stay whole
+    ("\x1bOP", ["f1"]),
+])
+def test_escape_then_a_key_in_one_read_is_escape_then_the_key(typed, keys):
+    import time
+
+    from rosnet_tui.ui.keys import escape_first_parser
+
+    parser = escape_first_parser()()
+    got = list(parser.feed(typed))
+    time.sleep(0.15)  # Textual's escape delay
+    got += list(parser.tick())
+    assert [k.key for k in got] == keys
