@@ -15,8 +15,8 @@ rosnet-tui: keys                                  Esc, q or ? closes this help
 
 Four steps, on every component (robot and laptops) and its own modem: 1 ISP
 (is forwarding allowed, the public IP), 2 Router/modem (forward the ports),
-3 Linux (names in /etc/hosts), 4 ROS (ROS_MASTER_URI). Each step shows what to
-expect, what to configure on this component, and live checks.
+3 Linux (names in /etc/hosts), 4 ROS (Zenoh routers, or ROS 1's master URI).
+Each step shows what to expect, what to configure here, and live checks.
 
  1-4    go to a step                 r       run the step's checks
  n / b  next / back                  R       re-run the highlighted check
