@@ -44,7 +44,8 @@ def aggregate(states: list[str]) -> str:
     return "skip" if all(s == "skip" for s in states) else "pass"
 
 
-def _default_specs(step: str) -> list[CheckSpec]:
+def registry_specs(step: str) -> list[CheckSpec]:
+    """The registered checks of *step* (the everyday source; tests hand in their own)."""
     from rosnet_tui.core.checks.runner import select
 
     return select([step])
@@ -59,7 +60,7 @@ class WizardSession:
     state_dir: Path = field(default_factory=default_state_dir)
     hosts_path: Path = Path("/etc/hosts")
     bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
-    specs_for: Callable[[str], list[CheckSpec]] = _default_specs
+    specs_for: Callable[[str], list[CheckSpec]] = registry_specs
     # Tests hand in their own context factory; None: the runner's everyday context.
     context_factory: Callable[[Settings], CheckContext] | None = None
     # How this machine's network is found out (interfaces, default route): asked once, when
@@ -127,7 +128,7 @@ class WizardSession:
         return [c for c in self._specs[step] if c.applies(self.settings)]
 
     def specs_loaded(self, step: str) -> bool:
-        return step in self._specs or self.specs_for is not _default_specs
+        return step in self._specs or self.specs_for is not registry_specs
 
     def check_rows(self, step: str) -> list[tuple[str, str]]:
         """(id, title) of every check of *step*, without importing the checks if they are not

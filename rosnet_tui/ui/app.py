@@ -17,8 +17,7 @@ from textual.app import App
 from textual.binding import Binding
 
 from rosnet_tui.core.procedure import STEP_IDS
-from rosnet_tui.core.session import WizardSession
-from rosnet_tui.core.session import _default_specs as registry_specs
+from rosnet_tui.core.session import WizardSession, registry_specs
 from rosnet_tui.core.settings import Settings, default_state_dir
 from rosnet_tui.core.steps import step_for
 from rosnet_tui.ui.keys import OrderedKeys
