@@ -107,7 +107,7 @@ def _write_in_place(path: Path, text: str, mode: int | None = None) -> None:
         os.chmod(path, mode)
 
 
-def _keypair(comment: str) -> tuple[bytes, bytes]:
+def keypair(comment: str) -> tuple[bytes, bytes]:
     key = Ed25519PrivateKey.generate()
     private = key.private_bytes(ser.Encoding.PEM, ser.PrivateFormat.OpenSSH, ser.NoEncryption())
     public = key.public_key().public_bytes(ser.Encoding.OpenSSH, ser.PublicFormat.OpenSSH)
@@ -119,6 +119,7 @@ class Lab:
 
     addr = ADDR
     HOSTS = HOSTS
+    COMPUTERS = COMPUTERS  # the hosts with a name, sshd, HOME (a subclass may have others)
     VARIANTS = VARIANTS
 
     def __init__(self) -> None:
@@ -139,8 +140,8 @@ class Lab:
     # ================================================================== names and paths
     def ns(self, host: str) -> str:
         """The network namespace name of *host*."""
-        if host not in HOSTS:
-            raise ValueError(f"unknown lab host {host!r} (known: {', '.join(HOSTS)})")
+        if host not in self.HOSTS:
+            raise ValueError(f"unknown lab host {host!r} (known: {', '.join(self.HOSTS)})")
         return self.prefix + host
 
     def netns_path(self, host: str) -> str:
@@ -190,9 +191,9 @@ class Lab:
     def wrap(self, host: str) -> list[str]:
         """argv prefix running a command on *host*: its netns, hostname, HOME, ~/.ssh, /etc/hosts."""
         ns = self.ns(host)
-        if host in COMPUTERS:
+        if host in self.COMPUTERS:
             return ["ip", "netns", "exec", ns, "unshare", "--uts", "--", "/bin/sh", "-c",
-                    _WRAP_SCRIPT, "rnl-wrap", HOSTNAMES[host], str(self.home(host) / ".ssh"),
+                    _WRAP_SCRIPT, "rnl-wrap", self.hostname(host), str(self.home(host) / ".ssh"),
                     str(self.home(host))]
         return ["ip", "netns", "exec", ns]
 
@@ -203,7 +204,7 @@ class Lab:
                and not k.lower().endswith("_proxy")}  # nothing in the lab goes via a proxy
         env["PYTHONPATH"] = str(REPO)
         env["PYTHONUNBUFFERED"] = "1"
-        if host in COMPUTERS:
+        if host in self.COMPUTERS:
             env["HOME"] = str(self.home(host))
         return env
 
@@ -440,8 +441,8 @@ class Lab:
             ssh.mkdir(parents=True, mode=0o700)
             os.chmod(hdir / "home", 0o755)
             (hdir / "etc").mkdir(mode=0o700)
-            keys[h] = {"host": _keypair(f"host key of {HOSTNAMES[h]}"),
-                       "user": _keypair(f"root@{HOSTNAMES[h]}")}
+            keys[h] = {"host": keypair(f"host key of {HOSTNAMES[h]}"),
+                       "user": keypair(f"root@{HOSTNAMES[h]}")}
         path = os.pathsep.join([str(Path(sys.executable).parent), "/usr/local/sbin",
                                 "/usr/local/bin", "/usr/sbin", "/usr/bin", "/sbin", "/bin"])
         for h in COMPUTERS:
@@ -468,7 +469,7 @@ class Lab:
             return open(self.log_path(name), "w")
 
         starts = {}
-        for h in COMPUTERS:
+        for h in self.COMPUTERS:
             with logfile(f"sshd-{h}") as log:
                 starts[f"sshd-{h}"] = (h, 22, "tcp", self.spawn(
                     h, [SSHD, "-D", "-e", "-f", str(self._hostdir(h) / "etc" / "sshd_config")],
@@ -882,8 +883,8 @@ class Lab:
                 if stream is not None:
                     with contextlib.suppress(OSError):
                         stream.close()
-        cleanup.remove_netns([self.prefix + h for h in HOSTS])  # kills anything else inside
-        for h in HOSTS:
+        cleanup.remove_netns([self.prefix + h for h in self.HOSTS])  # kills anything else inside
+        for h in self.HOSTS:
             shutil.rmtree(Path("/etc/netns") / (self.prefix + h), ignore_errors=True)
         with contextlib.suppress(OSError):
             Path("/etc/netns").rmdir()

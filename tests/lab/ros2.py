@@ -76,7 +76,7 @@ class Ros2World:
     def write_bashrc(self, host: str, **extra: str) -> None:
         """~/.bashrc of *host* with the ROS 2 exports (*extra* adds or, with "", removes)."""
         self.bash_extra[host].update(extra)
-        lines = [f"# ~/.bashrc of {topology.HOSTNAMES[host]} (rosnet-tui network lab, ROS 2)"]
+        lines = [f"# ~/.bashrc of {self.lab.hostname(host)} (rosnet-tui network lab, ROS 2)"]
         lines += [f"export {k}='{v}'" if " " in v or '"' in v else f"export {k}={v}"
                   for k, v in self.exports(host).items()]
         _write_in_place(self.lab.bashrc_path(host), "\n".join(lines) + "\n")
