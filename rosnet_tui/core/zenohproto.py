@@ -444,9 +444,10 @@ def run_program(argv: list[str]) -> int:
             return 0
         if cmd == "graph":
             name = a.get("name", probe_name())
-            node = ProbeNode(session, domain, name, "rosnet_tui/graph")
             acked = threading.Event()  # the other side has seen our probe node: we may go
+            # Subscribed before the probe node shows, so the checker's ack finds us.
             ack = session.declare_subscriber(f"rosnet_tui/ack/{name}", lambda _s: acked.set())
+            node = ProbeNode(session, domain, name, "rosnet_tui/graph")
             print(READY_MARK, flush=True)
             want = a.get("expect", "")
             seen: list[dict[str, Any]] = []

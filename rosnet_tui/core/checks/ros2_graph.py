@@ -106,23 +106,32 @@ async def check_graph(ctx: CheckContext) -> Outcome:
                                          "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)),
         stdin=ZENOH_SOURCE, timeout=max(0.5, deadline - time.monotonic()),
         connect_timeout=max(0.5, ctx.timeout_s * 0.6))) for p in peers]
-    tokens: list[dict] = []
+    # Every token seen during the check, not only at the last look: a peer drops its probe node
+    # once acknowledged, so with several peers the first one's is gone from a later look while
+    # we still wait for another's (issue 21: "the probe node ... not seen", from a member).
+    seen: dict[tuple, dict] = {}
     info: dict = {}
     acked: set[str] = set()
+
+    def ack() -> None:  # again on every round: an ack sent before the peer's subscription
+        for n in acked:  # has reached our router is lost, and the peer would wait its timeout
+            session.put(f"rosnet_tui/ack/{n}", b"seen")
+
     try:
         while True:
             left = deadline - time.monotonic()
-            tokens = await run_blocking(zenohproto.graph, session, dom, max(0.1, min(0.5, left)),
-                                        timeout=max(0.3, min(1.5, left + 0.5)))
-            names = {tk["name"] for tk in tokens}
-            for n in theirs.values():
-                if n in names and n not in acked:  # the peer may drop its probe node now
-                    acked.add(n)
-                    session.put(f"rosnet_tui/ack/{n}", b"seen")
+            look = await run_blocking(zenohproto.graph, session, dom, max(0.1, min(0.5, left)),
+                                      timeout=max(0.3, min(1.5, left + 0.5)))
+            seen.update((tuple(sorted(tk.items())), tk) for tk in look)
+            acked |= {n for n in theirs.values() if any(tk["name"] == n for tk in look)}
+            ack()  # the peers whose probe node we saw may drop it now
             if len(acked) == len(theirs) or left < t * 0.25 or all(x.done() for x in tasks):
                 break
             await asyncio.sleep(0.15)
         info = await run_blocking(zenohproto.router_info, session, 0.5, timeout=1.0)
+        while acked and not all(x.done() for x in tasks) and time.monotonic() < deadline:
+            await asyncio.wait(tasks, timeout=0.1)
+            ack()
         results = await asyncio.gather(*tasks)
     finally:
         for task in tasks:
@@ -130,6 +139,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
         await run_blocking(node.close, timeout=1.0)
         await close_zenoh(session)
     ev: list[str] = []
+    tokens = list(seen.values())
     names = {tk["name"] for tk in tokens}
     here = _user_nodes(tokens)
     comp_of: dict[str, str] = {z: s.this.name for z in _local_zids(info)} if how == "router" else {}
@@ -292,8 +302,13 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
                 window = max(0.2, min(deadline - time.monotonic() - 0.8, remote_t - 1.0))
                 got = await run_blocking(zenohproto.wait_message, node, window, text,
                                          timeout=window + 1.0)
-                if got[0] is not None:
+                if got[0] is not None:  # the peer publishes until acked: ack until it reports
+                    ack_until = min(deadline - 0.3, time.monotonic() + max(1.0, ctx.timeout_s))
                     session.put(f"rosnet_tui/ack/{tag}", b"ok")
+                    while time.monotonic() < ack_until and await sess.read_until(
+                            zenohproto.REPORT_MARK, timeout=0.1) is None:
+                        session.put(f"rosnet_tui/ack/{tag}", b"ok")  # one may have been lost
+                        await asyncio.sleep(0.02)
                 else:  # while the peer still publishes: is its publisher in the graph?
                     seen_pub = await _seen_by_client(endpoint, dom, topic)
             info = await run_blocking(zenohproto.router_info, session, 0.4, timeout=0.8)
