@@ -6,6 +6,7 @@ verification passes from the master and from a member.
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 import time
@@ -84,6 +85,41 @@ def test_nine_site_ros2_every_member_linked_and_every_check_passes_from_master_a
             assert {n["name"]: n["component"] for n in graph["nodes"]} == expected, explain(results)
             for cid in ("ros2.pubsub_out", "ros2.pubsub_in"):
                 assert sorted(results[cid]["data"]["peers"]) == sorted(others), explain(results)
+        for host in ("turtlebot", "member8"):    # every step: nothing fails or warns
+            results = full_check(fleet, host, w.env(host))
+            assert not [c for c in results.values() if c["status"] in ("fail", "warn")], \
+                explain(results)
+            assert all(results[cid]["status"] == "pass" for cid in ROS2_IDS), explain(results)
+
+
+def test_nine_site_ros1_every_check_passes_from_master_and_member(fleet):
+    fleet.reset()                     # ROS 1: every modem forwards 1024-65000 to its computer
+    fleet.start_roscore()
+    try:
+        fleet.talker("member8")
+        listener = fleet.listener("sami")
+        assert fleet.wait_output(listener, r"heard: hello from member8 \d+", timeout=20), \
+            fleet.output(listener)
+        for host in ("turtlebot", "member8"):
+            t0 = time.monotonic()
+            results = full_check(fleet, host, fleet.ros_env(host))
+            print(f"ROS 1, every check from {host} with {len(fleet.sites) - 1} peers: "
+                  f"{time.monotonic() - t0:.2f} s")
+            assert results and all(c["status"] == "pass" for c in results.values()), \
+                explain(results)
+            assert "ros.pubsub_in" in results
+    finally:
+        fleet.stop_roscore()
+        fleet.reset()
+
+
+def full_check(fleet: Fleet, host: str, env: dict[str, str]) -> dict[str, dict]:
+    """`rosnet-tui check --json` (every step) on *host*: {check id: entry}."""
+    r = fleet.rosnet(host, "check", "--json", "--config", str(fleet.home(host) / ".config" /
+                                                              "rosnet-tui" / "config.toml"),
+                     env=env, timeout=120)
+    assert r.stdout.strip(), r.stderr
+    return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
 
 
 def test_a_fleet_tears_down_to_nothing(lab_session):
