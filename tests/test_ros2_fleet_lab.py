@@ -67,3 +67,19 @@ def test_a_healthy_three_site_network_passes_every_ros2_check_20_runs_from_each_
                 assert sorted(results[cid]["data"]["peers"]) == peers, where
     print({h: f"{min(t):.2f}-{max(t):.2f} s, mean {sum(t) / len(t):.2f} s"
            for h, t in timings.items()})
+
+
+def test_a_far_member_does_not_hide_the_nearer_peers_probe_node(ros2):
+    """The race made certain: member2 is on a slow line (400 kbit/s), so the peer programs (fed
+    over SSH, about 20 kB each) start there most of a second after the master's, and from sami the
+    master's probe node shows up, is acknowledged and dropped well before member2's shows up.
+    The verdict must still count both as seen, from the other member and from the master."""
+    ros2.node("turtlebot", "talker")
+    ros2.lab.set_rate("member2", "400kbit")
+    for host in ("sami", "turtlebot"):
+        peers = sorted(n for n in ros2.lab.COMPUTERS if n != host)
+        results = ros2.check(host, step="ros")
+        graph = results["ros2.graph"]
+        assert graph["status"] == "pass", explain(results)
+        assert graph["data"]["probe_seen"] == dict.fromkeys(peers, True), explain(results)
+        assert all(c["status"] == "pass" for c in results.values()), explain(results)

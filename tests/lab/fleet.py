@@ -110,6 +110,7 @@ class Fleet(Lab):
         self.HOSTS = (*self.COMPUTERS, *(s.modem for s in self.sites), "internet")
         self.ROUTERS = (*(s.modem for s in self.sites), "internet")
         self.forwarding = {s.name: "ros1" for s in self.sites}
+        self.slowed: dict[str, str | None] = {}   # host -> its line's rate (set_rate)
         self.build_s: dict[str, float] = {}    # seconds per build phase, and "total"
 
     # ------------------------------------------------------------------ names
@@ -289,10 +290,24 @@ class Fleet(Lab):
             raise RuntimeError(f"forwarding on {s.modem}: {r.stderr.strip()}")
         self.forwarding[host] = mode
 
+    def set_rate(self, host: str, rate: str | None) -> None:
+        """A slow line at *host*'s site: its modem passes at most *rate* (tc tbf, e.g. "200kbit")
+        each way, queueing (not dropping) up to 2 s; None: full speed again."""
+        modem = self.by_name[host].modem
+        script = "\n".join(f"tc qdisc replace dev {dev} root tbf rate {rate} burst 16kbit "
+                           f"latency 2000ms" if rate else
+                           f"tc qdisc del dev {dev} root 2>/dev/null || true"
+                           for dev in ("wan0", "lan0"))
+        self._in_ns(modem, script)
+        self.slowed[host] = rate
+
     def reset(self) -> None:
-        """Back to the network as built: ROS 1 forwarding, hosts files, ~/.bashrc, settings."""
+        """Back to the network as built: ROS 1 forwarding, full speed, hosts files, ~/.bashrc,
+        settings."""
         if not self.built or self.destroyed:
             return
+        for h in [h for h, rate in self.slowed.items() if rate]:
+            self.set_rate(h, None)
         for h in self.COMPUTERS:
             if self.forwarding[h] != "ros1":
                 self.set_forwarding(h, "ros1")

@@ -123,6 +123,8 @@ class FleetRos2(Ros2World):
             self.lab.kill(p, grace=0.5)
         self.nodes.clear()
         self.bash_extra = {h: {} for h in self.lab.COMPUTERS}
+        for h in [h for h, rate in self.lab.slowed.items() if rate]:
+            self.lab.set_rate(h, None)
         self.forward()
         self._write_all()
         down = [h for h in self.lab.COMPUTERS
