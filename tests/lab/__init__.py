@@ -16,6 +16,10 @@ variant, reset, set_robot_wan, public_ip, log_path, destroy.
 On top of it: ``tests/lab/ros2.py`` (Ros2World: the ROS 2 network over real Zenoh routers) and
 ``tests/lab/upnp.py`` (UpnpModem: Debian's real miniupnpd in the robot's modem, UPnP IGD, PCP and
 NAT-PMP, with stund on the internet side and an optional second LAN host).
+
+Beside it: ``tests/lab/fleet.py`` (Fleet, a Lab subclass: a master and up to eight members, each
+behind its own modem; the ``fleet`` fixture) and ``tests/lab/fleet_ros2.py`` (FleetRos2: ROS 2 on
+it, every member's router linked to the master's).
 """
 
 from .lab import Lab, LabUnavailable, lab_available
