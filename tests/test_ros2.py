@@ -4,7 +4,6 @@ the steps text, which checks a version runs, and address sync leaving the ROS 2 
 from __future__ import annotations
 
 import json
-import shlex
 import struct
 from dataclasses import replace
 from pathlib import Path

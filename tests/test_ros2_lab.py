@@ -198,3 +198,38 @@ def test_a_new_master_address_is_followed_by_name(ros2):
             time.sleep(1)
         assert results["ros2.router"]["data"]["address"] == "203.0.113.77", explain(results)
         assert results["ros2.pubsub_out"]["status"] == "pass", explain(results)
+
+
+def test_the_peers_side_runs_with_the_rosnet_tui_installed_there(ros2):
+    """Issue 21: each lab computer has rosnet-tui installed the README's way (pipx layout in its
+    home) and an SSH session's python3 has no eclipse-zenoh, as on a robot; the checks' peer side
+    runs with that installation's interpreter."""
+    from tests.lab import readme_install
+
+    r = ros2.lab.run("laptop", ["ssh", "-o", "BatchMode=yes", "turtlebot",
+                                "echo $HOME; command -v python3; python3 -c 'import zenoh'; "
+                                "echo zenoh=$?"], timeout=30)
+    home, python3, *_ = r.stdout.split("\n")
+    assert home == str(ros2.lab.home("robot")) and "zenoh=1" in r.stdout, (r.stdout, r.stderr)
+    assert not python3.startswith(str(ros2.lab.home("robot"))), python3
+    venv_python = f"{ros2.lab.home('robot') / readme_install.VENV}/bin/python"
+    results = ros2.check("laptop")
+    assert all(c["status"] == "pass" for c in results.values()), explain(results)
+    for cid in ("ros2.pubsub_out", "ros2.pubsub_in"):
+        assert any(f"(run by {venv_python})" in e for e in results[cid]["evidence"]), \
+            explain(results)
+
+
+def test_a_peer_without_rosnet_tui_installed_skips_naming_the_readme_line(ros2):
+    ros2.uninstall("robot")
+    results = ros2.check("laptop")
+    line = "`pipx install --force .`"
+    for cid in ("ros2.pubsub_out", "ros2.pubsub_in"):
+        assert results[cid]["status"] == "skip", explain(results)
+        assert "rosnet-tui is not installed on turtlebot" in results[cid]["summary"]
+        assert line in results[cid]["summary"], explain(results)
+    graph = results["ros2.graph"]
+    assert graph["status"] == "warn" and line in graph["summary"], explain(results)
+    assert results["ros2.env"]["status"] == "pass", explain(results)   # python3 answers `info`
+    text = explain(results).replace("pipx install", "")
+    assert "pip install" not in text and "pip3 install" not in text, text
