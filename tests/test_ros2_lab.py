@@ -196,8 +196,15 @@ def test_a_new_master_address_is_followed_by_name(ros2):
             if results["ros2.pubsub_out"]["status"] == "pass" or time.monotonic() > deadline:
                 break
             time.sleep(1)
-        assert results["ros2.router"]["data"]["address"] == "203.0.113.77", explain(results)
-        assert results["ros2.pubsub_out"]["status"] == "pass", explain(results)
+        try:
+            assert results["ros2.router"]["data"]["address"] == "203.0.113.77", explain(results)
+            assert results["ros2.pubsub_out"]["status"] == "pass", explain(results)
+        finally:
+            # the address goes back when the block ends: the member's link to the master is
+            # stale again until its lease runs out. healthy() (the fixture) starts a fresh
+            # router once the hosts file is back, so the next test gets a healthy network (this
+            # used to be the module's last test, so nothing saw that).
+            ros2.stop_router("laptop")
 
 
 def test_the_peers_side_runs_with_the_rosnet_tui_installed_there(ros2):
