@@ -152,3 +152,28 @@ def test_the_program_reaches_the_interpreter_whole(tmp_path):
                        capture_output=True, timeout=30,
                        env={"HOME": str(home), "PATH": "/usr/bin:/bin", "SHELL": "/bin/sh"})
     assert zenohproto.parse_report(r.stdout.decode()) is not None, r.stderr
+
+
+def test_the_labs_readme_install_runs_from_any_home_even_a_long_one(tmp_path):
+    """tests/lab/readme_install.py: the cached build copied into a home whose path is too long
+    for a ``#!`` line gets pip's ``#!/bin/sh`` launcher, which both the shell and the prelude
+    follow; the copy's Python has eclipse-zenoh, and /usr/bin/python3 still has none."""
+    from tests.lab import readme_install
+
+    home = tmp_path / ("h" * 100) / "home"
+    launcher = readme_install.install(home)
+    venv_python = f"{home / readme_install.VENV}/bin/python"
+    target = launcher.resolve().read_text().splitlines()
+    assert target[0] == "#!/bin/sh" and venv_python in target[1], target[:3]
+    r = subprocess.run([str(launcher), "--version"], capture_output=True, text=True, timeout=60,
+                       env={"PATH": "/usr/bin:/bin", "HOME": str(home)})
+    assert r.returncode == 0 and r.stdout.startswith("rosnet-tui "), r.stderr
+    cmd = probes.zenoh_peer_command("graph", "--timeout", "1", "--local", "tcp/127.0.0.1:9")
+    rep, _, _ = run(cmd, home)
+    assert rep is not None and rep.get("error") == "open" and rep["python"] == venv_python, rep
+    sys_py = subprocess.run(["/usr/bin/python3", "-c", "import zenoh"], capture_output=True,
+                            timeout=30)
+    assert sys_py.returncode != 0
+    assert readme_install.install(home) == launcher          # installed already: kept
+    readme_install.uninstall(home)
+    assert not readme_install.installed(home) and not (home / readme_install.VENV).exists()
