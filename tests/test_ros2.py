@@ -4,7 +4,6 @@ the steps text, which checks a version runs, and address sync leaving the ROS 2 
 from __future__ import annotations
 
 import json
-import shlex
 import struct
 from dataclasses import replace
 from pathlib import Path
@@ -217,18 +216,19 @@ def test_address_sync_leaves_the_ros2_block_alone(tmp_path):
 
 def test_the_zenoh_peer_program_runs_with_the_peers_site_packages(tmp_path):
     """The ROS 1 probes run ``python3 -S`` (stdlib only, a faster start: issue 14), but the Zenoh
-    peer program imports eclipse-zenoh from the peer's site-packages: its command keeps site
-    (with -S every ROS 2 check said "no eclipse-zenoh" on a peer that has it)."""
+    peer program imports eclipse-zenoh from the site-packages of the rosnet-tui installed on the
+    peer (issue 21; tests/test_peer_install.py): its interpreter runs it with site."""
     import subprocess
     import sys
 
     from rosnet_tui.core.checks.probes import python_stdin_command, zenoh_peer_command
 
     cmd = zenoh_peer_command("graph", "--timeout", "1")
-    assert " -S " not in f" {cmd} " and cmd.startswith("python3 - ")
-    assert " -S " in f" {python_stdin_command('nodes')} "
+    assert cmd.startswith("sh -c ") and 'exec "$py" - "$@"' in cmd
+    assert python_stdin_command("nodes").startswith("python3 -S - ")
     src = Path(zenohproto.__file__).read_text()
-    r = subprocess.run(["sh", "-c", cmd.replace("python3", shlex.quote(sys.executable), 1)],
-                       input=src, capture_output=True, text=True, timeout=30, cwd=tmp_path)
+    path = f"{Path(sys.executable).parent}:/usr/bin:/bin"   # where this rosnet-tui's launcher is
+    r = subprocess.run(["sh", "-c", cmd], input=src, capture_output=True, text=True, timeout=30,
+                       cwd=tmp_path, env={"HOME": str(tmp_path), "PATH": path})
     rep = zenohproto.parse_report(r.stdout)
     assert rep is not None and rep.get("error") != "no_zenoh", (r.stdout, r.stderr)

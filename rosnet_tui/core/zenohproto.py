@@ -13,9 +13,10 @@ What rmw_zenoh puts on the wire (its design document and ``liveliness_utils.cpp`
 Humble's rmw_zenoh writes ``TypeHashNotSupported`` where later distros write an RIHS01 hash, so
 the two discover each other but never match each other's data keys.
 
-This file runs on its own too (``python3 - sub|pub|graph ...`` fed on stdin over SSH): the peer
-needs python3 and the ``eclipse-zenoh`` package, nothing of rosnet-tui. It imports only the
-standard library at the top; ``zenoh`` is imported when a session is opened.
+This file runs on its own too (``<python> - sub|pub|graph ...`` fed on stdin over SSH), with the
+interpreter of the rosnet-tui installed on the peer (its virtual environment has eclipse-zenoh;
+checks/probes.py finds it), whatever that rosnet-tui's version. It imports only the standard
+library at the top; ``zenoh`` is imported when a session is opened.
 """
 
 from __future__ import annotations
@@ -416,15 +417,15 @@ def run_program(argv: list[str]) -> int:
     timeout = float(a.get("timeout", "3"))
     deadline = time.monotonic() + timeout
     env = ros_env()
-    base = {"env": env, "host": os.uname().nodename}
+    base = {"env": env, "host": os.uname().nodename, "python": sys.executable}
     if cmd == "info":
         _report(**base)
         return 0
     try:
         _zenoh()
     except ZenohMissing:
-        _report(error="no_zenoh", detail="python3 has no eclipse-zenoh here "
-                                         "(pip install eclipse-zenoh)", **base)
+        _report(error="no_zenoh", detail=f"{sys.executable} has no eclipse-zenoh (it comes with "
+                                         "rosnet-tui: reinstall it as its README says)", **base)
         return NO_ZENOH_EXIT
     endpoint, how = peer_endpoint(env, a.get("local", "tcp/127.0.0.1:7447"))
     domain = int(a.get("domain", env.get("ROS_DOMAIN_ID") or "0") or 0)

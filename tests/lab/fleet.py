@@ -31,14 +31,13 @@ from __future__ import annotations
 import contextlib
 import os
 import subprocess
-import sys
 import time
 import xmlrpc.client
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from . import procs, topology
+from . import procs, readme_install, topology
 from .lab import Lab, LabUnavailable, keypair
 from .topology import ADDR, ZENOH_PORT
 
@@ -211,9 +210,10 @@ class Fleet(Lab):
                         "services": t4 - t3, "install": t5 - t4, "total": t5 - t0}
 
     def install_rosnet(self, host: str) -> None:
-        """Install rosnet-tui on *host* the README's way. THE ONE PLACE for it: call
-        tests/lab/readme_install.py's ``install(self.home(host))`` here once it exists (helper
-        H3's work); until then the lab's python3 runs the repo's code (PYTHONPATH)."""
+        """Install rosnet-tui on *host* the README's way (a pipx-style venv in its home on the
+        distribution's python3, which has no eclipse-zenoh): the peer side of the ROS 2 checks
+        runs with it, as on a real fleet."""
+        readme_install.install(self.home(host))
 
     def _configure_namespaces(self) -> None:
         """Sysctls, addresses, routes and firewalls of every namespace, all at once."""
@@ -251,9 +251,6 @@ class Fleet(Lab):
             (etc / "resolv.conf").write_text(topology.resolv_text())
         keys = {h: {"host": keypair(f"host key of {h}"), "user": keypair(f"root@{h}")}
                 for h in self.COMPUTERS}
-        path = os.pathsep.join([str(Path(sys.executable).parent), "/usr/local/sbin",
-                                "/usr/local/bin", "/usr/sbin", "/usr/bin", "/sbin", "/bin"])
-        repo = str(Path(__file__).resolve().parents[2])
         for h in self.COMPUTERS:
             hdir = self._hostdir(h)
             ssh = hdir / "home" / ".ssh"
@@ -275,7 +272,7 @@ class Fleet(Lab):
                 o.encode() + b" " + b" ".join(keys[o]["host"][1].split()[:2]) + b"\n"
                 for o in others))
             (hdir / "etc" / "sshd_config").write_text(topology.sshd_config(
-                str(host_key), str(hdir / "home"), path, repo))
+                str(host_key), str(hdir / "home"), topology.SSH_SESSION_PATH, ""))
             (hdir / "home" / ".bashrc").write_text(self.bashrc_text(h))
             self.config_path(h)
 

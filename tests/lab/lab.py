@@ -443,8 +443,6 @@ class Lab:
             (hdir / "etc").mkdir(mode=0o700)
             keys[h] = {"host": keypair(f"host key of {HOSTNAMES[h]}"),
                        "user": keypair(f"root@{HOSTNAMES[h]}")}
-        path = os.pathsep.join([str(Path(sys.executable).parent), "/usr/local/sbin",
-                                "/usr/local/bin", "/usr/sbin", "/usr/bin", "/sbin", "/bin"])
         for h in COMPUTERS:
             hdir, peer = self._hostdir(h), PEER[h]
             ssh = hdir / "home" / ".ssh"
@@ -460,7 +458,7 @@ class Lab:
             peer_host_key = b" ".join(keys[peer]["host"][1].split()[:2])
             (ssh / "known_hosts").write_bytes(HOSTNAMES[peer].encode() + b" " + peer_host_key + b"\n")
             (hdir / "etc" / "sshd_config").write_text(topology.sshd_config(
-                str(host_key), str(hdir / "home"), path, str(REPO)))
+                str(host_key), str(hdir / "home"), topology.SSH_SESSION_PATH, ""))
             _write_in_place(hdir / "home" / ".bashrc", topology.bashrc_text(h))
             self.config_path(h)
 
@@ -773,10 +771,9 @@ class Lab:
         hdir = self._hostdir(host)
         conf = hdir / "etc" / ("sshd_config" if port == 22 else f"sshd_config.{port}")
         if port != 22:
-            path = os.pathsep.join([str(Path(sys.executable).parent), "/usr/local/sbin",
-                                    "/usr/local/bin", "/usr/sbin", "/usr/bin", "/sbin", "/bin"])
             conf.write_text(topology.sshd_config(str(hdir / "etc" / "ssh_host_ed25519_key"),
-                                                 str(hdir / "home"), path, str(REPO), port))
+                                                 str(hdir / "home"), topology.SSH_SESSION_PATH,
+                                                 "", port))
         with open(self.log_path(name), "a") as log:
             proc = self.spawn(host, [SSHD, "-D", "-e", "-f", str(conf)], stdout=log,
                               stderr=subprocess.STDOUT)

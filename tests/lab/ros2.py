@@ -10,6 +10,9 @@
   only. SSH is the path the checks use to run the peer's side of an exchange; no ROS traffic
   needs it, and the ``member_unforwarded`` variant takes it away;
 - ~/.bashrc on both: RMW_IMPLEMENTATION, ROS_DOMAIN_ID, ROS_DISTRO, ZENOH_ROUTER_CONFIG_URI;
+- rosnet-tui installed in each computer's home as the README's pipx line leaves it
+  (tests/lab/readme_install.py); an SSH session's python3 there has no eclipse-zenoh, so the
+  checks' peer side runs with that installation, as on a robot (``uninstall(host)`` takes it away);
 - stand-in nodes (tests/lab/ros2_scripts/node.py) behave on the wire as rmw_zenoh nodes do.
 
 Leaving the block stops the routers and nodes and puts the ROS 1 lab back (lab.reset()).
@@ -24,7 +27,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from . import topology
+from . import readme_install, topology
 from .lab import Lab, _write_in_place
 from .topology import ADDR, COMPUTERS
 
@@ -91,6 +94,11 @@ class Ros2World:
         self.lab._set_forwarding("robot", robot)
         self.lab._set_forwarding("laptop", laptop)
 
+    def uninstall(self, host: str) -> None:
+        """Take rosnet-tui off *host* as ``pipx uninstall rosnet-tui`` would (healthy() puts it
+        back)."""
+        readme_install.uninstall(self.lab.home(host))
+
     # ------------------------------------------------------------------ processes
     def start_router(self, host: str, port: int = 7447, timeout: float = 15.0) -> subprocess.Popen:
         self.stop_router(host)
@@ -139,6 +147,7 @@ class Ros2World:
         try:
             self.forward()
             for h in COMPUTERS:
+                readme_install.install(self.lab.home(h))
                 self.config_path(h)
                 self.write_router_config(h)
                 self.write_bashrc(h)
@@ -161,6 +170,7 @@ class Ros2World:
             self.config_path(h)
             self.write_router_config(h)
             self.write_bashrc(h)
+            readme_install.install(self.lab.home(h))    # quick when it is there already
             if h not in self.routers or self.routers[h].poll() is not None:
                 self.start_router(h)
 

@@ -225,6 +225,12 @@ def bashrc_text(host: str, *, ros_ip: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+# The PATH of an SSH session on a lab computer: sshd's own default for root, as on a robot. Not
+# the development interpreter's folder: that python3 has eclipse-zenoh, a robot's has not (issue
+# 21); the ROS 2 checks find the rosnet-tui installed in the home (tests/lab/readme_install.py).
+SSH_SESSION_PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
+
+
 def sshd_config(host_key: str, home: str, path: str, pythonpath: str, port: int = 22) -> str:
     return "\n".join([
         f"Port {port}",
@@ -243,7 +249,7 @@ def sshd_config(host_key: str, home: str, path: str, pythonpath: str, port: int 
         "MaxStartups 64:30:128",
         "MaxSessions 32",
         "LogLevel INFO",
-        f"SetEnv HOME={home} PATH={path} PYTHONPATH={pythonpath}",
+        f"SetEnv HOME={home} PATH={path}" + (f" PYTHONPATH={pythonpath}" if pythonpath else ""),
         "Subsystem sftp internal-sftp",
         "",
     ])

@@ -15,6 +15,7 @@ import errno
 import ipaddress
 import shlex
 import socket
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -216,17 +217,65 @@ def python_command(script: str, *args: str, python: str = "python3") -> str:
             f"{quoted}").strip()
 
 
-def python_stdin_command(*args: str, site: bool = False) -> str:
-    """A shell command running the program fed on stdin with python3 on a peer (``python3 -``,
-    without site as :func:`python_command`, unless *site*: the program imports a package the
-    peer installed)."""
-    return ("python3 - " if site else "python3 -S - ") + " ".join(shlex.quote(a) for a in args)
+def python_stdin_command(*args: str) -> str:
+    """A shell command running the stdlib-only program fed on stdin with python3 on a peer
+    (``python3 -S -``: without site, as :func:`python_command`)."""
+    return "python3 -S - " + " ".join(shlex.quote(a) for a in args)
 
 
-def zenoh_peer_command(*args: str) -> str:
-    """The command running the Zenoh peer program (core/zenohproto.py, fed on stdin) on a peer:
-    with site, since it imports eclipse-zenoh from the peer's site-packages."""
-    return python_stdin_command(*args, site=True)
+# The README installs rosnet-tui (with eclipse-zenoh) in a virtual environment of its own; the
+# peer's python3 has no eclipse-zenoh (and under PEP 668 pip may not add it). So the Zenoh peer
+# program runs with the interpreter of the rosnet-tui installed on the peer, found by this POSIX
+# sh prelude in the same SSH round trip: the launchers the README's installs make (pipx, uv tool,
+# the root-owned pipx), their virtual environments, the PATH, and last a login shell's PATH
+# (bounded by `timeout`: fixed places first). A launcher's interpreter is its first line, or the
+# path on its second line in the `#!/bin/sh` form pip and uv write for long paths, or else the
+# `python` beside the launcher's target. The program is still fed on stdin, so the version of
+# the peer's rosnet-tui does not matter. Nothing here reads stdin: the program must arrive whole.
+NO_INSTALL_EXIT = 4       # the prelude's exit status when no rosnet-tui is installed on the peer
+PEER_INSTALL_PLACES = ("the PATH, ~/.local/bin, pipx's and uv's tool folders, /usr/local/bin, "
+                       "/opt/pipx, a login shell's PATH")
+README_INSTALL = "pipx install --force ."   # README, Install: run in a checkout of rosnet-tui
+_FIND_INSTALL = r"""
+py=; h=${HOME:-~}; d=${XDG_DATA_HOME:-$h/.local/share}
+L() {
+  [ -f "$1" ] || return 1
+  l1=; l2=; { IFS= read -r l1; IFS= read -r l2; } <"$1" 2>/dev/null
+  case $l1 in
+  "#!/bin/sh"*) r=${l2#*"exec' "}; q=${r%"${r#?}"}; r=${r#?}; p=${r%%"$q"*} ;;
+  "#!"*) r=${l1#??}; r=${r#"${r%%[! ]*}"}; p=${r%% *} ;;
+  *) p= ;;
+  esac
+  case $p in */env|*/sh|*/bash) p= ;; /*) ;; *) p= ;; esac
+  [ -n "$p" ] && [ -x "$p" ] || p=$(dirname -- "$(readlink -f -- "$1")")/python
+  [ -x "$p" ] && py=$p
+}
+V() { [ -x "$1/rosnet-tui/bin/python" ] && py=$1/rosnet-tui/bin/python; }
+for b in "${PIPX_BIN_DIR:-$h/.local/bin}" "${UV_TOOL_BIN_DIR:-${XDG_BIN_HOME:-$h/.local/bin}}"; do
+  [ -n "$py" ] || L "$b/rosnet-tui"
+done
+for v in "${PIPX_HOME:-$d/pipx}/venvs" "$h/.local/pipx/venvs" "${UV_TOOL_DIR:-$d/uv/tools}"; do
+  [ -n "$py" ] || V "$v"
+done
+[ -n "$py" ] || { b=$(command -v rosnet-tui) && L "$b"; }
+[ -n "$py" ] || L /usr/local/bin/rosnet-tui || V /opt/pipx/venvs
+[ -n "$py" ] || { b=$(timeout 3 "${SHELL:-/bin/sh}" -lc "command -v rosnet-tui" </dev/null \
+                     2>/dev/null | tail -n 1) && L "$b"; }
+[ -n "$py" ] && exec "$py" - "$@"
+[ -n "$FALLBACK" ] && exec python3 -S - "$@"
+echo "ROSNET_ZENOH {\"error\": \"no_install\", \"detail\": \"no rosnet-tui installed\"}"
+exit @EXIT@
+""".replace("@EXIT@", str(NO_INSTALL_EXIT))
+
+
+def zenoh_peer_command(*args: str, need_zenoh: bool = True) -> str:
+    """The command running the Zenoh peer program (core/zenohproto.py, fed on stdin) on a peer
+    with the interpreter of the rosnet-tui installed there, found by _FIND_INSTALL; one SSH round
+    trip. Without an installation it prints a ``no_install`` report and exits NO_INSTALL_EXIT,
+    unless not *need_zenoh* (``info`` needs only the standard library: the peer's python3 runs it
+    then). Run by ``sh -c``, so the peer's login shell may be any shell."""
+    script = _FIND_INSTALL if need_zenoh else "FALLBACK=1" + _FIND_INSTALL
+    return "sh -c " + shq(script) + " rosnet-tui-peer " + " ".join(shq(a) for a in args)
 
 
 def peer_program_problem(res: SshResult, peer: Peer) -> str | None:
@@ -246,7 +295,7 @@ def stderr_tail(res: SshResult) -> str:
 
 # --------------------------------------------------------------------------- ROS 2 (rmw_zenoh)
 # Shared by the ros2.* checks (checks/ros2.py and checks/ros2_graph.py).
-ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()   # the peer program, fed to `python3 -`
+ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()   # the peer program, fed on stdin
 
 
 def zenoh_env(ctx: CheckContext) -> dict[str, str]:
@@ -275,7 +324,8 @@ async def open_zenoh(endpoint: str, t: float, how: str = "client"
     except asyncio.TimeoutError:
         return None, f"no Zenoh session within {t + 0.4:.1f} s"
     except zenohproto.ZenohMissing:
-        return None, "eclipse-zenoh is not installed for this Python (pip install eclipse-zenoh)"
+        return None, (f"eclipse-zenoh is not installed for this Python ({sys.executable}); it "
+                      f"comes with rosnet-tui: reinstall it as the README says (`{README_INSTALL}`)")
     except zenohproto.OpenFailed as exc:
         return None, str(exc)
 
@@ -296,10 +346,15 @@ def zenoh_peer_problem(res: SshResult, peer: Peer, rep: dict | None) -> str | No
     """Why the peer's zenoh program gave no usable report (None: it did)."""
     if res.failure and res.failure != "timeout" and rep is None:
         return f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
+    if rep is not None and rep.get("error") == "no_install":
+        return (f"rosnet-tui is not installed on {peer.name} (looked in {PEER_INSTALL_PLACES}): "
+                f"install it there as the README says, in a checkout: `{README_INSTALL}`")
     if res.exit_status == 127:
-        return f"{peer.name} has no python3 (exit status 127)"
+        return f"{peer.name} has no sh or python3 to run the probe (exit status 127)"
     if rep is not None and rep.get("error") == "no_zenoh":
-        return f"{peer.name}'s python3 has no eclipse-zenoh (pip install eclipse-zenoh there)"
+        return (f"the rosnet-tui on {peer.name} ({rep.get('python') or 'its Python'}) has no "
+                f"eclipse-zenoh: reinstall it there as the README says, in a checkout: "
+                f"`{README_INSTALL}`")
     if rep is None:
         return (f"the probe on {peer.name} gave no report "
                 f"({stderr_tail(res) or res.detail or 'no output'})")

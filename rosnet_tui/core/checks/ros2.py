@@ -2,8 +2,8 @@
 (ros2.router). The graph and live publish/subscribe are in :mod:`.ros2_graph`.
 
 Every probe is a real Zenoh session (eclipse-zenoh) that behaves as an rmw_zenoh node does on the
-wire (:mod:`rosnet_tui.core.zenohproto`). Questions to a peer run the same module over SSH
-(``python3 -`` fed its source): the peer needs python3 (with eclipse-zenoh for sessions).
+wire (:mod:`rosnet_tui.core.zenohproto`). Questions to a peer run the same module over SSH, fed
+on stdin to the interpreter of the rosnet-tui installed there (probes.zenoh_peer_command).
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ def _read_router_config(path: str) -> tuple[dict | None, str | None]:
 
 async def _peer_infos(ctx: CheckContext, t: float) -> dict[str, dict | str]:
     peers = ros2_peers(ctx)
-    cmd = zenoh_peer_command("info")
+    cmd = zenoh_peer_command("info", need_zenoh=False)
     got = await asyncio.gather(*(ssh_run(ctx.ssh, p, cmd, stdin=ZENOH_SOURCE, timeout=t) for p in peers))
     out: dict[str, dict | str] = {}
     for p, res in zip(peers, got, strict=True):

@@ -323,7 +323,8 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
                 ev, _pdata(peer.name, False))
     assert rep is not None
     ev.append(f"{peer.name}: {rep.get('how')} session on {rep.get('endpoint')}"
-              + (f", router {rep['router'].get('zid')}" if rep.get("router") else ""))
+              + (f", router {rep['router'].get('zid')}" if rep.get("router") else "")
+              + (f" (run by {rep['python']})" if rep.get("python") else ""))
     if rep.get("error"):
         return (Status.FAIL, f"{arrow}: on {peer.name}, {rep.get('detail')}",
                 ev, _pdata(peer.name, False, "peer_router", None, rep.get("detail")))
