@@ -235,7 +235,8 @@ def python_stdin_command(*args: str) -> str:
 NO_INSTALL_EXIT = 4       # the prelude's exit status when no rosnet-tui is installed on the peer
 PEER_INSTALL_PLACES = ("the PATH, ~/.local/bin, pipx's and uv's tool folders, /usr/local/bin, "
                        "/opt/pipx, a login shell's PATH")
-README_INSTALL = "pipx install --force ."   # README, Install: run in a checkout of rosnet-tui
+README_INSTALL = "sudo apt install -y --no-install-recommends pipx && pipx install --force ."
+"""The README's install line without its last part (opening the wizard), typed in a checkout."""
 _FIND_INSTALL = r"""
 py=; h=${HOME:-~}; d=${XDG_DATA_HOME:-$h/.local/share}
 L() {

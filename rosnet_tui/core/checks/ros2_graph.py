@@ -145,6 +145,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     comp_of: dict[str, str] = {z: s.this.name for z in _local_zids(info)} if how == "router" else {}
     data["seen_from"].append("here")
     problems: list[str] = []
+    uninstalled: list[str] = []    # peers with no rosnet-tui to run the other side
     missing: dict[str, list[str]] = {}
     dead: list[str] = []
     domains: list[str] = []
@@ -155,6 +156,8 @@ async def check_graph(ctx: CheckContext) -> Outcome:
             dead.append(f"on {p.name}, {rep.get('detail')}")
             continue
         if why_not or rep is None or rep.get("error"):
+            if rep is not None and rep.get("error") == "no_install":
+                uninstalled.append(p.name)
             problems.append(why_not or f"on {p.name}: {rep.get('detail') if rep else '?'}")
             continue
         data["seen_from"].append(p.name)
@@ -206,6 +209,9 @@ async def check_graph(ctx: CheckContext) -> Outcome:
                                     "share this graph: they see each other but every message "
                                     "between them is dropped; use one distro everywhere", ev, data)
     n = len(data["nodes"])
+    if problems and len(data["seen_from"]) == 1 and len(uninstalled) == len(problems):
+        return Outcome(Status.SKIP, f"{n} node(s) seen from here, but the other side could not "
+                                    f"run: {problems[0]}", ev, data)
     if problems:
         return Outcome(Status.WARN, f"{n} node(s) seen from here, but not checked from the peer: "
                                     f"{problems[0]}", ev, data)
