@@ -144,3 +144,16 @@ def test_rosapi_missing_fails_at_the_rosapi_hop(bridge_lab):
     d = res["data"]
     assert d["upgraded"] is True and d["rosapi"] is False
     assert "/rosapi/topics does not exist" in d["detail"]
+
+
+def test_a_name_the_laptop_cannot_resolve_fails_at_the_name_hop(bridge_lab):
+    """turtlebot missing from the laptop's hosts file (the lab's DNS does not know it either)."""
+    lab = bridge_lab
+    lab.reset()
+    lab.write_hosts("laptop", "127.0.0.1\tlocalhost\n192.168.1.10\tsami\n")
+    try:
+        res = rosbridge_check(lab)
+    finally:
+        lab.reset()
+    assert_fails_at(res, "name", "rosbridge.name")
+    assert res["data"]["address"] is None and res["data"]["tcp"] is None
