@@ -259,10 +259,29 @@ def test_security_the_bridge_is_exposed_like_the_master():
     text = sec[0].meaning + " ".join(sec[0].actions)
     assert "like the ROS master" in text and "rosauth" in text and "TCP 9090" in text
     assert "ssh -L 9090:localhost:9090" in text
-    host = master()                                           # on the host: skipped check
     skip = CheckResult("ros.rosbridge", "ros", Status.SKIP, "skipped", [], 0, 3, {})
-    assert any(f.rule == "security.rosbridge_exposed"
-               for f in advise({"ros.rosbridge": skip}, host, strict=True))
-    off = replace(host, rosbridge=RosbridgeSettings())
+    assert not any(f.rule == "security.rosbridge_exposed"    # a skipped check says nothing
+                   for f in advise({"ros.rosbridge": skip}, master(), strict=True))
+    off = replace(s, rosbridge=RosbridgeSettings())
     assert not any(f.rule.startswith(("rosbridge.", "security.rosbridge"))
-                   for f in advise({"ros.rosbridge": skip}, off, strict=True))
+                   for f in advise({"ros.rosbridge": ok}, off, strict=True))
+
+
+def _case(status: str, **d):
+    def build():
+        s = replace(member(), peers=[Peer(name="localhost", public_ip="203.0.113.2")])
+        return {"ros.rosbridge": result(s, status, **d)}, s
+    return build
+
+
+# The advisor's rule cases (tests/test_advisor.py runs every rule on its case).
+ROSBRIDGE_CASES = {
+    "rosbridge.name": _case("fail", failed_hop="name", tcp=None, address=None),
+    "rosbridge.forward": _case("fail", failed_hop="forward", tcp="timeout"),
+    "rosbridge.not_running": _case("fail", failed_hop="bridge", tcp="refused"),
+    "rosbridge.upgrade": _case("fail", failed_hop="upgrade"),
+    "rosbridge.rosapi": _case("fail", failed_hop="rosapi", upgraded=True),
+    "rosbridge.round_trip": _case("fail", failed_hop="round_trip", upgraded=True, rosapi=True),
+    "security.rosbridge_exposed": _case("pass", upgraded=True, rosapi=True, round_trip=True,
+                                        detail=None),
+}

@@ -172,15 +172,10 @@ def _round_trip(ev: Evidence) -> list[Hit]:
       "router", "security")
 def _exposed(ev: Evidence) -> list[Hit]:
     b = ev.s.rosbridge
-    d = ev.data(CHECK)
-    reachable = d.get("upgraded") is True
-    hosted = ev.s.hosts_rosbridge and ev.remote and CHECK in ev.results  # skipped on the host
-    if not b.enabled or not (reachable or hosted):
+    if not b.enabled or ev.data(CHECK).get("upgraded") is not True:
         return []
     host, port = _host(ev), b.port
     peers = [f"{p.name} {p.public_ip}" for p in ev.s.peers if p.public_ip]
-    seen = (f"a WebSocket to {rosbridge.url(ev.s)} opened from {ev.me}" if reachable
-            else f"{host} runs rosbridge on TCP {port}, forwarded from the internet")
     return [Hit(f"rosbridge on {host} (TCP {port}) takes any client that reaches it: topics, "
                 "publishing (so driving the robot) and service calls, like the ROS master. It "
                 "has no authentication of its own.",
@@ -190,4 +185,4 @@ def _exposed(ev: Evidence) -> list[Hit]:
                  "Or switch on rosbridge's rosauth (`authenticate:=true`), or do not forward the "
                  f"port and reach it through SSH: `ssh -L {port}:localhost:{port} {host}`, then "
                  f"ws://localhost:{port}/."],
-                evidence=[seen])]
+                evidence=[f"{CHECK}: a WebSocket to {rosbridge.url(ev.s)} opened from {ev.me}"])]
