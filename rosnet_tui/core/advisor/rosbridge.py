@@ -17,7 +17,7 @@ CHECK = "ros.rosbridge"
 def _failed(ev: Evidence, *hops: str) -> bool:
     if not ev.s.rosbridge.enabled or not ev.is_fail(CHECK):
         return False
-    return ev.data(CHECK).get("failed_hop") in hops
+    return ev.data("ros.rosbridge").get("failed_hop") in hops
 
 
 def _host(ev: Evidence) -> str:
@@ -25,7 +25,7 @@ def _host(ev: Evidence) -> str:
 
 
 def _seen(ev: Evidence) -> list[str]:
-    d = ev.data(CHECK)
+    d = ev.data("ros.rosbridge")
     return [f"{CHECK}: {d.get('url')}: {d.get('failed_hop')} hop: {d.get('detail')}"]
 
 
@@ -62,7 +62,7 @@ def _forward(ev: Evidence) -> list[Hit]:
     if not _failed(ev, "forward"):
         return []
     host, port = _host(ev), ev.s.rosbridge.port
-    d = ev.data(CHECK)
+    d = ev.data("ros.rosbridge")
     how = ("an ICMP error came back (no machine where the modem forwards to)"
            if d.get("tcp") == "unreachable" else "nothing answered (the packets were dropped)")
     return [Hit(f"TCP {port} on {host} ({d.get('address')}) did not connect from {ev.me}: {how}. "
@@ -86,7 +86,7 @@ def _not_running(ev: Evidence) -> list[Hit]:
     if not _failed(ev, "bridge"):
         return []
     host, port = _host(ev), ev.s.rosbridge.port
-    d = ev.data(CHECK)
+    d = ev.data("ros.rosbridge")
     if d.get("tcp") == "refused":
         meaning = (f"{host} answers on its public address but refuses TCP {port}: rosbridge is "
                    "not running there, or listens on another port. (A modem that refuses "
@@ -172,7 +172,7 @@ def _round_trip(ev: Evidence) -> list[Hit]:
       "router", "security")
 def _exposed(ev: Evidence) -> list[Hit]:
     b = ev.s.rosbridge
-    if not b.enabled or ev.data(CHECK).get("upgraded") is not True:
+    if not b.enabled or ev.data("ros.rosbridge").get("upgraded") is not True:
         return []
     host, port = _host(ev), b.port
     peers = [f"{p.name} {p.public_ip}" for p in ev.s.peers if p.public_ip]
