@@ -285,3 +285,21 @@ ROSBRIDGE_CASES = {
     "security.rosbridge_exposed": _case("pass", upgraded=True, rosapi=True, round_trip=True,
                                         detail=None),
 }
+
+
+def test_a_reports_settings_keep_rosbridge():
+    """`rosnet-tui report --from-json` reads the settings back: the rosbridge rules need them."""
+    from rosnet_tui.cli.report import ReportError, public_settings, settings_from_dict
+
+    s = master(port=9091, host="sami")
+    assert settings_from_dict(public_settings(s)).rosbridge == s.rosbridge
+    bad = public_settings(s)
+    bad["rosbridge"]["enabled"] = "yes"
+    with pytest.raises(ReportError, match="rosbridge.enabled"):
+        settings_from_dict(bad)
+
+
+def test_a_member_running_rosbridge_under_ros2_forwards_only_its_port():
+    text = STEP_BY_ID["router"].configure(member(2, host="sami"))
+    assert "Only rosbridge needs a forward" in text and "TCP 9090" in text
+    assert "Zenoh port" not in text.split("**rosbridge")[1]

@@ -82,7 +82,8 @@ def router_text(s: Settings) -> str:
     if not forward_needed(s):
         return ""
     port = s.rosbridge.port
-    also = f", besides the Zenoh port {s.ros.zenoh_port}" if s.ros2 else " (outside the range)"
+    also = ("" if not s.ros2 else f", besides the Zenoh port {s.ros.zenoh_port}"
+            if s.is_master else "") if s.ros2 else " (outside ROS 1's range)"
     return (f"**rosbridge (web clients).** Forward **TCP {port}** to "
             f"**{s.this.local_ip or '<this component local IP>'}** too{also}: browsers "
             "connect to it from outside. It takes any client, like the ROS master.")

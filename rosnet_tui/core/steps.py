@@ -114,6 +114,11 @@ def configure_router(s: Settings) -> str:
     if s.this.profile != "remote":      # a LAN profile: nothing needs forwarding
         return configure_lan_router(s)
     bridge = rosbridge.router_text(s)
+    if s.ros2 and bridge and not s.is_master:   # a member running rosbridge: only its port
+        return (f"**Only rosbridge needs a forward on {_name(s)}'s modem.** Its Zenoh router "
+                "connects out to the master's, so ROS 2 itself needs nothing here.\n\n"
+                f"{bridge}\n\n**To verify:** the other components' ROS step opens "
+                f"`{rosbridge.url(s)}` through this forward.")
     if s.ros2:
         return configure_router_ros2(s) + (f"\n\n{bridge}" if bridge else "")
     ip = _this_ip(s)
