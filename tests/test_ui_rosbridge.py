@@ -80,3 +80,20 @@ async def test_setup_asks_and_saving_it_puts_the_check_on_the_ros_step(tmp_path)
         assert "[rosbridge]" in (tmp_path / "config.toml").read_text()
         rows = list(app.screen.query_one(CheckList).rows)
         assert rows[-1] == "ros.rosbridge", rows
+
+
+async def test_an_unsaved_rosbridge_choice_comes_back_with_the_draft(tmp_path):
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("s")
+        await pilot.pause()
+        app.screen.query_one("#rosbridge-enabled", Select).value = True
+        await pilot.pause()
+        app.screen.query_one("#rosbridge-host", Input).value = "sami"
+        app.screen.keep_draft()
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        assert app.screen.query_one("#rosbridge-enabled", Select).value is True
+        assert app.screen.query_one("#rosbridge-host-field").display
+        assert app.screen.query_one("#rosbridge-host", Input).value == "sami"
