@@ -28,6 +28,7 @@ from rosnet_tui.core.settings import (
     CheckSettings,
     Peer,
     ProbeSettings,
+    RosbridgeSettings,
     RosSettings,
     Settings,
     SettingsError,
@@ -288,8 +289,9 @@ def settings_from_dict(d: dict[str, Any]) -> Settings:
                 continue
             proto = cls.__annotations__.get(k, "")
             want: tuple[type, ...] = {"str": (str,), "int": (int,), "float": (int, float),
-                                      "list[str]": (list,)}.get(str(proto), (object,))
-            if isinstance(v, bool) or not isinstance(v, want) or (
+                                      "list[str]": (list,), "bool": (bool,)
+                                      }.get(str(proto), (object,))
+            if (isinstance(v, bool) and want != (bool,)) or not isinstance(v, want) or (
                     want == (list,) and not all(isinstance(x, str) for x in v)):
                 raise ReportError(f"settings: {section}.{k} has the wrong type")
             kept[k] = v
@@ -306,7 +308,8 @@ def settings_from_dict(d: dict[str, Any]) -> Settings:
                  peers=[p for p in peers if p is not None],
                  ros=pick(RosSettings, d.get("ros"), "ros"),
                  probe=pick(ProbeSettings, d.get("probe"), "probe"),
-                 checks=pick(CheckSettings, d.get("checks"), "checks"))
+                 checks=pick(CheckSettings, d.get("checks"), "checks"),
+                 rosbridge=pick(RosbridgeSettings, d.get("rosbridge"), "rosbridge"))
     for key, why in s.problems():
         # incomplete is fine (the advice then knows fewer names); wrong is not
         if why.endswith("is required") or why.startswith(("a member needs", "give the peer")):

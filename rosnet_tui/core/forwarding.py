@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from rosnet_tui.core.rosbridge import forward_needed
 from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
 
 
@@ -30,12 +31,19 @@ def ports_to_forward(settings: Settings) -> list[ForwardPort]:
     """The forwards this component's modem needs (required ones first), each to its local IP.
 
     ROS 1: TCP 1024-65000 (UDP optional), TCP 22 for SSH (optional). ROS 2 master: TCP
-    ``zenoh_port`` only (and 22 for SSH, optional). ROS 2 member: nothing is required.
+    ``zenoh_port`` only (and 22 for SSH, optional). ROS 2 member: nothing is required. The
+    component running rosbridge ([rosbridge] enabled) forwards its port too, under ROS 2 (and
+    under ROS 1 when the port is outside the range).
     """
     ssh = ForwardPort("TCP", 22, 22, False, "SSH from the peers (keys only)")
+    # [rosbridge] on this component: its port too, unless ROS 1's range already covers it.
+    bp = settings.rosbridge.port
+    bridge = ([ForwardPort("TCP", bp, bp, True, "rosbridge: web clients (Robot Web Tools)")]
+              if forward_needed(settings) else [])
     if not settings.ros2:
         return [ForwardPort("TCP", PORT_MIN, PORT_MAX, True, "ROS (master, nodes) and the test "
                                                                "port"),
+                *bridge,
                 ForwardPort("UDP", PORT_MIN, PORT_MAX, False,
                             "only for UDP transports; ROS 1 topics use TCP"),
                 ssh]
@@ -43,8 +51,8 @@ def ports_to_forward(settings: Settings) -> list[ForwardPort]:
         port = settings.ros.zenoh_port
         return [ForwardPort("TCP", port, port, True, "the Zenoh router of the ROS 2 master "
                                                      "(rmw_zenohd); every member connects here"),
-                ssh]
-    return [ssh]
+                *bridge, ssh]
+    return [*bridge, ssh]
 
 
 def required_ports(settings: Settings) -> list[ForwardPort]:

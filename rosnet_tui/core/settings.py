@@ -40,6 +40,7 @@ from rosnet_tui.core.settings_model import (  # noqa: F401 (the model; re-export
     CheckSettings,
     Peer,
     ProbeSettings,
+    RosbridgeSettings,
     RosSettings,
     Settings,
     SettingsError,
@@ -85,9 +86,10 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "checks": {"timeout_s": (int, float)},
     "sync": {"store": str, "folder": str, "interval_s": (int, float), "dns_server": str,
              "zone": str, "tsig_key_file": str},
+    "rosbridge": {"enabled": bool, "port": int, "host": str},
 }
 _TYPE_WORDS = {str: "a string in quotes", int: "a whole number", list: "a list [ ... ]",
-               (int, float): "a number"}
+               (int, float): "a number", bool: "true or false"}
 
 
 def _lines(text: str) -> list[str]:
@@ -126,7 +128,7 @@ def _check_table(text: str, path: Path | None, table: str, data: Any, index: int
             raise SettingsError(f"unknown key (known keys in [{table}]: {known})", path=path,
                                 line=_locate(text, table, key, index), key=full)
         want = schema[key]
-        ok = isinstance(value, want) and not isinstance(value, bool)
+        ok = isinstance(value, want) and (want is bool or not isinstance(value, bool))
         if not ok:
             raise SettingsError(f"must be {_TYPE_WORDS[want]}", path=path,
                                 line=_locate(text, table, key, index), key=full)
@@ -284,6 +286,9 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
         _check_table(text, path, "sync", raw["sync"])
         s.sync = replace(s.sync, **raw["sync"])
         s.has_sync = True
+    if "rosbridge" in raw:
+        _check_table(text, path, "rosbridge", raw["rosbridge"])
+        s.rosbridge = replace(s.rosbridge, **raw["rosbridge"])
 
     for key, why in s.problems():
         # Incomplete is fine (the wizard fills it in); wrong is not.
@@ -368,8 +373,12 @@ def _table_values(s: Settings) -> dict[str, dict[str, Any]]:
     for k in ("folder", "dns_server", "zone", "tsig_key_file"):
         if getattr(y, k):
             sync[k] = getattr(y, k)
+    b = s.rosbridge
+    rosbridge: dict[str, Any] = {"enabled": b.enabled, "port": b.port}
+    if b.host:
+        rosbridge["host"] = b.host
     return {"this": this, "ros": ros, "probe": probe, "checks": {"timeout_s": s.checks.timeout_s},
-            "sync": sync}
+            "sync": sync, "rosbridge": rosbridge}
 
 
 def _peer_values(p: Peer) -> dict[str, Any]:
@@ -417,6 +426,8 @@ def render_settings(s: Settings, previous_text: str | None = None) -> str:
         _merge_table(doc, name, values[name])
     if s.has_sync or s.sync != SyncSettings():
         _merge_table(doc, "sync", values["sync"])
+    if "rosbridge" in doc or s.rosbridge != RosbridgeSettings():
+        _merge_table(doc, "rosbridge", values["rosbridge"])
     if s.peers:
         # Keep peers before [ros] when writing fresh, as in the documented example.
         body = doc.as_string()

@@ -25,6 +25,7 @@ PROFILES = ("remote", "office", "portable")
 PORT_MIN, PORT_MAX = 1024, 65000
 ROS_VERSIONS = (1, 2)            # 1: ROS 1 (roscore); 2: ROS 2 over rmw_zenoh
 ZENOH_PORT_DEFAULT = 7447        # rmw_zenoh's router port
+ROSBRIDGE_PORT_DEFAULT = 9090    # rosbridge_server's WebSocket port
 DOMAIN_ID_MAX = 232              # ROS_DOMAIN_ID: 0..232
 DEFAULT_PUBLIC_IP_URLS = ("https://ifconfig.co/ip",)
 DEFAULT_PORT_CHECK_URL = "https://ifconfig.co"
@@ -217,6 +218,13 @@ class CheckSettings:
     timeout_s: float = 3.0
 
 
+@dataclass
+class RosbridgeSettings:
+    enabled: bool = False            # check the browser's path (rosbridge over WebSocket)
+    port: int = ROSBRIDGE_PORT_DEFAULT  # the bridge's TCP port on its host
+    host: str = ""                   # the component running the bridge ("": the master)
+
+
 SYNC_STORES = ("folder", "dns")
 
 
@@ -238,6 +246,7 @@ class Settings:
     probe: ProbeSettings = field(default_factory=ProbeSettings)
     checks: CheckSettings = field(default_factory=CheckSettings)
     sync: SyncSettings = field(default_factory=SyncSettings)
+    rosbridge: RosbridgeSettings = field(default_factory=RosbridgeSettings)
     # Whether the file had a [sync] table (so saving does not add one the user never asked for).
     has_sync: bool = field(default=False, compare=False, repr=False)
 
@@ -256,6 +265,17 @@ class Settings:
     @property
     def master_name(self) -> str:
         return self.ros.master or (self.this.name if self.is_master else "")
+
+    @property
+    def rosbridge_host(self) -> str:
+        """The component running rosbridge: [rosbridge] host, else the master."""
+        return self.rosbridge.host or self.master_name
+
+    @property
+    def hosts_rosbridge(self) -> bool:
+        """True when rosbridge is enabled and runs on this component."""
+        return self.rosbridge.enabled and bool(self.this.name) and \
+            self.rosbridge_host.lower() == self.this.name.lower()
 
     def problems(self) -> list[tuple[str, str]]:
         """Everything that keeps these settings from being complete: (key, reason) pairs."""
@@ -316,6 +336,14 @@ class Settings:
         add("probe.port_check_url", validate_url(self.probe.port_check_url))
         if not _number_within(self.checks.timeout_s, 0.1, 120):
             add("checks.timeout_s", "must be between 0.1 and 120 seconds")
+        b = self.rosbridge
+        if not isinstance(b.enabled, bool):
+            add("rosbridge.enabled", "must be true or false")
+        add("rosbridge.port", validate_port(b.port, lo=1, hi=65535))
+        if b.host:
+            add("rosbridge.host", validate_name(b.host))
+            if b.host.lower() not in seen:
+                add("rosbridge.host", f"'{shown(b.host)}' is neither this component nor a peer")
         y = self.sync
         add("sync.store", None if y.store in SYNC_STORES
             else f"must be one of {', '.join(SYNC_STORES)}")

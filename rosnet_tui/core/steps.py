@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+from rosnet_tui.core import rosbridge
 from rosnet_tui.core.procedure import STEP_IDS, STEP_TITLES, step_number
 from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
 
@@ -112,8 +113,14 @@ def configure_lan_router(s: Settings) -> str:
 def configure_router(s: Settings) -> str:
     if s.this.profile != "remote":      # a LAN profile: nothing needs forwarding
         return configure_lan_router(s)
+    bridge = rosbridge.router_text(s)
+    if s.ros2 and bridge and not s.is_master:   # a member running rosbridge: only its port
+        return (f"**Only rosbridge needs a forward on {_name(s)}'s modem.** Its Zenoh router "
+                "connects out to the master's, so ROS 2 itself needs nothing here.\n\n"
+                f"{bridge}\n\n**To verify:** the other components' ROS step opens "
+                f"`{rosbridge.url(s)}` through this forward.")
     if s.ros2:
-        return configure_router_ros2(s)
+        return configure_router_ros2(s) + (f"\n\n{bridge}" if bridge else "")
     ip = _this_ip(s)
     parts: list[str] = []
     if s.this.connection == "corporate":
@@ -132,6 +139,8 @@ def configure_router(s: Settings) -> str:
         f"{s.ros.port}) to the whole internet, and ROS 1 has no authentication: anyone who "
         "reaches the master can drive the robot. Allow only your peers' addresses if the modem "
         "can, and use SSH keys, not passwords.")
+    if bridge:
+        parts.append(bridge)
     parts.append("**To verify:** a port tested from outside the modem is reported *Open* while "
                  "a listener runs on it, and *Closed* when nothing listens.")
     return "\n\n".join(parts)
@@ -169,8 +178,13 @@ def configure_linux(s: Settings) -> str:
 
 # --------------------------------------------------------------------------- step 4: ROS
 def configure_ros(s: Settings) -> str:
-    if s.ros2:
-        return configure_ros2(s)
+    """The ROS step's text for the settings' ROS version, with rosbridge's when it is on."""
+    bridge = rosbridge.ros_step_text(s)
+    text = configure_ros2(s) if s.ros2 else configure_ros1(s)
+    return text + (f"\n\n{bridge}" if bridge else "")
+
+
+def configure_ros1(s: Settings) -> str:
     port = s.ros.port
     if s.is_master:
         uri = f"http://{_name(s)}:{port}"
@@ -316,7 +330,15 @@ assert tuple(STEP_BY_ID) == STEP_IDS, "the steps are listed in the procedure's o
 
 
 def step_for(step_id: str, settings: Settings) -> Step:
-    """The step as *settings*' ROS version has it (ROS 2: the ros2.* checks and expectation)."""
+    """The step as *settings*' ROS version has it (ROS 2: the ros2.* checks and expectation),
+    with ros.rosbridge on the ROS step when [rosbridge] is enabled."""
+    step = _step_for_version(step_id, settings)
+    if step_id == "ros" and settings.rosbridge.enabled:
+        step = replace(step, check_ids=(*step.check_ids, "ros.rosbridge"))
+    return step
+
+
+def _step_for_version(step_id: str, settings: Settings) -> Step:
     step = STEP_BY_ID[step_id]
     if not settings.ros2:
         return step

@@ -62,8 +62,16 @@ ROLE_OPTIONS = [("ROS master (roscore / the Zenoh hub)", "master"), ("Member", "
 ROS_VERSION_OPTIONS = [("ROS 2 (rmw_zenoh: one forwarded port)", 2), ("ROS 1 (roscore)", 1)]
 PROFILE_OPTIONS = [("Remote (peers by public IP)", "remote"), ("Office LAN", "office"),
                    ("Portable hotspot LAN", "portable")]
+ROSBRIDGE_OPTIONS = [("Off (no web clients)", False),
+                     ("On: check browsers' path (rosbridge)", True)]
 SELECT_OPTIONS = {"this-role": ROLE_OPTIONS, "this-connection": CONNECTION_OPTIONS,
-                  "this-profile": PROFILE_OPTIONS, "ros-version": ROS_VERSION_OPTIONS}
+                  "this-profile": PROFILE_OPTIONS, "ros-version": ROS_VERSION_OPTIONS,
+                  "rosbridge-enabled": ROSBRIDGE_OPTIONS}
+
+
+def validate_optional_name(value: str) -> str | None:
+    """A name, or nothing (the default applies)."""
+    return S.validate_name(value) if value else None
 
 
 class PeerRow(Horizontal):
@@ -182,6 +190,22 @@ class SetupScreen(Screen[bool]):
                             placeholder="name of the peer that runs roscore", id="ros-master",
                             compact=True, validators=[CoreValidator(S.validate_name)])
             yield Label("", id="ros-master-error", classes="field-error")
+            with Horizontal(classes="field"):
+                yield Label("rosbridge", classes="field-label")
+                yield Select(ROSBRIDGE_OPTIONS, value=s.rosbridge.enabled is True,
+                             allow_blank=False, id="rosbridge-enabled", compact=True)
+            with Horizontal(classes="field", id="rosbridge-port-field"):
+                yield Label("Bridge port", classes="field-label")
+                yield OrderedInput(str(s.rosbridge.port), id="rosbridge-port", compact=True,
+                                   type="integer",
+                                   validators=[CoreValidator(S.validate_port, lo=1, hi=65535)])
+            yield Label("", id="rosbridge-port-error", classes="field-error")
+            with Horizontal(classes="field", id="rosbridge-host-field"):
+                yield Label("Bridge host", classes="field-label")
+                yield OrderedInput(s.rosbridge.host, placeholder="default: the ROS master",
+                                   id="rosbridge-host", compact=True,
+                                   validators=[CoreValidator(validate_optional_name)])
+            yield Label("", id="rosbridge-host-error", classes="field-error")
             yield Static("Peers  (name · local IP · public IP · SSH user, optional)",
                          classes="section")
             with Vertical(id="peer-rows"):
@@ -298,6 +322,7 @@ class SetupScreen(Screen[bool]):
     # ------------------------------------------------------------------ events
     @on(Select.Changed, "#this-role")
     @on(Select.Changed, "#ros-version")
+    @on(Select.Changed, "#rosbridge-enabled")
     def _role_changed(self) -> None:
         self._update_role()
 
@@ -313,6 +338,10 @@ class SetupScreen(Screen[bool]):
         for wid in ("#zenoh-field", "#ros-zenoh-port-error", "#domain-field",
                     "#ros-domain-id-error"):
             self.query_one(wid).display = ros2
+        bridge = self.query_one("#rosbridge-enabled", Select).value is True
+        for wid in ("#rosbridge-port-field", "#rosbridge-port-error", "#rosbridge-host-field",
+                    "#rosbridge-host-error"):
+            self.query_one(wid).display = bridge
 
     @on(Input.Changed)
     def _input_changed(self, event: Input.Changed) -> None:
@@ -406,8 +435,18 @@ class SetupScreen(Screen[bool]):
                     problems.append((f"ros.{key}", why))
                 else:
                     ros = replace(ros, **{key: int(text)})
+        bridge = replace(old.rosbridge,
+                         enabled=self.query_one("#rosbridge-enabled", Select).value is True)
+        if bridge.enabled:
+            text = val("rosbridge-port")
+            why = S.validate_port(text, lo=1, hi=65535)
+            if why:
+                problems.append(("rosbridge.port", why))
+            else:
+                bridge = replace(bridge, port=int(text))
+            bridge = replace(bridge, host=val("rosbridge-host"))
         settings = replace(old, this=this, peers=peers, ros=ros,
-                           probe=replace(old.probe, port=port))
+                           probe=replace(old.probe, port=port), rosbridge=bridge)
         problems += settings.problems()
         # Blank is fine when this machine's address can be detected at each run.
         why = S.validate_ip(this.local_ip, required=not self.detected.local_ip)
@@ -432,7 +471,9 @@ class SetupScreen(Screen[bool]):
             target = {"this.name": "#this-name", "this.local_ip": "#this-local-ip",
                       "probe.port": "#probe-port", "ros.master": "#ros-master",
                       "ros.zenoh_port": "#ros-zenoh-port",
-                      "ros.domain_id": "#ros-domain-id"}.get(key)
+                      "ros.domain_id": "#ros-domain-id",
+                      "rosbridge.port": "#rosbridge-port",
+                      "rosbridge.host": "#rosbridge-host"}.get(key)
             label_id = f"{target}-error" if target else None
         if label_id:
             label = self.query_one(label_id, Label)

@@ -185,6 +185,7 @@ SHORT_TITLES = {
     "ros2.graph": "Every node seen",
     "ros2.pubsub_out": "Publish here, peer hears",
     "ros2.pubsub_in": "Peer publishes, we hear",
+    "ros.rosbridge": "Browser path (rosbridge)",
 }
 TITLE_MAX = 24
 

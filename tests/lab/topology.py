@@ -118,6 +118,7 @@ def sysctl_script(host: str) -> str:
 
 
 ZENOH_PORT = 7447
+ROSBRIDGE_PORT = 9090
 
 
 def forward_rules(side: str, mode: str) -> list[str]:
@@ -127,10 +128,14 @@ def forward_rules(side: str, mode: str) -> list[str]:
     local IP where nobody is), "refuse" (none, and the modem answers every TCP connection with a
     reset), "travel" (to the travel router's WAN address, double_nat); and for ROS 2: "ros2" (TCP
     22 and TCP 7447 only: the master's router) and "ssh" (TCP 22 only: the SSH path the checks
-    use to run the peer's side; no ROS traffic comes in).
+    use to run the peer's side; no ROS traffic comes in); and for web clients: "bridge" (TCP 22
+    and TCP 9090 only: SSH and the rosbridge stand-in, tests/lab/rosbridge.py).
     """
     if mode in ("none", "refuse"):
         return []
+    if mode == "bridge":
+        return [f"-A RNL_PF -p tcp --dport {port} -j DNAT --to-destination {LOCAL_IP[side]}"
+                for port in (22, ROSBRIDGE_PORT)]
     if mode in ("ros2", "ssh"):
         rules = [f"-A RNL_PF -p tcp --dport 22 -j DNAT --to-destination {LOCAL_IP[side]}"]
         if mode == "ros2":

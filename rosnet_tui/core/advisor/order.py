@@ -80,7 +80,15 @@ RULE_ORDER: tuple[str, ...] = (
     "ros2.router.ipv6_only",
     "ros2.peer_mode",
     "ros2.link.missing",
+    # step 4: web clients (rosbridge), both ROS versions: one rule per hop
+    "rosbridge.name",
+    "rosbridge.forward",
+    "rosbridge.not_running",
+    "rosbridge.upgrade",
+    "rosbridge.rosapi",
+    "rosbridge.round_trip",
     # security (step 2: what the forwarding exposes)
     "security.zenoh_exposed",
+    "security.rosbridge_exposed",
     "security.exposed",
 )

@@ -69,13 +69,26 @@ class CheckSpec:
     timeout_factor: float = 1.0
     # The ROS version the check belongs to (1: roscore, 2: rmw_zenoh); None: every version.
     ros: int | None = None
+    # A settings table whose ``enabled`` must be true for the check to apply ("rosbridge");
+    # None: no switch.
+    switch: str | None = None
+
+    def switched_off(self, settings: Settings) -> bool:
+        return self.switch is not None and getattr(getattr(settings, self.switch, None),
+                                                   "enabled", False) is not True
 
     def applies(self, settings: Settings) -> bool:
-        """Whether this check belongs to *settings*' ROS version ([ros] version)."""
+        """Whether this check belongs to *settings*' ROS version ([ros] version) and its switch,
+        if it has one, is on."""
+        if self.switched_off(settings):
+            return False
         return self.ros is None or self.ros == settings.ros.version
 
     def not_applicable(self, settings: Settings) -> str:
         """Why the check is skipped under *settings* (the SKIP result's summary)."""
+        if self.switched_off(settings):
+            return (f"skipped: [{self.switch}] enabled = false in the settings (set it to true "
+                    "to check this)")
         other = {1: "ROS 1 (roscore)", 2: "ROS 2 over rmw_zenoh"}
         return (f"skipped: this check is for {other.get(self.ros or 0, '?')}, and the settings say "
                 f"{other.get(settings.ros.version, '?')} ([ros] version = {settings.ros.version})")
@@ -84,14 +97,15 @@ class CheckSpec:
 REGISTRY: dict[str, CheckSpec] = {}
 
 
-def check(id: str, step: str, title: str, timeout_factor: float = 1.0, ros: int | None = None
-          ) -> Callable[[CheckFunc], CheckFunc]:
-    """Register a check function under *id* for *step* (*ros*: only for that ROS version)."""
+def check(id: str, step: str, title: str, timeout_factor: float = 1.0, ros: int | None = None,
+          switch: str | None = None) -> Callable[[CheckFunc], CheckFunc]:
+    """Register a check function under *id* for *step* (*ros*: only for that ROS version;
+    *switch*: only when that settings table is enabled)."""
     if step not in STEP_IDS:
         raise ValueError(f"unknown step {step!r}")
 
     def deco(func: CheckFunc) -> CheckFunc:
-        REGISTRY[id] = CheckSpec(id, step, title, func, timeout_factor, ros)
+        REGISTRY[id] = CheckSpec(id, step, title, func, timeout_factor, ros, switch)
         return func
 
     return deco

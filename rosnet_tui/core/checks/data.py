@@ -360,6 +360,24 @@ class Ros2PubsubData(Ros2PubsubPeer, total=False):
     peers: dict[str, Ros2PubsubPeer]  # every peer's exchange, by peer name
 
 
+# ---- step 4, both ROS versions: web clients (rosnet_tui/core/checks/rosbridge.py)
+RosbridgeHop = Literal["name", "forward", "upgrade", "bridge", "rosapi", "round_trip"]
+
+
+class RosRosbridgeData(TypedDict, total=False):
+    host: str                 # the component running rosbridge ([rosbridge] host, else the master)
+    url: str                  # what a browser opens: ws://<host>:<port>/
+    address: str | None       # the host's name resolved here (None: it does not, or not tried)
+    tcp: TcpKind | None       # how the TCP connection to the bridge's port went (None: not tried)
+    upgraded: bool            # the HTTP upgrade to WebSocket was accepted (101)
+    rosapi: bool              # call_service /rosapi/topics answered with a topic list
+    topics: list[str]         # the topics it listed (rosnet-tui's probes left out; at most 200)
+    round_trip: bool          # a publish through one WebSocket reached a subscribe on another
+    round_trip_ms: float | None  # how long that took (None: it did not)
+    failed_hop: RosbridgeHop | None  # where it broke (None: it did not, or it was skipped)
+    detail: str | None        # what was seen at the failed hop
+
+
 DATA: dict[str, type] = {
     "isp.internet": IspInternetData,
     "isp.public_ip": IspPublicIpData,
@@ -385,6 +403,7 @@ DATA: dict[str, type] = {
     "ros2.graph": Ros2GraphData,
     "ros2.pubsub_out": Ros2PubsubData,
     "ros2.pubsub_in": Ros2PubsubData,
+    "ros.rosbridge": RosRosbridgeData,
 }
 
 

@@ -80,6 +80,8 @@ def needs(settings: Settings, *, lease_s: int = LEASE_S, test_port: bool = True)
 
 def description(settings: Settings, w: Wanted) -> str:
     what = "test port" if w.temporary else ("Zenoh router" if settings.ros2 else "ROS")
+    if not w.temporary and settings.hosts_rosbridge and w.port == settings.rosbridge.port:
+        what = "rosbridge"
     return f"{DESCRIPTION} {settings.this.name or ''} {what}".replace("  ", " ")[:63]
 
 
