@@ -217,8 +217,10 @@ def table1_causes(ev: Evidence) -> list[Cause]:
     others = [p for p in port_rows(ev) if p.get("port") != tp and p.get("answer")]
     if answer == "refused":
         c.up(40, f"{who}'s connection to {where} was refused: something at that address "
-                 "answers and rejects it, so the modem is online and does not forward the port")
-        b.down(20, "a refusal comes from the modem itself, not from a carrier that blocks")
+                 "answers and rejects it, so the modem is online and most likely does not forward "
+                 "the port")
+        b.down(20, "a refusal usually comes from the modem itself; a carrier that blocks "
+                   "usually drops")
     elif answer == "unreachable":
         c.up(50, f"{who}'s connection to {where} came back unreachable: the modem forwards it "
                  "to a local address where no machine answers")
@@ -494,11 +496,11 @@ def master_causes(ev: Evidence, master: str) -> list[Cause]:
     ip = ssh.get("address") or ev.expected_ip(master) or "its address"
     if kind == "refused":
         if reached:
-            core.up(50, f"{master} answers SSH at {ip} but refuses port {port}: nothing listens "
-                        "there")
+            core.up(50, f"{master} answers SSH at {ip} but refuses port {port}: most likely "
+                        "nothing listens there")
         elif peer_tcp(ev, master) == "refused":
-            fwd.up(40, f"{ip} refuses port {port} and its SSH port alike: the modem rejects "
-                       "everything")
+            fwd.up(40, f"{ip} refuses port {port} and its SSH port alike: the modem (or its "
+                       "provider) seems to reject everything")
         else:
             core.up(20, f"port {port} was refused at {ip}: nothing listens there, or the modem "
                         "rejects it")

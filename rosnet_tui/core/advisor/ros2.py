@@ -142,8 +142,8 @@ def _not_running(ev: Evidence) -> list[Hit]:
         ssh = (ev.data("linux.ssh").get("peers") or {}).get(where) or {}
         seen = (f"{where} answers SSH at the same address, so its modem lets connections in"
                 if ssh.get("ok") is True or peer_tcp(ev, where) == "connected" else
-                f"a refusal alone cannot tell that from {where}'s modem refusing the port; "
-                f"{where}'s own Router step (its port test) tells them apart")
+                f"a refusal alone cannot tell that from {where}'s modem refusing the port: "
+                f"the port test of {where}'s own Router step tells them apart")
         return [Hit(f"A connection to {r.get('endpoint')} ({r.get('address')}) was refused: most "
                     f"likely no Zenoh router listens on {where} ({seen}).",
                     _start_router(ev, where), check_ids=ids,
