@@ -213,3 +213,22 @@ def test_settings_built_in_memory_are_not_dated(tmp_path):
     s = laptop_settings()
     assert s.saved_at is None
     assert "saved_at" not in render_settings(s)
+
+
+def test_the_wizard_dates_its_settings_when_it_saves_them_or_finds_them_saved(tmp_path):
+    """The wizard's save (WizardSession.save_settings): a new file takes the time of the save;
+    settings the file already holds take the file's time (it is not rewritten)."""
+    import dataclasses
+    import os
+
+    from rosnet_tui.core.session import WizardSession
+
+    path = tmp_path / "config.toml"
+    session = WizardSession(config_path=path, settings=laptop_settings(), state_dir=tmp_path)
+    fresh = laptop_settings()
+    session.save_settings(fresh)
+    assert fresh.saved_at == os.stat(path).st_mtime and session.settings.saved_at is not None
+    os.utime(path, (time.time() - 40 * DAY,) * 2)
+    same = dataclasses.replace(laptop_settings(), saved_at=None)
+    session.save_settings(same)                           # the file already says this
+    assert same.saved_at == os.stat(path).st_mtime < time.time() - 39 * DAY
