@@ -225,8 +225,8 @@ def _not_forwarded(ev: Evidence) -> list[Hit]:
         seen = (f"connections from {ev.me} to {r.get('endpoint')} ({r.get('address')}) get no "
                 "answer at all (dropped, not refused)")
         local = ev.peer_local(_master(ev)) or f"{_master(ev)}'s local IP"
-    elif site_closed(ev):
-        return [_site_hit(ev, site_closed(ev))]
+    elif said := site_closed(ev):
+        return [_site_hit(ev, said)]
     else:
         return []
     ids = [c for c in ("router.port_open", "ros2.router") if ev.is_fail(c)]
