@@ -52,7 +52,7 @@ def test_refused_at_the_public_address_puts_forwarding_before_the_carrier():
     assert "was refused" in first.meaning and "the modem is online" in first.meaning
     assert causes(fs) == ["forwarding", "isp", "port_in_use"]
     isp = next(f for f in fs if f.rule == f"{T1}.isp")
-    assert "Less likely here: a refusal comes from the modem itself" in isp.meaning
+    assert "Less likely here: a refusal usually comes from the modem itself" in isp.meaning
 
 
 def test_silence_with_a_pinging_public_address_puts_forwarding_first_even_on_telecom():

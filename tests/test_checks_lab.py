@@ -82,7 +82,11 @@ def test_stale_hosts_entry_fails_resolve_and_ssh(lab, tmp_path):
     res = checks["linux.resolve"]
     assert res["status"] == "fail", table(checks)
     assert res["data"]["wrong"] == ["turtlebot"]
-    assert res["data"]["names"]["turtlebot"] == {"resolved": "203.0.113.99", "expected": "203.0.113.2"}
+    tb = res["data"]["names"]["turtlebot"]
+    assert (tb["resolved"], tb["expected"]) == ("203.0.113.99", "203.0.113.2")
+    # the settings file the lab just wrote dates the address the settings give
+    assert [(d["ip"], d["by"]) for d in tb["dated"]] == [("203.0.113.2", "settings")]
+    assert 0 <= tb["dated"][0]["age_s"] < 120
     ssh = checks["linux.ssh"]
     assert ssh["status"] == "fail" and ssh["data"]["peers"]["turtlebot"]["failure"] == "network"
     assert "203.0.113.99" in " ".join(ssh["evidence"])

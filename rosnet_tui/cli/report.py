@@ -271,6 +271,7 @@ def _scrub(value: Any) -> Any:
 def public_settings(settings: Settings) -> dict[str, Any]:
     """The settings as a dict for a report: every key that could hold a secret left out."""
     d = dataclasses.asdict(settings)
+    d.pop("saved_at", None)          # the file's time, not a setting
     out = {"this": d.pop("this"), "peer": d.pop("peers")}
     out.update(d)
     return _scrub(out)

@@ -112,10 +112,12 @@ class WizardSession:
         from rosnet_tui.core.settings import SettingsError, load_settings
 
         try:
-            same = self.config_path.exists() and load_settings(self.config_path) == settings
+            saved = load_settings(self.config_path) if self.config_path.exists() else None
         except SettingsError:
-            same = False
-        if not same:
+            saved = None
+        if saved is not None and saved == settings:
+            settings.saved_at = saved.saved_at     # the file's time: it already said this
+        else:
             save_settings(settings, self.config_path)
         self.settings = settings
 

@@ -346,7 +346,16 @@ def load_settings(path: Path) -> Settings | None:
     text = read_settings_text(path)
     if text is None:
         return None
-    return parse_settings(text, path)
+    s = parse_settings(text, path)
+    s.saved_at = _mtime(path)
+    return s
+
+
+def _mtime(path: Path) -> float | None:
+    try:
+        return os.stat(path).st_mtime
+    except OSError:
+        return None
 
 
 # --------------------------------------------------------------------------- saving
@@ -503,3 +512,4 @@ def save_settings(s: Settings, path: Path) -> None:
     if previous is not None:
         parse_settings(previous, path)  # raises on a malformed file: never clobber it
     atomic_write_text(path, render_settings(s, previous))
+    s.saved_at = _mtime(path)

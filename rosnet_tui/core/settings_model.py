@@ -249,6 +249,10 @@ class Settings:
     rosbridge: RosbridgeSettings = field(default_factory=RosbridgeSettings)
     # Whether the file had a [sync] table (so saving does not add one the user never asked for).
     has_sync: bool = field(default=False, compare=False, repr=False)
+    # When the settings file holding these values was saved (its modification time, seconds since
+    # the epoch; None: not loaded from or saved to a file). linux.resolve reports it as the age
+    # of the peers' addresses (entered or learned then).
+    saved_at: float | None = field(default=None, compare=False, repr=False)
 
     def peer(self, name: str) -> Peer | None:
         return next((p for p in self.peers if p.name == name), None)

@@ -180,6 +180,10 @@ def _icmp_filtered(ev: Evidence) -> list[Hit]:
     return hits
 
 
+def _silent(ev: Evidence, name: str) -> bool:   # dropped, not refused
+    return peer_tcp(ev, name) in ("timeout", "error", None)
+
+
 def _peer_actions(ev: Evidence, name: str, causes: list[Cause], port: int) -> list[str]:
     """One action per cause, in the evidence's order."""
     local = ev.peer_local(name) or "its local IP"
@@ -189,7 +193,10 @@ def _peer_actions(ev: Evidence, name: str, causes: list[Cause], port: int) -> li
         "forwarding": f"Check that {name}'s modem forwards {ports} to {local} (the Router step "
                       f"on {name}: its port test must say Open)"
                       + (f"; port {port} is outside {FORWARD_RANGE} and needs a rule of its own."
-                         if port < PORT_MIN else "."),
+                         if port < PORT_MIN else ".")
+                      + (" Check the modem's firewall too: one that drops incoming "
+                         "connections looks the same from here."
+                         if _silent(ev, name) and causes[0].key == "forwarding" else ""),
         "sshd": f"On {name}: sshd may listen on another port than {port}, or not run at all: "
                 f"`sudo ss -tlnp | grep sshd` there shows its port; set ssh_port = N under the "
                 f"[[peer]] named {name} in the settings, or start it (`sudo systemctl enable "
@@ -205,6 +212,8 @@ def _peer_actions(ev: Evidence, name: str, causes: list[Cause], port: int) -> li
 
 _LEAD = {
     "forwarding": "most likely {name}'s modem does not forward port {port} to {name}",
+    "forwarding_silent": "most likely {name}'s modem does not forward port {port} to {name} "
+                         "(or its firewall drops it)",
     "sshd": "most likely sshd on {name} does not listen on port {port} (it may listen on "
             "another one: ssh_port in the settings)",
     "offline": "most likely {name} itself is off or off-line",
@@ -220,8 +229,9 @@ def _peer_hit(ev: Evidence, name: str, meaning: str) -> Hit:
     port = int(ssh.get("port") or 22)
     ip = ssh.get("address") or ev.expected_ip(name) or "?"
     first = causes[0]
+    lead = "forwarding_silent" if first.key == "forwarding" and _silent(ev, name) else first.key
     meaning += (" Causes, most likely first: "
-                + _LEAD[first.key].format(name=name, port=port, ip=ip) + ". " + first.sentence())
+                + _LEAD[lead].format(name=name, port=port, ip=ip) + ". " + first.sentence())
     return Hit(meaning.strip(), _peer_actions(ev, name, causes, port),
                check_ids=peer_check_ids(ev, name), goto_step=first.step,
                evidence=[f"{name} ({ip}): icmp={st['icmp']}, tcp={peer_tcp(ev, name)}, "

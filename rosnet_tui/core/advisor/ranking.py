@@ -51,6 +51,10 @@ EVIDENCE: tuple[tuple[str, str], ...] = (
      "and drops it: forwarding (or the component is off) before the provider"),
     ("silent, and the public IP does not answer ping either", "the address may be wrong or "
      "offline: the hosts entry and the provider first"),
+    ("how old the peer's address is (`linux.resolve`: when the settings holding it were saved, "
+     "the peer's own sync record)", "confirmed within the hour: a stale address is unlikely, "
+     "the modem's forwarding or firewall first; older than a day, undated, or a newer sync "
+     "record with another address: the address first"),
     ("UPnP: the modem's WAN address is the public IP; the path probe's hops are public",
      "no carrier NAT: the provider moves down (not for a corporate firewall)"),
     ("the network profile is office or portable", "nothing is forwarded: no Table 1, no "
@@ -213,8 +217,10 @@ def table1_causes(ev: Evidence) -> list[Cause]:
     others = [p for p in port_rows(ev) if p.get("port") != tp and p.get("answer")]
     if answer == "refused":
         c.up(40, f"{who}'s connection to {where} was refused: something at that address "
-                 "answers and rejects it, so the modem is online and does not forward the port")
-        b.down(20, "a refusal comes from the modem itself, not from a carrier that blocks")
+                 "answers and rejects it, so the modem is online and most likely does not forward "
+                 "the port")
+        b.down(20, "a refusal usually comes from the modem itself; a carrier that blocks "
+                   "usually drops")
     elif answer == "unreachable":
         c.up(50, f"{who}'s connection to {where} came back unreachable: the modem forwards it "
                  "to a local address where no machine answers")
@@ -271,13 +277,88 @@ def peer_tcp(ev: Evidence, name: str) -> str | None:
 
 
 def master_answer(ev: Evidence, name: str) -> str | None:
-    """How *name*'s ROS master answered us ("connected", "refused", ...), when *name* runs it."""
+    """How *name*'s ROS master (ROS 2: its Zenoh router) answered us ("connected", "refused",
+    ...), when *name* runs it."""
     if name != ev.s.master_name or ev.s.is_master:
         return None
+    if ev.s.ros2:
+        r = ev.data("ros2.router")
+        if r.get("reachable") is True:
+            return "connected"
+        f = r.get("failure")
+        return f if f in ("refused", "timeout", "unreachable") else None
     d = ev.data("ros.master")
     if d.get("reachable") is True:
         return "connected"
     return d.get("tcp")
+
+
+def master_port_words(ev: Evidence) -> str:
+    """The master's port, in words: "the ROS master's port 11311" (ROS 2: the Zenoh router's)."""
+    if ev.s.ros2:
+        return f"the Zenoh router's port {ev.s.ros.zenoh_port}"
+    return f"the ROS master's port {ev.s.ros.port}"
+
+
+# --------------------------------------------------------------------------- an address's age
+FRESH_S = 3600.0       # confirmed within the hour: a stale address is the less likely cause
+DAY_S = 86400.0        # within a day: still unlikely; older: public addresses do change
+
+_DATED_BY = {"settings": "settings saved", "sync": "{name}'s own sync record"}
+
+
+def ago(seconds: float) -> str:
+    """An age in words: "40 s", "3 min", "5 h", "12 days"."""
+    s = max(float(seconds), 0.0)
+    if s < 90:
+        return f"{int(s)} s"
+    if s < 90 * 60:
+        return f"{round(s / 60)} min"
+    if s < 36 * 3600:
+        return f"{round(s / 3600)} h"
+    return f"{round(s / 86400)} days"
+
+
+def address_dates(ev: Evidence, name: str, ip: str) -> tuple[Mapping | None, Mapping | None]:
+    """(the newest confirmation of *ip* as *name*'s address, a newer source that gives another
+    address), from linux.resolve's ``dated``; None where there is none."""
+    rows = ((ev.data("linux.resolve").get("names") or {}).get(name) or {}).get("dated") or []
+    rows = sorted((r for r in rows if isinstance(r, Mapping) and r.get("ip")
+                   and isinstance(r.get("age_s"), (int, float))), key=lambda r: r["age_s"])
+    same = next((r for r in rows if r["ip"] == ip), None)
+    other = next((r for r in rows if r["ip"] != ip
+                  and (same is None or r["age_s"] < same["age_s"])), None)
+    return same, other
+
+
+def dated_words(ev: Evidence, name: str, row: Mapping) -> str:
+    """"203.0.113.2 was confirmed 3 min ago (settings saved)"."""
+    by = _DATED_BY.get(str(row.get("by")), str(row.get("by"))).format(name=name)
+    return f"{row['ip']} was confirmed {ago(row['age_s'])} ago ({by})"
+
+
+def _date_address(ev: Evidence, name: str, ip: str, addr: Cause, fwd: Cause) -> None:
+    """Rank "the address is stale" against "the modem drops it" by the age of *ip*."""
+    same, other = address_dates(ev, name, ip)
+    if other is not None and other.get("by") == "sync":
+        addr.up(50, f"{name}'s own sync record of {ago(other['age_s'])} ago gives "
+                    f"{other['ip']}, not {ip}")
+        return
+    if same is None:
+        addr.up(0, f"nothing here says when {ip} was last confirmed (no sync record of {name}, "
+                   "no time for the settings)")
+        return
+    said, age = dated_words(ev, name, same), float(same["age_s"])
+    if age < FRESH_S:
+        addr.down(30, said)
+        fwd.up(30, f"{said}, so the address is most likely right: {name}'s modem is there and "
+                   "drops what comes in (no forwarding, or its firewall)")
+    elif age < DAY_S:
+        addr.down(10, said)
+        fwd.up(15, f"{said}: a modem that drops what comes in looks the same")
+    else:
+        addr.up(10, f"{said.replace(' was confirmed ', ' was last confirmed ')}: public "
+                    "addresses change when a modem restarts or reconnects")
 
 
 def resolved_elsewhere(ev: Evidence, name: str) -> tuple[str, str] | None:
@@ -306,25 +387,33 @@ def peer_causes(ev: Evidence, name: str) -> list[Cause]:
         off.down(30, f"{ip} answered (it refused), so it is online")
         addr.down(20, f"{ip} answered (it refused)")
         if m == "connected":
-            sshd.up(40, f"{name}'s ROS master answers at the same address, so its modem "
-                        "forwards and the machine is up")
+            sshd.up(40, f"{name}'s {'Zenoh router' if ev.s.ros2 else 'ROS master'} answers at "
+                        "the same address, so its modem forwards and the machine is up")
         elif m == "refused":
-            fwd.up(35, f"{ip} refuses the ROS master's port {ev.s.ros.port} as well: the modem "
-                       "rejects everything")
+            fwd.up(35, f"{ip} refuses {master_port_words(ev)} as well: the modem (or its "
+                       "provider) seems to reject everything")
     elif kind == "unreachable":
         fwd.up(40, f"the connection to {ip}:{port} came back unreachable: {name}'s modem "
                    "forwards to a local address where no machine answers (its local IP changed?)")
         off.up(30, f"or {name} itself is off (the same answer)")
     elif kind in ("timeout", "error") or kind is None:
         if m == "connected":
-            fwd.up(45, f"{name}'s ROS master answers at {ip}, but port {port} is dropped: "
-                       f"{port} is not forwarded (it is outside the forwarded range)")
+            fwd.up(45, f"{name}'s {'Zenoh router' if ev.s.ros2 else 'ROS master'} answers at "
+                       f"{ip}, but port {port} is dropped: most likely {port} is not forwarded"
+                       + ("" if ev.s.ros2 else " (it is outside the forwarded range)"))
         elif icmp is True:
             fwd.up(20, f"{ip} answers ping, so {name}'s modem is online, but drops port {port}")
             off.up(15, f"{name} itself may be off (its modem would still answer ping)")
         elif icmp is False:
             addr.up(25, f"nothing answers at {ip}, not even ping")
             off.up(20, f"{name}'s modem may be off-line")
+        if m == "refused":
+            fwd.up(30, f"{ip} refuses {master_port_words(ev)} while port {port} gets no answer: "
+                       "something at that address answers, and lets nothing in")
+            addr.down(20, f"{ip} answers (it refused {master_port_words(ev)})")
+            off.down(20, f"{ip} answers, so it is online")
+        if m != "connected":
+            _date_address(ev, name, ip, addr, fwd)
     moved = resolved_elsewhere(ev, name)
     if moved:
         addr.up(50, f"{name} resolves to {moved[0]} here, not to {moved[1]} as the settings say")
@@ -407,11 +496,11 @@ def master_causes(ev: Evidence, master: str) -> list[Cause]:
     ip = ssh.get("address") or ev.expected_ip(master) or "its address"
     if kind == "refused":
         if reached:
-            core.up(50, f"{master} answers SSH at {ip} but refuses port {port}: nothing listens "
-                        "there")
+            core.up(50, f"{master} answers SSH at {ip} but refuses port {port}: most likely "
+                        "nothing listens there")
         elif peer_tcp(ev, master) == "refused":
-            fwd.up(40, f"{ip} refuses port {port} and its SSH port alike: the modem rejects "
-                       "everything")
+            fwd.up(40, f"{ip} refuses port {port} and its SSH port alike: the modem (or its "
+                       "provider) seems to reject everything")
         else:
             core.up(20, f"port {port} was refused at {ip}: nothing listens there, or the modem "
                         "rejects it")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence, join_and
+from rosnet_tui.core.advisor.ranking import peer_tcp
 
 
 def _on(ev: Evidence) -> bool:
@@ -34,6 +35,25 @@ def _hops(ev: Evidence, *hops: str) -> list[str]:
     if inn.get("ok") is False and inn.get("failed_hop") in hops:
         ids.append("ros2.pubsub_in")
     return ids
+
+
+def site_closed(ev: Evidence) -> str:
+    """A member found the master's Zenoh port refused and the master's SSH port refused or
+    unanswered: what SSH did, in words ("" when that is not the case). A refusal alone cannot
+    tell "nothing listens" from "the modem refuses"; both ports together point at the site."""
+    if not _on(ev) or ev.s.is_master or ev.data("ros2.router").get("failure") != "refused":
+        return ""
+    master = _master(ev)
+    ssh = (ev.data("linux.ssh").get("peers") or {}).get(master) or {}
+    if ssh.get("ok") is True:
+        return ""
+    kind = peer_tcp(ev, master)
+    if kind == "refused":
+        return "refused too"
+    if kind in ("timeout", "unreachable") or (kind is None and ssh.get("failure") in ("network",
+                                                                                     "timeout")):
+        return "did not answer either"
+    return ""
 
 
 def _start_router(ev: Evidence, where: str) -> list[str]:
@@ -113,12 +133,21 @@ def _not_running(ev: Evidence) -> list[Hit]:
     ids = ["ros2.router", *_hops(ev, "our_router", "master_router", "peer_router")]
     if ev.is_fail("ros2.graph"):
         ids.append("ros2.graph")
-    if r.get("failure") == "refused" or r.get("listen_problem") == "not_running":
-        where = ev.me if ev.s.is_master else _master(ev)
-        return [Hit(f"No Zenoh router runs on {where}: a connection to {r.get('endpoint')} "
-                    f"({r.get('address')}) is refused, so the forward works but nothing listens "
-                    f"behind it.", _start_router(ev, where), check_ids=ids,
-                    evidence=[f"ros2.router: {r.get('failure') or r.get('listen_problem')}"])]
+    if r.get("listen_problem") == "not_running":
+        return [Hit(f"Nothing listens on TCP {_port(ev)} on {ev.me} (this machine, the master): "
+                    "its Zenoh router is not running.", _start_router(ev, ev.me), check_ids=ids,
+                    evidence=["ros2.router: not_running"])]
+    if r.get("failure") == "refused" and not site_closed(ev):
+        where = _master(ev)
+        ssh = (ev.data("linux.ssh").get("peers") or {}).get(where) or {}
+        seen = (f"{where} answers SSH at the same address, so its modem lets connections in"
+                if ssh.get("ok") is True or peer_tcp(ev, where) == "connected" else
+                f"a refusal alone cannot tell that from {where}'s modem refusing the port: "
+                f"the port test of {where}'s own Router step tells them apart")
+        return [Hit(f"A connection to {r.get('endpoint')} ({r.get('address')}) was refused: most "
+                    f"likely no Zenoh router listens on {where} ({seen}).",
+                    _start_router(ev, where), check_ids=ids,
+                    evidence=[f"ros2.router: {r.get('failure')}"])]
     if local and local.get("reachable") is False:
         return [Hit(f"{ev.me}'s own router is not running: the master's router answers, but "
                     f"nodes here look for their router at {local.get('endpoint')} and find "
@@ -175,10 +204,12 @@ def _cgnat_master(ev: Evidence) -> bool:
 @rule("ros2.port.not_forwarded", "router", ("router.port_open", "ros2.router", "ros2.graph",
                                             "ros2.pubsub_out", "ros2.pubsub_in"),
       "the master's Zenoh port is closed from outside (Table 1 under ROS 2)",
-      "The router listens, but a connection from the internet does not reach it: the modem does "
-      "not forward TCP zenoh_port to the master's local IP (or a firewall of the provider stops "
-      "it).",
-      "Forward TCP <zenoh_port> (only that port) to the master's local IP, reserve that IP by DHCP.",
+      "A connection from the internet does not reach the master's router: most likely its modem "
+      "does not forward TCP zenoh_port to the master's local IP, or the provider stops it "
+      "(carrier-grade NAT). From a member: the port gets no answer, or it is refused while the "
+      "master's SSH is shut out too (the whole site takes no connection).",
+      "Forward TCP <zenoh_port> (only that port) to the master's local IP, reserve that IP by "
+      "DHCP; on the master, its ISP step tells carrier-grade NAT.",
       "router", "fail")
 def _not_forwarded(ev: Evidence) -> list[Hit]:
     if not _on(ev) or _cgnat_master(ev):
@@ -194,11 +225,14 @@ def _not_forwarded(ev: Evidence) -> list[Hit]:
         seen = (f"connections from {ev.me} to {r.get('endpoint')} ({r.get('address')}) get no "
                 "answer at all (dropped, not refused)")
         local = ev.peer_local(_master(ev)) or f"{_master(ev)}'s local IP"
+    elif said := site_closed(ev):
+        return [_site_hit(ev, said)]
     else:
         return []
     ids = [c for c in ("router.port_open", "ros2.router") if ev.is_fail(c)]
     ids += _hops(ev, "master_router", "peer_router")
-    return [Hit(f"{seen}: {_master(ev)}'s modem does not forward TCP {port} to its router.",
+    return [Hit(f"{seen}: most likely {_master(ev)}'s modem does not forward TCP {port} to its "
+                "router.",
                 [f"In {_master(ev)}'s modem (firewall / NAT / port forwarding): forward TCP {port} "
                  f"to {local}; nothing else is needed for ROS 2 (no range, no UDP).",
                  f"Reserve {local} for {_master(ev)} by DHCP so the forward keeps pointing at it.",
@@ -208,6 +242,40 @@ def _not_forwarded(ev: Evidence) -> list[Hit]:
                  f"map` on {_master(ev)} asks it for this forward (it shows the request and "
                  "waits for a yes)."],
                 check_ids=ids or ["ros2.router"], evidence=[f"router.port_open/ros2.router: {seen}"])]
+
+
+def _site_hit(ev: Evidence, ssh_said: str) -> Hit:
+    """The master's whole site takes no connection from here: its modem or its provider."""
+    master, port, r = _master(ev), _port(ev), ev.data("ros2.router")
+    addr = r.get("address") or ev.expected_ip(master) or "its address"
+    local = ev.peer_local(master) or f"{master}'s local IP"
+    ssh = (ev.data("linux.ssh").get("peers") or {}).get(master) or {}
+    ssh_port = ssh.get("port") or 22
+    seen = (f"{master}'s Zenoh port ({addr}:{port}) refused {ev.me}'s connection and its SSH "
+            f"port {ssh_port} {ssh_said}")
+    ids = ["ros2.router", *_hops(ev, "master_router", "peer_router")]
+    if ev.is_fail("ros2.graph"):
+        ids.append("ros2.graph")
+    return Hit(f"{seen}: nothing at {addr} takes a connection from here. That points at "
+               f"{master}'s modem or its provider rather than at its router: the modem forwards "
+               f"neither port (or its firewall rejects them), or {master} sits behind "
+               "carrier-grade NAT and the carrier answers in its place. A refused Zenoh port "
+               "alone could also mean that no router listens there; with SSH shut out too, the "
+               "site is the first suspect.",
+               [f"On {master}: run its ISP and Router steps (`rosnet-tui check --step isp "
+                "--step router` there): isp.cgnat tells carrier-grade NAT, the port test "
+                f"whether TCP {port} gets in from outside.",
+                f"In {master}'s modem: forward TCP {port} (the router) and TCP {ssh_port} (SSH, "
+                f"for the checks) to {local}, and let them through its firewall.",
+                f"If {master} is behind carrier-grade NAT, no forward can work there: make a "
+                "component with a public address the master, or run the hub router on a small "
+                "public server (see ros2.cgnat).",
+                f"Only then, if TCP {port} is open from outside: is rmw_zenohd running on "
+                f"{master}? (`ss -tlnp | grep {port}` there)"],
+               check_ids=ids, goto_step="router",
+               evidence=[f"ros2.router: {r.get('endpoint')} ({addr}) refused",
+                         f"linux.ssh: {master} port {ssh_port} {ssh_said} "
+                         f"(tcp={peer_tcp(ev, master)}, ssh={ssh.get('failure')})"])
 
 
 @rule("ros2.cgnat", "isp", ("isp.cgnat", "ros2.router"),

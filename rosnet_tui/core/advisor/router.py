@@ -299,8 +299,9 @@ def _t1_cause_forwarding(ev: Evidence) -> list[Hit]:
                 f"Reserve {local} for {ev.me} by DHCP, then re-run the Router step."]
         ids.append("isp.cgnat")
     else:
-        meaning = (f"The modem does not forward port {_t1_port(ev)} to {ev.me} ({local}): the "
-                   "forwarding is missing, covers other ports, or points at another address.")
+        meaning = (f"The modem does not seem to forward port {_t1_port(ev)} to {ev.me} "
+                   f"({local}): the forwarding may be missing, cover other ports, or point at "
+                   "another address.")
         if answer == "other":
             meaning = (f"Port {_t1_port(ev)} is forwarded, but to another machine or service "
                        f"than {ev.me} ({local}).")

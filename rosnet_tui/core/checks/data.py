@@ -181,9 +181,19 @@ class LinuxHostsData(TypedDict, total=False):
     loopback: list[str]       # names mapped to a loopback address (127.x) that should not be
 
 
+class AddressDated(TypedDict, total=False):
+    ip: str       # the address this source gives for the component
+    by: Literal["settings", "sync"]  # "settings": the settings file holding it was saved then;
+    #                                  "sync": the component's own address record (applied here)
+    at: str       # when (ISO 8601, UTC): the file's modification time, or the record's timestamp
+    age_s: float  # seconds from then until this check ran (0 for a time in the future)
+
+
 class Resolved(TypedDict, total=False):
     resolved: str | None  # the first IPv4 address the resolver gave (None: does not resolve)
     expected: str         # the address the settings expect
+    dated: list[AddressDated]  # peers: what says when their address was last confirmed, newest
+    #                            first ([]: nothing here dates it)
 
 
 class LinuxResolveData(TypedDict, total=False):

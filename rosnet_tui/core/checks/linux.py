@@ -14,6 +14,7 @@ import shutil
 import socket
 import time
 from collections.abc import Awaitable, Callable
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -111,6 +112,41 @@ async def check_hosts(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- linux.resolve
+_DATED_BY = {"settings": "the settings file saved", "sync": "its own sync record"}
+
+
+def _iso(ts: float) -> str:
+    return datetime.fromtimestamp(ts, tz=timezone.utc).replace(microsecond=0).isoformat()
+
+
+def address_dates(ctx: CheckContext, expected: list[HostsEntry]) -> dict[str, list[dict[str, Any]]]:
+    """For each peer in *expected*: what says when its address was last confirmed, newest first
+    (see linux.resolve's ``dated``): the time the settings file holding it was saved, and the
+    peer's own address record that sync applied here (remote profile: its public IP)."""
+    s, now = ctx.settings, time.time()
+    records: dict[str, Any] = {}
+    if s.this.profile == "remote":
+        try:
+            from rosnet_tui.core.sync.applied import load_applied  # lazy: the sync package is big
+
+            records = load_applied(ctx.state_dir)
+        except Exception:   # dating is a bonus: never let it cost the verdict
+            records = {}
+    out: dict[str, list[dict[str, Any]]] = {}
+    for e in expected:
+        if e.name.lower() == s.this.name.lower():
+            continue
+        rows = []
+        if s.saved_at is not None:
+            rows.append((e.ip, "settings", s.saved_at))
+        rec = records.get(e.name.lower())
+        if rec is not None and rec.public_ip:
+            rows.append((rec.public_ip, "sync", rec.timestamp))
+        out[e.name] = [{"ip": ip, "by": by, "at": _iso(ts), "age_s": round(max(now - ts, 0.0), 1)}
+                       for ip, by, ts in sorted(rows, key=lambda r: -r[2])]
+    return out
+
+
 @check("linux.resolve", "linux", "Each name resolves to the expected address", 1.0)
 async def check_resolve(ctx: CheckContext) -> Outcome:
     expected = hosts_entries(ctx.settings)
@@ -118,11 +154,16 @@ async def check_resolve(ctx: CheckContext) -> Outcome:
     if not expected:
         return Outcome(Status.SKIP, "no names with known addresses in the settings yet", data=data)
     t = budget(ctx, "linux.resolve") * 0.8
-    got = await asyncio.gather(*(resolve_ipv4(e.name, t) for e in expected))
+    got, dated = await asyncio.gather(asyncio.gather(*(resolve_ipv4(e.name, t) for e in expected)),
+                                      asyncio.to_thread(address_dates, ctx, expected))
     evidence = []
     for e, (addrs, err) in zip(expected, got, strict=True):
         resolved = addrs[0] if addrs else None
         data["names"][e.name] = {"resolved": resolved, "expected": e.ip}
+        if e.name in dated:
+            data["names"][e.name]["dated"] = dated[e.name]
+            evidence += [f"{e.name}: {d['ip']} per {_DATED_BY[d['by']]} of {d['at']}"
+                         for d in dated[e.name]]
         if resolved is None:
             data["wrong"].append(e.name)
             evidence.append(f"{e.name}: {err} (expected {e.ip})")
