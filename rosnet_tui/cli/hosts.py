@@ -254,7 +254,7 @@ def _decide_conflicts(args: argparse.Namespace, settings: Settings, profile: str
     if args.yes or args.dry_run or not interactive():
         return False
     try:
-        old = mf.read_bytes(path)
+        old = mf.read_bytes(path, state_dir=state_dir_of(args))
         conflicts = find_hosts_conflicts(mf.decode(old) if old is not None else None,
                                          settings, profile)
     except mf.ManagedFileError:
@@ -274,7 +274,8 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
     path = Path(args.file).expanduser().absolute() if args.file else DEFAULT_HOSTS_PATH
     fix = _decide_conflicts(args, settings, profile, path)
     try:
-        preview = preview_hosts(settings, profile, path, fix_conflicts=bool(fix))
+        preview = preview_hosts(settings, profile, path, fix_conflicts=bool(fix),
+                                state_dir=state_dir_of(args))
     except WriterSettingsError as exc:
         return report_settings_problems(exc), settings
     except mf.ManagedFileError as exc:
