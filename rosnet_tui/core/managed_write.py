@@ -25,7 +25,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rosnet_tui.core import tempfiles
+from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.managed_text import ManagedFileError, PermissionNeededError, decode
+from rosnet_tui.core.regular_file import FileRefusedError, read_regular
 
 LOCK_TIMEOUT_S = 10.0
 _TMP_RE = tempfiles.MANAGED_TMP
@@ -95,21 +97,15 @@ MAX_FILE_BYTES = 256 << 20   # hosts files and shell files are far smaller
 def _read_regular(path: Path) -> bytes:
     """A regular file's bytes; anything else (a FIFO, a device behind a link) is refused
     without reading it, as is a file over MAX_FILE_BYTES."""
-    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
     try:
-        st = os.fstat(fd)
-        if stat.S_ISDIR(st.st_mode):
-            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
-        if not stat.S_ISREG(st.st_mode):
-            raise ManagedFileError(f"{path} is not a regular file (a FIFO or a device?); "
-                                   "nothing was read or written")
-        if st.st_size > MAX_FILE_BYTES:
-            raise ManagedFileError(f"{path} is too big ({st.st_size} bytes) to be a file "
-                                   "rosnet-tui edits")
-        with os.fdopen(os.dup(fd), "rb") as f:
-            return f.read()
-    finally:
-        os.close(fd)
+        return read_regular(path, MAX_FILE_BYTES)
+    except FileRefusedError as exc:
+        if exc.kind == "folder":
+            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path)) from None
+        if exc.kind == "big":
+            raise ManagedFileError(f"{path} {exc.why} to be a file rosnet-tui edits") from None
+        raise ManagedFileError(f"{path} is not a regular file (a FIFO or a device?); "
+                               "nothing was read or written") from None
 
 
 # --------------------------------------------------------------------------- writing
@@ -227,9 +223,9 @@ def _parse_journal(data: bytes) -> tuple[dict, bytes, bytes] | None:
     if nl < 0:
         return None
     try:
-        head = json.loads(data[len(INPLACE_MAGIC):nl])
+        head = loads_bounded(data[len(INPLACE_MAGIC):nl].decode("utf-8"))
         old_len, new_len = int(head["old_len"]), int(head["new_len"])
-    except (ValueError, TypeError, KeyError):
+    except (ValueError, TypeError, KeyError):   # JsonInputError, UnicodeDecodeError included
         return None
     body = data[nl + 1:]
     if old_len < 0 or new_len < 0 or len(body) != old_len + new_len:

@@ -18,6 +18,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
 from rosnet_tui.core.settings import Settings
 
 RMW_ZENOH = "rmw_zenoh_cpp"
@@ -230,10 +231,10 @@ def loads_json5(text: str) -> Any:
         elif kind == "num":
             tok = tok.lstrip("+")
         out.append(tok)
-    try:
-        return json.loads("".join(out))
-    except json.JSONDecodeError as exc:
-        raise ValueError(exc.msg) from None
+    try:   # bounded depth: a config nested thousands deep is refused, not a RecursionError
+        return loads_bounded("".join(out), unique_keys=False)
+    except JsonInputError as exc:
+        raise ValueError(str(exc).removeprefix("not valid JSON (").rstrip(")")) from None
 
 
 def _next_significant(text: str, pos: int) -> str:

@@ -472,7 +472,7 @@ def parse_report_line(stdout: str) -> Optional[Dict[str, Any]]:
         if line.startswith("{"):
             try:
                 data = json.loads(line)
-            except ValueError:
+            except (ValueError, RecursionError):   # stdlib only: too deep is a decode error
                 continue
             if isinstance(data, dict) and data.get(REPORT_KEY):
                 return data

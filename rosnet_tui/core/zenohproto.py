@@ -238,9 +238,11 @@ def router_info(session: Any, timeout: float) -> dict[str, Any]:
             for reply in session.get(f"@/{zid}/router", timeout=timeout):
                 if reply.ok is None:
                     continue
-                try:
+                try:   # stdlib only (this also runs on peers): too deep is a decode error
                     body = json.loads(reply.ok.payload.to_bytes().decode("utf-8", "replace"))
-                except ValueError:
+                except (ValueError, RecursionError):
+                    continue
+                if not isinstance(body, dict):
                     continue
                 out["version"] = str(body.get("version", "")).split(" ")[0]
                 out["locators"] = [str(x) for x in body.get("locators") or []]
@@ -386,7 +388,7 @@ def parse_report(text: str) -> dict[str, Any] | None:
         if line.startswith(REPORT_MARK):
             try:
                 value = json.loads(line[len(REPORT_MARK):])
-            except ValueError:
+            except (ValueError, RecursionError):   # stdlib only: too deep is a decode error
                 return None
             return value if isinstance(value, dict) else None
     return None
