@@ -134,7 +134,11 @@ def _returns_within(fn, fifo: Path, seconds: float = 1.0):
     t.join(seconds)
     took = time.monotonic() - start
     if t.is_alive():
-        fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)       # free the reader: EOF
+        try:                                                  # free a reader: EOF
+            fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError:                                       # no reader: it waits to write
+            fd = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)
+        time.sleep(0.2)
         os.close(fd)
         t.join(5)
         pytest.fail(f"still blocked after {seconds} s on the FIFO {fifo}")
@@ -219,3 +223,51 @@ def test_state_files_and_named_files_that_are_fifos_do_not_hang(tmp_path, which,
         data, why = box["value"]
         assert data is None and "not a regular file" in why
     tally(AREA, 1, 1, f"FIFO {which}")
+
+
+@pytest.mark.parametrize("which", ["ros1_bashrc", "ros2_bashrc", "ros2_distro", "known_hosts"])
+def test_more_files_that_are_fifos_do_not_hang(tmp_path, which):
+    """Siblings: ~/.bashrc as the ROS checks (and their peer programs) read it, and the
+    known_hosts file the wizard appends a trusted key to."""
+    fifo = tmp_path / ("known_hosts" if which == "known_hosts" else ".bashrc")
+    os.mkfifo(fifo)
+    if which == "ros1_bashrc":
+        from rosnet_tui.core.rosproto import read_shell_exports
+
+        box = _returns_within(lambda: read_shell_exports(str(fifo), ("ROS_MASTER_URI",)), fifo)
+        assert box == {"value": {}}
+    elif which == "ros2_bashrc":
+        from rosnet_tui.core.zenohproto import read_exports
+
+        box = _returns_within(lambda: read_exports(str(fifo)), fifo)
+        assert box == {"value": {}}
+    elif which == "ros2_distro":
+        from rosnet_tui.core.zenohproto import ros_env
+
+        box = _returns_within(lambda: ros_env({}, str(fifo)), fifo)
+        assert box == {"value": {}}
+    else:
+        from rosnet_tui.core.ssh import SshOptions, trust_host_key
+
+        key = "ssh-ed25519 AAAAC3NzaC1lZDI1NTE5AAAAIEdz0LdBvGAIK3wAmPBkH3TkjCFRCe7Ddm6yZ8pHsH4j"
+        opts = SshOptions(ssh_dir=str(tmp_path), known_hosts_files=[str(fifo)])
+        box = _returns_within(lambda: trust_host_key(opts, "turtlebot", 22, key), fifo)
+        assert isinstance(box.get("error"), ValueError) and "not a regular file" in \
+            str(box["error"]), box
+    tally(AREA, 1, 1, f"FIFO {which}")
+
+
+def test_sync_install_over_a_fifo_unit_file_is_refused_at_once(tmp_path):
+    from rosnet_tui.cli.sync import UNIT_NAME
+
+    cfg = tmp_path / "settings.toml"
+    cfg.write_text('[this]\nname = "turtlebot"\n')
+    os.mkfifo(tmp_path / UNIT_NAME)
+    started = time.monotonic()
+    r = subprocess.run([sys.executable, "-m", "rosnet_tui", "sync", "install-service", "--config",
+                        str(cfg), "--unit-dir", str(tmp_path), "--yes"], capture_output=True,
+                       text=True, timeout=30, env=dict(os.environ, PYTHONPATH=str(REPO)),
+                       stdin=subprocess.DEVNULL)
+    assert r.returncode == 1 and "not a regular file" in r.stderr, (r.returncode, r.stderr)
+    assert "Traceback" not in r.stderr and time.monotonic() - started < 15
+    tally(AREA, 1, 1, "FIFO sync unit")
