@@ -178,7 +178,7 @@ def run_kills(tmp_path: Path, etc: str, kills: int, budget_s: float, seed: int) 
     a = hosts_text(1_500_000, seed)
     box = Container(tmp_path, etc, a)
     stats = {"kills": 0, "torn": 0, "old": 0, "new": 0, "torn_before_show": 0,
-             "torn_before_check": 0, "completed": 0}
+             "torn_before_check": 0, "torn_before_apply": 0, "completed": 0}
     try:
         want = {"A": (show(box), check_linux_hosts(box))}
         r = box.run("hosts", "apply", "--yes", "--no-checks", "--config", str(box.cfg))
@@ -198,18 +198,25 @@ def run_kills(tmp_path: Path, etc: str, kills: int, budget_s: float, seed: int) 
             now = box.src.read_bytes()
             state = "A" if now == a else "B" if now == b else "torn"
             stats[{"A": "new", "B": "old", "torn": "torn"}[state]] += 1
-            reader = "show" if stats["kills"] % 2 else "check"
+            reader = ("show", "check", "apply")[stats["kills"] % 3]
             if state == "torn":
                 assert box.journals(), "a torn file without a journal to complete it"
                 stats[f"torn_before_{reader}"] += 1
-            got = show(box) if reader == "show" else check_linux_hosts(box)
+            if reader == "apply":
+                r = box.run("hosts", "apply", "--yes", "--no-checks", "--config", str(box.cfg))
+                # It previewed the completed file: no "changed since the preview" refusal.
+                assert r.returncode == 0, f"kill {stats['kills']} ({how}): {r.stderr}"
+                assert box.src.read_bytes() == b
+            else:
+                got = show(box) if reader == "show" else check_linux_hosts(box)
             after = box.src.read_bytes()
             final = "A" if after == a else "B" if after == b else "torn"
             # The reader completed the write (or found nothing to complete) and saw the result.
             assert final != "torn", (f"kill {stats['kills']} ({how}): the next {reader} left "
                                      f"the file torn ({state} before it)")
-            assert got == want[final][0 if reader == "show" else 1], \
-                f"kill {stats['kills']} ({how}): the {reader} output is not the {final} file's"
+            if reader != "apply":
+                assert got == want[final][0 if reader == "show" else 1], \
+                    f"kill {stats['kills']} ({how}): the {reader} output is not the {final} file's"
             if state == "torn":
                 stats["completed"] += 1
                 assert not box.journals()
@@ -223,10 +230,10 @@ def run_kills(tmp_path: Path, etc: str, kills: int, budget_s: float, seed: int) 
 @pytest.mark.parametrize("etc", ["ro", "overlay"])
 def test_a_killed_undo_is_completed_by_the_next_hosts_show_and_check(tmp_path, etc):
     """A real ``rosnet-tui undo`` of a 1.5 MB bind-mounted /etc/hosts, SIGKILLed at random
-    moments; after each kill the next ``hosts show`` or ``check`` (in turn) finds the old or the
-    new file, never a mix, and leaves it whole. ``ro``: /etc read-only (a container's read-only
+    moments; after each kill the next ``hosts show``, ``check`` or ``hosts apply`` (in turn)
+    finds the old or the new file, never a mix, and leaves it whole. ``ro``: /etc read-only (a container's read-only
     root), the journal in the state dir; ``overlay``: the journal beside /etc/hosts."""
-    stats = run_kills(tmp_path, etc, kills=10, budget_s=30, seed=21 if etc == "ro" else 22)
+    stats = run_kills(tmp_path, etc, kills=12, budget_s=30, seed=21 if etc == "ro" else 22)
     print(etc, stats)
     assert stats["kills"] >= 6, stats
     assert stats["torn"] >= 1, f"no kill landed inside the rewrite: {stats}"
