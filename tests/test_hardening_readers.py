@@ -326,10 +326,36 @@ def test_the_hosts_preview_and_apply_complete_a_cut_write_in_their_state_dir(tmp
     real_access = os.access
     monkeypatch.setattr(mw.os, "access", lambda p, m, **kw: False if Path(p) == folder
                         else real_access(p, m, **kw))
-    new = b"127.0.0.1\tlocalhost\n"
-    _cut(target, new, monkeypatch, journal_dir=sd / mw.INPLACE_DIR)
+    new = b"127.0.0.1\tlocalhost\n# new\n"
+    assert _cut(target, new, monkeypatch, journal_dir=sd / mw.INPLACE_DIR) not in (old, new)
     cfg = tmp_path / "settings.toml"
     cfg.write_text(CONFIG)
     preview = preview_hosts(load_settings(cfg), "remote", target, state_dir=sd)
     assert preview.old == new
     assert mf.read_bytes(target) == new
+
+
+def test_hosts_show_finds_the_journal_in_the_state_dir_it_is_given(tmp_path, monkeypatch,
+                                                                   capsys):
+    """A writer with ``--state-dir X`` journaled in X (the file's folder may not be written):
+    ``hosts show --state-dir X`` completes it, though X is not the default state dir."""
+    from rosnet_tui.cli import main
+
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "elsewhere"))
+    sd = tmp_path / "sd"
+    folder = tmp_path / "etc"
+    folder.mkdir()
+    target = folder / "hosts"
+    old = b"127.0.0.1\tlocalhost\n" + b"10.9.9.9\tother\n" * 300
+    target.write_bytes(old)
+    real_access = os.access
+    monkeypatch.setattr(mw.os, "access", lambda p, m, **kw: False if Path(p) == folder
+                        else real_access(p, m, **kw))
+    new = b"127.0.0.1\tlocalhost\n# new\n"
+    assert _cut(target, new, monkeypatch, journal_dir=sd / mw.INPLACE_DIR) not in (old, new)
+    cfg = tmp_path / "settings.toml"
+    cfg.write_text(CONFIG)
+    assert main(["hosts", "show", "--config", str(cfg), "--file", str(target),
+                 "--state-dir", str(sd)]) == 0
+    assert "has no rosnet-tui block yet" in capsys.readouterr().out
+    assert target.read_bytes() == new and not list((sd / mw.INPLACE_DIR).iterdir())

@@ -242,6 +242,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--profile", choices=PROFILES, default=None)
     s.add_argument("--file", metavar="PATH", type=Path, default=None,
                    help="hosts file to look at (default: /etc/hosts)")
+    s.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
+                   help="the state dir of the writer, where a write cut short may have left its "
+                        "journal (default: $XDG_STATE_HOME/rosnet-tui)")
     add_config_option(s)
     s.set_defaults(func=run_show)
 
@@ -351,7 +354,7 @@ def run_show(args: argparse.Namespace) -> int:
     print(f"The block rosnet-tui writes into {path}:")
     sys.stdout.write(block)
     try:
-        preview = preview_hosts(settings, profile, path)
+        preview = preview_hosts(settings, profile, path, state_dir=state_dir_of(args))
     except mf.ManagedFileError as exc:
         print(f"\n{path}: {exc}")
         return EXIT_OK
