@@ -189,7 +189,7 @@ def apply_bashrc(settings: Settings, path: Path | None = None, *, comment_ros_ip
                  expect_digest: str | None = None,
                  state_dir: Path | None = None) -> mf.ApplyResult:
     """Preview and write in one go; *expect_digest* (from an earlier preview) guards staleness."""
-    preview = preview_bashrc(settings, path, comment_ros_ip=comment_ros_ip)
+    preview = preview_bashrc(settings, path, comment_ros_ip=comment_ros_ip, state_dir=state_dir)
     if expect_digest is not None and preview.digest != expect_digest:
         raise mf.StalePreviewError(f"{preview.path} changed since the preview; nothing was written")
     return mf.apply_preview(preview, state_dir=state_dir)
