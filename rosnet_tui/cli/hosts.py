@@ -242,6 +242,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--profile", choices=PROFILES, default=None)
     s.add_argument("--file", metavar="PATH", type=Path, default=None,
                    help="hosts file to look at (default: /etc/hosts)")
+    s.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
+                   help="the state dir of the writer, where a write cut short may have left its "
+                        "journal (default: $XDG_STATE_HOME/rosnet-tui)")
     add_config_option(s)
     s.set_defaults(func=run_show)
 
@@ -254,7 +257,7 @@ def _decide_conflicts(args: argparse.Namespace, settings: Settings, profile: str
     if args.yes or args.dry_run or not interactive():
         return False
     try:
-        old = mf.read_bytes(path)
+        old = mf.read_bytes(path, state_dir=state_dir_of(args))
         conflicts = find_hosts_conflicts(mf.decode(old) if old is not None else None,
                                          settings, profile)
     except mf.ManagedFileError:
@@ -274,7 +277,8 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
     path = Path(args.file).expanduser().absolute() if args.file else DEFAULT_HOSTS_PATH
     fix = _decide_conflicts(args, settings, profile, path)
     try:
-        preview = preview_hosts(settings, profile, path, fix_conflicts=bool(fix))
+        preview = preview_hosts(settings, profile, path, fix_conflicts=bool(fix),
+                                state_dir=state_dir_of(args))
     except WriterSettingsError as exc:
         return report_settings_problems(exc), settings
     except mf.ManagedFileError as exc:
@@ -350,7 +354,7 @@ def run_show(args: argparse.Namespace) -> int:
     print(f"The block rosnet-tui writes into {path}:")
     sys.stdout.write(block)
     try:
-        preview = preview_hosts(settings, profile, path)
+        preview = preview_hosts(settings, profile, path, state_dir=state_dir_of(args))
     except mf.ManagedFileError as exc:
         print(f"\n{path}: {exc}")
         return EXIT_OK

@@ -77,7 +77,7 @@ def _decide_comment(args: argparse.Namespace, path: Path) -> bool:
     if args.yes or args.dry_run or not interactive():
         return False
     try:
-        old = mf.read_bytes(path)
+        old = mf.read_bytes(path, state_dir=state_dir_of(args))
         found = find_ros_ip_lines(mf.decode(old) if old is not None else None)
     except mf.ManagedFileError:
         return False
@@ -98,7 +98,8 @@ def run_apply(args: argparse.Namespace) -> int:
     path = Path(args.file).expanduser().absolute() if args.file else default_bashrc_path()
     comment = _decide_comment(args, path)
     try:
-        preview = preview_bashrc(settings, path, comment_ros_ip=comment)
+        preview = preview_bashrc(settings, path, comment_ros_ip=comment,
+                                 state_dir=state_dir_of(args))
         lines = shell_lines(settings, os.environ)
     except WriterSettingsError as exc:
         return report_settings_problems(exc)
@@ -148,7 +149,8 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
     path = Path(args.file).expanduser().absolute() if args.file else default_bashrc_path()
     rc = Path(args.router_config).expanduser().absolute() if args.router_config else None
     try:
-        previews = ros2.previews(settings, path, client=args.client, router_config_path=rc)
+        previews = ros2.previews(settings, path, client=args.client, router_config_path=rc,
+                                 state_dir=state_dir_of(args))
         lines = ros2.shell_lines(settings, client=args.client)
     except WriterSettingsError as exc:
         return report_settings_problems(exc)

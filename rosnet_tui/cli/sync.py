@@ -309,14 +309,18 @@ def _unit_dir(args: argparse.Namespace) -> Path:
 
 
 def run_install(args: argparse.Namespace) -> int:
+    from rosnet_tui.core.regular_file import FileRefusedError, read_regular
     from rosnet_tui.core.settings import atomic_write_text
 
     text, notes = unit_text(args, user=args.user)
     path = _unit_dir(args) / UNIT_NAME
-    try:
-        old = path.read_text(encoding="utf-8")
+    try:   # without blocking: a FIFO or a device there is refused, not waited on
+        old = read_regular(path, 1 << 20).decode("utf-8", "replace")
     except FileNotFoundError:
         old = None
+    except FileRefusedError as exc:
+        _err(f"rosnet-tui: {exc}")
+        return EXIT_FAIL
     except OSError as exc:
         _err(f"rosnet-tui: cannot read {path}: {exc.strerror}")
         return EXIT_FAIL

@@ -156,14 +156,14 @@ def _guard_syntax(old: bytes | None, body: Sequence[str],
 
 
 def preview_bashrc(settings: Settings, path: Path | None = None, *,
-                   comment_ros_ip: bool = False) -> mf.Preview:
+                   comment_ros_ip: bool = False, state_dir: Path | None = None) -> mf.Preview:
     """Preview our ROS block at the end of *path* (default ~/.bashrc); writes nothing.
 
     ROS_IP/ROS_HOSTNAME lines are listed in the notes; with *comment_ros_ip* (only after the user
     agreed) they are commented out.
     """
     path = Path(path) if path is not None else default_bashrc_path()
-    old = mf.read_bytes(path)
+    old = mf.read_bytes(path, state_dir=state_dir)
     text = mf.decode(old) if old is not None else None
     found = find_ros_ip_lines(text)
     earlier = len(_COMMENTED_RE.findall(text or ""))
@@ -189,7 +189,7 @@ def apply_bashrc(settings: Settings, path: Path | None = None, *, comment_ros_ip
                  expect_digest: str | None = None,
                  state_dir: Path | None = None) -> mf.ApplyResult:
     """Preview and write in one go; *expect_digest* (from an earlier preview) guards staleness."""
-    preview = preview_bashrc(settings, path, comment_ros_ip=comment_ros_ip)
+    preview = preview_bashrc(settings, path, comment_ros_ip=comment_ros_ip, state_dir=state_dir)
     if expect_digest is not None and preview.digest != expect_digest:
         raise mf.StalePreviewError(f"{preview.path} changed since the preview; nothing was written")
     return mf.apply_preview(preview, state_dir=state_dir)

@@ -227,7 +227,8 @@ def _environment_notes(text: str | None) -> list[str]:
 
 
 def preview_hosts(settings: Settings, profile: str | None = None,
-                  path: Path = DEFAULT_HOSTS_PATH, *, fix_conflicts: bool = False) -> mf.Preview:
+                  path: Path = DEFAULT_HOSTS_PATH, *, fix_conflicts: bool = False,
+                  state_dir: Path | None = None) -> mf.Preview:
     """Preview our block in *path* with *profile*'s set active; writes nothing.
 
     Conflicting lines outside the block are listed in the notes; with *fix_conflicts* (only
@@ -235,7 +236,7 @@ def preview_hosts(settings: Settings, profile: str | None = None,
     """
     profile = profile or settings.this.profile
     body = render_hosts_block(settings, profile)
-    old = mf.read_bytes(Path(path))
+    old = mf.read_bytes(Path(path), state_dir=state_dir)
     text = mf.decode(old) if old is not None else None
     conflicts = find_hosts_conflicts(text, settings, profile)
     notes = _environment_notes(text)
@@ -253,7 +254,8 @@ def apply_hosts(settings: Settings, profile: str | None = None,
                 path: Path = DEFAULT_HOSTS_PATH, *, expect_digest: str | None = None,
                 fix_conflicts: bool = False, state_dir: Path | None = None) -> mf.ApplyResult:
     """Preview and write in one go; *expect_digest* (from an earlier preview) guards staleness."""
-    preview = preview_hosts(settings, profile, path, fix_conflicts=fix_conflicts)
+    preview = preview_hosts(settings, profile, path, fix_conflicts=fix_conflicts,
+                            state_dir=state_dir)
     if expect_digest is not None and preview.digest != expect_digest:
         raise mf.StalePreviewError(f"{path} changed since the preview was made; nothing was written")
     return mf.apply_preview(preview, state_dir=state_dir)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import errno
 import hashlib
 import hmac
 import os
@@ -206,7 +207,17 @@ def trust_host_key(opts: SshOptions | None, name: str, port: int, host_key: str)
                          f"(ssh-keygen -R {host_key_name(name, port)})")
     path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
     line = f"{host_key_name(name, port)} {ktype} {b64.split()[0]}\n"
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o600)
+    try:   # without blocking: a FIFO there (no reader) must not hang the wizard
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NONBLOCK, 0o600)
+    except OSError as exc:
+        if exc.errno == errno.ENXIO:
+            raise ValueError(f"{path} is not a regular file (a FIFO?); nothing was written") \
+                from None
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise ValueError(f"{path} is not a regular file; nothing was written")
+    os.set_blocking(fd, True)
     with os.fdopen(fd, "a", encoding="utf-8") as f:
         if f.tell() > 0:
             with open(path, "rb") as r:

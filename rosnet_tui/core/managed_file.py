@@ -39,6 +39,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 # The block text and the file writing live in their own modules; their names are ours too.
+from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.managed_text import (  # noqa: F401 (re-exported)
     _MARKER_RE,
     ABSENT,
@@ -76,6 +77,7 @@ from rosnet_tui.core.managed_write import (  # noqa: F401 (re-exported)
     sweep_state_dir,
     write_file,
 )
+from rosnet_tui.core.regular_file import FileRefusedError, read_regular
 
 JOURNAL_KEEP = 100  # applies remembered for undo; older ones (and their backups) are dropped
 
@@ -311,8 +313,9 @@ def journal_entries(state_dir: Path | None = None) -> list[JournalEntry]:
         raise ManagedFileError(f"cannot read the journal in {folder}: {exc.strerror}") from None
     for n in names:
         try:
-            out.append(JournalEntry.from_json(json.loads((folder / n).read_text("utf-8"))))
-        except (OSError, ValueError, TypeError, KeyError):
+            raw = read_regular(folder / n, MAX_FILE_BYTES).decode("utf-8")
+            out.append(JournalEntry.from_json(loads_bounded(raw, unique_keys=False)))
+        except (OSError, ValueError, TypeError, KeyError, AttributeError):
             continue  # a damaged entry is skipped, never trusted
     return out
 
@@ -443,6 +446,23 @@ def _backup_path(sd: Path, f: JournalFile) -> Path | None:
     return b
 
 
+def _read_backup(sd: Path, f: JournalFile) -> bytes | None:
+    """The backup's bytes (None: the file did not exist before the apply). A backup that is
+    missing, not a regular file or too big is refused (ManagedFileError), never waited on."""
+    b = _backup_path(sd, f)
+    if b is None:
+        return None
+    try:
+        return read_regular(b, MAX_FILE_BYTES)
+    except FileNotFoundError:
+        raise ManagedFileError(f"the backup {b} is missing; {f.path} was left as it is") from None
+    except FileRefusedError as exc:
+        raise ManagedFileError(f"the backup {exc}; {f.path} was left as it is") from None
+    except OSError as exc:
+        raise ManagedFileError(f"cannot read the backup {b}: {exc.strerror}; {f.path} was left "
+                               "as it is") from None
+
+
 # Files root may restore from a journal that a normal user owns (sudo): the system files we write.
 ROOT_RESTORABLE = ("/etc/hosts",)
 
@@ -464,10 +484,9 @@ def _check_root_safe(sd: Path, entry: JournalEntry) -> None:
 
 
 def _restore_one(sd: Path, f: JournalFile) -> None:
-    b = _backup_path(sd, f)
-    data = b.read_bytes() if b else None
+    data = _read_backup(sd, f)
     if data is not None and file_digest(data) != f.before:
-        raise ManagedFileError(f"the backup {b} is damaged (digest mismatch); "
+        raise ManagedFileError(f"the backup {_backup_path(sd, f)} is damaged (digest mismatch); "
                                f"{f.path} was left as it is")
     write_file(Path(f.real_path), data, mode=f.mode, uid=f.uid, gid=f.gid,
                journal_dir=sd / INPLACE_DIR)
@@ -527,8 +546,7 @@ def plan_undo(state_dir: Path | None = None, *, entry_id: str | None = None) -> 
         with contextlib.suppress(OSError):
             recover_in_place(Path(f.real_path), journal_dir=sd / INPLACE_DIR)
         current = read_bytes(Path(f.real_path))
-        b = _backup_path(sd, f)
-        target = b.read_bytes() if b else None
+        target = _read_backup(sd, f)
         digest = file_digest(current)
         if digest not in (f.after, f.before):
             conflicts.append(f.path)

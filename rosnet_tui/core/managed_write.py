@@ -25,7 +25,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rosnet_tui.core import tempfiles
-from rosnet_tui.core.managed_text import ManagedFileError, PermissionNeededError
+from rosnet_tui.core.jsonsafe import loads_bounded
+from rosnet_tui.core.managed_text import ManagedFileError, PermissionNeededError, decode
+from rosnet_tui.core.regular_file import FileRefusedError, read_regular
 
 LOCK_TIMEOUT_S = 10.0
 _TMP_RE = tempfiles.MANAGED_TMP
@@ -40,14 +42,20 @@ _before_truncate: Callable[[], None] | None = None
 
 
 # --------------------------------------------------------------------------- preview
-def read_bytes(path: Path) -> bytes | None:
+def read_bytes(path: Path, *, state_dir: Path | None = None,
+               wait_s: float = LOCK_TIMEOUT_S) -> bytes | None:
     """The file's bytes, or None when it does not exist. Other errors: ManagedFileError.
 
-    An in-place write that was cut short (its journal is still beside the file) is completed
-    first when this process may write the file; otherwise the bytes it will have once
-    completed are returned."""
+    Every read of a file rosnet-tui writes goes through here. An in-place write that was cut
+    short (its journal is still beside the file, or in the in-place folder of *state_dir* or of
+    the default state dir) is completed first when this process may write the file; otherwise
+    the bytes it will have once completed are returned. Whichever command wrote it, the reader
+    never sees a mix of the old and the new bytes. A writer still at work is waited for, up to
+    *wait_s*."""
     try:
-        effective = recover_in_place(Path(path))
+        effective = recover_in_place(
+            Path(path), journal_dir=Path(state_dir) / INPLACE_DIR if state_dir else None,
+            wait_s=wait_s)
         real = Path(os.path.realpath(path))
         _remove_stale_temps(real.parent, real.name)
         if effective is not None:
@@ -63,27 +71,41 @@ def read_bytes(path: Path) -> bytes | None:
         raise ManagedFileError(f"cannot read {path}: {exc.strerror}") from None
 
 
+def read_text(path: Path, *, state_dir: Path | None = None, errors: str = "surrogateescape",
+              wait_s: float = LOCK_TIMEOUT_S) -> str | None:
+    """:func:`read_bytes` as text (by default bytes that are not UTF-8 survive as surrogates;
+    ``errors="replace"`` for text shown or printed)."""
+    data = read_bytes(path, state_dir=state_dir, wait_s=wait_s)
+    if data is None:
+        return None
+    return decode(data) if errors == "surrogateescape" else data.decode("utf-8", errors)
+
+
+def settle(path: Path, *, state_dir: Path | None = None,
+           wait_s: float = LOCK_TIMEOUT_S) -> None:
+    """Complete a cut-short in-place write of *path*, for readers that must open the file
+    themselves (the stdlib-only programs that also run on peers); never raises."""
+    with contextlib.suppress(OSError):
+        recover_in_place(Path(path),
+                         journal_dir=Path(state_dir) / INPLACE_DIR if state_dir else None,
+                         wait_s=wait_s)
+
+
 MAX_FILE_BYTES = 256 << 20   # hosts files and shell files are far smaller
 
 
 def _read_regular(path: Path) -> bytes:
     """A regular file's bytes; anything else (a FIFO, a device behind a link) is refused
     without reading it, as is a file over MAX_FILE_BYTES."""
-    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
     try:
-        st = os.fstat(fd)
-        if stat.S_ISDIR(st.st_mode):
-            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
-        if not stat.S_ISREG(st.st_mode):
-            raise ManagedFileError(f"{path} is not a regular file (a FIFO or a device?); "
-                                   "nothing was read or written")
-        if st.st_size > MAX_FILE_BYTES:
-            raise ManagedFileError(f"{path} is too big ({st.st_size} bytes) to be a file "
-                                   "rosnet-tui edits")
-        with os.fdopen(os.dup(fd), "rb") as f:
-            return f.read()
-    finally:
-        os.close(fd)
+        return read_regular(path, MAX_FILE_BYTES)
+    except FileRefusedError as exc:
+        if exc.kind == "folder":
+            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path)) from None
+        if exc.kind == "big":
+            raise ManagedFileError(f"{path} {exc.why} to be a file rosnet-tui edits") from None
+        raise ManagedFileError(f"{path} is not a regular file (a FIFO or a device?); "
+                               "nothing was read or written") from None
 
 
 # --------------------------------------------------------------------------- writing
@@ -201,9 +223,9 @@ def _parse_journal(data: bytes) -> tuple[dict, bytes, bytes] | None:
     if nl < 0:
         return None
     try:
-        head = json.loads(data[len(INPLACE_MAGIC):nl])
+        head = loads_bounded(data[len(INPLACE_MAGIC):nl].decode("utf-8"))
         old_len, new_len = int(head["old_len"]), int(head["new_len"])
-    except (ValueError, TypeError, KeyError):
+    except (ValueError, TypeError, KeyError):   # JsonInputError, UnicodeDecodeError included
         return None
     body = data[nl + 1:]
     if old_len < 0 or new_len < 0 or len(body) != old_len + new_len:
@@ -248,10 +270,24 @@ def _rewrite(real: Path, data: bytes) -> None:
         os.close(fd)
 
 
+def journal_dirs(journal_dir: Path | None = None) -> list[Path]:
+    """Where the journal of a file whose folder may not be written can be: *journal_dir* (the
+    writer's state dir), then the default state dir's in-place folder (so that a reader that is
+    not told the writer's state dir, such as ``check``, still finds it)."""
+    from rosnet_tui.core.settings import default_state_dir
+
+    out = [Path(journal_dir)] if journal_dir else []
+    with contextlib.suppress(RuntimeError, KeyError):   # no home folder: only the given one
+        default = default_state_dir().expanduser().absolute() / INPLACE_DIR
+        if default not in out:
+            out.append(default)
+    return out
+
+
 def recover_in_place(path: Path, *, journal_dir: Path | None = None,
                      wait_s: float = LOCK_TIMEOUT_S) -> bytes | None:
     """Complete an in-place write of *path* that was cut short, from its journal (beside the
-    file, or in *journal_dir*).
+    file, in *journal_dir*, or in the default state dir's in-place folder).
 
     Returns None when there is nothing to do (no journal: read the file as it is) or when the
     write was completed here; when this process may not write the file (a user previewing what
@@ -264,7 +300,7 @@ def recover_in_place(path: Path, *, journal_dir: Path | None = None,
     real = Path(os.path.realpath(path))
     st = os.stat(real)
     name = _journal_name(real, st)
-    jpaths = [real.parent / name] + ([Path(journal_dir) / name] if journal_dir else [])
+    jpaths = [real.parent / name] + [d / name for d in journal_dirs(journal_dir)]
     for jpath in jpaths:
         got = _recover_from(real, st, jpath, wait_s)
         if got is not None:

@@ -18,6 +18,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
 from rosnet_tui.core.settings import Settings
 
 RMW_ZENOH = "rmw_zenoh_cpp"
@@ -230,10 +231,10 @@ def loads_json5(text: str) -> Any:
         elif kind == "num":
             tok = tok.lstrip("+")
         out.append(tok)
-    try:
-        return json.loads("".join(out))
-    except json.JSONDecodeError as exc:
-        raise ValueError(exc.msg) from None
+    try:   # bounded depth: a config nested thousands deep is refused, not a RecursionError
+        return loads_bounded("".join(out), unique_keys=False)
+    except JsonInputError as exc:
+        raise ValueError(str(exc).removeprefix("not valid JSON (").rstrip(")")) from None
 
 
 def _next_significant(text: str, pos: int) -> str:
@@ -358,11 +359,11 @@ def bashrc_block(s: Settings, *, client: bool = False, router_config_path: Path 
                              session_config_path=session_config_path, distro=distro)
 
 
-def preview_whole_file(path: Path, text: str, label: str) -> Any:
+def preview_whole_file(path: Path, text: str, label: str, state_dir: Path | None = None) -> Any:
     """A preview replacing *path* with *text*, refused when the file exists and is not ours."""
     from rosnet_tui.core import managed_file as mf
 
-    old = mf.read_bytes(path)
+    old = mf.read_bytes(path, state_dir=state_dir)
     if old is not None and not is_managed(mf.decode(old)):
         raise mf.ManagedFileError(f"{path} exists and was not written by rosnet-tui: move it "
                                   "away (or point the setting at another file), then try again")
@@ -371,7 +372,7 @@ def preview_whole_file(path: Path, text: str, label: str) -> Any:
 
 def previews(s: Settings, bashrc_path: Path, *, client: bool = False,
              router_config_path: Path | None = None, session_config_path: Path | None = None,
-             distro: str | None = None) -> list[Any]:
+             distro: str | None = None, state_dir: Path | None = None) -> list[Any]:
     """What ``ros apply`` writes under ROS 2, as managed-file previews (one undo restores all):
     the ~/.bashrc block, and the router's config (or, for a lone client node on Humble, the
     session config)."""
@@ -387,15 +388,16 @@ def previews(s: Settings, bashrc_path: Path, *, client: bool = False,
     sc_path = session_config_path or default_session_config_path()
     body = bashrc_block(s, client=lone, router_config_path=rc_path,
                         session_config_path=sc_path, distro=distro)
+    old = mf.read_bytes(Path(bashrc_path), state_dir=state_dir)
     out = [mf.preview_block(bashrc_path, body, position="end",
                             label=f"ROS 2 environment in {Path(bashrc_path).name}",
-                            new_mode=0o644)]
+                            new_mode=0o644, current=old, use_current=True)]
     if not lone:
         out.append(preview_whole_file(rc_path, render_router_config(s),
-                                      f"Zenoh router config {rc_path.name}"))
+                                      f"Zenoh router config {rc_path.name}", state_dir))
     elif distro.lower() in DISTROS_WITHOUT_OVERRIDE:
         out.append(preview_whole_file(sc_path, render_session_config(s),
-                                      f"Zenoh session config {sc_path.name}"))
+                                      f"Zenoh session config {sc_path.name}", state_dir))
     return out
 
 

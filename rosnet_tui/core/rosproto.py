@@ -32,6 +32,7 @@ import select
 import shlex
 import socket
 import socketserver
+import stat
 import struct
 import sys
 import threading
@@ -96,6 +97,27 @@ def describe_error(exc: BaseException, timeout: Optional[float] = None) -> Tuple
 _ASSIGN_RE = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)=(.*)$", re.S)
 
 
+
+def read_small_text(path: str, limit: int) -> str:
+    """The first *limit* bytes of a regular file, as text. This program also runs alone on peers
+    (stdlib only), so it carries its own guard: opened without blocking, anything but a regular
+    file (a FIFO would block until a writer comes, a device never end) raises OSError."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", path)
+        chunks, total = [], 0
+        while total < limit:
+            chunk = os.read(fd, min(65536, limit - total))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+    finally:
+        os.close(fd)
+    return b"".join(chunks).decode("utf-8", "replace")
+
+
 def read_shell_exports(path: Optional[str], names: Iterable[str]
                        ) -> Dict[str, Tuple[Optional[str], int]]:
     """The last effective assignment of each of *names* in a shell rc file such as ~/.bashrc.
@@ -109,8 +131,7 @@ def read_shell_exports(path: Optional[str], names: Iterable[str]
     if not path:
         return found
     try:
-        with open(os.path.expanduser(str(path)), encoding="utf-8", errors="replace") as f:
-            lines = f.read().splitlines()
+        lines = read_small_text(os.path.expanduser(str(path)), 4 << 20).splitlines()
     except OSError:
         return found
     for n, raw in enumerate(lines, 1):
@@ -472,7 +493,7 @@ def parse_report_line(stdout: str) -> Optional[Dict[str, Any]]:
         if line.startswith("{"):
             try:
                 data = json.loads(line)
-            except ValueError:
+            except (ValueError, RecursionError):   # stdlib only: too deep is a decode error
                 continue
             if isinstance(data, dict) and data.get(REPORT_KEY):
                 return data

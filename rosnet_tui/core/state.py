@@ -19,6 +19,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.jsonsafe import loads_bounded
+from rosnet_tui.core.regular_file import read_regular
 from rosnet_tui.core.settings import atomic_write_text
 
 PUBLIC_IP_FILE = "public_ip.json"
@@ -54,11 +56,19 @@ def locked(state_dir: Path, wait_s: float = 2.0) -> Iterator[None]:
         os.close(fd)
 
 
+MAX_STATE_BYTES = 16 << 20   # the biggest state file (sync status of many peers) is far smaller
+
+
 def read_json(path: Path) -> Any | None:
-    """The JSON in *path*, or None when missing or unreadable (state is never worth a crash)."""
+    """The JSON in *path*, or None when missing or unreadable (state is never worth a crash).
+
+    Damaged state counts as unreadable: JSON nested too deeply (the decoder would recurse out of
+    stack), a file that is not a regular one (a FIFO would block, a device never end), one over
+    MAX_STATE_BYTES."""
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        return loads_bounded(read_regular(path, MAX_STATE_BYTES).decode("utf-8"),
+                             unique_keys=False)
+    except (OSError, ValueError):   # JsonInputError and UnicodeDecodeError are ValueErrors
         return None
 
 

@@ -17,6 +17,7 @@ from typing import Any
 
 from rosnet_tui.core.results import CheckResult, Status
 from rosnet_tui.core.settings import atomic_write_text
+from rosnet_tui.core.state import read_json
 
 UI_FILE = "ui.json"
 VERSION = 2
@@ -95,10 +96,7 @@ class UiState:
         self.data: dict[str, Any] = self._load()
 
     def _load(self) -> dict[str, Any]:
-        try:
-            data = json.loads(self.path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            return {}
+        data = read_json(self.path)   # None when missing, damaged, too deep or not a file
         return data if isinstance(data, dict) else {}
 
     def save(self) -> bool:

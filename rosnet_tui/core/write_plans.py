@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core.managed_write import read_text
 from rosnet_tui.core.settings import Settings
 
 
@@ -43,8 +44,13 @@ class WritePaths:
     bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
 
 
-def _read(path: Path) -> str | None:
-    return path.read_text(errors="replace") if path.exists() else None
+def _read(path: Path, state_dir: Path) -> str | None:
+    """A file we write, as text (a write of ours cut short is completed first); None when it
+    is missing or cannot be read (the preview then says why)."""
+    try:
+        return read_text(path, state_dir=state_dir, errors="replace")
+    except mf.ManagedFileError:
+        return None
 
 
 def hosts_plan(settings: Settings, paths: WritePaths) -> WritePlan:
@@ -54,13 +60,15 @@ def hosts_plan(settings: Settings, paths: WritePaths) -> WritePlan:
     profile = settings.this.profile
 
     def conflicts() -> int:
-        return len(hosts.find_hosts_conflicts(_read(paths.hosts_path), settings, profile))
+        return len(hosts.find_hosts_conflicts(_read(paths.hosts_path, paths.state_dir),
+                                              settings, profile))
 
     return WritePlan(
         title=f"Write the '{profile}' hosts set to {paths.hosts_path}",
         explain="Our marked block only; every other line stays. Review the change:",
         make_preview=lambda fix: hosts.preview_hosts(settings, profile, paths.hosts_path,
-                                                     fix_conflicts=fix),
+                                                     fix_conflicts=fix,
+                                                     state_dir=paths.state_dir),
         option_label="also comment out other lines that give our names other addresses",
         option_count=conflicts,
         sudo_command=lambda p, fix: privilege.hosts_apply_command(
@@ -74,7 +82,8 @@ def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:
     from rosnet_tui.core import ros2
 
     def make(client: bool) -> list[mf.Preview]:
-        return ros2.previews(settings, paths.bashrc_path, client=client)
+        return ros2.previews(settings, paths.bashrc_path, client=client,
+                             state_dir=paths.state_dir)
 
     member = not settings.is_master
     return WritePlan(
@@ -97,13 +106,14 @@ def ros_plan(settings: Settings, paths: WritePaths) -> WritePlan:
     from rosnet_tui.core import bashrc
 
     def ros_ip_lines() -> int:
-        return len(bashrc.find_ros_ip_lines(_read(paths.bashrc_path)))
+        return len(bashrc.find_ros_ip_lines(_read(paths.bashrc_path, paths.state_dir)))
 
     return WritePlan(
         title=f"Write ROS_MASTER_URI to {paths.bashrc_path}",
         explain="A marked block at the end of the file; every other line stays:",
         make_preview=lambda fix: bashrc.preview_bashrc(settings, paths.bashrc_path,
-                                                       comment_ros_ip=fix),
+                                                       comment_ros_ip=fix,
+                                                       state_dir=paths.state_dir),
         option_label="comment out ROS_IP / ROS_HOSTNAME lines (they break remote networks: a "
                      "node then publishes but cannot subscribe, or the reverse)",
         option_count=ros_ip_lines,

@@ -21,12 +21,14 @@ library at the top; ``zenoh`` is imported when a session is opened.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
 import queue
 import re
 import secrets
+import stat
 import struct
 import sys
 import threading
@@ -141,12 +143,31 @@ def decode_attachment(data: bytes | None) -> tuple[int, int, bytes] | None:
 _EXPORT = re.compile(r"""^\s*(?:export\s+)?([A-Z_][A-Z0-9_]*)=("[^"\n]*"|'[^'\n]*'|[^\s;#]*)""")
 
 
+
+def read_small_text(path: str, limit: int) -> str:
+    """The first *limit* bytes of a regular file, as text. This program also runs alone on peers
+    (stdlib only), so it carries its own guard: opened without blocking, anything but a regular
+    file (a FIFO would block until a writer comes, a device never end) raises OSError."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", path)
+        chunks, total = [], 0
+        while total < limit:
+            chunk = os.read(fd, min(65536, limit - total))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+    finally:
+        os.close(fd)
+    return b"".join(chunks).decode("utf-8", "replace")
+
 def read_exports(path: str) -> dict[str, str]:
     """``export NAME=value`` lines of a shell file (the last one of each name wins)."""
     out: dict[str, str] = {}
     try:
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            lines = fh.read(512 * 1024).splitlines()
+        lines = read_small_text(path, 512 * 1024).splitlines()
     except OSError:
         return out
     for line in lines:
@@ -170,8 +191,7 @@ def ros_env(env: dict[str, str] | None = None, bashrc: str | None = None) -> dic
     rc = read_exports(path)
     if "ROS_DISTRO" not in rc:
         try:
-            with open(path, encoding="utf-8", errors="replace") as fh:
-                found = _SOURCED.findall(fh.read(512 * 1024))
+            found = _SOURCED.findall(read_small_text(path, 512 * 1024))
             if found:
                 rc["ROS_DISTRO"] = found[-1]
         except OSError:
@@ -239,9 +259,11 @@ def router_info(session: Any, timeout: float) -> dict[str, Any]:
             for reply in session.get(f"@/{zid}/router", timeout=timeout):
                 if reply.ok is None:
                     continue
-                try:
+                try:   # stdlib only (this also runs on peers): too deep is a decode error
                     body = json.loads(reply.ok.payload.to_bytes().decode("utf-8", "replace"))
-                except ValueError:
+                except (ValueError, RecursionError):
+                    continue
+                if not isinstance(body, dict):
                     continue
                 out["version"] = str(body.get("version", "")).split(" ")[0]
                 out["locators"] = [str(x) for x in body.get("locators") or []]
@@ -387,7 +409,7 @@ def parse_report(text: str) -> dict[str, Any] | None:
         if line.startswith(REPORT_MARK):
             try:
                 value = json.loads(line[len(REPORT_MARK):])
-            except ValueError:
+            except (ValueError, RecursionError):   # stdlib only: too deep is a decode error
                 return None
             return value if isinstance(value, dict) else None
     return None

@@ -23,6 +23,8 @@ from rosnet_tui.core.checks.probes import budget, chat_ros2, python_command, shq
 from rosnet_tui.core.connect import kind_from_text, tcp_failure_kind
 from rosnet_tui.core.hosts import HostsEntry, hosts_entries
 from rosnet_tui.core.listener import ECHO, GREETING
+from rosnet_tui.core.managed_text import ManagedFileError
+from rosnet_tui.core.managed_write import read_text
 from rosnet_tui.core.procedure import is_ip, is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer
@@ -85,10 +87,15 @@ async def check_hosts(ctx: CheckContext) -> Outcome:
     if not expected:
         return Outcome(Status.SKIP, "no names with known addresses in the settings yet", data=base)
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except OSError as exc:
+        # Through the managed-file reader: a write of ours cut short is completed first.
+        text = read_text(path, state_dir=ctx.state_dir, errors="replace",
+                         wait_s=ctx.timeout_s / 2)
+        why = f"cannot read {path}: No such file or directory"
+    except ManagedFileError as exc:   # its message names the file and why
+        text, why = None, str(exc)
+    if text is None:
         base["missing"] = [e.name for e in expected]
-        return Outcome(Status.FAIL, f"cannot read {path}: {exc.strerror or exc}", data=base)
+        return Outcome(Status.FAIL, why, data=base)
     audit = audit_hosts(text, expected)
     evidence = [f"expected {e.ip} {e.name} ({e.why}); {path} has: "
                 + (", ".join(audit["lines"][e.name]) or "nothing") for e in expected]

@@ -162,10 +162,10 @@ def parse_ip(text: str) -> str | None:
     """The IPv4 address a what-is-my-IP service answered (plain text, or JSON with "ip")."""
     t = text.strip()
     if t.startswith("{"):
-        import json
+        from rosnet_tui.core.jsonsafe import loads_bounded
 
-        with contextlib.suppress(ValueError, AttributeError):
-            t = str(json.loads(t).get("ip", ""))
+        with contextlib.suppress(ValueError, AttributeError):   # JsonInputError is a ValueError
+            t = str(loads_bounded(t, unique_keys=False).get("ip", ""))
     t = t.split()[0] if t.split() else ""
     try:
         a = ipaddress.ip_address(t)

@@ -30,6 +30,8 @@ from rosnet_tui.core.checks.probes import (
     zenoh_peer_command,
     zenoh_peer_problem,
 )
+from rosnet_tui.core.managed_text import ManagedFileError
+from rosnet_tui.core.managed_write import read_text
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer
@@ -44,10 +46,14 @@ DDS_VARS = ("CYCLONEDDS_URI", "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT
 def _read_router_config(path: str) -> tuple[dict | None, str | None]:
     p = Path(path.removeprefix("file://"))
     try:
-        with open(p, encoding="utf-8", errors="replace") as fh:
-            text = fh.read(256 * 1024)
-    except OSError as exc:
-        return None, f"cannot read {p}: {exc.strerror or exc}"
+        # rosnet-tui writes this file (ros apply): through the managed-file reader, which
+        # completes a write of ours cut short and refuses a FIFO or a device.
+        text = read_text(p, errors="replace", wait_s=1.0)
+    except ManagedFileError as exc:
+        return None, str(exc)
+    if text is None:
+        return None, f"cannot read {p}: No such file or directory"
+    text = text[:256 * 1024]
     try:
         data = ros2.loads_json5(text)
     except ValueError as exc:

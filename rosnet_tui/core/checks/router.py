@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import os
 import random
 import socket
@@ -28,6 +27,7 @@ from rosnet_tui.core.checks.probes import (
     ssh_peers,
 )
 from rosnet_tui.core.connect import kind_from_text
+from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.listener import GREETING, TestListener
 from rosnet_tui.core.netinfo import detect_local_net, interface_ipv4
 from rosnet_tui.core.results import Outcome, Status
@@ -275,19 +275,31 @@ async def _probe_from_peer(ctx: CheckContext, peer: Peer, public_ip: str, ports:
                         tcp_timeout=patience)
     if not res.ok:
         return None, None, f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
-    ping = next((json.loads(ln[5:]) for ln in res.stdout.splitlines()
-                 if ln.startswith("PING ") and ln[5:].strip() in ("true", "false", "null")), None)
-    for line in res.stdout.splitlines():
-        if line.startswith("RESULT "):
-            try:
-                raw = json.loads(line[7:])
-                return {int(k): (v[0], v[1]) for k, v in raw.items()}, ping, ""
-            except (ValueError, KeyError, IndexError, TypeError):
-                break
+    ping = next((_PING_WORDS[ln[5:].strip()] for ln in res.stdout.splitlines()
+                 if ln.startswith("PING ") and ln[5:].strip() in _PING_WORDS), None)
+    result = parse_probe_result(res.stdout)
+    if result is not None:
+        return result, ping, ""
     why = (res.stderr.strip().splitlines() or ["no output"])[-1]
     if "python3" in res.stderr and ("not found" in res.stderr or "No such file" in res.stderr):
         why = "python3 is not installed there"
     return None, ping, f"the probe on {peer.name} did not run: {why}"
+
+
+_PING_WORDS = {"true": True, "false": False, "null": None}
+
+
+def parse_probe_result(stdout: str) -> dict[int, tuple[str, str]] | None:
+    """The peer probe's ``RESULT {port: [state, text]}`` line (the first one), or None when it
+    is missing or not that shape (peer output: bounded depth, any shape refused cleanly)."""
+    for line in stdout.splitlines():
+        if line.startswith("RESULT "):
+            try:
+                raw = loads_bounded(line[7:], unique_keys=False)
+                return {int(k): (str(v[0]), str(v[1])) for k, v in raw.items()}
+            except (ValueError, KeyError, IndexError, TypeError, AttributeError):
+                return None
+    return None
 
 
 def _answer_kind(state: str, text: str, lst: TestListener | None) -> str:
@@ -317,7 +329,7 @@ async def _probe_echoip(ctx: CheckContext, port: int, timeout: float) -> tuple[b
             return None, f"GET {base}/port/{port} -> HTTP 429: the checker's rate limit; try later"
         return None, ans.describe()
     try:
-        body = json.loads(ans.text)
+        body = loads_bounded(ans.text, unique_keys=False)
         reachable = body.get("reachable")
     except (ValueError, AttributeError):
         return None, f"GET {base}/port/{port} -> not echoip JSON: {ans.text.strip()[:80]!r}"

@@ -21,6 +21,7 @@ from rosnet_tui.core.checks import (
     load_builtin_checks,
     run_checks,
 )
+from rosnet_tui.core.managed_write import settle
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings
 from rosnet_tui.core.ssh import SshOptions
@@ -75,7 +76,11 @@ def make_context(settings: Settings, options: RunOptions | None = None) -> Check
         kw["bashrc_path"] = o.bashrc_path
     if o.state_dir is not None:
         kw["state_dir"] = o.state_dir
-    return CheckContext(**kw)
+    ctx = CheckContext(**kw)
+    # The ROS checks (and the programs they start here) open ~/.bashrc themselves: a write of
+    # ours cut short is completed first (linux.hosts reads through read_bytes itself).
+    settle(ctx.bashrc_path, state_dir=ctx.state_dir, wait_s=min(2.0, timeout / 2))
+    return ctx
 
 
 def prestart_ssh(settings: Settings, options: RunOptions | None = None,

@@ -33,6 +33,8 @@ import dns.rdtypes.ANY.TXT
 import dns.tsig
 import dns.update
 
+from rosnet_tui.core.regular_file import FileRefusedError, read_regular
+
 from .records import Candidate, Record, RecordError, parse_record
 from .store import FetchResult, Refusal, StoreConfigError, StoreError
 
@@ -89,11 +91,18 @@ def parse_tsig_key(text: str) -> TsigKey:
     return TsigKey(name, algorithm, secret)
 
 
+MAX_KEY_FILE_BYTES = 64 << 10   # a key file is a few lines
+
+
 def load_tsig_key(path: Path) -> TsigKey:
+    """The key in the file the settings name. Refused at once, without reading: a FIFO (it
+    would block until someone writes to it), a device, a folder, a file over 64 KB."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_regular(Path(path), MAX_KEY_FILE_BYTES).decode("utf-8")
     except FileNotFoundError:
         raise StoreConfigError(f"the TSIG key file {path} does not exist") from None
+    except FileRefusedError as exc:
+        raise StoreConfigError(f"the TSIG key file {path} {exc.why}") from None
     except OSError as exc:
         raise StoreConfigError(f"cannot read the TSIG key file {path}: {exc.strerror}") from None
     except UnicodeDecodeError:

@@ -17,6 +17,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from rosnet_tui.core.regular_file import FileRefusedError, read_regular
 from rosnet_tui.core.settings import atomic_write_text
 
 from .records import MAX_RECORD_BYTES, Candidate, Record, RecordError, parse_record
@@ -142,12 +143,12 @@ class FolderStore:
         elif st.st_size > MAX_RECORD_BYTES:
             result = RecordError(f"too big ({st.st_size} bytes)")
         else:
-            try:
-                with open(entry.path, "rb") as f:
-                    data = f.read(MAX_RECORD_BYTES + 1)
-                result = parse_record(data)
+            try:   # swapped for a FIFO since the stat: refused, never waited on
+                result = parse_record(read_regular(entry.path, MAX_RECORD_BYTES))
             except RecordError as exc:
                 result = exc
+            except FileRefusedError as exc:
+                result = RecordError(exc.why)
             except OSError as exc:
                 result = RecordError(f"cannot read it: {exc.strerror}")
             except Exception as exc:  # noqa: BLE001 - one bad file never stops the others

@@ -48,7 +48,7 @@ class ApplyMixin:
         plan = self._plan()
         self._last_plan = plan
         try:
-            old = mf.read_bytes(self.hosts_path)
+            old = mf.read_bytes(self.hosts_path, state_dir=self.state_dir)
             text = mf.decode(old) if old is not None else None
             check_complete(plan, text)
             body = plan.body()
@@ -66,7 +66,8 @@ class ApplyMixin:
         if self.bashrc_path is not None and not plan.settings.ros2:
             # (ROS 2: the member's router dials the master by name; the hosts line is all)
             try:
-                previews.append(preview_bashrc(plan.settings, self.bashrc_path))
+                previews.append(preview_bashrc(plan.settings, self.bashrc_path,
+                                               state_dir=self.state_dir))
             except (WriterSettingsError, mf.ManagedFileError) as exc:
                 self._once(("bashrc", str(exc)), logging.WARNING,
                            "%s is left as it is: %s", self.bashrc_path, exc)
