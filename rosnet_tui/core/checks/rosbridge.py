@@ -20,7 +20,7 @@ import socket
 import time
 from typing import Any
 
-from rosnet_tui.core import rosbridge, rosproto
+from rosnet_tui.core import jsonsafe, rosbridge, rosproto
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import budget
 from rosnet_tui.core.connect import tcp_failure_kind
@@ -120,8 +120,9 @@ class _Browser:
                                      f"{waiting} ({exc.rcvd.code if exc.rcvd else 'no close frame'})"
                                 ) from None
             try:
-                msg = json.loads(raw)
-            except (TypeError, ValueError):
+                msg = jsonsafe.loads_bounded(raw if isinstance(raw, str) else
+                                             raw.decode("utf-8", "replace"), unique_keys=False)
+            except jsonsafe.JsonInputError:
                 raise HopFailed("bridge", "the WebSocket answered something that is not "
                                           "rosbridge's JSON") from None
             if not isinstance(msg, dict):
