@@ -208,8 +208,11 @@ async def check_listener(ctx: CheckContext) -> Outcome:
 _PROBE_SCRIPT = r"""
 import json, socket, sys, threading
 ip = sys.argv[1]; t = float(sys.argv[2]); ports = []; how = {}
+optional = set()
 for x in sys.argv[3].split(","):
     p, _, h = x.partition("=")
+    if h.endswith("?"):
+        optional.add(int(p)); h = h[:-1]
     ports.append(int(p)); how[int(p)] = h or "line"
 XMLRPC = ('<?xml version="1.0"?><methodCall><methodName>getPid</methodName><params><param>'
           '<value><string>/rosnet_tui_port_probe</string></value></param></params></methodCall>')
@@ -249,12 +252,20 @@ def icmp():
             res["ping"] = r.returncode == 0
         except Exception:
             pass
-th = [threading.Thread(target=probe, args=(p,)) for p in ports]
-th.append(threading.Thread(target=icmp))
-for x in th:
+import time
+t0 = time.monotonic()
+th = {p: threading.Thread(target=probe, args=(p,)) for p in ports}
+th["ping"] = threading.Thread(target=icmp)
+for x in th.values():
     x.daemon = True; x.start()
-for x in th:
-    x.join(t + 2)
+for k, x in th.items():
+    if k not in optional and k != "ping":
+        x.join(t + 2)
+grace = max(0.25, time.monotonic() - t0)
+for k in ["ping", *optional]:
+    th[k].join(max(0.0, t0 + grace - time.monotonic()) if len(optional) < len(ports) else t + 2)
+    if k not in res and k != "ping":
+        res[k] = ["pending", "%.2f" % grace]
 ping = res.pop("ping", None)
 print("PING " + json.dumps(ping))
 print("RESULT " + json.dumps(res))
@@ -265,12 +276,15 @@ print("RESULT " + json.dumps(res))
 #             and read the status line of its answer;
 #   "accept": a server that waits for a request we have no harmless one for (a Zenoh router):
 #             the accepted connection is the answer, nothing is read.
-PortTalk = Literal["line", "xmlrpc", "accept"]
+# A "?" after it marks a port the verdict does not need: once the others are done, it gets as
+# long again (at least 0.25 s), then it is reported "pending" (its text: the seconds waited).
+PortTalk = Literal["line", "xmlrpc", "accept", "line?", "xmlrpc?", "accept?"]
 
 
 def port_probe_command(ip: str, t_connect: float, ports: dict[int, PortTalk]) -> str:
     """The shell command a peer runs to test *ports* (how to talk to each) at *ip*, and ping
-    it: it prints ``PING true|false|null`` and ``RESULT {port: [state, first line read]}``."""
+    it: it prints ``PING true|false|null`` and ``RESULT {port: [state, first line read]}``
+    (state: open, timeout, error, or pending for an optional port not waited for longer)."""
     spec = ",".join(f"{p}={how}" for p, how in ports.items())
     return python_command(_PROBE_SCRIPT, ip, f"{t_connect:.2f}", spec)
 
@@ -284,6 +298,7 @@ def _talk(port: int, lst: TestListener | None, ros_port: int) -> PortTalk:
 
 def _what_answered(how: PortTalk, text: str) -> str:
     """What the peer's probe got from an open port, in a few words."""
+    how = how.rstrip("?")  # type: ignore[assignment]
     if how == "accept":
         return "connection accepted (the service waits for its client to speak first)"
     if how == "xmlrpc":
@@ -564,7 +579,9 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
         via = "echoip"
         answers: dict[int, str | None] = {}     # how each port answered (peer test only)
         if peer is not None and public_ip:
-            talk = {p: _talk(p, ours.get(p), 0) for p in ports}  # no XML-RPC here
+            # The verdict needs zenoh_port only: the test port is not waited for much longer.
+            talk: dict[int, PortTalk] = {zport: _talk(zport, ours.get(zport), 0)}
+            talk[test_port] = "line?" if test_port in ours else "accept?"
             raw, data["public_ip_ping"], why = await _probe_from_peer(
                 ctx, peer, public_ip, talk, t_connect=min(max(left() * 0.35, 0.5), 3.0),
                 total=left() * 0.9, patience=max(ctx.timeout_s * 0.6, 0.3))
@@ -575,8 +592,12 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
                 for p in ports:
                     state, text = raw.get(p, ("error", "no result"))
                     lst = ours.get(p)
-                    answers[p] = _answer_kind(state, text, lst)
-                    if state == "open" and lst is not None and lst.token not in text:
+                    answers[p] = None if state == "pending" else _answer_kind(state, text, lst)
+                    if state == "pending":
+                        outcomes[p] = (None, f"{peer.name} -> {public_ip}:{p}: no answer within "
+                                             f"{text} s after TCP {zport} answered; not waited "
+                                             "for longer")
+                    elif state == "open" and lst is not None and lst.token not in text:
                         outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: accepted, but not "
                                               "by this machine: forwarded to another one")
                     elif state == "open":
