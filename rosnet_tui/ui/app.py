@@ -118,17 +118,13 @@ class RosnetApp(OrderedKeys, App[int]):
                          if isinstance(f, ANSIToTruecolor) else f for f in self._filters]
 
     # ------------------------------------------------------------------ start-up
-    def get_default_screen(self) -> StepScreen:
-        """The current step's screen is the first on the stack: no blank default screen is
-        laid out, drawn and then covered at start-up."""
+    def on_mount(self) -> None:
+        self._catch_signals()
         self.set_class(self.size.width >= self.WIDE_AT, "wide")
         for step_id in STEP_IDS:
             screen = StepScreen(step_for(step_id, self.session.settings), self.session)
             self.install_screen(screen, name=f"step-{step_id}")
-        return self.get_screen(f"step-{self.current_step}", StepScreen)
-
-    def on_mount(self) -> None:
-        self._catch_signals()
+        self.push_screen(f"step-{self.current_step}")
         if self.deps.open_setup or not self.session.settings.complete or self.session.draft():
             self.action_setup()
 
