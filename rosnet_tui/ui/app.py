@@ -109,12 +109,13 @@ class RosnetApp(OrderedKeys, App[int]):
         from textual.filter import ANSIToTruecolor
 
         self.set_reactive(App.theme, THEME.name)
+        self.stylesheet.set_variables(self.get_css_variables())  # nothing is parsed yet
         for name in [c for c in self.classes if c.startswith("-theme-")]:
             self.remove_class(name, update=False)
         self.set_class(True, f"-theme-{THEME.name}", update=False)
         self.set_class(THEME.dark, "-dark-mode", update=False)
         self.set_class(not THEME.dark, "-light-mode", update=False)
-        self._filters = [ANSIToTruecolor(self.ansi_theme, enabled=f.enabled)
+        self._filters = [ANSIToTruecolor(self.ansi_theme, enabled=not self.native_ansi_color)
                          if isinstance(f, ANSIToTruecolor) else f for f in self._filters]
 
     # ------------------------------------------------------------------ start-up
