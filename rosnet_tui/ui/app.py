@@ -88,7 +88,7 @@ class RosnetApp(OrderedKeys, App[int]):
         # The theme and the console's glyphs are chosen before the first style is computed
         # (choosing them later restyles every widget, at start-up).
         self.register_theme(THEME)
-        self._use_theme()
+        self.theme = THEME.name
         if self.no_color:  # NO_COLOR: the terminal's own colours only (Textual chose its filter
             from textual.filter import Monochrome, NoColor  # for its default theme: greys)
 
@@ -99,24 +99,6 @@ class RosnetApp(OrderedKeys, App[int]):
         self.deps = deps
         self.session = deps.session()
         self.current_step = self.session.last_step()
-
-    def _use_theme(self) -> None:
-        """Make THEME the app's theme before anything is styled. Setting ``self.theme`` would
-        also queue a refresh of all CSS for after start-up (a second parse of every rule, a
-        second styling of every widget: a sizeable part of the first frame's cost), which a
-        theme chosen before the first style does not need; so the value is set without its
-        watcher, and what the watcher does besides is done here."""
-        from textual.filter import ANSIToTruecolor
-
-        self.set_reactive(App.theme, THEME.name)
-        self.stylesheet.set_variables(self.get_css_variables())  # nothing is parsed yet
-        for name in [c for c in self.classes if c.startswith("-theme-")]:
-            self.remove_class(name, update=False)
-        self.set_class(True, f"-theme-{THEME.name}", update=False)
-        self.set_class(THEME.dark, "-dark-mode", update=False)
-        self.set_class(not THEME.dark, "-light-mode", update=False)
-        self._filters = [ANSIToTruecolor(self.ansi_theme, enabled=not self.native_ansi_color)
-                         if isinstance(f, ANSIToTruecolor) else f for f in self._filters]
 
     # ------------------------------------------------------------------ start-up
     def on_mount(self) -> None:
