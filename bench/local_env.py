@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from bench.compiled import compiled_copy, run_compiled
 from bench.pty_harness import PtyProcess
 
 REPO = Path(__file__).resolve().parents[1]
@@ -115,6 +116,7 @@ class LocalWorld:
     probe_port: int
     tarpit: Tarpit
     probe: subprocess.Popen
+    package: Path | None = None  # rosnet-tui byte-compiled, as installed (bench/compiled.py)
 
     def env(self) -> dict[str, str]:
         env = base_env()
@@ -152,7 +154,9 @@ def _wait_listening(port: int, proc: subprocess.Popen, timeout: float) -> bool:
 
 
 @contextlib.contextmanager
-def local_world():
+def local_world(compiled: bool = False):
+    """The world; with *compiled*, spawn_app runs a byte-compiled copy of rosnet-tui (as the
+    benchmarks do; tests run the repository's own files)."""
     root = Path(tempfile.mkdtemp(prefix="rosnet-bench-"))
     for d in ("config/rosnet-tui", "state", "home"):
         (root / d).mkdir(parents=True)
@@ -177,7 +181,8 @@ def local_world():
         config_slow = root / "slow.toml"
         write_settings(config_slow, probe_url=f"http://127.0.0.1:{tarpit.port}",
                        public_ip_url=f"http://127.0.0.1:{tarpit.port}/ip", test_port=test_port)
-        world = LocalWorld(root, config, config_slow, probe_port, tarpit, probe)
+        world = LocalWorld(root, config, config_slow, probe_port, tarpit, probe,
+                           compiled_copy(root / "package") if compiled else None)
         yield world
     finally:
         if world is not None:
@@ -197,7 +202,8 @@ def spawn_app(world: LocalWorld, *, config: Path | None = None, cols: int = 80,
     if config is not None:
         argv += ["--config", str(config)]
     argv += list(args)
-    return PtyProcess(argv, world.env(), cols=cols, rows=rows, cwd=str(REPO), term=term,
+    env = world.env() if world.package is None else run_compiled(world.env(), world.package)
+    return PtyProcess(argv, env, cols=cols, rows=rows, cwd=str(REPO), term=term,
                       no_color=no_color)
 
 

@@ -7,11 +7,9 @@ its process tree killed on timeout); the lab is destroyed at the end, whatever h
 from __future__ import annotations
 
 import json
-import os
 import random
 import shutil
 import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -19,13 +17,14 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from bench.compiled import compiled_copy, run_compiled
 from bench.model import BenchError, Line, Options, RowResult, goal_ratio, median
 
 BENCH = Path(__file__).resolve().parent
 MANUAL_SCRIPT = BENCH / "manual_check.sh"
 CHECK_TIMEOUT = 120.0       # the bound of one `rosnet-tui check` run
 _COMPILED: Path | None = None   # a byte-compiled copy of the package (compiled_copy)
-TITLES = {2: "Full verification on the lab's healthy network",
+TITLES = {2: "Full verification on the lab's healthy network, from a member and the master",
           3: "Bad news fast: every verdict within its timeout",
           6: "Address sync: master address change to member updated"}
 
@@ -41,8 +40,8 @@ def rosnet_check(lab: Any, host: str, state: Path, *extra: str) -> dict[str, Any
         float(lab.settings(host).checks.timeout_s)
     config = lab.config_path(host)  # written before the clock starts
     env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
-    if _COMPILED is not None:       # the byte-compiled copy first (see compiled_copy)
-        env["PYTHONPATH"] = os.pathsep.join([str(_COMPILED), env.get("PYTHONPATH", "")])
+    if _COMPILED is not None:       # the byte-compiled copy (bench/compiled.py)
+        env = run_compiled(env, _COMPILED)
     t0 = time.monotonic()
     r = lab.rosnet(host, "check", "--json", "-q", "--config", str(config), *extra, env=env,
                    timeout=CHECK_TIMEOUT)
@@ -59,20 +58,6 @@ def rosnet_check(lab: Any, host: str, state: Path, *extra: str) -> dict[str, Any
             "statuses": {c["id"]: c["status"] for c in checks},
             "worst_margin_s": worst[0], "worst_check": f"{worst[1]} {worst[2]:.2f}/{worst[3]:g} s",
             "slowest_check_s": max(c["duration_s"] for c in checks)}
-
-
-def compiled_copy(into: Path) -> Path:
-    """A copy of the rosnet_tui package, byte-compiled, in *into*: what `pip install` leaves.
-
-    The baseline's tools (ssh, nc, rostopic, rospy) are installed, compiled programs; rosnet-tui
-    run from the repository with PYTHONDONTWRITEBYTECODE set (as in CI) would compile every
-    module on every run instead. The repository's own files are not touched.
-    """
-    src = BENCH.parent / "rosnet_tui"
-    shutil.copytree(src, into / "rosnet_tui", ignore=shutil.ignore_patterns("__pycache__"))
-    subprocess.run([sys.executable, "-m", "compileall", "-q", str(into / "rosnet_tui")],
-                   check=True, capture_output=True, timeout=120)
-    return into
 
 
 # =============================================================================== row 2
@@ -101,11 +86,13 @@ def row2_full(lab: Any, opts: Options, state: Path) -> RowResult:
     res = RowResult(2, TITLES[2])
     lab.reset()
     lab.start_roscore()
-    app_runs, base_runs = [], []
+    app_runs, base_runs, master_runs = [], [], []
     for i in range(opts.reps):
-        for who in (("app", "base") if i % 2 == 0 else ("base", "app")):
+        for who in (("app", "base", "master") if i % 2 == 0 else ("master", "base", "app")):
             if who == "app":
                 app_runs.append(rosnet_check(lab, "laptop", state / "laptop"))
+            elif who == "master":
+                master_runs.append(rosnet_check(lab, "robot", state / "robot"))
             else:
                 base_runs.append(manual_check(lab, i, 60.0))
     ln = Line(2, "Full verification (wall time)", "s",
@@ -127,8 +114,22 @@ def row2_full(lab: Any, opts: Options, state: Path) -> RowResult:
         bad_app = sorted({k for r in app_runs for k, v in r["statuses"].items() if v != "pass"})
         bad_base = sorted({x for r in base_runs for x in r["lines"] if x.startswith("FAIL")})
         ln.note += f"; not all good: rosnet-tui {bad_app}, manual {bad_base}"
-    res.lines = [ln]
-    res.details = {"app_runs": app_runs, "base_runs": base_runs}
+    seat = Line(2, "Full verification from the master's seat (wall time)", "s",
+                [r["wall_s"] for r in master_runs], [r["wall_s"] for r in app_runs],
+                baseline="the same from a member's seat (the laptop)", goal="<= 1.2x")
+    goal_ratio(seat, 1.2)
+    master_ok = all(r["all_pass"] for r in master_runs)
+    seat.note = (f"all steps, both ways, from the robot (the ROS master) against the laptop: "
+                 f"{len(master_runs[0]['statuses']) if master_runs else 0} checks; all good: "
+                 f"{'yes' if master_ok else 'NO'}; slowest check "
+                 f"{median([r['slowest_check_s'] for r in master_runs]):.2f} s on the master, "
+                 f"{median([r['slowest_check_s'] for r in app_runs]):.2f} s on the member")
+    if not master_ok:
+        seat.status = "error"
+        bad = sorted({k for r in master_runs for k, v in r["statuses"].items() if v != "pass"})
+        seat.note += f"; not all good on the master: {bad}"
+    res.lines = [ln, seat]
+    res.details = {"app_runs": app_runs, "base_runs": base_runs, "master_runs": master_runs}
     return res
 
 

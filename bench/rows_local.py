@@ -172,7 +172,7 @@ def run_local_rows(rows: list[int], opts: Options, log: Callable[[str], None]) -
     wanted = [r for r in rows if r in funcs]
     if not wanted:
         return out
-    with local_world() as world:
+    with local_world(compiled=True) as world:
         for r in wanted:
             log(f"row {r}: running")
             t0 = time.monotonic()

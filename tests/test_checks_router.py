@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import shutil
 import socket
 import subprocess
+import threading
 import time
+from contextlib import contextmanager
+from xmlrpc.server import SimpleXMLRPCServer
 
 import pytest
 
@@ -18,6 +22,7 @@ from rosnet_tui.core.checks import (
     run_check,
     run_checks,
 )
+from rosnet_tui.core.checks.router import port_probe_command
 from rosnet_tui.core.listener import GREETING, ListenerPool
 from rosnet_tui.core.netinfo import detect_local_net
 from rosnet_tui.core.results import Status
@@ -251,3 +256,112 @@ async def test_router_step_runs_concurrently_without_fighting_over_the_port(prob
     got = {r.id: r async for r in run_checks(specs, ctx)}
     assert all(r.status is Status.PASS for r in got.values()), {i: r.summary for i, r in got.items()}
     assert can_bind(ctx.settings.probe.port) and not ctx.listeners.holds(ctx.settings.probe.port)
+
+
+# --------------------------------------------------------------------------- what answers where
+@contextmanager
+def ros_master_stand_in(port: int):
+    """An XML-RPC server answering getPid on 0.0.0.0:*port*, as the ROS master does (rosmaster's
+    server is the standard library's SimpleXMLRPCServer): it never speaks first."""
+    srv = SimpleXMLRPCServer(("0.0.0.0", port), logRequests=False, allow_none=True)
+    srv.register_function(lambda caller_id: [1, "", 4242], "getPid")
+    th = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+    th.start()
+    try:
+        yield srv
+    finally:
+        srv.shutdown()
+        srv.server_close()
+        th.join(2)
+
+
+@contextmanager
+def silent_listener():
+    """A port that accepts connections and never says a word (a Zenoh router, to a probe)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen(8)
+        yield s.getsockname()[1]
+
+
+@contextmanager
+def dropping_port():
+    """A port whose connections get no answer at all, as behind a modem that drops them: a
+    listener whose accept queue is full (Linux then drops further SYNs)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen(0)
+        port = s.getsockname()[1]
+        fillers = []
+        try:
+            for _ in range(3):
+                c = socket.socket()
+                c.setblocking(False)
+                with contextlib.suppress(BlockingIOError):
+                    c.connect(("127.0.0.1", port))
+                fillers.append(c)
+            time.sleep(0.05)
+            yield port
+        finally:
+            for c in fillers:
+                c.close()
+
+
+def run_probe(ports: dict, t: float = 3.0) -> tuple[dict, float]:
+    cmd = port_probe_command("127.0.0.1", t, ports)
+    t0 = time.monotonic()
+    r = subprocess.run(["sh", "-c", cmd], capture_output=True, text=True, timeout=t + 5)
+    took = time.monotonic() - t0
+    line = next(ln for ln in r.stdout.splitlines() if ln.startswith("RESULT "))
+    return {int(k): v for k, v in json.loads(line[7:]).items()}, took
+
+
+async def test_the_port_probe_knows_what_answers_where():
+    """A silent open port is open at once; the ROS master answers a harmless getPid; a server
+    that speaks first (our listener) is read. None of them waits for a banner that never comes."""
+    pool = ListenerPool()
+    ros_port = free_port()
+    with silent_listener() as quiet, ros_master_stand_in(ros_port):
+        async with pool.hold(free_port()) as lst:
+            got, took = await asyncio.to_thread(
+                run_probe, {lst.port: "line", quiet: "accept", ros_port: "xmlrpc"})
+    assert got[quiet] == ["open", ""]
+    assert got[ros_port][0] == "open" and got[ros_port][1].startswith("HTTP/1."), got
+    assert got[lst.port][0] == "open" and lst.token in got[lst.port][1]
+    assert took < 1.0, f"the probe took {took:.2f} s: it waited for a silent port"
+
+
+async def test_port_open_from_the_peer_with_a_ros_master_running_here(ssh_client, web,  # noqa: F811
+                                                                      tmp_path):
+    """The master's seat: a ROS master listens on its port, so the peer tests that port too; it
+    must not wait for a greeting that an XML-RPC server never sends (issue 25)."""
+    web.routes["/ip"] = (200, "127.0.0.1\n")
+    ros_port = free_port()
+    ctx = ctx_for(tmp_path, peers=[ssh_client.peer()], urls=[web.url("/ip")], ros_port=ros_port,
+                  ssh_options=SshOptions(ssh_dir=ssh_client.dir,
+                                         known_hosts_files=(ssh_client.dir / "known_hosts",)),
+                  timeout=3.0)
+    with ros_master_stand_in(ros_port):
+        ctx.ssh_pool = None
+        warm = await run("router.port_open", ctx)          # the SSH login, once
+        assert warm.status is Status.PASS, (warm.summary, warm.evidence)
+        t0 = time.monotonic()
+        r = await run("router.port_open", ctx)
+        took = time.monotonic() - t0
+    assert r.status is Status.PASS, (r.summary, r.evidence)
+    row = next(p for p in r.data["ports"] if p["port"] == ros_port)
+    assert row["reachable"] is True and row["answer"] == "token" and row["via"] == "peer:localhost"
+    assert any(f":{ros_port}: open, getPid over XML-RPC answered 'HTTP/1." in e
+               for e in r.evidence), r.evidence
+    assert took < 1.4, f"router.port_open took {took:.2f} s"
+
+
+async def test_a_port_the_verdict_does_not_need_is_not_waited_for():
+    """Under ROS 2 only zenoh_port decides; the test port (not forwarded on a ROS 2 modem) is
+    given as long again as the needed port took (at least 0.25 s), then reported pending."""
+    with silent_listener() as needed, dropping_port() as dropped:
+        got, took = await asyncio.to_thread(run_probe, {needed: "accept", dropped: "accept?"})
+        assert got[needed] == ["open", ""] and got[dropped][0] == "pending", got
+        assert took < 1.0, f"the probe took {took:.2f} s"
+        got, took = await asyncio.to_thread(run_probe, {dropped: "accept"}, 1.0)
+    assert got[dropped][0] == "timeout" and took >= 1.0     # a needed port gets its whole time

@@ -136,3 +136,34 @@ def test_prestart_ssh_only_when_the_steps_use_the_peers(ssh_client, steps, start
         fut = o.ssh_pool.start(ssh_client.opts(timeout_s=2.0), ssh_client.peer())
         assert fut.result(timeout=10).result.ok
         o.ssh_pool.close()
+
+
+async def test_per_peer_work_runs_concurrently_bounded_and_in_order(ssh_client, sshd):  # noqa: F811
+    """each_peer: every peer at once up to the bound, results in the peers' order; real SSH
+    sessions on one shared connection per peer."""
+    from rosnet_tui.core.checks.probes import each_peer
+    from rosnet_tui.core.settings import Peer
+
+    running = peak = 0
+
+    async def work(p: Peer) -> str:
+        nonlocal running, peak
+        running += 1
+        peak = max(peak, running)
+        await asyncio.sleep(0.1)
+        running -= 1
+        return p.name
+
+    peers = [Peer(f"member{i}") for i in range(12)]
+    t0 = time.monotonic()
+    got = await each_peer(peers, work, limit=8)
+    assert got == [p.name for p in peers] and peak == 8
+    assert time.monotonic() - t0 < 0.6          # two waves of 0.1 s, not twelve
+    pool = SshPool()
+    opts = pooled(ssh_client, pool)
+    try:
+        res = await each_peer([ssh_client.peer()] * 3,
+                              lambda p: ssh_run(opts, p, "echo hi", timeout=10))
+    finally:
+        pool.close()
+    assert [r.stdout for r in res] == ["hi\n"] * 3

@@ -118,7 +118,8 @@ class PortRow(TypedDict, total=False):
     listener: bool          # our own listener held it during the test (True for others' services)
     via: str                # who tested: "peer:<name>" over SSH, or "echoip" (the port checker)
     answer: PortAnswer | None  # how it answered the peer (None: the port checker tells only
-    #                            open or closed; see PortAnswer)
+    #                            open or closed, or, under ROS 2, the test port was not waited
+    #                            for once zenoh_port answered; see PortAnswer)
 
 
 class RouterPortOpenData(TypedDict, total=False):

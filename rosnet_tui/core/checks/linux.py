@@ -19,7 +19,14 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import budget, chat_ros2, python_command, shq, ssh_peers
+from rosnet_tui.core.checks.probes import (
+    budget,
+    chat_ros2,
+    each_peer,
+    python_command,
+    shq,
+    ssh_peers,
+)
 from rosnet_tui.core.connect import kind_from_text, tcp_failure_kind
 from rosnet_tui.core.hosts import HostsEntry, hosts_entries
 from rosnet_tui.core.listener import ECHO, GREETING
@@ -270,7 +277,7 @@ async def check_ping(ctx: CheckContext) -> Outcome:
             ping_name(p.name, t), tcp_connect(p.name, p.ssh_port or 22, min(t, ctx.timeout_s)))
         return icmp, kind, [line, tline]
 
-    got = await asyncio.gather(*(one(p) for p in peers))
+    got = await each_peer(peers, one)
     evidence: list[str] = []
     ok: list[str] = []
     tcp_only: list[str] = []
@@ -309,9 +316,9 @@ async def check_ssh(ctx: CheckContext) -> Outcome:
         return Outcome(Status.SKIP, _NO_SSH, data=data)
     t = budget(ctx, "linux.ssh") * 0.85
     # The TCP connection is bounded by the round's timeout: an unreachable peer is told by then.
-    results = await asyncio.gather(*(ssh_run(ctx.ssh, p, "echo rosnet-tui-ssh-ok; hostname",
-                                             timeout=t, tcp_timeout=ctx.timeout_s)
-                                     for p in peers))
+    results = await each_peer(peers, lambda p: ssh_run(ctx.ssh, p,
+                                                        "echo rosnet-tui-ssh-ok; hostname",
+                                                        timeout=t, tcp_timeout=ctx.timeout_s))
     evidence: list[str] = []
     good: list[str] = []
     bad: list[tuple[str, str | None]] = []
@@ -458,7 +465,7 @@ async def _chat_per_peer(ctx: CheckContext, check_id: str,
     if not peers:
         return Outcome(Status.SKIP, _NO_SSH, data=data)
     t = budget(ctx, check_id) * 0.9
-    got = await asyncio.gather(*(one(p, t) for p in peers))
+    got = await each_peer(peers, lambda p: one(p, t))
     evidence: list[str] = []
     good: list[str] = []
     bad: list[str] = []

@@ -17,9 +17,10 @@ import shlex
 import socket
 import sys
 import time
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 from urllib.parse import urljoin, urlsplit
 
 from rosnet_tui import __version__
@@ -32,6 +33,7 @@ from rosnet_tui.core.settings import Peer, Settings
 from rosnet_tui.core.ssh import SshResult, resolve_ipv4, run_blocking, ssh_run
 
 MAX_BODY = 64 * 1024
+T = TypeVar("T")
 
 
 def budget(ctx: CheckContext, check_id: str) -> float:
@@ -198,6 +200,24 @@ async def fetch_public_ip(ctx: CheckContext, timeout: float) -> str | None:
 def ssh_peers(s: Settings) -> list[Peer]:
     """The peers we can run commands on (those with an SSH user), in the settings' order."""
     return [p for p in s.peers if p.ssh_user]
+
+
+PEER_CONCURRENCY = 8  # peers one check works with at once (the largest fleet: 8 members)
+
+
+async def each_peer(peers: Sequence[Peer], work: Callable[[Peer], Awaitable[T]], *,
+                    limit: int = PEER_CONCURRENCY, return_exceptions: bool = False
+                    ) -> list[T | BaseException]:
+    """``await work(peer)`` for every peer, concurrently, at most *limit* at once (each peer's
+    SSH sessions share its one connection of the round); results in *peers*' order. With
+    *return_exceptions*, an exception is that peer's result, as with ``asyncio.gather``."""
+    gate = asyncio.Semaphore(max(1, limit))
+
+    async def one(peer: Peer) -> T:
+        async with gate:
+            return await work(peer)
+
+    return await asyncio.gather(*(one(p) for p in peers), return_exceptions=return_exceptions)
 
 
 def shq(s: str) -> str:
@@ -439,8 +459,9 @@ async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
             with contextlib.suppress(OSError):
                 await stack.enter_async_context(ctx.listeners.hold(port))
         cmd = python_command(_ROS2_CONNECT, me, str(port), f"{t * 0.5:.1f}")
-        got = await asyncio.gather(*(ssh_run(ctx.ssh, p, cmd, timeout=t, connect_timeout=t * 0.5,
-                                             tcp_timeout=ctx.timeout_s) for p in peers))
+        got = await each_peer(peers, lambda p: ssh_run(ctx.ssh, p, cmd, timeout=t,
+                                                       connect_timeout=t * 0.5,
+                                                       tcp_timeout=ctx.timeout_s))
     ev: list[str] = []
     bad: list[str] = []
     for p, res in zip(peers, got, strict=True):

@@ -17,6 +17,7 @@ from urllib.parse import urlparse
 from rosnet_tui.core import rosproto
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
+    each_peer,
     peer_program_problem,
     python_stdin_command,
     ssh_peers,
@@ -324,9 +325,9 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
     include = ["--include", me.caller_id] if registered else []
     cmd = python_stdin_command("nodes", "--master", uri, "--timeout", f"{remote_t:.1f}", *include)
     ssh_t = max(0.5, deadline - time.monotonic())
-    remote_tasks = [asyncio.ensure_future(ssh_run(ctx.ssh, p, cmd, stdin=ROSPROTO_SOURCE,
-                                                  timeout=ssh_t, tcp_timeout=ctx.timeout_s))
-                    for p in peers]
+    remote_tasks = [asyncio.ensure_future(each_peer(
+        peers, lambda p: ssh_run(ctx.ssh, p, cmd, stdin=ROSPROTO_SOURCE, timeout=ssh_t,
+                                 tcp_timeout=ctx.timeout_s), return_exceptions=True))]
     try:
         try:
             local: Any = await run_blocking(_local_nodes, uri, local_t,
@@ -335,7 +336,7 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
         except asyncio.TimeoutError as exc:
             local = exc
         if isinstance(local, dict) and not local.get("error"):
-            remote_results = await asyncio.gather(*remote_tasks, return_exceptions=True)
+            remote_results = await remote_tasks[0]
         else:
             remote_results = []  # no master here: the peers' view adds nothing
     finally:
@@ -566,7 +567,7 @@ async def _pubsub(ctx: CheckContext, direction: str) -> Outcome:
                        [], _pubsub_data("", False))
     budget = _budget(ctx, FACTOR_PUBSUB) - 0.5
     one = _pubsub_out_one if direction == "out" else _pubsub_in_one
-    outcomes = await asyncio.gather(*(one(ctx, p, uri, budget) for p in peers))
+    outcomes = await each_peer(peers, lambda p: one(ctx, p, uri, budget))
     rank = {Status.FAIL: 0, Status.SKIP: 1, Status.WARN: 2, Status.PASS: 3}
     worst = min(range(len(peers)), key=lambda i: rank[outcomes[i][0]])
     status, summary, _, data = outcomes[worst]

@@ -22,6 +22,7 @@ from rosnet_tui.core.checks.probes import (
     ZENOH_SOURCE,
     budget,
     close_zenoh,
+    each_peer,
     node_endpoint,
     open_zenoh,
     ros2_peers,
@@ -64,7 +65,7 @@ def _read_router_config(path: str) -> tuple[dict | None, str | None]:
 async def _peer_infos(ctx: CheckContext, t: float) -> dict[str, dict | str]:
     peers = ros2_peers(ctx)
     cmd = zenoh_peer_command("info", need_zenoh=False)
-    got = await asyncio.gather(*(ssh_run(ctx.ssh, p, cmd, stdin=ZENOH_SOURCE, timeout=t) for p in peers))
+    got = await each_peer(peers, lambda p: ssh_run(ctx.ssh, p, cmd, stdin=ZENOH_SOURCE, timeout=t))
     out: dict[str, dict | str] = {}
     for p, res in zip(peers, got, strict=True):
         rep = zenohproto.parse_report(res.stdout)

@@ -13,7 +13,7 @@ import contextlib
 import os
 import random
 import socket
-from typing import Any
+from typing import Any, Literal
 
 import psutil
 
@@ -207,7 +207,15 @@ async def check_listener(ctx: CheckContext) -> Outcome:
 # --------------------------------------------------------------------------- router.port_open
 _PROBE_SCRIPT = r"""
 import json, socket, sys, threading
-ip = sys.argv[1]; t = float(sys.argv[2]); ports = [int(p) for p in sys.argv[3].split(",")]
+ip = sys.argv[1]; t = float(sys.argv[2]); ports = []; how = {}
+optional = set()
+for x in sys.argv[3].split(","):
+    p, _, h = x.partition("=")
+    if h.endswith("?"):
+        optional.add(int(p)); h = h[:-1]
+    ports.append(int(p)); how[int(p)] = h or "line"
+XMLRPC = ('<?xml version="1.0"?><methodCall><methodName>getPid</methodName><params><param>'
+          '<value><string>/rosnet_tui_port_probe</string></value></param></params></methodCall>')
 res = {}
 def probe(p):
     s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -218,18 +226,22 @@ def probe(p):
         res[p] = ["timeout", ""]; s.close(); return
     except Exception as e:
         res[p] = ["error", str(e)]; s.close(); return
-    s.settimeout(min(t, 1.5))
     b = b""
     try:
-        while b"\n" not in b and len(b) < 200:
-            c = s.recv(200)
-            if not c:
-                break
-            b += c
+        if how[p] == "xmlrpc":
+            s.sendall(("POST /RPC2 HTTP/1.0\r\nHost: %s:%d\r\nContent-Type: text/xml\r\n"
+                       "Content-Length: %d\r\n\r\n%s" % (ip, p, len(XMLRPC), XMLRPC)).encode())
+        if how[p] != "accept":
+            s.settimeout(min(t, 1.5 if how[p] == "line" else 1.0))
+            while b"\n" not in b and len(b) < 200:
+                c = s.recv(200)
+                if not c:
+                    break
+                b += c
     except Exception:
         pass
     s.close()
-    res[p] = ["open", b.decode("utf-8", "replace").strip()[:160]]
+    res[p] = ["open", b.decode("utf-8", "replace").strip().split("\n")[0].strip()[:160]]
 def icmp():
     import shutil, subprocess
     exe = shutil.which("ping")
@@ -240,16 +252,59 @@ def icmp():
             res["ping"] = r.returncode == 0
         except Exception:
             pass
-th = [threading.Thread(target=probe, args=(p,)) for p in ports]
-th.append(threading.Thread(target=icmp))
-for x in th:
+import time
+t0 = time.monotonic()
+th = {p: threading.Thread(target=probe, args=(p,)) for p in ports}
+th["ping"] = threading.Thread(target=icmp)
+for x in th.values():
     x.daemon = True; x.start()
-for x in th:
-    x.join(t + 2)
+for k, x in th.items():
+    if k not in optional and k != "ping":
+        x.join(t + 2)
+grace = max(0.25, time.monotonic() - t0)
+for k in ["ping", *optional]:
+    th[k].join(max(0.0, t0 + grace - time.monotonic()) if len(optional) < len(ports) else t + 2)
+    if k not in res and k != "ping":
+        res[k] = ["pending", "%.2f" % grace]
 ping = res.pop("ping", None)
 print("PING " + json.dumps(ping))
 print("RESULT " + json.dumps(res))
 """
+# How the peer's probe talks to each port once connected (what answers there):
+#   "line": a server that speaks first (our listener's greeting, an SSH banner): read its line;
+#   "xmlrpc": the ROS master (XML-RPC over HTTP never speaks first): ask it a harmless getPid
+#             and read the status line of its answer;
+#   "accept": a server that waits for a request we have no harmless one for (a Zenoh router):
+#             the accepted connection is the answer, nothing is read.
+# A "?" after it marks a port the verdict does not need: once the others are done, it gets as
+# long again (at least 0.25 s), then it is reported "pending" (its text: the seconds waited).
+PortTalk = Literal["line", "xmlrpc", "accept", "line?", "xmlrpc?", "accept?"]
+
+
+def port_probe_command(ip: str, t_connect: float, ports: dict[int, PortTalk]) -> str:
+    """The shell command a peer runs to test *ports* (how to talk to each) at *ip*, and ping
+    it: it prints ``PING true|false|null`` and ``RESULT {port: [state, first line read]}``
+    (state: open, timeout, error, or pending for an optional port not waited for longer)."""
+    spec = ",".join(f"{p}={how}" for p, how in ports.items())
+    return python_command(_PROBE_SCRIPT, ip, f"{t_connect:.2f}", spec)
+
+
+def _talk(port: int, lst: TestListener | None, ros_port: int) -> PortTalk:
+    """How to talk to *port* (*lst*: our listener holds it)."""
+    if lst is not None or port == 22:
+        return "line"
+    return "xmlrpc" if port == ros_port else "accept"
+
+
+def _what_answered(how: PortTalk, text: str) -> str:
+    """What the peer's probe got from an open port, in a few words."""
+    how = how.rstrip("?")  # type: ignore[assignment]
+    if how == "accept":
+        return "connection accepted (the service waits for its client to speak first)"
+    if how == "xmlrpc":
+        return (f"getPid over XML-RPC answered {text[:60]!r}" if text else
+                "connection accepted (no answer to getPid over XML-RPC in time)")
+    return f"read {text[:60]!r}"
 
 
 def _pick_random_ports(n: int, avoid: set[int]) -> list[int]:
@@ -262,15 +317,16 @@ def _pick_random_ports(n: int, avoid: set[int]) -> list[int]:
     return out
 
 
-async def _probe_from_peer(ctx: CheckContext, peer: Peer, public_ip: str, ports: list[int],
-                           t_connect: float, total: float, patience: float
+async def _probe_from_peer(ctx: CheckContext, peer: Peer, public_ip: str,
+                           ports: dict[int, PortTalk], t_connect: float, total: float,
+                           patience: float
                            ) -> tuple[dict[int, tuple[str, str]] | None, bool | None, str]:
     """The peer's view of *ports* at *public_ip*, whether it answers ping, and why not.
 
     *patience* bounds the wait for the SSH connection: an unreachable peer leaves the rest of
     the budget to the port checker.
     """
-    cmd = python_command(_PROBE_SCRIPT, public_ip, f"{t_connect:.2f}", ",".join(map(str, ports)))
+    cmd = port_probe_command(public_ip, t_connect, ports)
     res = await ssh_run(ctx.ssh, peer, cmd, timeout=total, connect_timeout=min(patience, total),
                         tcp_timeout=patience)
     if not res.ok:
@@ -409,8 +465,9 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
             if not public_ip:
                 evidence.append("the public IP is unknown, so the peer cannot be asked")
             else:
+                talk = {p: _talk(p, ours.get(p), s.ros.port or 11311) for p in ports}
                 raw, ping, why = await _probe_from_peer(
-                    ctx, peer, public_ip, ports, t_connect=min(max(left() * 0.35, 0.5), 3.0),
+                    ctx, peer, public_ip, talk, t_connect=min(max(left() * 0.35, 0.5), 3.0),
                     total=left() * 0.9, patience=max(ctx.timeout_s * 0.6, 0.3))
                 if ping is not None:
                     evidence.append(f"{peer.name} -> ping {public_ip}: "
@@ -433,8 +490,8 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
                                 if lst is not None:
                                     seen = [x.address for x in lst.seen]
                                     src = f"; our listener saw {seen[-1]}" if seen else ""
-                                outcomes[p] = (True, f"{peer.name} -> {public_ip}:{p}: open, read "
-                                                     f"{text[:60]!r}{src}")
+                                outcomes[p] = (True, f"{peer.name} -> {public_ip}:{p}: open, "
+                                                     f"{_what_answered(talk[p], text)}{src}")
                         elif state == "timeout":
                             outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: no answer "
                                                   "(dropped: no forwarding or a firewall)")
@@ -534,8 +591,11 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
         via = "echoip"
         answers: dict[int, str | None] = {}     # how each port answered (peer test only)
         if peer is not None and public_ip:
+            # The verdict needs zenoh_port only: the test port is not waited for much longer.
+            talk: dict[int, PortTalk] = {zport: _talk(zport, ours.get(zport), 0)}
+            talk[test_port] = "line?" if test_port in ours else "accept?"
             raw, data["public_ip_ping"], why = await _probe_from_peer(
-                ctx, peer, public_ip, ports, t_connect=min(max(left() * 0.35, 0.5), 3.0),
+                ctx, peer, public_ip, talk, t_connect=min(max(left() * 0.35, 0.5), 3.0),
                 total=left() * 0.9, patience=max(ctx.timeout_s * 0.6, 0.3))
             if raw is None:
                 evidence.append(why + "; asking the port checker instead")
@@ -544,8 +604,12 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
                 for p in ports:
                     state, text = raw.get(p, ("error", "no result"))
                     lst = ours.get(p)
-                    answers[p] = _answer_kind(state, text, lst)
-                    if state == "open" and lst is not None and lst.token not in text:
+                    answers[p] = None if state == "pending" else _answer_kind(state, text, lst)
+                    if state == "pending":
+                        outcomes[p] = (None, f"{peer.name} -> {public_ip}:{p}: no answer within "
+                                             f"{text} s after TCP {zport} answered; not waited "
+                                             "for longer")
+                    elif state == "open" and lst is not None and lst.token not in text:
                         outcomes[p] = (False, f"{peer.name} -> {public_ip}:{p}: accepted, but not "
                                               "by this machine: forwarded to another one")
                     elif state == "open":
