@@ -13,12 +13,13 @@ if str(REPO) not in sys.path:  # `tests.lab` and `rosnet_tui` import from the re
 
 from bench.model import Options  # noqa: E402
 
-ALL_ROWS = (1, 2, 3, 4, 5, 6, 7)
+ALL_ROWS = (1, 2, 3, 4, 5, 6, 7, 8)
 ROW_NAMES = {1: "start-up time and peak RSS", 2: "full verification on the lab",
              3: "bad news fast (master down, no forwarding, peer unplugged)",
              4: "terminal traffic (bytes per screen, both terminals, both sizes)",
              5: "responsiveness while checks run", 6: "address sync (from the sync service)",
-             7: "a burst of keys equals the same keys typed slowly"}
+             7: "a burst of keys equals the same keys typed slowly",
+             8: "the fleet grows (1 to 8 members) and the sync fan-out"}
 DEFAULT_JSON = REPO / "bench" / "results" / "latest.json"
 
 
@@ -29,7 +30,7 @@ def parse_rows(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(f"'{text}' is not a list of row numbers like 1,4,5") from None
     bad = [r for r in rows if r not in ALL_ROWS]
     if bad or not rows:
-        raise argparse.ArgumentTypeError(f"rows are 1-7 (got {text!r})")
+        raise argparse.ArgumentTypeError(f"rows are {ALL_ROWS[0]}-{ALL_ROWS[-1]} (got {text!r})")
     return rows
 
 
@@ -49,7 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Measure rosnet-tui against baselines measured in the same run and print a "
                     "table (median of the repetitions). Rows: "
                     + "; ".join(f"{k} {v}" for k, v in ROW_NAMES.items())
-                    + ". Rows 1, 4, 5, 7 run anywhere (loopback only); rows 2, 3, 6 need root and "
+                    + ". Rows 1, 4, 5, 7 run anywhere (loopback only); rows 2, 3, 6, 8 need root and "
                       "network namespaces (the network lab of tests/lab) and are skipped, with "
                       "the reason, otherwise.",
         epilog="Exit code 0 when every selected row ran or was skipped with a reason (goals not "
@@ -88,6 +89,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         results += run_local_rows(args.rows, opts, log)
         results += run_lab_rows(args.rows, opts, log)
+        if 8 in args.rows:
+            from bench.fleet_row import run_fleet_row
+
+            results += run_fleet_row(opts, log)
     except KeyboardInterrupt:
         print("bench: interrupted (everything it started has been stopped)", file=sys.stderr)
         return 130

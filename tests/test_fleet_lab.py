@@ -26,7 +26,11 @@ SSH = ["ssh", "-o", "BatchMode=yes", "-o", "StrictHostKeyChecking=yes", "-o", "C
 def test_nine_sites_build_fast_and_each_shows_its_own_public_address(fleet):
     print(f"fleet of {len(fleet.sites)} built in {fleet.build_s['total']:.2f} s: "
           + ", ".join(f"{k} {v:.2f}" for k, v in fleet.build_s.items() if k != "total"))
-    assert fleet.build_s["total"] < 10.0   # typically 0.3-0.7 s; generous for a loaded machine
+    # The network itself: typically 0.3-0.7 s; generous for a loaded machine. Installing
+    # rosnet-tui in every home is apart: the first build of a source tree makes the cached
+    # virtual environment (about 15 s), later builds link it (about 1 s for 9 homes).
+    network = fleet.build_s["total"] - fleet.build_s["install"]
+    assert network < 10.0
     assert len(fleet.members) == 8 and fleet.master == "turtlebot"
     publics = [fleet.public_ip(h) for h in fleet.COMPUTERS]
     assert len(set(publics)) == 9

@@ -110,6 +110,7 @@ class Fleet(Lab):
         self.ROUTERS = (*(s.modem for s in self.sites), "internet")
         self.forwarding = {s.name: "ros1" for s in self.sites}
         self.slowed: dict[str, str | None] = {}   # host -> its line's rate (set_rate)
+        self.wan_ip: dict[str, str] = {}    # host -> its modem's public address (set_public_ip)
         self.build_s: dict[str, float] = {}    # seconds per build phase, and "total"
 
     # ------------------------------------------------------------------ names
@@ -298,11 +299,34 @@ class Fleet(Lab):
         self._in_ns(modem, script)
         self.slowed[host] = rate
 
+    def set_public_ip(self, host: str, ip: str | None) -> None:
+        """Give *host*'s modem a new public address now (a modem restart with a new IP from its
+        provider); None: the one it was built with. Hosts files and settings are not touched
+        (that is the sync service's work)."""
+        s = self.by_name[host]
+        ip = ip or s.public_ip
+        if not ip.startswith(("198.51.100.", "203.0.113.")) or ip in (
+                ADDR.INTERNET_ROBOT_SIDE, ADDR.INTERNET_LAPTOP_SIDE) or any(
+                o.public_ip == ip for o in self.sites if o is not s):
+            raise ValueError(f"{ip} is not a free lab public address")
+        old = self.wan_ip.get(host, s.public_ip)
+        if old == ip:
+            return
+        self._ip(s.modem, ["addr flush dev wan0", f"addr add {ip}/32 dev wan0",
+                           f"route add {s.upstream}/32 dev wan0",
+                           f"route replace default via {s.upstream}"])
+        self._ip("internet", [f"route del {old}/32 dev {s.wan_if}",
+                              f"route add {ip}/32 dev {s.wan_if}"])
+        self.wan_ip[host] = ip
+
     def reset(self) -> None:
-        """Back to the network as built: ROS 1 forwarding, full speed, hosts files, ~/.bashrc,
-        settings."""
+        """Back to the network as built: ROS 1 forwarding, full speed, public addresses, hosts
+        files, ~/.bashrc, settings."""
         if not self.built or self.destroyed:
             return
+        for h in list(self.wan_ip):
+            self.set_public_ip(h, None)
+            del self.wan_ip[h]
         for h in [h for h, rate in self.slowed.items() if rate]:
             self.set_rate(h, None)
         for h in self.COMPUTERS:

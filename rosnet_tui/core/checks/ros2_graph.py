@@ -19,6 +19,7 @@ from rosnet_tui.core.checks.probes import (
     ZENOH_SOURCE,
     budget,
     close_zenoh,
+    each_peer,
     node_domain,
     node_endpoint,
     open_zenoh,
@@ -101,11 +102,12 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     peers = ros2_peers(ctx)
     theirs = {p.name: zenohproto.probe_name() for p in peers}
     remote_t = max(0.5, t * 0.55)
-    tasks = [asyncio.ensure_future(ssh_run(
+    # One task for every peer's side (probes.each_peer: bounded, one SSH connection per peer).
+    tasks = [asyncio.ensure_future(each_peer(peers, lambda p: ssh_run(
         ctx.ssh, p, zenoh_peer_command("graph", "--expect", ours, "--name", theirs[p.name],
                                          "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)),
         stdin=ZENOH_SOURCE, timeout=max(0.5, deadline - time.monotonic()),
-        connect_timeout=max(0.5, ctx.timeout_s * 0.6))) for p in peers]
+        connect_timeout=max(0.5, ctx.timeout_s * 0.6))))]
     # Every token seen during the check, not only at the last look: a peer drops its probe node
     # once acknowledged, so with several peers the first one's is gone from a later look while
     # we still wait for another's (issue 21: "the probe node ... not seen", from a member).
@@ -132,7 +134,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
         while acked and not all(x.done() for x in tasks) and time.monotonic() < deadline:
             await asyncio.wait(tasks, timeout=0.1)
             ack()
-        results = await asyncio.gather(*tasks)
+        results = await tasks[0]
     finally:
         for task in tasks:
             task.cancel()
@@ -365,7 +367,7 @@ async def _pubsub(ctx: CheckContext, out: bool, cid: str) -> Outcome:
                                     "other side of the exchange cannot be run from here", [],
                        _pdata("", False))
     b = budget(ctx, cid) - 0.5
-    outcomes = await asyncio.gather(*(_exchange(ctx, p, out, b) for p in peers))
+    outcomes = await each_peer(peers, lambda p: _exchange(ctx, p, out, b))
     rank = {Status.FAIL: 0, Status.SKIP: 1, Status.WARN: 2, Status.PASS: 3}
     worst = min(range(len(peers)), key=lambda i: rank[outcomes[i][0]])
     status, summary, _, data = outcomes[worst]

@@ -1,0 +1,170 @@
+"""Row 8: the fleet grows. On the N-site lab (tests/lab/fleet.py, nine sites: a master and eight
+members), the master's full verification (`rosnet-tui check`, every step, both directions) with
+1, 2, 4 and 8 members in its settings, under ROS 1 and ROS 2, as a ratio to 1 member; and the
+address-sync fan-out: all eight members follow a change of the master's public address
+(bench/fleet_sync.py).
+
+The same built fleet serves every measurement; only the master's settings file says how many of
+the members it verifies (the first N). Every command runs through ``fleet.run`` (bounded); the
+fleet is destroyed at the end, whatever happens.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from bench.compiled import compiled_copy, run_compiled
+from bench.model import BenchError, Line, Options, RowResult, goal_ratio, median
+
+TITLE = "The fleet grows: the master's verification with 1 to 8 members, and the sync fan-out"
+SIZES = (1, 2, 4, 8)
+SITES = 9
+CHECK_TIMEOUT = 120.0
+
+
+def write_master_config(fleet: Any, settings: Any, members: int, path: Path) -> Path:
+    """*settings* (the master's) with only its first *members* peers, written to *path*."""
+    from rosnet_tui.core.settings import atomic_write_text, render_settings
+
+    atomic_write_text(path, render_settings(replace(settings, peers=settings.peers[:members])),
+                      mode=0o644)
+    return path
+
+
+def master_check(fleet: Any, config: Path, env: dict[str, str], package: Path | None
+                 ) -> dict[str, Any]:
+    """`rosnet-tui check --json -q` (every step) on the master: wall time and verdicts."""
+    if package is not None:
+        env = run_compiled(env, package)
+    t0 = time.monotonic()
+    r = fleet.rosnet(fleet.master, "check", "--json", "-q", "--config", str(config), env=env,
+                     timeout=CHECK_TIMEOUT)
+    wall = time.monotonic() - t0
+    try:
+        checks = json.loads(r.stdout)["checks"]
+    except (ValueError, KeyError) as exc:
+        raise BenchError(f"rosnet-tui check on the master gave no JSON (exit {r.returncode}): "
+                         f"{r.stderr[-500:]}") from exc
+    slowest = max(checks, key=lambda c: c["duration_s"])
+    # All good: nothing fails or warns (under ROS 2 the members forward SSH only, so the checks
+    # of ports a ROS 1 member would open skip).
+    return {"wall_s": wall, "exit": r.returncode,
+            "all_pass": r.returncode == 0 and all(c["status"] in ("pass", "skip")
+                                                  for c in checks),
+            "not_pass": {c["id"]: f"{c['status']}: {c['summary']}" for c in checks
+                         if c["status"] != "pass"},
+            "statuses": {c["id"]: c["status"] for c in checks},
+            "durations": {c["id"]: c["duration_s"] for c in checks},
+            "slowest": f"{slowest['id']} {slowest['duration_s']:.2f} s"}
+
+
+def measure_sizes(fleet: Any, settings: Any, env: dict[str, str], opts: Options, state: Path,
+                  package: Path | None, tag: str) -> dict[int, list[dict[str, Any]]]:
+    """Every size once per repetition, the order alternating (no size always first)."""
+    configs = {n: write_master_config(fleet, settings, n, state / f"{tag}-{n}.toml")
+               for n in SIZES}
+    env = dict(env, XDG_STATE_HOME=str(state / f"{tag}-state"))
+    runs: dict[int, list[dict[str, Any]]] = {n: [] for n in SIZES}
+    master_check(fleet, configs[SIZES[0]], env, package)    # a warm-up run, not counted
+    for i in range(opts.reps):
+        for n in (SIZES if i % 2 == 0 else tuple(reversed(SIZES))):
+            runs[n].append(master_check(fleet, configs[n], env, package))
+    return runs
+
+
+def size_lines(runs: dict[int, list[dict[str, Any]]], ros: str) -> list[Line]:
+    base = [r["wall_s"] for r in runs[SIZES[0]]]
+    lines = []
+    for n in SIZES[1:]:
+        ln = Line(8, f"{ros}: the master's full verification, {n} members (wall time)", "s",
+                  [r["wall_s"] for r in runs[n]], base,
+                  baseline="the same with 1 member", goal="<= 1.3x" if n == SIZES[-1] else "")
+        if n == SIZES[-1]:
+            goal_ratio(ln, 1.3)
+        ok = all(r["all_pass"] for r in runs[n])
+        ln.note = (f"{len(runs[n][0]['statuses']) if runs[n] else 0} checks, all good: "
+                   f"{'yes' if ok else 'NO'}; slowest check (median run) "
+                   f"{_median_run(runs[n])['slowest'] if runs[n] else '-'}")
+        if n == SIZES[1]:
+            ln.note += (f"; 1 member: {median(base):.2f} s, slowest "
+                        f"{_median_run(runs[SIZES[0]])['slowest']}")
+        if not ok or not all(r["all_pass"] for r in runs[SIZES[0]]):
+            ln.status = "error"
+            bad = sorted({k for m in (n, SIZES[0]) for r in runs[m]
+                          for k, v in r["statuses"].items() if v != "pass"})
+            ln.note += f"; not all good: {bad}"
+        lines.append(ln)
+    return lines
+
+
+def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    return sorted(runs, key=lambda r: r["wall_s"])[len(runs) // 2]
+
+
+def run_fleet_row(opts: Options, log: Callable[[str], None]) -> list[RowResult]:
+    res = RowResult(8, TITLE)
+    try:
+        from tests.lab import LabUnavailable, lab_available
+        from tests.lab.fleet import Fleet
+        from tests.lab.fleet_ros2 import FleetRos2
+    except Exception as exc:  # e.g. the lab's own dependencies are missing
+        res.status, res.reason = "skipped", f"the network lab cannot be imported: {exc}"
+        return [res]
+    ok, why = lab_available()
+    if not ok:
+        res.status, res.reason = "skipped", why
+        return [res]
+    if shutil.which("roscore") is None:
+        res.status, res.reason = "skipped", "roscore is not installed (Debian package ros-core)"
+        return [res]
+    t0 = time.monotonic()
+    fleet = Fleet(SITES)
+    state = Path(tempfile.mkdtemp(prefix="rosnet-bench-fleet-"))
+    details: dict[str, Any] = {}
+    try:
+        package = compiled_copy(state / "package")
+        log(f"row 8: building a fleet of {SITES} sites")
+        try:
+            fleet.build()
+        except LabUnavailable as exc:
+            res.status, res.reason = "skipped", str(exc)
+            return [res]
+        details["build_s"] = fleet.build_s
+        log("row 8: ROS 1")
+        fleet.reset()
+        fleet.start_roscore()
+        try:
+            ros1 = measure_sizes(fleet, fleet.settings(fleet.master), fleet.ros_env(fleet.master),
+                                 opts, state, package, "ros1")
+        finally:
+            fleet.stop_roscore()
+            fleet.reset()
+        res.lines += size_lines(ros1, "ROS 1")
+        details["ros1"] = {str(n): v for n, v in ros1.items()}
+        log("row 8: ROS 2")
+        with FleetRos2(fleet) as w:
+            ros2 = measure_sizes(fleet, w.settings(fleet.master), w.env(fleet.master), opts,
+                                 state, package, "ros2")
+        res.lines += size_lines(ros2, "ROS 2")
+        details["ros2"] = {str(n): v for n, v in ros2.items()}
+        log("row 8: sync fan-out")
+        from bench import fleet_sync
+
+        lines, sync_details = fleet_sync.run(fleet, opts, state / "sync")
+        res.lines += lines
+        details["sync"] = sync_details
+    except Exception as exc:
+        res.status, res.reason = "error", f"{type(exc).__name__}: {exc}"
+    finally:
+        fleet.destroy()
+        shutil.rmtree(state, ignore_errors=True)
+    res.details = details
+    res.seconds = time.monotonic() - t0
+    return [res]
