@@ -12,6 +12,8 @@ fleet is destroyed at the end, whatever happens.
 from __future__ import annotations
 
 import json
+import os
+import resource
 import shutil
 import tempfile
 import time
@@ -38,15 +40,33 @@ def write_master_config(fleet: Any, settings: Any, members: int, path: Path) -> 
     return path
 
 
+def machine_busy_s() -> float:
+    """CPU seconds the whole machine has been busy (all cores; /proc/stat, idle and iowait
+    left out)."""
+    with open("/proc/stat") as f:
+        v = [int(x) for x in f.readline().split()[1:]]
+    return (sum(v[:8]) - v[3] - v[4]) / os.sysconf("SC_CLK_TCK")
+
+
+def _children_cpu_s() -> float:
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def master_check(fleet: Any, config: Path, env: dict[str, str], package: Path | None
                  ) -> dict[str, Any]:
     """`rosnet-tui check --json -q` (every step) on the master: wall time and verdicts."""
     if package is not None:
         env = run_compiled(env, package)
+    busy0, own0 = machine_busy_s(), _children_cpu_s()
     t0 = time.monotonic()
     r = fleet.rosnet(fleet.master, "check", "--json", "-q", "--config", str(config), env=env,
                      timeout=CHECK_TIMEOUT)
     wall = time.monotonic() - t0
+    # rosnet-tui is the only child of this process that ends during the run (the fleet's
+    # daemons run on; the peers' programs are sshd's children): its CPU time, and the whole
+    # machine's (every site of the lab shares this machine's cores).
+    own, busy = _children_cpu_s() - own0, machine_busy_s() - busy0
     try:
         checks = json.loads(r.stdout)["checks"]
     except (ValueError, KeyError) as exc:
@@ -55,11 +75,13 @@ def master_check(fleet: Any, config: Path, env: dict[str, str], package: Path | 
     slowest = max(checks, key=lambda c: c["duration_s"])
     # All good: nothing fails or warns (under ROS 2 the members forward SSH only, so the checks
     # of ports a ROS 1 member would open skip).
-    return {"wall_s": wall, "exit": r.returncode,
+    return {"wall_s": wall, "exit": r.returncode, "cpu_s": own, "machine_busy_s": busy,
             "all_pass": r.returncode == 0 and all(c["status"] in ("pass", "skip")
                                                   for c in checks),
             "not_pass": {c["id"]: f"{c['status']}: {c['summary']}" for c in checks
                          if c["status"] != "pass"},
+            "evidence": {c["id"]: c.get("evidence") for c in checks
+                         if c["status"] in ("fail", "warn")},
             "statuses": {c["id"]: c["status"] for c in checks},
             "durations": {c["id"]: c["duration_s"] for c in checks},
             "slowest": f"{slowest['id']} {slowest['duration_s']:.2f} s"}
@@ -89,19 +111,28 @@ def size_lines(runs: dict[int, list[dict[str, Any]]], ros: str) -> list[Line]:
         if n == SIZES[-1]:
             goal_ratio(ln, 1.3)
         ok = all(r["all_pass"] for r in runs[n])
-        ln.note = (f"{len(runs[n][0]['statuses']) if runs[n] else 0} checks, all good: "
-                   f"{'yes' if ok else 'NO'}; slowest check (median run) "
-                   f"{_median_run(runs[n])['slowest'] if runs[n] else '-'}")
+        ln.note = (f"{len(runs[n][0]['statuses']) if runs[n] else 0} checks, nothing failed "
+                   f"or warned: {'yes' if ok else 'NO'}; slowest check (median run) "
+                   f"{_median_run(runs[n])['slowest'] if runs[n] else '-'}; "
+                   + _cpu_note(runs[n]))
         if n == SIZES[1]:
             ln.note += (f"; 1 member: {median(base):.2f} s, slowest "
-                        f"{_median_run(runs[SIZES[0]])['slowest']}")
-        if not ok or not all(r["all_pass"] for r in runs[SIZES[0]]):
+                        f"{_median_run(runs[SIZES[0]])['slowest']}, " + _cpu_note(runs[SIZES[0]]))
+        bad = sorted({f"{k} ({r['not_pass'][k]})" for m in (n, SIZES[0]) for r in runs[m]
+                      for k, v in r["statuses"].items() if v in ("fail", "warn")})
+        if bad:   # a verdict that is not good: said, and the row's exit code says so
             ln.status = "error"
-            bad = sorted({k for m in (n, SIZES[0]) for r in runs[m]
-                          for k, v in r["statuses"].items() if v != "pass"})
-            ln.note += f"; not all good: {bad}"
+            ln.note += f"; not all good in {sum(not r['all_pass'] for r in runs[n])} of " \
+                       f"{len(runs[n])} runs: {bad}"
         lines.append(ln)
     return lines
+
+
+def _cpu_note(runs: list[dict[str, Any]]) -> str:
+    wall = median([r["wall_s"] for r in runs]) or 0.0
+    return (f"rosnet-tui's own CPU {median([r['cpu_s'] for r in runs]):.2f} s, the machine busy "
+            f"{median([r['machine_busy_s'] for r in runs]):.2f} of "
+            f"{wall * (os.cpu_count() or 1):.2f} core-seconds")
 
 
 def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
