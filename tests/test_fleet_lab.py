@@ -66,6 +66,30 @@ def test_a_member_modem_forwards_only_what_its_mode_says(fleet):
         fleet.reset()
 
 
+def test_the_masters_modem_gets_a_new_public_address_and_reset_puts_the_old_back(fleet):
+    """Fleet.set_public_ip (bench row 8's sync fan-out): the new address is what the internet
+    sees and what reaches the master; the hosts files are not touched; reset() restores."""
+    fleet.reset()
+    built = fleet.public_ip("turtlebot")
+    hosts = fleet.hosts_path("member5").read_text()
+    try:
+        fleet.set_public_ip("turtlebot", "203.0.113.77")
+        assert fleet.http_get("turtlebot", "http://probe.lab.test/ip")[1].strip() == "203.0.113.77"
+        r = fleet.run("member5", [*SSH, "-o", "HostKeyAlias=turtlebot", "root@203.0.113.77",
+                                  "hostname"], timeout=20)   # the key verified by name
+        assert (r.returncode, r.stdout.strip()) == (0, "turtlebot"), r.stderr
+        assert fleet.hosts_path("member5").read_text() == hosts
+        with pytest.raises(ValueError):
+            fleet.set_public_ip("turtlebot", "10.0.0.1")   # not a lab public address
+        with pytest.raises(ValueError):
+            fleet.set_public_ip("turtlebot", fleet.public_ip("member2"))   # taken
+    finally:
+        fleet.reset()
+    assert fleet.http_get("turtlebot", "http://probe.lab.test/ip")[1].strip() == built
+    r = fleet.run("member5", [*SSH, "root@turtlebot", "hostname"], timeout=20)
+    assert (r.returncode, r.stdout.strip()) == (0, "turtlebot"), r.stderr
+
+
 def test_nine_site_ros2_every_member_linked_and_every_check_passes_from_master_and_member(fleet):
     with FleetRos2(fleet) as w:
         print(f"ROS 2 on {len(fleet.sites)} sites: routers up and linked in {w.start_s:.2f} s")
