@@ -52,7 +52,7 @@ def test_undeclared_reads_raise_only_in_strict_mode(monkeypatch):
     """What advise() does with UndeclaredKeyError: through when strict, skipped otherwise."""
     from rosnet_tui.core.advisor import engine
     from rosnet_tui.core.advisor.order import RULE_ORDER
-    from tests.test_advisor import healthy_laptop, laptop_settings
+    from tests.builders import healthy_laptop, laptop_settings
 
     def reads_a_typo(ev):
         return [engine.Hit("m", ["a"])] if ev.data("isp.internet").get("dns_okay") else []

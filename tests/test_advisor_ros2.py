@@ -103,7 +103,7 @@ def test_ros1_rules_stay_quiet_on_ros2_results():
     assert not [f for f in fs if f.rule.startswith("ros.")]
 
 
-# Cases for tests/test_advisor.py's CASES (every rule fires on its case and stays silent on the
+# Cases for tests/test_advisor_rules.py's CASES (every rule fires on its case and stays silent on the
 # healthy ROS 1 network): rule id -> () -> (results by id, settings).
 def _case(settings, *results: CheckResult):
     return lambda: ({x.id: x for x in results}, settings())

@@ -61,7 +61,7 @@ def _case(*results: CheckResult):
     return lambda: ({x.id: x for x in results}, master())
 
 
-# One case per rule, for tests/test_advisor.py's every-rule tests (and the golden inputs).
+# One case per rule, for tests/test_advisor_rules.py's every-rule tests (and the golden inputs).
 UPNP_CASES = {
     "router.upnp.missing": _case(r("warn", missing=[7447])),
     "router.upnp.conflict": _case(r("fail", conflicts=[{"port": 7447,

@@ -274,7 +274,7 @@ def _case(status: str, **d):
     return build
 
 
-# The advisor's rule cases (tests/test_advisor.py runs every rule on its case).
+# The advisor's rule cases (tests/test_advisor_rules.py runs every rule on its case).
 ROSBRIDGE_CASES = {
     "rosbridge.name": _case("fail", failed_hop="name", tcp=None, address=None),
     "rosbridge.forward": _case("fail", failed_hop="forward", tcp="timeout"),
