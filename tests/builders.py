@@ -7,8 +7,8 @@ Result builders follow the checks contract (check ids and their ``data`` keys).
 
 from __future__ import annotations
 
-import getpass
 import socket
+from dataclasses import replace
 from pathlib import Path
 
 from rosnet_tui.core.netinfo import LocalNet
@@ -208,11 +208,23 @@ def folder_sync_settings(folder: Path, interval_s: float = 60, peers: int = 1) -
     return Settings(
         this=ThisComponent(name="sami", role="member", profile="remote", local_ip="192.168.1.10",
                            public_ip="198.51.100.2", interface="eth0"),
-        peers=[Peer(**vars(p)) for p in SYNC_PEERS[:peers]],
+        peers=[replace(p) for p in SYNC_PEERS[:peers]],
         ros=RosSettings(master="turtlebot"),
         probe=ProbeSettings(public_ip_urls=["http://127.0.0.1:9/ip"]),
         sync=SyncSettings(store="folder", folder=str(folder), interval_s=interval_s),
         has_sync=True)
+
+
+def sync_laptop_settings(**sync) -> Settings:
+    """sami, a remote member with one peer; *sync* are its SyncSettings (none: no sync)."""
+    return Settings(
+        this=ThisComponent(name="sami", role="member", profile="remote", local_ip="192.168.1.10",
+                           public_ip="198.51.100.2", interface="eth0"),
+        peers=[Peer(name="turtlebot", local_ip="10.10.10.1", public_ip="203.0.113.2",
+                    ssh_user="root")],
+        ros=RosSettings(master="turtlebot"),
+        probe=ProbeSettings(public_ip_urls=["http://127.0.0.1:9/ip"]),
+        sync=SyncSettings(**sync), has_sync=bool(sync))
 
 
 def settings_with(peer: Peer, **this) -> Settings:
@@ -222,7 +234,24 @@ def settings_with(peer: Peer, **this) -> Settings:
     return Settings(this=ThisComponent(**this), peers=[peer])
 
 
-def ssh_peer(port: int, **kw) -> Peer:
-    """localhost as a peer reached over SSH on *port* as the current user."""
-    kw.setdefault("ssh_user", getpass.getuser())
-    return Peer(name=kw.pop("name", "localhost"), ssh_port=port, **kw)
+def seat_settings(role="master", connection="telecom", profile="remote") -> Settings:
+    """turtlebot (the master) or sami (a member), with the other as its one peer."""
+    s = Settings()
+    name = "turtlebot" if role == "master" else "sami"
+    local = "10.10.10.1" if role == "master" else "192.168.1.10"
+    s.this = ThisComponent(name=name, role=role, connection=connection, profile=profile,
+                           local_ip=local)
+    other = Peer("sami", "192.168.1.10", "198.51.100.2", "ops") if role == "master" else \
+        Peer("turtlebot", "10.10.10.1", "203.0.113.2", "root", office_ip="172.16.0.5")
+    s.peers = [other]
+    s.ros.master = "turtlebot"
+    return s
+
+
+def probe_settings(name="turtlebot", local_ip="10.10.10.1", peers=None,
+                   profile="remote") -> Settings:
+    """This machine with a free test port, and sami as its peer unless *peers* are given."""
+    return Settings(this=ThisComponent(name=name, local_ip=local_ip, profile=profile),
+                    peers=peers if peers is not None else
+                    [Peer(name="sami", local_ip="192.168.1.10", public_ip="198.51.100.2")],
+                    probe=ProbeSettings(port=free_port()))

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.results import CheckResult, Status
-from tests.test_ros2 import master, member
+from tests.builders import ros2_master as master
+from tests.builders import ros2_member as member
 
 
 def r(cid: str, status: str, data: dict, step: str = "ros", summary: str = "s") -> CheckResult:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.results import CheckResult, Status
-from tests.test_ros2 import master, member
+from tests.builders import ros2_master as master
+from tests.builders import ros2_member as member
 
 
 def r(status: str, summary: str = "s", **data) -> CheckResult:

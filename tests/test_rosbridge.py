@@ -29,7 +29,7 @@ from rosnet_tui.core.settings import (
 )
 from rosnet_tui.core.steps import STEP_BY_ID, step_for
 from rosnet_tui.core.upnp.forwards import description, needs
-from tests.test_checks_isp import free_port
+from tests.builders import free_port
 
 
 def member(version: int = 1, **bridge) -> Settings:
