@@ -14,8 +14,8 @@ from rosnet_tui.core.advisor import engine
 from rosnet_tui.core.advisor.engine import Hit, RuleOrderError
 from rosnet_tui.core.advisor.evidence import Evidence
 from rosnet_tui.core.advisor.order import RULE_ORDER
+from tests.builders import healthy_laptop, laptop_settings
 from tests.golden import codec, record
-from tests.test_advisor import healthy_laptop, laptop_settings
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -3,8 +3,9 @@
 tests/golden/ holds, recorded with ``python -m tests.golden.record`` before the advisor became a
 package: the rule ids (``python -m rosnet_tui.core.advisor --ids``), the troubleshooting
 document (``--markdown``) and ``advise()``'s findings, every field, over every (results,
-settings) pair that tests/test_advisor.py and tests/test_report.py feed it. Each test recomputes
-one of them with the code as it is and compares byte for byte.
+settings) pair the advisor tests and tests/test_report.py fed it (the case names keep the file
+they came from then: tests/test_advisor.py, since split per step). Each test recomputes one of
+them with the code as it is and compares byte for byte.
 """
 
 from __future__ import annotations

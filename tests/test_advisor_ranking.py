@@ -9,16 +9,14 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor import T1, first_failure
 from rosnet_tui.core.results import CheckResult, Status
-from tests.test_advisor import (
+from tests.advisor_support import ids, run, text
+from tests.builders import (
     healthy_laptop,
     healthy_robot,
-    ids,
     laptop_settings,
     no_ssh,
     put,
     robot_settings,
-    run,
-    text,
 )
 
 
@@ -257,9 +255,9 @@ def test_master_uri_only_in_this_shell_says_how_to_write_it():
 def test_peer_cannot_register_follows_the_port_test():
     """On the master: the peer's nodes cannot register. The port test of this round tells
     whether the forwarding is the cause."""
-    from tests.test_advisor import _peer_cannot_register
+    from tests.advisor_support import peer_cannot_register
 
-    r, s = _peer_cannot_register()                     # 11311 open from outside
+    r, s = peer_cannot_register()                     # 11311 open from outside
     f = next(f for f in run(r, s) if f.rule == "ros.master.peer_cannot_register")
     assert f.goto_step == "linux" and f.actions[0].startswith("On sami: `getent hosts turtlebot`")
     assert "11311 open from outside" in f.meaning

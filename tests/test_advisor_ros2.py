@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.results import CheckResult, Status
-from tests.test_ros2 import master, member
+from tests.builders import ros2_master as master
+from tests.builders import ros2_member as member
 
 
 def r(cid: str, status: str, data: dict, step: str = "ros", summary: str = "s") -> CheckResult:
@@ -103,7 +104,7 @@ def test_ros1_rules_stay_quiet_on_ros2_results():
     assert not [f for f in fs if f.rule.startswith("ros.")]
 
 
-# Cases for tests/test_advisor.py's CASES (every rule fires on its case and stays silent on the
+# Cases for tests/test_advisor_rules.py's CASES (every rule fires on its case and stays silent on the
 # healthy ROS 1 network): rule id -> () -> (results by id, settings).
 def _case(settings, *results: CheckResult):
     return lambda: ({x.id: x for x in results}, settings())

@@ -24,8 +24,9 @@ from rosnet_tui.core.checks.data import undeclared
 from rosnet_tui.core.hosts import hosts_entries
 from rosnet_tui.core.results import CheckResult, Status
 from rosnet_tui.core.settings import load_settings, render_settings, save_settings
-from tests.test_advisor import healthy_laptop, ids, laptop_settings, no_ssh, put, run
-from tests.test_ros2 import member
+from tests.advisor_support import ids, run
+from tests.builders import healthy_laptop, laptop_settings, no_ssh, put
+from tests.builders import ros2_member as member
 
 MIN, DAY = 60.0, 86400.0
 
@@ -95,7 +96,7 @@ def test_zenoh_refused_without_ssh_evidence_says_a_refusal_alone_cannot_tell():
 
 
 def test_the_master_itself_says_nothing_listens_here():
-    from tests.test_ros2 import master
+    from tests.builders import ros2_master as master
     fs = advise([r2("ros2.router", "fail", {"role": "master", "listen_problem": "not_running",
                                             "listening": [], "reachable": False})],
                 master(), strict=True)

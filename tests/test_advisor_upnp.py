@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.results import CheckResult, Status
-from tests.test_ros2 import master, member
+from tests.builders import ros2_master as master
+from tests.builders import ros2_member as member
 
 
 def r(status: str, summary: str = "s", **data) -> CheckResult:
@@ -61,7 +62,7 @@ def _case(*results: CheckResult):
     return lambda: ({x.id: x for x in results}, master())
 
 
-# One case per rule, for tests/test_advisor.py's every-rule tests (and the golden inputs).
+# One case per rule, for tests/test_advisor_rules.py's every-rule tests (and the golden inputs).
 UPNP_CASES = {
     "router.upnp.missing": _case(r("warn", missing=[7447])),
     "router.upnp.conflict": _case(r("fail", conflicts=[{"port": 7447,

@@ -26,7 +26,7 @@ from rosnet_tui.core.checks import (
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh import SshOptions
-from tests.test_checks_isp import free_port
+from tests.builders import free_port
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA_PY = ROOT / "rosnet_tui" / "core" / "checks" / "data.py"

@@ -1,110 +1,21 @@
-"""ISP checks on loopback: a local what-is-my-IP web server, the real probe server, real sockets.
-
-Also home of ``WebServer`` and ``ProbeThread``, which the router and CLI tests import.
-"""
+"""ISP checks on loopback: a local what-is-my-IP web server, the real probe server, real sockets
+(the ``web`` and ``probe_server`` fixtures are in tests/plugins/web.py)."""
 
 from __future__ import annotations
 
-import asyncio
 import json
-import socket
-import threading
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-
-import pytest
 
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
 from rosnet_tui.core.checks.isp import Hop, judge_path, judge_wan, ttl_probe
 from rosnet_tui.core.checks.probes import parse_ip
-from rosnet_tui.core.probe_server import ProbeServer
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import ProbeSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh import SshOptions
 from rosnet_tui.core.state import public_ip_history, record_public_ip
+from tests.builders import free_port
 
 load_builtin_checks()
-
-
-class WebServer:
-    """A tiny HTTP server on 127.0.0.1: ``routes[path] = (status, body)`` (changeable live)."""
-
-    def __init__(self) -> None:
-        self.routes: dict[str, tuple[int, str]] = {}
-        self.fallback = None  # callable(path) -> (status, body) for paths not in routes
-        self.hits: list[str] = []
-        routes, hits, server = self.routes, self.hits, self
-
-        class Handler(BaseHTTPRequestHandler):
-            def do_GET(self):  # noqa: N802
-                hits.append(self.path)
-                if self.path in routes or server.fallback is None:
-                    status, body = routes.get(self.path, (404, "not found"))
-                else:
-                    status, body = server.fallback(self.path)
-                data = body.encode()
-                self.send_response(status)
-                self.send_header("Content-Type", "text/plain")
-                self.send_header("Content-Length", str(len(data)))
-                self.end_headers()
-                self.wfile.write(data)
-
-            def log_message(self, *a):
-                pass
-
-        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.httpd.daemon_threads = True
-        self.port = self.httpd.server_address[1]
-        self.thread = threading.Thread(target=self.httpd.serve_forever, args=(0.05,), daemon=True)
-        self.thread.start()
-
-    def url(self, path: str, host: str = "127.0.0.1") -> str:
-        return f"http://{host}:{self.port}{path}"
-
-    def close(self) -> None:
-        self.httpd.shutdown()
-        self.httpd.server_close()
-
-
-class ProbeThread:
-    """The product's echoip-compatible probe server on 127.0.0.1, in its own thread and loop."""
-
-    def __init__(self) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.server = ProbeServer("127.0.0.1", 0)
-        self.port = self.loop.run_until_complete(self.server.start())
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self.thread.start()
-
-    @property
-    def url(self) -> str:
-        return f"http://127.0.0.1:{self.port}"
-
-    def close(self) -> None:
-        asyncio.run_coroutine_threadsafe(self.server.close(), self.loop).result(5)
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(5)
-        self.loop.close()
-
-
-@pytest.fixture
-def web():
-    w = WebServer()
-    yield w
-    w.close()
-
-
-@pytest.fixture
-def probe_server():
-    p = ProbeThread()
-    yield p
-    p.close()
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def make_ctx(tmp_path: Path, urls: list[str], port_check_url: str = "http://127.0.0.1:9",

@@ -12,17 +12,10 @@ from rosnet_tui.core.hosts import HostsEntry
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh import SshOptions
-from tests.test_checks_isp import free_port
-from tests.test_ssh import ssh_client, sshd  # noqa: F401
+from tests.builders import free_port
+from tests.builders import probe_settings as settings
 
 load_builtin_checks()
-
-
-def settings(name="turtlebot", local_ip="10.10.10.1", peers=None, profile="remote") -> Settings:
-    return Settings(this=ThisComponent(name=name, local_ip=local_ip, profile=profile),
-                    peers=peers if peers is not None else
-                    [Peer(name="sami", local_ip="192.168.1.10", public_ip="198.51.100.2")],
-                    probe=ProbeSettings(port=free_port()))
 
 
 def ctx(s: Settings, tmp_path, client=None, timeout=2.0, **kw) -> CheckContext:
@@ -126,7 +119,7 @@ async def test_ping_skips_without_peers(tmp_path):
 
 
 # --------------------------------------------------------------------------- linux.ssh
-async def test_ssh_passes_with_a_verified_key(ssh_client, sshd, tmp_path):  # noqa: F811
+async def test_ssh_passes_with_a_verified_key(ssh_client, sshd, tmp_path):
     s = settings(peers=[ssh_client.peer(), Peer(name="nouser", public_ip="198.51.100.9")])
     r = await run("linux.ssh", ctx(s, tmp_path, ssh_client))
     assert r.status is Status.PASS, r.evidence
@@ -135,7 +128,7 @@ async def test_ssh_passes_with_a_verified_key(ssh_client, sshd, tmp_path):  # no
     assert r.data["peers"]["nouser"]["failure"] == "no_user"
 
 
-async def test_ssh_unknown_host_key_fails_with_the_fingerprint(ssh_client, sshd, tmp_path):  # noqa: F811
+async def test_ssh_unknown_host_key_fails_with_the_fingerprint(ssh_client, sshd, tmp_path):
     (ssh_client.dir / "known_hosts").write_text("")
     r = await run("linux.ssh", ctx(settings(peers=[ssh_client.peer()]), tmp_path, ssh_client))
     assert r.status is Status.FAIL
@@ -152,14 +145,14 @@ async def test_ssh_skips_without_an_ssh_user(tmp_path):
 
 
 # --------------------------------------------------------------------------- chats
-async def test_chat_out_by_name(ssh_client, tmp_path):  # noqa: F811
+async def test_chat_out_by_name(ssh_client, tmp_path):
     r = await run("linux.chat_out", ctx(settings(peers=[ssh_client.peer()]), tmp_path, ssh_client))
     assert r.status is Status.PASS, r.evidence
     assert r.data["peers"]["localhost"] == {"ok": True, "failure": None, "tcp": "connected"}
     assert any("python3" in e for e in r.evidence)
 
 
-async def test_chat_in_by_name(ssh_client, tmp_path):  # noqa: F811
+async def test_chat_in_by_name(ssh_client, tmp_path):
     c = ctx(settings(name="localhost", local_ip="127.0.0.1", peers=[ssh_client.peer()]),
             tmp_path, ssh_client)
     r = await run("linux.chat_in", c)
@@ -170,7 +163,7 @@ async def test_chat_in_by_name(ssh_client, tmp_path):  # noqa: F811
 
 
 @pytest.mark.skipif(shutil.which("nc") is None, reason="needs nc")
-async def test_chats_fall_back_to_nc_without_python3(ssh_client, tmp_path, monkeypatch):  # noqa: F811
+async def test_chats_fall_back_to_nc_without_python3(ssh_client, tmp_path, monkeypatch):
     monkeypatch.setattr(linux, "PYTHON", "no-such-python3")
     out = await run("linux.chat_out", ctx(settings(peers=[ssh_client.peer()]), tmp_path,
                                           ssh_client, timeout=3.0))
@@ -182,7 +175,7 @@ async def test_chats_fall_back_to_nc_without_python3(ssh_client, tmp_path, monke
     assert inn.status is Status.PASS, inn.evidence
 
 
-async def test_chat_in_fails_when_the_peer_cannot_reach_us(ssh_client, tmp_path):  # noqa: F811
+async def test_chat_in_fails_when_the_peer_cannot_reach_us(ssh_client, tmp_path):
     c = ctx(settings(name="localhost", local_ip="127.0.0.1", peers=[ssh_client.peer()]),
             tmp_path, ssh_client)
     # Something else holds our test port: the peer reaches it, but not our listener.
@@ -196,7 +189,7 @@ async def test_chat_in_fails_when_the_peer_cannot_reach_us(ssh_client, tmp_path)
     assert r.data["peers"]["localhost"]["failure"] == "local_listen"
 
 
-async def test_chat_out_reports_ssh_trouble(ssh_client, tmp_path):  # noqa: F811
+async def test_chat_out_reports_ssh_trouble(ssh_client, tmp_path):
     s = settings(peers=[ssh_client.peer(ssh_port=free_port())])
     r = await run("linux.chat_out", ctx(s, tmp_path, ssh_client))
     assert r.status is Status.FAIL and r.data["peers"]["localhost"]["failure"] == "ssh:network"
@@ -230,7 +223,7 @@ async def test_ros2_chat_out_says_how_the_connection_to_the_masters_router_went(
     assert inn.status is Status.SKIP and "accepts no connections" in inn.summary
 
 
-async def test_ros2_chat_in_on_the_master_records_the_members_connection(ssh_client, tmp_path):  # noqa: F811
+async def test_ros2_chat_in_on_the_master_records_the_members_connection(ssh_client, tmp_path):
     s = ros2_settings("master", [ssh_client.peer()], free_port())
     r = await run("linux.chat_in", ctx(s, tmp_path, ssh_client))
     assert r.status is Status.PASS, r.evidence

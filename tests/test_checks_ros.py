@@ -23,7 +23,8 @@ from rosnet_tui.core.checks import REGISTRY, CheckContext, checks_for, run_check
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import Peer, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh import SshOptions
-from tests.test_rosproto import RosCore, free_port, roscore  # noqa: F401 (session fixture)
+from tests.builders import free_port
+from tests.plugins.roscore import RosCore
 
 SSHD = Path("/usr/sbin/sshd")
 ROS_IDS = ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in"]
@@ -217,7 +218,7 @@ async def test_no_master_configured_skips_every_ros_check(tmp_path: Path):
 
 
 # --------------------------------------------------------------------------- ros.master
-async def test_master_answers(tmp_path: Path, roscore: RosCore):  # noqa: F811
+async def test_master_answers(tmp_path: Path, roscore: RosCore):
     ctx = make_ctx(tmp_path, loopback_settings(roscore.port), env=loopback_env(roscore))
     r = await run(ctx, "ros.master")
     assert r.status == Status.PASS, r.summary
@@ -243,7 +244,7 @@ async def test_dead_master_fails_within_its_timeout(tmp_path: Path):
 
 
 # --------------------------------------------------------------------------- ros.node_uris
-async def test_node_with_unreachable_uri_is_named(tmp_path: Path, roscore: RosCore):  # noqa: F811
+async def test_node_with_unreachable_uri_is_named(tmp_path: Path, roscore: RosCore):
     topic = f"/rosnet_test/{rosproto.new_probe_id()}"
     dead = f"http://127.0.0.1:{free_port()}/"
     fake = rosproto.MasterClient(roscore.uri, "/teleop_with_bad_uri", 2.0)
@@ -262,7 +263,7 @@ async def test_node_with_unreachable_uri_is_named(tmp_path: Path, roscore: RosCo
 
 
 # --------------------------------------------------------------------------- with the peer over SSH
-async def test_healthy_loopback_passes_in_both_directions(tmp_path: Path, roscore: RosCore,  # noqa: F811
+async def test_healthy_loopback_passes_in_both_directions(tmp_path: Path, roscore: RosCore,
                                                           sshd: Sshd):
     ctx = make_ctx(tmp_path, loopback_settings(roscore.port, sshd), env=loopback_env(roscore),
                    ssh=sshd)
@@ -280,7 +281,7 @@ async def test_healthy_loopback_passes_in_both_directions(tmp_path: Path, roscor
 
 
 async def test_pubsub_skips_without_ssh_peer_or_trusted_key(tmp_path: Path,
-                                                            roscore: RosCore):  # noqa: F811
+                                                            roscore: RosCore):
     ctx = make_ctx(tmp_path, loopback_settings(roscore.port), env=loopback_env(roscore))
     for cid in ("ros.pubsub_out", "ros.pubsub_in"):
         r = await run(ctx, cid)

@@ -28,8 +28,7 @@ from rosnet_tui.core.netinfo import detect_local_net
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh import SshOptions
-from tests.test_checks_isp import free_port, probe_server, web  # noqa: F401
-from tests.test_ssh import ssh_client, sshd  # noqa: F401
+from tests.builders import free_port
 
 load_builtin_checks()
 
@@ -187,7 +186,7 @@ async def test_the_pool_shares_one_listener_and_records_chat_lines():
 
 
 # --------------------------------------------------------------------------- router.port_open
-async def test_port_open_via_the_probe_server(probe_server, tmp_path):  # noqa: F811
+async def test_port_open_via_the_probe_server(probe_server, tmp_path):
     ros_port = free_port()
     ctx = ctx_for(tmp_path, port_check_url=probe_server.url, ros_port=ros_port)
     with socket.socket() as roscore_stand_in:  # a "service" listening there: probed too
@@ -205,7 +204,7 @@ async def test_port_open_via_the_probe_server(probe_server, tmp_path):  # noqa: 
     assert all(can_bind(p) for p in ports[:3])  # our listeners are gone
 
 
-async def test_port_open_closed_while_listening_is_table1_row3(web, tmp_path):  # noqa: F811
+async def test_port_open_closed_while_listening_is_table1_row3(web, tmp_path):
     web.fallback = lambda path: (200, json.dumps({"ip": "127.0.0.1", "reachable": False,
                                                   "port": int(path.rsplit("/", 1)[-1])}))
     ctx = ctx_for(tmp_path, port_check_url=web.url(""))
@@ -221,7 +220,7 @@ async def test_port_open_without_a_checker_cannot_tell(tmp_path):
     assert "could not test" in r.summary
 
 
-async def test_port_open_from_the_peer_over_ssh(ssh_client, web, tmp_path):  # noqa: F811
+async def test_port_open_from_the_peer_over_ssh(ssh_client, web, tmp_path):
     web.routes["/ip"] = (200, "127.0.0.1\n")
     ctx = ctx_for(tmp_path, peers=[ssh_client.peer()], urls=[web.url("/ip")],
                   ssh_options=SshOptions(ssh_dir=ssh_client.dir,
@@ -237,8 +236,8 @@ async def test_port_open_from_the_peer_over_ssh(ssh_client, web, tmp_path):  # n
     assert r.data["public_ip_ping"] is True
 
 
-async def test_port_open_falls_back_to_the_checker_when_ssh_fails(ssh_client, probe_server,  # noqa: F811
-                                                                  web, tmp_path):  # noqa: F811
+async def test_port_open_falls_back_to_the_checker_when_ssh_fails(ssh_client, probe_server,
+                                                                  web, tmp_path):
     web.routes["/ip"] = (200, "127.0.0.1\n")
     peer = ssh_client.peer(ssh_port=free_port())
     ctx = ctx_for(tmp_path, peers=[peer], urls=[web.url("/ip")], port_check_url=probe_server.url,
@@ -249,7 +248,7 @@ async def test_port_open_falls_back_to_the_checker_when_ssh_fails(ssh_client, pr
     assert "asking the port checker instead" in r.evidence[0]
 
 
-async def test_router_step_runs_concurrently_without_fighting_over_the_port(probe_server,  # noqa: F811
+async def test_router_step_runs_concurrently_without_fighting_over_the_port(probe_server,
                                                                             tmp_path):
     ctx = ctx_for(tmp_path, port_check_url=probe_server.url)
     specs = [REGISTRY[i] for i in ("router.port_free", "router.listener", "router.port_open")]
@@ -331,7 +330,7 @@ async def test_the_port_probe_knows_what_answers_where():
     assert took < 1.0, f"the probe took {took:.2f} s: it waited for a silent port"
 
 
-async def test_port_open_from_the_peer_with_a_ros_master_running_here(ssh_client, web,  # noqa: F811
+async def test_port_open_from_the_peer_with_a_ros_master_running_here(ssh_client, web,
                                                                       tmp_path):
     """The master's seat: a ROS master listens on its port, so the peer tests that port too; it
     must not wait for a greeting that an XML-RPC server never sends (issue 25)."""

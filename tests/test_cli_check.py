@@ -15,7 +15,8 @@ import sys
 import pytest
 
 from rosnet_tui.core.checks import checks_for
-from tests.test_checks_isp import ProbeThread, WebServer, free_port
+from tests.builders import free_port
+from tests.plugins.web import ProbeThread, WebServer
 
 ROUTER_IDS = [s.id for s in checks_for(["router"]) if s.ros != 2]   # ROS 1 settings here
 

@@ -1,5 +1,4 @@
-# ruff: noqa: F811 - the sshd fixtures come from test_ssh.py
-"""Issue 15, SSH host keys, against a real sshd on 127.0.0.1 (the fixtures of test_ssh.py).
+"""Issue 15, SSH host keys, against a real sshd on 127.0.0.1 (the fixtures of tests/plugins/ssh.py).
 
 Reproduced: one ``@cert-authority`` or ``@revoked`` line anywhere in known_hosts made paramiko
 raise, uncaught: every SSH check then failed as "sshd problem", even for peers whose key was
@@ -23,7 +22,7 @@ import pytest
 
 from rosnet_tui.core.ssh import host_key_name, ssh_run, trust_host_key
 from tests.hardening_tally import tally
-from tests.test_ssh import SSHD, keygen, ssh_client, sshd  # noqa: F401 - fixtures
+from tests.plugins.ssh import SSHD, keygen
 
 pytestmark = pytest.mark.skipif(not os.path.exists(SSHD) or not shutil.which("ssh-keygen"),
                                 reason="needs OpenSSH (sshd, ssh-keygen)")

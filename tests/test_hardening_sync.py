@@ -24,18 +24,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rosnet_tui.core.settings import (
-    Peer,
-    ProbeSettings,
-    RosSettings,
-    Settings,
-    SyncSettings,
-    ThisComponent,
     render_settings,
 )
 from rosnet_tui.core.sync import FolderStore, RecordError, SyncService, parse_record
 from rosnet_tui.core.sync.dnsstore import TXT_TAG, record_from_txt
 from rosnet_tui.core.sync.records import MAX_RECORD_BYTES, format_time, new_record
 from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
+from tests.builders import folder_sync_settings
 from tests.hardening_tally import tally
 
 NOW = time.time()
@@ -216,17 +211,6 @@ def test_one_bad_file_never_stops_the_others_in_the_folder_store(tmp_path):
 
 
 # =========================================================================== the service
-def two_peer_settings(folder: Path) -> Settings:
-    return Settings(
-        this=ThisComponent(name="sami", role="member", profile="remote", local_ip="192.168.1.10",
-                           public_ip="198.51.100.2", interface="eth0"),
-        peers=[Peer(name="turtlebot", local_ip="10.10.10.1", public_ip="203.0.113.2"),
-               Peer(name="rover", local_ip="10.10.20.1", public_ip="203.0.113.30")],
-        ros=RosSettings(master="turtlebot"),
-        probe=ProbeSettings(public_ip_urls=["http://127.0.0.1:9/ip"]),
-        sync=SyncSettings(store="folder", folder=str(folder), interval_s=2), has_sync=True)
-
-
 class Two:
     """A laptop following two peers through a shared folder in tmp_path."""
 
@@ -234,7 +218,7 @@ class Two:
         self.folder = tmp_path / "shared"
         self.folder.mkdir()
         self.config = tmp_path / "config.toml"
-        self.config.write_text(render_settings(two_peer_settings(self.folder)))
+        self.config.write_text(render_settings(folder_sync_settings(self.folder, 2, peers=2)))
         self.hosts = tmp_path / "hosts"
         self.hosts.write_text("127.0.0.1\tlocalhost\n")
         self.state = tmp_path / "state"

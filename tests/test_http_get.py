@@ -1,12 +1,16 @@
-"""probes.http_get on the standard library (issue 14: requests' import cost a tenth of a second of
-every run): answers, redirects, errors in words, bounded time. Real sockets on 127.0.0.1 only."""
+"""probes.http_get on requests (the user's stack; issue 23): answers, redirects, errors in words,
+bounded size and time. requests is imported where a GET is made, never on the start-up path
+(issue 14: its import costs a tenth of a second). Real sockets on 127.0.0.1 only."""
 
 from __future__ import annotations
 
 import asyncio
 import socket
+import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
@@ -116,3 +120,52 @@ def test_refused_and_silent_are_told_apart_within_the_timeout(server):
 def test_not_http_is_refused_in_words():
     a = asyncio.run(http_get("ftp://127.0.0.1/x", 1.0))
     assert not a.ok and "not an http(s) URL" in a.error
+
+
+def loads_requests(argv: list[str]) -> bool:
+    """Whether running rosnet-tui with *argv* (no network: help texts) imports requests."""
+    code = ("import sys\nfrom rosnet_tui.cli import main\n"
+            f"try:\n    main({argv!r})\nexcept SystemExit:\n    pass\n"
+            "print('requests' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    return out.stdout.strip().splitlines()[-1] == "True"
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["check", "--help"]], ids=" ".join)
+def test_help_does_not_import_requests(argv):
+    assert not loads_requests(argv)
+
+
+def test_a_get_imports_requests(server):
+    """The same helper sees the import once a GET is made (so the test above can fail)."""
+    s = server(response("200 OK", b"203.0.113.9"))
+    code = ("import asyncio, sys\nfrom rosnet_tui.core.checks.probes import http_get\n"
+            f"print(asyncio.run(http_get({s.url()!r}, 2.0)).ok, 'requests' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.split() == ["True", "True"], out.stderr
+
+
+def test_the_wizards_first_frame_does_not_import_requests(tmp_path: Path):
+    """The real wizard under a pty: first frame, quit; the modules it loaded are written at exit."""
+    from bench.local_env import base_env
+    from bench.pty_harness import PtyProcess
+
+    mods = tmp_path / "modules.txt"
+    code = ("import atexit, sys\n"
+            f"atexit.register(lambda: open({str(mods)!r}, 'w').write('\\n'.join(sys.modules)))\n"
+            "from rosnet_tui.cli import main\n"
+            f"sys.exit(main(['--config', {str(tmp_path / 'config.toml')!r}]))\n")
+    env = base_env()
+    env.update(HOME=str(tmp_path), XDG_CONFIG_HOME=str(tmp_path / "config"),
+               XDG_STATE_HOME=str(tmp_path / "state"))
+    p = PtyProcess([sys.executable, "-c", code], env, cols=100, rows=30,
+                   cwd=str(Path(__file__).resolve().parents[1]))
+    try:
+        assert p.wait_text("Describe this machine", 30) is not None, p.text_since(0)[-800:]
+        p.wait_quiet(0.4, 10)
+    finally:
+        p.close(quit_keys=b"\x11")
+    loaded = mods.read_text().split()
+    assert "rosnet_tui.ui.app" in loaded  # the wizard did run
+    assert "requests" not in loaded

@@ -13,7 +13,8 @@ from rosnet_tui.core.results import Status
 from rosnet_tui.core.router_card import build_router_card, render_router_card
 from rosnet_tui.core.ssh import SshOptions
 from rosnet_tui.core.steps import STEP_BY_ID, step_for
-from tests.test_router_card import NET, robot
+from tests.builders import ROBOT_NET as NET
+from tests.builders import card_robot as robot
 
 load_builtin_checks()
 

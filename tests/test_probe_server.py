@@ -21,6 +21,7 @@ from rosnet_tui.core.probe_server import (
     caller_address,
     parse_listen,
 )
+from tests.builders import free_port
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -66,12 +67,6 @@ class Listener:
 
     def close(self) -> None:
         self.sock.close()
-
-
-def free_port(host: str = "127.0.0.1") -> int:
-    with socket.socket() as s:
-        s.bind((host, 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture

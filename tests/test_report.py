@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -14,14 +13,8 @@ import pytest
 from rosnet_tui.cli import report
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import render_settings
-from tests.test_advisor import (
-    _chat,
-    _unreachable,
-    healthy_laptop,
-    laptop_settings,
-    put,
-    t1,
-)
+from tests.advisor_support import chat, unreachable
+from tests.builders import free_port, healthy_laptop, laptop_settings, put, t1
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -37,7 +30,7 @@ def rosnet(*args: str, env: dict | None = None, input: str | None = None,
 @pytest.fixture
 def saved(tmp_path):
     """A `check --json` file (with data) of a broken network, and its settings file."""
-    results, settings = _unreachable()
+    results, settings = unreachable()
     put(results, "ros.env", "warn", ros_ip="192.168.1.10")
     chk = tmp_path / "check.json"
     chk.write_text(json.dumps({"checks": [r.to_json() for r in results.values()]}))
@@ -121,7 +114,7 @@ def test_step_filter_and_stdin(saved):
 
 def test_check_json_without_data_still_reports(tmp_path):
     """Older or trimmed `check --json` output (no data keys): results, catch-all advice."""
-    results, _ = _chat(True, False)()
+    results, _ = chat(True, False)()
     entries = []
     for r in results.values():
         e = r.to_json()
@@ -188,16 +181,10 @@ def test_build_report_counts_and_findings():
     assert md.count("[FAIL]") == 3
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_live_report_runs_the_checks(tmp_path):
     """Live: the Router step's checks against loopback only (probes point at a closed port)."""
-    closed = _free_port()
-    test_port = _free_port()
+    closed = free_port()
+    test_port = free_port()
     s = laptop_settings(local_ip="127.0.0.1")
     s.peers[0].ssh_user = ""
     s.probe.port = test_port

@@ -14,27 +14,14 @@ from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks.runner import select
 from rosnet_tui.core.forwarding import ports_to_forward, required_ports
 from rosnet_tui.core.settings import (
-    Peer,
     RosSettings,
-    Settings,
     SettingsError,
-    ThisComponent,
     parse_settings,
     render_settings,
 )
 from rosnet_tui.core.steps import STEP_BY_ID, step_for
-
-
-def member(**ros) -> Settings:
-    return Settings(this=ThisComponent(name="sami", role="member", local_ip="192.168.1.10"),
-                    peers=[Peer(name="turtlebot", public_ip="203.0.113.2", ssh_user="robot")],
-                    ros=RosSettings(master="turtlebot", version=2, **ros))
-
-
-def master(**ros) -> Settings:
-    return Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1"),
-                    peers=[Peer(name="sami", public_ip="198.51.100.2", ssh_user="me")],
-                    ros=RosSettings(master="turtlebot", version=2, **ros))
+from tests.builders import ros2_master as master
+from tests.builders import ros2_member as member
 
 
 # --------------------------------------------------------------------------- settings

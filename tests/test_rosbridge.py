@@ -29,7 +29,7 @@ from rosnet_tui.core.settings import (
 )
 from rosnet_tui.core.steps import STEP_BY_ID, step_for
 from rosnet_tui.core.upnp.forwards import description, needs
-from tests.test_checks_isp import free_port
+from tests.builders import free_port
 
 
 def member(version: int = 1, **bridge) -> Settings:
@@ -274,7 +274,7 @@ def _case(status: str, **d):
     return build
 
 
-# The advisor's rule cases (tests/test_advisor.py runs every rule on its case).
+# The advisor's rule cases (tests/test_advisor_rules.py runs every rule on its case).
 ROSBRIDGE_CASES = {
     "rosbridge.name": _case("fail", failed_hop="name", tcp=None, address=None),
     "rosbridge.forward": _case("fail", failed_hop="forward", tcp="timeout"),

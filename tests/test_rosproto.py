@@ -9,7 +9,6 @@ from __future__ import annotations
 import ast
 import json
 import os
-import signal
 import socket
 import struct
 import subprocess
@@ -17,79 +16,17 @@ import sys
 import threading
 import time
 import xmlrpc.client
-from dataclasses import dataclass
 from pathlib import Path
 from xmlrpc.server import SimpleXMLRPCServer
 
 import pytest
 
 from rosnet_tui.core import rosproto
+from tests.builders import free_port
+from tests.plugins.roscore import ROS_PYTHON, RosCore, kill_group
 
-ROSCORE = Path("/usr/bin/roscore")
-ROS_PYTHON = Path("/usr/bin/python3")
 SOURCE = Path(rosproto.__file__).read_bytes()
 LOOPBACK_ENV = {"ROS_IP": "127.0.0.1"}
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@dataclass
-class RosCore:
-    uri: str
-    port: int
-    env: dict[str, str]
-    home: Path
-
-
-def _kill_group(proc: subprocess.Popen, grace: float = 5.0) -> None:
-    if proc.poll() is not None:
-        return
-    try:
-        os.killpg(proc.pid, signal.SIGINT)
-        proc.wait(grace)
-    except (ProcessLookupError, subprocess.TimeoutExpired):
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.wait(5)
-
-
-@pytest.fixture(scope="session")
-def roscore(tmp_path_factory: pytest.TempPathFactory):
-    """A real roscore on 127.0.0.1:<free port> with its own ROS_HOME; killed at the end."""
-    if not ROSCORE.exists() or not ROS_PYTHON.exists():
-        pytest.skip("roscore is not installed (Debian packages ros-core, python3-rospy)")
-    home = tmp_path_factory.mktemp("roshome")
-    port = free_port()
-    uri = f"http://127.0.0.1:{port}"
-    env = {"PATH": "/usr/bin:/bin", "HOME": str(home), "ROS_HOME": str(home),
-           "ROS_LOG_DIR": str(home / "log"), "ROS_MASTER_URI": uri, "ROS_IP": "127.0.0.1",
-           "LANG": "C.UTF-8"}
-    log = open(home / "roscore.out", "wb")
-    proc = subprocess.Popen([str(ROSCORE), "-p", str(port)], env=env, stdout=log,
-                            stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                            start_new_session=True)
-    try:
-        deadline = time.monotonic() + 30
-        while True:
-            try:
-                rosproto.MasterClient(uri, "/wait", 0.5).get_system_state()
-                break
-            except Exception:
-                if proc.poll() is not None or time.monotonic() > deadline:
-                    log.flush()
-                    pytest.fail("roscore did not come up: "
-                                + (home / "roscore.out").read_text(errors="replace")[-2000:])
-                time.sleep(0.1)
-        yield RosCore(uri, port, env, home)
-    finally:
-        _kill_group(proc)
-        log.close()
 
 
 TALKER = """
@@ -234,7 +171,7 @@ def test_our_subscriber_hears_a_rospy_talker(roscore: RosCore):
     try:
         rep = rosproto.run_subscriber(roscore.uri, topic, 10.0, env=LOOPBACK_ENV)
     finally:
-        _kill_group(talker, 2)
+        kill_group(talker, 2)
     assert rep.ok, rep.evidence()
     assert rep.received == "hello from rospy"
     assert [h.hop for h in rep.hops if h.ok and h.hop != "info"] == list(rosproto.HOPS)
@@ -250,7 +187,7 @@ def test_rostopic_echo_hears_our_publisher(roscore: RosCore):
         try:
             out, err = echo.communicate(timeout=15)
         except subprocess.TimeoutExpired:
-            _kill_group(echo, 1)
+            kill_group(echo, 1)
             out, err = echo.communicate()
         assert pub.wait_served(3.0)
     finally:

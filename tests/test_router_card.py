@@ -15,22 +15,10 @@ import pytest
 
 from rosnet_tui.core.netinfo import LocalNet
 from rosnet_tui.core.router_card import build_router_card, render_router_card
-from rosnet_tui.core.settings import Peer, RosSettings, Settings, ThisComponent
+from tests.builders import ROBOT_NET as NET
+from tests.builders import card_robot as robot
 
 REPO = Path(__file__).resolve().parent.parent
-NET = LocalNet(interface="wlan0", local_ip="10.10.10.1", gateway="10.10.10.254",
-               mac="02:00:0a:0a:0a:01", netmask="255.255.255.0")
-
-
-def robot(connection: str = "telecom", local_ip: str = "10.10.10.1",
-          interface: str = "") -> Settings:
-    return Settings(this=ThisComponent(name="turtlebot", role="master", connection=connection,
-                                       local_ip=local_ip, public_ip="203.0.113.2",
-                                       interface=interface),
-                    peers=[Peer(name="sami", local_ip="192.168.1.10", public_ip="198.51.100.2")],
-                    ros=RosSettings(master="turtlebot"))
-
-
 def test_card_values_forward_range_to_local_ip_and_reserve_it_for_the_mac():
     card = build_router_card(robot(), NET)
     tcp = card.forwards[0]

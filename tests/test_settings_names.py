@@ -6,13 +6,11 @@ from __future__ import annotations
 import pytest
 
 from rosnet_tui.core.settings import (
-    Peer,
-    Settings,
-    ThisComponent,
     shown,
     validate_ip,
     validate_name,
 )
+from tests.builders import named_settings as settings
 
 
 @pytest.mark.parametrize("name", ["localhost", "LocalHost", "ip6-localhost", "ip6-allnodes",
@@ -24,14 +22,6 @@ def test_names_the_hosts_file_gives_this_machine_are_reserved(name):
 @pytest.mark.parametrize("name", ["turtlebot", "sami-laptop", "ip6", "mylocalhost"])
 def test_ordinary_names_pass(name):
     assert validate_name(name) is None
-
-
-def settings(*peers: str) -> Settings:
-    s = Settings()
-    s.this = ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1")
-    s.peers = [Peer(p, "", "198.51.100.2") for p in peers]
-    s.ros.master = "turtlebot"
-    return s
 
 
 def test_names_equal_but_for_case_are_refused():

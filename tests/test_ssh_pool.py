@@ -11,7 +11,8 @@ import pytest
 
 from rosnet_tui.core.ssh import ssh_run
 from rosnet_tui.core.ssh_pool import SshPool
-from tests.test_ssh import Sshd, free_port, ssh_client, sshd  # noqa: F401
+from tests.builders import free_port
+from tests.plugins.ssh import Sshd
 
 
 def logins(d: Sshd) -> int:
@@ -22,7 +23,7 @@ def pooled(client, pool: SshPool, **kw):
     return dataclasses.replace(client.opts(**kw), pool=pool)
 
 
-async def test_concurrent_sessions_share_one_login(ssh_client, sshd):  # noqa: F811
+async def test_concurrent_sessions_share_one_login(ssh_client, sshd):
     pool = SshPool()
     before = logins(sshd)
     opts = pooled(ssh_client, pool)
@@ -39,7 +40,7 @@ async def test_concurrent_sessions_share_one_login(ssh_client, sshd):  # noqa: F
     assert logins(sshd) == before + 1
 
 
-async def test_prestarted_connection_is_used_by_the_round(ssh_client, sshd):  # noqa: F811
+async def test_prestarted_connection_is_used_by_the_round(ssh_client, sshd):
     pool = SshPool()
     before = logins(sshd)
     opts = pooled(ssh_client, pool)
@@ -54,7 +55,7 @@ async def test_prestarted_connection_is_used_by_the_round(ssh_client, sshd):  # 
     assert logins(sshd) == before + 1
 
 
-async def test_sessions_beyond_maxsessions_get_their_own_connection(ssh_client, tmp_path):  # noqa: F811
+async def test_sessions_beyond_maxsessions_get_their_own_connection(ssh_client, tmp_path):
     d = Sshd(tmp_path / "sshd2")
     d.config.write_text(d.config.read_text() + "MaxSessions 2\n")
     d.authorized.write_text(ssh_client.pub + "\n")
@@ -74,7 +75,7 @@ async def test_sessions_beyond_maxsessions_get_their_own_connection(ssh_client, 
         d.stop()
 
 
-async def test_a_refusing_peer_is_one_shared_verdict(ssh_client):  # noqa: F811
+async def test_a_refusing_peer_is_one_shared_verdict(ssh_client):
     pool = SshPool()
     opts = pooled(ssh_client, pool, timeout_s=2.0)
     peer = ssh_client.peer(ssh_port=free_port())          # nothing listens there
@@ -88,7 +89,7 @@ async def test_a_refusing_peer_is_one_shared_verdict(ssh_client):  # noqa: F811
     assert all("it may listen on another port" in r.detail for r in got)
 
 
-async def test_a_peer_that_answered_may_use_the_longer_budget(ssh_client):  # noqa: F811
+async def test_a_peer_that_answered_may_use_the_longer_budget(ssh_client):
     """The TCP connection is made (the kernel accepts), but no SSH banner ever comes: the caller
     waits past its TCP bound, up to its own timeout, and the verdict says it connected."""
     silent = socket.socket()
@@ -108,7 +109,7 @@ async def test_a_peer_that_answered_may_use_the_longer_budget(ssh_client):  # no
     assert 0.5 < took < 2.6, took
 
 
-def test_close_ends_the_connections_and_later_sessions_still_work(ssh_client):  # noqa: F811
+def test_close_ends_the_connections_and_later_sessions_still_work(ssh_client):
     async def go():
         pool = SshPool()
         opts = pooled(ssh_client, pool)
@@ -125,9 +126,9 @@ def test_close_ends_the_connections_and_later_sessions_still_work(ssh_client):  
 
 
 @pytest.mark.parametrize("steps, started", [(None, True), (["isp"], False), (["ros"], True)])
-def test_prestart_ssh_only_when_the_steps_use_the_peers(ssh_client, steps, started):  # noqa: F811
+def test_prestart_ssh_only_when_the_steps_use_the_peers(ssh_client, steps, started):
     from rosnet_tui.core.checks.runner import RunOptions, prestart_ssh
-    from tests.test_ssh import settings_with
+    from tests.builders import settings_with
 
     s = settings_with(ssh_client.peer())
     o = prestart_ssh(s, RunOptions(ssh=ssh_client.opts(), timeout_s=2.0), steps)
@@ -138,7 +139,7 @@ def test_prestart_ssh_only_when_the_steps_use_the_peers(ssh_client, steps, start
         o.ssh_pool.close()
 
 
-async def test_per_peer_work_runs_concurrently_bounded_and_in_order(ssh_client, sshd):  # noqa: F811
+async def test_per_peer_work_runs_concurrently_bounded_and_in_order(ssh_client, sshd):
     """each_peer: every peer at once up to the bound, results in the peers' order; real SSH
     sessions on one shared connection per peer."""
     from rosnet_tui.core.checks.probes import each_peer

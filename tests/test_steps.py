@@ -6,21 +6,8 @@ import re
 
 import pytest
 
-from rosnet_tui.core.settings import Peer, Settings, ThisComponent
 from rosnet_tui.core.steps import STEP_BY_ID, STEPS
-
-
-def settings(role="master", connection="telecom", profile="remote") -> Settings:
-    s = Settings()
-    name = "turtlebot" if role == "master" else "sami"
-    local = "10.10.10.1" if role == "master" else "192.168.1.10"
-    s.this = ThisComponent(name=name, role=role, connection=connection, profile=profile,
-                           local_ip=local)
-    other = Peer("sami", "192.168.1.10", "198.51.100.2", "ops") if role == "master" else \
-        Peer("turtlebot", "10.10.10.1", "203.0.113.2", "root", office_ip="172.16.0.5")
-    s.peers = [other]
-    s.ros.master = "turtlebot"
-    return s
+from tests.builders import seat_settings as settings
 
 
 def test_four_steps_in_procedure_order():

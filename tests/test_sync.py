@@ -16,11 +16,7 @@ import pytest
 
 from rosnet_tui.core.settings import (
     Peer,
-    ProbeSettings,
-    RosSettings,
     Settings,
-    SyncSettings,
-    ThisComponent,
     atomic_write_text,
     load_settings,
     render_settings,
@@ -47,6 +43,7 @@ from rosnet_tui.core.sync.plan import LAN_WHY, check_complete
 from rosnet_tui.core.sync.records import MAX_RECORD_BYTES, format_time
 from rosnet_tui.core.sync.store import StoreConfigError
 from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
+from tests.builders import sync_laptop_settings as laptop_settings
 
 NOW = time.time()
 REPO = Path(__file__).resolve().parents[1]
@@ -231,17 +228,6 @@ def test_backoff_cap_follows_the_interval_within_bounds():
 
 
 # =========================================================================== the plan
-def laptop_settings(**sync) -> Settings:
-    return Settings(
-        this=ThisComponent(name="sami", role="member", profile="remote", local_ip="192.168.1.10",
-                           public_ip="198.51.100.2", interface="eth0"),
-        peers=[Peer(name="turtlebot", local_ip="10.10.10.1", public_ip="203.0.113.2",
-                    ssh_user="root")],
-        ros=RosSettings(master="turtlebot"),
-        probe=ProbeSettings(public_ip_urls=["http://127.0.0.1:9/ip"]),
-        sync=SyncSettings(**sync), has_sync=bool(sync))
-
-
 def test_plan_remote_peer_gets_its_public_ip():
     plan = plan_hosts(laptop_settings(), local_ip="192.168.1.10", public_ip="198.51.100.2",
                       records={"turtlebot": rec(public="203.0.113.7")})

@@ -24,12 +24,7 @@ from typing import Any
 import pytest
 
 from rosnet_tui.core.settings import (
-    Peer,
-    ProbeSettings,
-    RosSettings,
     Settings,
-    SyncSettings,
-    ThisComponent,
     atomic_write_text,
     render_settings,
 )
@@ -38,6 +33,7 @@ from rosnet_tui.core.sync import folder_watch as fw
 from rosnet_tui.core.sync.folder_watch import FolderWatch, WatchUnavailable
 from rosnet_tui.core.sync.service import read_period
 from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
+from tests.builders import folder_sync_settings
 
 REPO = Path(__file__).resolve().parents[1]
 APPLY_S = 0.5          # the issue: applied within 0.5 s of the record appearing complete
@@ -50,17 +46,6 @@ def wait_for(fn: Callable[[], Any], timeout: float, step: float = 0.005) -> Any:
         if got or time.monotonic() >= deadline:
             return got
         time.sleep(step)
-
-
-def settings(folder: Path, interval_s: float = 60) -> Settings:
-    return Settings(
-        this=ThisComponent(name="sami", role="member", profile="remote", local_ip="192.168.1.10",
-                           public_ip="198.51.100.2", interface="eth0"),
-        peers=[Peer(name="turtlebot", local_ip="10.10.10.1", public_ip="203.0.113.2")],
-        ros=RosSettings(master="turtlebot"),
-        probe=ProbeSettings(public_ip_urls=["http://127.0.0.1:9/ip"]),
-        sync=SyncSettings(store="folder", folder=str(folder), interval_s=interval_s),
-        has_sync=True)
 
 
 def hosts_entry(hosts: Path, name: str) -> str | None:
@@ -84,7 +69,7 @@ class Member:
         if make_folder:
             self.folder.mkdir(exist_ok=True)
         self.config = root / "config.toml"
-        self.config.write_text(render_settings(settings(self.folder, interval_s)))
+        self.config.write_text(render_settings(folder_sync_settings(self.folder, interval_s)))
         self.hosts = root / "hosts"
         self.hosts.write_text("127.0.0.1\tlocalhost\n")
         self.state = root / "state"
@@ -321,7 +306,7 @@ def test_the_watch_follows_the_settings_to_another_folder(tmp_path, caplog):
         assert m.follow("203.0.113.10") is not None
         other = tmp_path / "other"
         other.mkdir()
-        m.config.write_text(render_settings(settings(other, 60)))     # the user moves it
+        m.config.write_text(render_settings(folder_sync_settings(other, 60)))     # the user moves it
         assert wait_for(lambda: f"watching the shared folder {other}" in log_text(caplog), 10), \
             log_text(caplog)
         m.robot = FolderStore(other)

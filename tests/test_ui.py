@@ -12,23 +12,15 @@ from textual.widgets import DataTable, Input
 from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.netinfo import LocalNet
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import Peer, Settings, ThisComponent, load_settings
+from rosnet_tui.core.settings import Peer, Settings, load_settings
 from rosnet_tui.core.ssh import SshOptions
 from rosnet_tui.ui.app import AppDeps, RosnetApp
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.widgets import CheckList
+from tests.builders import complete_settings
 
 NET = LocalNet("wlan0", "10.10.10.1", "10.10.10.254", "02:00:00:00:0a:01", "255.255.255.0")
-
-
-def complete_settings() -> Settings:
-    s = Settings()
-    s.this = ThisComponent(name="turtlebot", role="master", connection="telecom",
-                           local_ip="10.10.10.1")
-    s.peers = [Peer("sami", "192.168.1.10", "198.51.100.2", "ops")]
-    s.ros.master = "turtlebot"
-    return s
 
 
 def make_app(tmp_path: Path, settings: Settings | None = None, specs=None, **kw) -> RosnetApp:

@@ -8,7 +8,8 @@ from textual.widgets import Select
 from rosnet_tui.core.checks.runner import select
 from rosnet_tui.core.settings import load_settings
 from rosnet_tui.ui.widgets import CheckList
-from tests.test_ui import complete_settings, make_app
+from tests.builders import complete_settings
+from tests.test_ui import make_app
 
 
 async def test_switching_to_ros2_in_setup_changes_the_ros_step(tmp_path):
@@ -41,11 +42,10 @@ async def test_ros2_fields_in_a_burst_equal_slow_typing(tmp_path):
     """The ROS version picked and the Zenoh fields it reveals typed in one burst (issue 12's
     burst-safe keys): the same screen and saved settings as typed slowly."""
     from tests.test_ui_burst import compare
-    from tests.test_ui_burst import complete_settings as burst_settings
 
     keys = ["tab"] * 6 + ["enter", "up", "enter", "tab", "backspace", "7448", "tab",
                           "backspace", "5", "ctrl+s"]  # a field's text is selected as it is entered
-    state = await compare(tmp_path, burst_settings(), keys, open_setup=True)
+    state = await compare(tmp_path, complete_settings(), keys, open_setup=True)
     assert state["screen"] == "StepScreen", state
     saved = load_settings(tmp_path / "burst" / "config.toml")
     assert (saved.ros.version, saved.ros.zenoh_port, saved.ros.domain_id) == (2, 7448, 5)

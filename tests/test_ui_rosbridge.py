@@ -10,7 +10,8 @@ from textual.widgets import Input, Select
 from rosnet_tui.core.checks.runner import select
 from rosnet_tui.core.settings import RosbridgeSettings, load_settings
 from rosnet_tui.ui.widgets import CheckList
-from tests.test_ui import complete_settings, make_app
+from tests.builders import complete_settings
+from tests.test_ui import make_app
 
 
 def _with_bridge(**kw):

@@ -15,7 +15,8 @@ from rosnet_tui.core.settings import load_settings, save_settings
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.widgets import SHORT_TITLES, TITLE_MAX, CheckList
-from tests.test_ui_burst import complete_settings, key_event, make_app, settle
+from tests.builders import complete_settings
+from tests.test_ui_burst import key_event, make_app, settle
 
 
 async def _long(ctx: CheckContext) -> Outcome:

@@ -20,6 +20,7 @@ from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.session import WizardSession, registry_specs
 from rosnet_tui.core.settings import Settings, default_state_dir
 from rosnet_tui.core.steps import step_for
+from rosnet_tui.ui import textual_compat as tc
 from rosnet_tui.ui.keys import OrderedKeys
 from rosnet_tui.ui.messages import Navigate, SettingsSaved
 from rosnet_tui.ui.step_screen import StepScreen
@@ -59,7 +60,7 @@ class AppDeps:
                              context_factory=self.make_context, detect_net=self.detect_net)
 
 
-class RosnetApp(OrderedKeys, App[int]):
+class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
     CSS_PATH = "app.tcss"
     TITLE = "rosnet-tui"
     ENABLE_COMMAND_PALETTE = False
@@ -92,7 +93,8 @@ class RosnetApp(OrderedKeys, App[int]):
         if self.no_color:  # NO_COLOR: the terminal's own colours only (Textual chose its filter
             from textual.filter import Monochrome, NoColor  # for its default theme: greys)
 
-            self._filters = [NoColor() if isinstance(f, Monochrome) else f for f in self._filters]
+            tc.set_app_filters(self, [NoColor() if isinstance(f, Monochrome) else f
+                                   for f in tc.app_filters(self)])
         if linux_console():
             self.add_class("linux")
             use_console_glyphs()
@@ -177,7 +179,7 @@ class RosnetApp(OrderedKeys, App[int]):
 
     def action_redraw(self) -> None:
         """Ctrl+L: send the whole screen again (after line noise, or a message over it)."""
-        forget = getattr(self._driver, "forget_screen", None)
+        forget = getattr(tc.app_driver(self), "forget_screen", None)
         if forget is not None:
             forget()
         self.refresh(repaint=True, layout=True)
@@ -215,13 +217,13 @@ class RosnetApp(OrderedKeys, App[int]):
         import os
         import termios
 
-        driver = self._driver
+        driver = tc.app_driver(self)
         try:
             os.write(2, b"\x1b[<u\x1b[?1000l\x1b[?1003l\x1b[?1006l\x1b[?2004l\x1b[?7h"
                         b"\x1b[?1049l\x1b[?25h\x1b[m")
-            attrs = getattr(driver, "attrs_before", None)
+            attrs = tc.saved_tty_attrs(driver)
             if attrs is not None:
-                termios.tcsetattr(driver.fileno, termios.TCSANOW, attrs)
+                termios.tcsetattr(tc.driver_fileno(driver), termios.TCSANOW, attrs)
         except (OSError, termios.error, AttributeError):
             pass
         os._exit(code)
@@ -236,9 +238,8 @@ class RosnetApp(OrderedKeys, App[int]):
                 except Exception:  # keeping a draft must never stand in the way of leaving
                     pass
 
-    def _handle_exception(self, error: Exception) -> None:
+    def before_crash(self, error: BaseException) -> None:
         self.keep_state()  # a crash keeps the draft too
-        super()._handle_exception(error)
 
     def action_advisor(self) -> None:
         from rosnet_tui.ui.advisor_screen import AdvisorScreen

@@ -6,8 +6,10 @@ from textual import events
 from textual.reactive import reactive
 from textual.widgets import Input
 
+from rosnet_tui.ui.textual_compat import KeyFirst, own_bindings
 
-class OrderedInput(Input):
+
+class OrderedInput(KeyFirst, Input):
     """An Input whose editing keys (backspace, arrows...) keep their place among typed characters.
 
     Textual runs an Input's bound keys as actions after the event has travelled, while typed
@@ -18,12 +20,12 @@ class OrderedInput(Input):
 
     cursor_blink = reactive(False, init=False)  # a blink costs bytes twice a second, for ever
 
-    async def _on_key(self, event: events.Key) -> None:
+    async def key_first(self, event: events.Key) -> bool:
         if not event.is_printable:
-            for binding in self._merged_bindings.key_to_bindings.get(event.key, []):
+            for binding in own_bindings(self, event.key):
                 if not binding.priority:
                     event.stop()
                     event.prevent_default()
                     await self.run_action(binding.action)
-                    return
-        await super()._on_key(event)
+                    return True
+        return False

@@ -21,7 +21,8 @@ import time
 from collections import deque
 
 from textual import events
-from textual.keys import _character_to_key
+
+from rosnet_tui.ui import textual_compat as tc
 
 # At most this long for the app to settle after a key before the next goes anyway: a key is never
 # held for ever, even if some widget keeps its queue busy.
@@ -29,23 +30,12 @@ SETTLE_LIMIT_S = 2.0
 _POLL_S = 0.002
 
 
-def _pump_idle(pump) -> bool:
-    """True when *pump* (a message pump) has nothing queued and waits for its next message."""
-    queue = pump._message_queue
-    if not queue.empty():
-        return False
-    waiters = getattr(queue.ready_event, "_waiters", None)
-    if waiters is None:  # another asyncio: emptiness is the best we can tell
-        return True
-    return bool(waiters) or pump._closed or pump._closing
-
-
 def split_alt(event: events.Key) -> list[events.Key]:
     """Escape then the key, for an ``alt+`` key event (the caller decides whether it is bound)."""
     char = event.character
     if not event.key.startswith("alt+") or not char or len(char) != 1 or not char.isprintable():
         return [event]
-    key = char if char.isalnum() else _character_to_key(char)
+    key = char if char.isalnum() else tc.character_to_key(char)
     return [events.Key("escape", "\x1b"), events.Key(key, char)]
 
 
@@ -61,18 +51,15 @@ def escape_first_parser():
     is read as '¡', Esc Tab as Shift+Tab, Esc Backspace as Ctrl+W. On a slow link Escape and the
     next key often arrive together, so help stayed open and the key was lost.
     """
-    from textual._xterm_parser import XTermParser
+    def key_events(sequence: str, alt: bool, textual):
+        if (len(sequence) == 2 and sequence[0] == "\x1b"
+                and sequence[1] not in _SEQUENCE_STARTS and sequence[1] != "\x1b"):
+            yield events.Key("escape", "\x1b")
+            yield from textual(sequence[1], False)
+            return
+        yield from textual(sequence, alt)
 
-    class EscapeFirstParser(XTermParser):
-        def _sequence_to_key_events(self, sequence: str, alt: bool = False):
-            if (len(sequence) == 2 and sequence[0] == "\x1b"
-                    and sequence[1] not in _SEQUENCE_STARTS and sequence[1] != "\x1b"):
-                yield events.Key("escape", "\x1b")
-                yield from super()._sequence_to_key_events(sequence[1])
-                return
-            yield from super()._sequence_to_key_events(sequence, alt)
-
-    return EscapeFirstParser
+    return tc.input_parser_class(key_events, "EscapeFirstParser")
 
 
 class OrderedKeys:
@@ -98,21 +85,21 @@ class OrderedKeys:
             screen = app.screen  # type: ignore[attr-defined]
         except Exception:
             return True
-        if not screen.is_mounted or screen._callbacks:
+        if not screen.is_mounted or tc.callbacks_pending(screen):
             return False
         if inside_app:  # the app is handling the key itself: its queue must be empty
-            if not app._message_queue.empty():  # type: ignore[attr-defined]
+            if not tc.queue_empty(app):
                 return False
-        elif not _pump_idle(app):
+        elif not tc.pump_idle(app):
             return False
         for node in screen.walk_children(with_self=True):
-            if not node.is_mounted or not _pump_idle(node):
+            if not node.is_mounted or not tc.pump_idle(node):
                 return False
         return True
 
     def _is_bound(self, key: str) -> bool:
         try:
-            chain = self.screen._binding_chain  # type: ignore[attr-defined]
+            chain = tc.binding_chain(self.screen)  # type: ignore[attr-defined]
         except Exception:
             return False
         return any(key in bindings.key_to_bindings for _node, bindings in chain)
@@ -137,8 +124,7 @@ class OrderedKeys:
             deadline = time.monotonic() + SETTLE_LIMIT_S
             while not self._settled() and time.monotonic() < deadline:
                 await asyncio.sleep(_POLL_S)
-            app = self  # type: ignore[assignment]
-            if not self._pending_keys or app._exit or app._closing or app._closed:
+            if not self._pending_keys or tc.app_leaving(self):
                 break
             event = self._pending_keys.popleft()
             released = events.Key(event.key, event.character)

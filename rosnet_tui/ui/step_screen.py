@@ -14,6 +14,7 @@ from textual.widgets import Static
 from rosnet_tui.core.session import NOT_RUN, RUNNING, WizardSession
 from rosnet_tui.core.steps import Step, step_for
 from rosnet_tui.ui.messages import Navigate
+from rosnet_tui.ui.textual_compat import installed_screens
 from rosnet_tui.ui.widgets import CheckList, KeyBar, PlainHeader, StepBar
 
 if TYPE_CHECKING:
@@ -179,8 +180,7 @@ class StepScreen(Screen):
     def action_cancel_checks(self) -> None:
         """Cancel the checks running on any step (they may have been started elsewhere)."""
         steps = []
-        for screen in self.app.screen_stack + list(getattr(self.app, "_installed_screens",
-                                                           {}).values()):
+        for screen in self.app.screen_stack + installed_screens(self.app):
             if isinstance(screen, StepScreen) and screen.is_mounted and screen not in steps:
                 if screen.workers.cancel_group(screen, "checks"):
                     steps.append(screen)

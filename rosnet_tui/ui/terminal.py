@@ -406,15 +406,15 @@ def frugal_driver_class():
     import os
 
     from textual import events
-    from textual.drivers import linux_driver
     from textual.drivers.linux_driver import LinuxDriver
 
+    from rosnet_tui.ui import textual_compat as tc
     from rosnet_tui.ui.keys import escape_first_parser
 
-    # The driver builds its parser from this module name when its input thread starts.
-    linux_driver.XTermParser = escape_first_parser()  # type: ignore[misc]
+    # The driver builds its parser when its input thread starts.
+    tc.use_input_parser(escape_first_parser())
 
-    class FrugalDriver(LinuxDriver):
+    class FrugalDriver(tc.DriverHooks, LinuxDriver):
         def __init__(self, *args, **kwargs) -> None:
             super().__init__(*args, **kwargs)
             term = os.environ.get("TERM", "")
@@ -422,7 +422,7 @@ def frugal_driver_class():
 
         def _tty_size(self) -> tuple[int, int]:
             try:
-                size = os.get_terminal_size(self.fileno)
+                size = os.get_terminal_size(tc.driver_fileno(self))
                 return size.columns, size.lines
             except OSError:
                 return self.frugal.cols, self.frugal.rows
@@ -442,17 +442,16 @@ def frugal_driver_class():
             self.frugal.invalidate(*self._tty_size())
             super().start_application_mode()
 
-        def _get_terminal_size(self) -> tuple[int, int]:
+        def size_asked(self) -> None:
             self._forget = True  # asked on every SIGWINCH: the terminal may have redrawn
-            return super()._get_terminal_size()
 
         def process_message(self, message) -> None:
             if isinstance(message, events.Resize):  # in-band resize reports
                 self._forget = True
             super().process_message(message)
 
-        def _enable_mouse_support(self) -> None:
-            if self._mouse:  # clicks (SGR coordinates), no motion reports
+        def enable_mouse(self, wanted: bool) -> None:
+            if wanted:  # clicks (SGR coordinates), no motion reports
                 self.write("\x1b[?1000h\x1b[?1006h")
                 self.flush()
 

@@ -3,7 +3,7 @@
     python -m tests.golden.record            # re-record inputs from the tests, then outputs
     python -m tests.golden.record --outputs  # only recompute outputs from the stored inputs
 
-Recording runs tests/test_advisor.py and tests/test_report.py with ``advise()`` wrapped: every
+Recording runs the advisor tests (TEST_FILES) and tests/test_report.py with ``advise()`` wrapped: every
 call (also in the ``rosnet-tui report`` subprocesses, through a sitecustomize on PYTHONPATH)
 appends its (results, settings, strict) and what it returned to a JSON-lines file. Each distinct
 input becomes one case of tests/golden/advise_inputs.json; the round trip through JSON is
@@ -29,7 +29,10 @@ FINDINGS = HERE / "advise_findings.json"
 IDS = HERE / "rule_ids.txt"
 MARKDOWN = HERE / "TROUBLESHOOTING.md"
 LOG_ENV = "ROSNET_TUI_GOLDEN_LOG"
-TEST_FILES = ("tests/test_advisor.py", "tests/test_report.py", "tests/test_advisor_ros2.py")
+# Every advisor test that calls advise() (the rules' cases run in test_advisor_rules.py).
+TEST_FILES = ("tests/test_advisor_rules.py", "tests/test_advisor_isp.py",
+              "tests/test_advisor_router.py", "tests/test_advisor_linux.py",
+              "tests/test_advisor_ros.py", "tests/test_report.py", "tests/test_advisor_ros2.py")
 
 
 def install() -> None:

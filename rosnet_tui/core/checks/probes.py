@@ -79,76 +79,106 @@ def _short_error(exc: BaseException, connected: bool = False) -> str:
     return text[:160] or type(exc).__name__
 
 
-_TLS: list = []
-
-
-def _tls_context():  # -> ssl.SSLContext
-    """The system's trusted CAs (certifi's bundle when the system has none), made once."""
+def _ca_bundle() -> str | bool:
+    """The system's trusted CAs (requests' own bundle, certifi's, when the system has none)."""
     import ssl
 
-    if not _TLS:
-        ctx = ssl.create_default_context()
-        if not ctx.cert_store_stats().get("x509_ca"):
-            with contextlib.suppress(Exception):
-                import certifi
+    paths = ssl.get_default_verify_paths()
+    for path in (paths.cafile, paths.capath):
+        if path and Path(path).exists():
+            return path
+    return True
 
-                ctx = ssl.create_default_context(cafile=certifi.where())
-        _TLS.append(ctx)
-    return _TLS[0]
+
+def _root_cause(exc: BaseException) -> BaseException:
+    """The socket or TLS error inside a requests exception (requests and urllib3 wrap it)."""
+    import ssl
+
+    seen: list[BaseException] = []
+    todo = [exc]
+    while todo:
+        e = todo.pop(0)
+        if e in seen:
+            continue
+        seen.append(e)
+        todo += [x for x in (getattr(e, "reason", None), e.__cause__, e.__context__, *e.args)
+                 if isinstance(x, BaseException)]
+    for kinds in ((ssl.SSLError, ssl.CertificateError), socket.gaierror, ConnectionRefusedError,
+                  OSError):
+        found = [e for e in seen if isinstance(e, kinds) and (kinds is not OSError or e.errno)]
+        if found:
+            return found[-1]
+    return exc
+
+
+def _read_capped(r, deadline: float) -> bytes:
+    """At most MAX_BODY bytes of the body of *r* (streamed), read before *deadline*."""
+    body = b""
+    for chunk in r.iter_content(8192):
+        body += chunk
+        if len(body) >= MAX_BODY or time.monotonic() > deadline:
+            break
+    return body[:MAX_BODY]
+
+
+def _charset(content_type: str | None) -> str:
+    from email.message import Message
+
+    m = Message()
+    m["content-type"] = content_type or "text/plain"
+    return m.get_content_charset() or "utf-8"
 
 
 def _http_get_blocking(url: str, timeout: float) -> HttpAnswer:
-    """GET *url* with the standard library (no proxies from the environment: a proxy would
-    answer with its own address); redirects are followed on the same host only."""
-    import http.client
+    """GET *url* with requests (imported here: never on the start-up path). No proxies from the
+    environment (a proxy would answer with its own address); redirects are followed on the same
+    host only; the body is streamed and capped at MAX_BODY."""
+    import requests
 
     deadline = time.monotonic() + timeout
     current = url
-    for _ in range(4):
-        parts = urlsplit(current)
-        if parts.scheme not in ("http", "https") or not parts.hostname:
-            return HttpAnswer(url, False, None, "", f"not an http(s) URL: {current}")
-        left = max(deadline - time.monotonic(), 0.05)
-        try:
-            port = parts.port
-        except ValueError:
-            return HttpAnswer(url, False, None, "", f"bad port in {current}")
-        conn = (http.client.HTTPSConnection(parts.hostname, port, timeout=left,
-                                            context=_tls_context())
-                if parts.scheme == "https" else
-                http.client.HTTPConnection(parts.hostname, port, timeout=left))
-        path = (parts.path or "/") + (f"?{parts.query}" if parts.query else "")
-        try:
+    with requests.Session() as http:
+        http.trust_env = False
+        for _ in range(4):
+            parts = urlsplit(current)
+            if parts.scheme not in ("http", "https") or not parts.hostname:
+                return HttpAnswer(url, False, None, "", f"not an http(s) URL: {current}")
             try:
-                conn.request("GET", path, headers={
-                    "User-Agent": f"rosnet-tui/{__version__}",
-                    "Accept": "text/plain, application/json;q=0.9, */*;q=0.5"})
-                if conn.sock is not None:
-                    conn.sock.settimeout(max(deadline - time.monotonic(), 0.05))
-                r = conn.getresponse()
-                location = r.getheader("location")
-                if r.status in (301, 302, 303, 307, 308) and location:
-                    nxt = urljoin(current, location)
-                    if urlsplit(nxt).hostname != urlsplit(url).hostname:
-                        return HttpAnswer(url, False, r.status, "",
-                                          f"HTTP {r.status}: redirected to another host ({nxt}); "
-                                          "not followed")
-                    current = nxt
-                    continue
-                body = r.read(MAX_BODY) or b""
-            except (OSError, http.client.HTTPException) as exc:
-                return HttpAnswer(url, False, None, "",
-                                  _short_error(exc, connected=conn.sock is not None))
-            charset = r.headers.get_content_charset() or "utf-8"
+                parts.port  # noqa: B018 (a bad port raises here)
+            except ValueError:
+                return HttpAnswer(url, False, None, "", f"bad port in {current}")
+            left = max(deadline - time.monotonic(), 0.05)
+            try:
+                with http.get(current, timeout=left, stream=True, allow_redirects=False,
+                              verify=_ca_bundle() if parts.scheme == "https" else True,
+                              headers={"User-Agent": f"rosnet-tui/{__version__}",
+                                       "Accept": "text/plain, application/json;q=0.9, */*;q=0.5"}
+                              ) as r:
+                    location = r.headers.get("location")
+                    if r.status_code in (301, 302, 303, 307, 308) and location:
+                        nxt = urljoin(current, location)
+                        if urlsplit(nxt).hostname != urlsplit(url).hostname:
+                            return HttpAnswer(url, False, r.status_code, "",
+                                              f"HTTP {r.status_code}: redirected to another host "
+                                              f"({nxt}); not followed")
+                        current = nxt
+                        continue
+                    body = _read_capped(r, deadline)
+                    status, reason = r.status_code, r.reason
+                    charset = _charset(r.headers.get("content-type"))
+            except requests.RequestException as exc:
+                if isinstance(exc, requests.Timeout):  # connected when the read timed out
+                    words = _short_error(TimeoutError(), isinstance(exc, requests.ReadTimeout))
+                else:
+                    words = _short_error(_root_cause(exc))
+                return HttpAnswer(url, False, None, "", words)
             try:
                 text = body.decode(charset, "replace")
             except LookupError:
                 text = body.decode("utf-8", "replace")
-            if 200 <= r.status < 300:
-                return HttpAnswer(url, True, r.status, text, None)
-            return HttpAnswer(url, False, r.status, text, f"HTTP {r.status} {r.reason or ''}".strip())
-        finally:
-            conn.close()
+            if 200 <= status < 300:
+                return HttpAnswer(url, True, status, text, None)
+            return HttpAnswer(url, False, status, text, f"HTTP {status} {reason or ''}".strip())
     return HttpAnswer(url, False, None, "", "too many redirects")
 
 

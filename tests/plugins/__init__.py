@@ -1,0 +1,1 @@
+"""Fixtures as pytest plugins (listed in tests/conftest.py)."""
