@@ -125,7 +125,7 @@ def test_nothing_installed_skips_naming_the_readme_line_and_never_pip(tmp_path):
                     fingerprint=None)
     why = probes.zenoh_peer_problem(res, Peer(name="turtlebot"), rep)
     assert why is not None and "rosnet-tui is not installed on turtlebot" in why, why
-    assert "`pipx install --force .`" in why and "pip install" not in why.replace("pipx", "")
+    assert f"`{probes.README_INSTALL}`" in why and "pip install" not in why.replace("pipx", "")
     # info needs the standard library only: the peer's python3 answers it
     rep, rc, _ = run(probes.zenoh_peer_command("info", need_zenoh=False), home)
     assert rc == 0 and rep is not None and "env" in rep and rep["python"].startswith("/usr/bin/")
