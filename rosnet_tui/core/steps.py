@@ -296,7 +296,8 @@ def configure_ros2(s: Settings) -> str:
     return "\n\n".join(head)
 
 
-ROS2_CHECK_IDS = ("ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in")
+ROS2_CHECK_IDS = ("ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in",
+                  "security.outsider")
 ROS2_EXPECTED = ("Every component's Zenoh router links to the master's router through its one "
                  "forwarded port; every component's nodes are seen, and each can publish and "
                  "subscribe.")
@@ -317,12 +318,13 @@ STEPS: tuple[Step, ...] = (
          "messages over TCP by name, whichever side starts.",
          configure_linux,
          ("linux.hosts", "linux.resolve", "linux.ping", "linux.ssh", "linux.chat_out",
-          "linux.chat_in")),
+          "linux.chat_in", "security.ssh_auth")),
     Step("ros",
          "Every component registers with the one ROS master, and each can both publish and "
          "subscribe.",
          configure_ros,
-         ("ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in")),
+         ("ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in",
+          "security.outsider")),
 )
 
 STEP_BY_ID = {s.id: s for s in STEPS}
