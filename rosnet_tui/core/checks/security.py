@@ -41,6 +41,15 @@ from rosnet_tui.core.ssh import ssh_run
 SSH_PORT = 22
 
 
+def no_security_setting(s: Settings) -> str | None:
+    """The checks' gate: settings without ``[ros] security`` (a build before issue 22's settings,
+    S1's part) get no security.* checks, so nothing changes for them; every build with the
+    setting runs them (its default is "mtls" or "firewall", "none" keeps the finding)."""
+    if hasattr(s.ros, "security"):
+        return None
+    return "this build's settings have no [ros] security yet"
+
+
 def security_mode(s: Settings) -> str:
     """``[ros] security`` ("mtls", "firewall", "none"); settings without it (before issue 22's
     settings land) behave as "none"."""
@@ -56,7 +65,7 @@ def _public_target(s: Settings) -> str:
 
 # --------------------------------------------------------------------------- security.ssh_auth
 @check("security.ssh_auth", "linux", "SSH offers the internet no password (seen from a peer)",
-       2.0)
+       2.0, gate=no_security_setting)
 async def check_ssh_auth(ctx: CheckContext) -> Outcome:
     s = ctx.settings
     target, user = _public_target(s), getpass.getuser()
@@ -115,7 +124,8 @@ async def check_ssh_auth(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- security.outsider
-@check("security.outsider", "ros", "An outsider is refused; the fleet still gets in", 3.0)
+@check("security.outsider", "ros", "An outsider is refused; the fleet still gets in", 3.0,
+       gate=no_security_setting)
 async def check_outsider(ctx: CheckContext) -> Outcome:
     s = ctx.settings
     data: dict[str, Any] = {"security": security_mode(s), "ros": s.ros.version}
