@@ -200,7 +200,7 @@ def _ros2_verdict(s: Settings, rep: dict[str, Any], data: dict[str, Any]) -> Out
                                "expired": facts.expired}
         ev.append(f"the master's certificate names {', '.join(facts.names) or 'nothing'}; "
                   f"valid until {facts.not_after}")
-    if all(a.get("result") == "closed" for a in (no_cert, attempts["insider"])):
+    if no_cert.get("result") == "closed" and attempts["insider"].get("result") != "accepted":
         data["cause"] = "unreachable"
         return Outcome(Status.FAIL, f"nothing answers at {master}:{port} from "
                                     f"{data.get('from')} (see ros2.router): nothing to judge",
