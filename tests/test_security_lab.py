@@ -102,6 +102,23 @@ def test_ssh_audit_passes_when_sshd_offers_keys_only(lab):
     assert c["duration_s"] < 2 * TIMEOUT + 0.5, took
 
 
+def test_ssh_audit_without_rosnet_tui_on_the_peer_says_so_and_never_uses_its_python3(lab):
+    from tests.lab import readme_install
+
+    lab.reset()
+    _install_on_peers(lab)
+    readme_install.uninstall(lab.home("laptop"))
+    try:
+        res = run_security(lab, "robot", lab.config_path("robot"), "firewall",
+                           "security.ssh_auth")
+        c = res["security.ssh_auth"]
+        assert c["status"] == "warn", c
+        assert "rosnet-tui is not installed on sami" in c["summary"], c
+        assert c["duration_s"] < 2 * TIMEOUT + 0.5, c
+    finally:
+        readme_install.install(lab.home("laptop"))
+
+
 def test_ssh_audit_names_password_login_with_the_fix(lab):
     lab.reset()
     _install_on_peers(lab)

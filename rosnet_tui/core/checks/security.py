@@ -119,8 +119,8 @@ async def check_ssh_auth(ctx: CheckContext) -> Outcome:
         return Outcome(Status.PASS, f"sshd at {target}:{SSH_PORT} offers only "
                                     f"{', '.join(audit.methods) or 'nothing'} (no password, "
                                     "also not to root)", ev, data)
-    data["from"] = ""
-    return Outcome(Status.FAIL, "no peer could run the SSH audit: " + "; ".join(ev), ev, data)
+    data["from"] = ""     # not a finding about sshd: the audit could not run (linux.ssh says why)
+    return Outcome(Status.WARN, "no peer could run the SSH audit: " + "; ".join(ev), ev, data)
 
 
 # --------------------------------------------------------------------------- security.outsider
