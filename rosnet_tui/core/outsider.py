@@ -121,27 +121,38 @@ def attempt(cert=None, key=None, ca=None):
         s.close()
     return out
 
+import threading
 rep = {}
+
+def run(name, *a):
+    try:
+        rep[name] = attempt(*a)
+    except (OSError, ssl.SSLError, ValueError) as e:
+        rep[name] = {"result": "no_fleet_cert" if name == "insider" else "error",
+                     "detail": str(e)[:160]}
+
 tmp = tempfile.mkdtemp(prefix="rosnet-outsider-")
 try:
     os.chmod(tmp, 0o700)
     for name, text in FOREIGN.items():
-        with open(os.path.join(tmp, name), "w") as f:
+        fd = os.open(os.path.join(tmp, name), os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "w") as f:
             f.write(text)
-    rep["no_cert"] = attempt()
-    rep["foreign"] = attempt(os.path.join(tmp, "crt"), os.path.join(tmp, "key"))
+    d = os.path.expanduser(fleet)
+    files = [os.path.join(d, n) for n in ("node.crt", "node.key", "ca.crt")]
+    missing = [f for f in files if not os.path.isfile(f)]
+    if missing:
+        rep["insider"] = {"result": "no_fleet_cert", "detail": "missing: " + ", ".join(missing)}
+    jobs = [("no_cert",), ("foreign", os.path.join(tmp, "crt"), os.path.join(tmp, "key"))]
+    if not missing:
+        jobs.append(("insider", *files))
+    threads = [threading.Thread(target=run, args=j, daemon=True) for j in jobs]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(3 * t + wait + 1)
 finally:
     shutil.rmtree(tmp, ignore_errors=True)
-d = os.path.expanduser(fleet)
-files = [os.path.join(d, n) for n in ("node.crt", "node.key", "ca.crt")]
-missing = [f for f in files if not os.path.isfile(f)]
-if missing:
-    rep["insider"] = {"result": "no_fleet_cert", "detail": "missing: " + ", ".join(missing)}
-else:
-    try:
-        rep["insider"] = attempt(files[0], files[1], files[2])
-    except (OSError, ssl.SSLError) as e:
-        rep["insider"] = {"result": "no_fleet_cert", "detail": str(e)[:160]}
 print(MARK + json.dumps(rep))
 """
 
@@ -242,7 +253,7 @@ def ssh_fix(host_name: str, user: str) -> list[str]:
 def refused(att: dict[str, Any]) -> bool:
     """Whether an outsider attempt got no session (anything but an accepted handshake or a port
     that speaks plain TCP)."""
-    return att.get("result") not in ("accepted", "not_tls")
+    return att.get("result") not in ("accepted", "not_tls", None)   # None: no verdict came
 
 
 def plain_attempt(no_cert: dict[str, Any]) -> dict[str, Any]:
