@@ -226,6 +226,18 @@ def _ros2_verdict(s: Settings, rep: dict[str, Any], data: dict[str, Any]) -> Out
                    ev, data)
 
 
+async def _listens_here(port: int) -> bool:
+    """Whether something accepts TCP on *port* here (loopback)."""
+    try:
+        _r, w = await asyncio.wait_for(asyncio.open_connection("127.0.0.1", port), 0.5)
+    except (OSError, asyncio.TimeoutError):
+        return False
+    w.close()
+    with contextlib.suppress(Exception):
+        await asyncio.wait_for(w.wait_closed(), 0.5)
+    return True
+
+
 _CONNECT = r"""
 import socket, sys
 ip = sys.argv[1]; t = float(sys.argv[2])
@@ -253,18 +265,27 @@ async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
     rng = random.SystemRandom()
     avoid = {s.ros.port, s.probe.port, SSH_PORT}
     spare = next(p for p in iter(lambda: rng.randint(PORT_MIN, PORT_MAX), None) if p not in avoid)
-    ports = ([s.ros.port] if s.is_master else []) + [spare]
-    data["ports"] = ports
-    base = s.probe.port_check_url.rstrip("/")
     ev: list[str] = []
+    ports = [spare]
+    if s.is_master:     # the master's port is judged only when something listens there
+        if await _listens_here(s.ros.port):
+            ports.insert(0, s.ros.port)
+        else:
+            ev.append(f"nothing listens on {s.ros.port} here (see ros.master): not judged")
+    base = s.probe.port_check_url.rstrip("/")
     async with contextlib.AsyncExitStack() as stack:
-        with contextlib.suppress(OSError):
+        try:
             await stack.enter_async_context(ctx.listeners.hold(spare))
-        outs = await asyncio.gather(*(http_get(f"{base}/port/{p}", t * 0.4) for p in ports))
+        except OSError as exc:
+            return Outcome(Status.FAIL, f"cannot listen on port {spare} of the range for the "
+                                        f"test: {exc.strerror or exc}", ev, data)
+        data["ports"] = ports
         cmd = python_command(_CONNECT, target, f"{t * 0.25:.2f}", *map(str, ports))
         peer = peers[0]
-        res = await ssh_run(ctx.ssh, peer, cmd, timeout=t * 0.8, connect_timeout=t * 0.4,
-                            tcp_timeout=ctx.timeout_s)
+        res, *outs = await asyncio.gather(
+            ssh_run(ctx.ssh, peer, cmd, timeout=t * 0.8, connect_timeout=t * 0.4,
+                    tcp_timeout=ctx.timeout_s),
+            *(http_get(f"{base}/port/{p}", t * 0.4) for p in ports))
     data["from"] = peer.name
     outside: dict[str, Any] = {}
     for p, ans in zip(ports, outs, strict=True):
