@@ -260,3 +260,19 @@ def test_settings_without_security_get_no_security_checks():
     assert "security.outsider" not in [c.id for c in checks_for(["ros"], s)]
     assert "security.ssh_auth" not in step_for("linux", s).check_ids
     assert outsider.refused({"result": "alert"}) and not outsider.refused({"result": "not_tls"})
+
+
+def test_a_peers_report_of_any_shape_is_read_without_a_traceback():
+    """Peer output is input: odd shapes give "no methods" or "no verdict", never an exception."""
+    for rep in ({"users": []}, {"users": {"root": []}}, {"users": {"root": {"methods": 5}}},
+                {}):
+        a = outsider.read_ssh_audit(rep, "root")
+        assert isinstance(a.methods, list)
+    assert outsider.parse_marked("ROSNET_OUTSIDER [1, 2]\n", outsider.TLS_MARK) is None
+    assert outsider.parse_marked("ROSNET_OUTSIDER {bad\n", outsider.TLS_MARK) is None
+    s = _settings(7447)
+    from rosnet_tui.core.checks import security
+
+    for rep in ({"no_cert": [], "foreign": "x", "insider": 3}, {}):
+        out = security.ros2_verdict(s, rep, {"from": "here"})
+        assert out.status == "fail"

@@ -207,6 +207,12 @@ def parse_marked(stdout: str, mark: str) -> dict[str, Any] | None:
     return None
 
 
+def as_dict(x: Any) -> dict[str, Any]:
+    """*x* when a peer's report holds a dict there, else an empty one (any shape is refused
+    cleanly, never a traceback)."""
+    return x if isinstance(x, dict) else {}
+
+
 # --------------------------------------------------------------------------- SSH audit verdict
 @dataclass
 class SshAudit:
@@ -228,12 +234,13 @@ class SshAudit:
 
 
 def read_ssh_audit(rep: dict[str, Any], user: str) -> SshAudit:
-    users = rep.get("users") if isinstance(rep.get("users"), dict) else {}
-    mine, root = users.get(user) or {}, users.get("root") or {}
+    users = as_dict(rep.get("users"))
+    mine, root = as_dict(users.get(user)), as_dict(users.get("root"))
     err = mine.get("error") or (root.get("error") if user != "root" else None)
 
     def methods(x: Any) -> list[str]:
-        return [str(m) for m in x.get("methods") or []] if isinstance(x, dict) else []
+        got = x.get("methods")
+        return [str(m) for m in got] if isinstance(got, list) else []
     return SshAudit(methods(mine), methods(root), str(err) if err else None)
 
 

@@ -176,18 +176,20 @@ async def _outsider_ros2(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
         problem = None if rep is not None else f"the probe gave no report ({err or 'no output'})"
     if rep is None:
         return Outcome(Status.FAIL, f"the TLS probe did not run: {problem}", [], data)
-    return _ros2_verdict(s, rep, data)
+    return ros2_verdict(s, rep, data)
 
 
 _ATTEMPT_WORDS = {"no_cert": "without a certificate", "foreign": "with a foreign CA's "
                   "certificate", "plain": "in plain TCP", "insider": "with the fleet certificate"}
 
 
-def _ros2_verdict(s: Settings, rep: dict[str, Any], data: dict[str, Any]) -> Outcome:
+def ros2_verdict(s: Settings, rep: dict[str, Any], data: dict[str, Any]) -> Outcome:
+    """The verdict on the TLS probe's report *rep* (any shape: a peer's output)."""
     master, port = s.master_name, s.ros.zenoh_port
-    no_cert = rep.get("no_cert") or {}
-    attempts = {"no_cert": no_cert, "foreign": rep.get("foreign") or {},
-                "plain": outsider.plain_attempt(no_cert), "insider": rep.get("insider") or {}}
+    no_cert = outsider.as_dict(rep.get("no_cert"))
+    attempts = {"no_cert": no_cert, "foreign": outsider.as_dict(rep.get("foreign")),
+                "plain": outsider.plain_attempt(no_cert),
+                "insider": outsider.as_dict(rep.get("insider"))}
     ev = [f"{data.get('from')}: {_ATTEMPT_WORDS[k]} -> {a.get('result')}"
           + (f" ({a.get('detail')})" if a.get("detail") else "") for k, a in attempts.items()]
     data["attempts"] = {k: {"result": str(a.get("result") or "none"),
