@@ -227,3 +227,13 @@ def test_ros2_default_mtls_refuses_the_outsider(world):
         res = run_security(lab, host, world.config_path(host), "mtls", "security.outsider",
                            env=world.env(host))
         assert res["security.outsider"]["status"] == "pass", explain(res)
+
+
+def test_the_fleet_has_the_outsider_too(fleet):
+    """tests/lab/fleet.py inherits the outsider: on the internet, no peer, every site in reach."""
+    code, text = fleet.http_get("outsider", f"{ADDR.PROBE_URL}/ip")
+    assert code == 200 and text.strip() == ADDR.OUTSIDER_IP
+    assert ADDR.OUTSIDER_IP not in {fleet.public_ip(h) for h in fleet.COMPUTERS}
+    for host in fleet.COMPUTERS:
+        got = outsider.ssh_auth_none(fleet, fleet.public_ip(host))
+        assert got.get("methods") == ["publickey"], (host, got)
