@@ -177,3 +177,24 @@ def test_the_labs_readme_install_runs_from_any_home_even_a_long_one(tmp_path):
     assert readme_install.install(home) == launcher          # installed already: kept
     readme_install.uninstall(home)
     assert not readme_install.installed(home) and not (home / readme_install.VENV).exists()
+
+
+def test_installed_python_command_serves_any_program_with_its_own_mark(tmp_path):
+    """The install prelude, generalised (issue 22: the SSH audit needs the install's paramiko):
+    another program's mark in the no_install report, the installed interpreter otherwise."""
+    no_root_install()
+    home = tmp_path / "home"
+    home.mkdir()
+    cmd = probes.installed_python_command("x", mark="ROSNET_SSHAUDIT ")
+    r = subprocess.run(["/bin/sh", "-c", cmd], input=b"print('ran')", capture_output=True,
+                       timeout=30, env={"HOME": str(home), "PATH": "/usr/bin:/bin",
+                                        "SHELL": "/bin/sh"}, cwd=home)
+    assert r.returncode == probes.NO_INSTALL_EXIT, r
+    assert r.stdout.decode().startswith('ROSNET_SSHAUDIT {"error": "no_install"'), r.stdout
+    v = venv(home / ".local/share/pipx/venvs/rosnet-tui")
+    (home / ".local/bin").mkdir(parents=True)
+    (home / ".local/bin/rosnet-tui").symlink_to(v / "bin" / "rosnet-tui")
+    r = subprocess.run(["/bin/sh", "-c", cmd], input=b"import sys; print(sys.executable)",
+                       capture_output=True, timeout=30, env={"HOME": str(home),
+                                                             "PATH": "/usr/bin:/bin"}, cwd=home)
+    assert r.returncode == 0 and r.stdout.decode().strip() == f"{v}/bin/python", r

@@ -331,11 +331,19 @@ assert tuple(STEP_BY_ID) == STEP_IDS, "the steps are listed in the procedure's o
 
 def step_for(step_id: str, settings: Settings) -> Step:
     """The step as *settings*' ROS version has it (ROS 2: the ros2.* checks and expectation),
-    with ros.rosbridge on the ROS step when [rosbridge] is enabled."""
+    with ros.rosbridge on the ROS step when [rosbridge] is enabled, and the security.* checks
+    when the settings carry [ros] security."""
     step = _step_for_version(step_id, settings)
     if step_id == "ros" and settings.rosbridge.enabled:
         step = replace(step, check_ids=(*step.check_ids, "ros.rosbridge"))
+    extra = SECURITY_CHECK_IDS.get(step_id)
+    if extra and hasattr(settings.ros, "security"):  # issue 22: with [ros] security (S1)
+        step = replace(step, check_ids=(*step.check_ids, extra))
     return step
+
+
+# What a stranger gets (core/checks/security.py), in the step each belongs to.
+SECURITY_CHECK_IDS = {"linux": "security.ssh_auth", "ros": "security.outsider"}
 
 
 def _step_for_version(step_id: str, settings: Settings) -> Step:

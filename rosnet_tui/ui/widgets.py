@@ -186,6 +186,8 @@ SHORT_TITLES = {
     "ros2.pubsub_out": "Publish here, peer hears",
     "ros2.pubsub_in": "Peer publishes, we hear",
     "ros.rosbridge": "Browser path (rosbridge)",
+    "security.ssh_auth": "SSH offers no password",
+    "security.outsider": "Outsider refused",
 }
 TITLE_MAX = 24
 

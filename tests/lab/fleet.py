@@ -106,7 +106,7 @@ class Fleet(Lab):
         self.sites = [site(i) for i in range(sites)]
         self.by_name = {s.name: s for s in self.sites}
         self.COMPUTERS = tuple(s.name for s in self.sites)
-        self.HOSTS = (*self.COMPUTERS, *(s.modem for s in self.sites), "internet")
+        self.HOSTS = (*self.COMPUTERS, *(s.modem for s in self.sites), "internet", "outsider")
         self.ROUTERS = (*(s.modem for s in self.sites), "internet")
         self.forwarding = {s.name: "ros1" for s in self.sites}
         self.slowed: dict[str, str | None] = {}   # host -> its line's rate (set_rate)
@@ -152,7 +152,9 @@ class Fleet(Lab):
             for s in self.sites:
                 lines += [f"addr add {s.upstream}/32 dev {s.wan_if}", f"link set {s.wan_if} up",
                           f"route add {s.public_ip}/32 dev {s.wan_if}"]
-            return lines
+            return lines + topology.outsider_internet_lines()
+        if host == "outsider":
+            return lines + topology.outsider_lines()
         s = next(x for x in self.sites if x.modem == host)
         return lines + [f"addr add {s.gateway}/24 dev lan0", "link set lan0 up",
                         f"addr add {s.public_ip}/32 dev wan0", "link set wan0 up",
@@ -189,6 +191,9 @@ class Fleet(Lab):
                       f"netns {self.ns(s.modem)}",
                       f"link add name wan0 netns {self.ns(s.modem)} type veth peer name "
                       f"{s.wan_if} netns {self.ns('internet')}"]
+        a, ia, b, ib = topology.OUTSIDER_LINK   # a stranger on the internet (issue 22)
+        lines.append(f"link add name {ia} netns {self.ns(a)} type veth peer name {ib} "
+                     f"netns {self.ns(b)}")
         r = subprocess.run(["ip", "-batch", "-"], input="\n".join(lines) + "\n", text=True,
                            capture_output=True, timeout=30)
         self._netns_inodes = [i for i in (procs.netns_inode(self.netns_path(h))

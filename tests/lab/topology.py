@@ -7,7 +7,11 @@ plus the private LANs of the procedure and 100.64.0.0/10 behind the carrier in t
       (turtlebot)                                                   |  internet 203.0.113.1
                                  carrier 203.0.113.3 (cgnat only) --'            198.51.100.1
     laptop 192.168.1.10 - laptop_modem 192.168.1.254 | 198.51.100.2 ---  services 192.0.2.10/.53
-      (sami)
+      (sami)                                                            |
+                                    outsider 192.0.2.66 (no peer) ------'
+
+The outsider is an address on the internet that is no peer (issue 22): what a stranger tries
+against the forwarded ports comes from there (tests/lab/outsider.py).
 
 In the double_nat variant a travel router of the user's own sits between the robot and its modem:
 robot 10.10.10.1 - travel_router 10.10.10.254 | 192.168.0.2 - robot_modem 192.168.0.1 | public.
@@ -41,6 +45,8 @@ class Addresses:
     OUTER_LAN_GW: str = "192.168.0.1"            # the robot modem's LAN side (double_nat)
     TRAVEL_WAN: str = "192.168.0.2"              # the travel router's WAN side (double_nat)
     ROBOT_SSHD_PORT: str = "2222"                # where the robot's sshd listens (sshd_port)
+    OUTSIDER_IP: str = "192.0.2.66"              # a stranger on the internet (no peer)
+    OUTSIDER_GW: str = "192.0.2.65"              # the internet's end of the outsider's link
     PROBE_NAME: str = "probe.lab.test"
     PROBE_URL: str = "http://probe.lab.test"
     PUBLIC_IP_URL: str = "http://probe.lab.test/ip"
@@ -51,11 +57,12 @@ class Addresses:
 
 ADDR = Addresses()
 
-HOSTS = ("robot", "laptop", "robot_modem", "laptop_modem", "internet", "carrier", "travel_router")
+HOSTS = ("robot", "laptop", "robot_modem", "laptop_modem", "internet", "carrier", "travel_router",
+         "outsider")
 COMPUTERS = ("robot", "laptop")          # the hosts with a name, sshd, HOME and ROS
 HOSTNAMES = {"robot": ADDR.ROBOT_NAME, "laptop": ADDR.LAPTOP_NAME, "robot_modem": "robot-modem",
              "laptop_modem": "laptop-modem", "internet": "internet", "carrier": "carrier",
-             "travel_router": "travel-router"}
+             "travel_router": "travel-router", "outsider": "outsider"}
 PEER = {"robot": "laptop", "laptop": "robot"}
 MODEM = {"robot": "robot_modem", "laptop": "laptop_modem"}
 LOCAL_IP = {"robot": ADDR.ROBOT_LOCAL, "laptop": ADDR.LAPTOP_LOCAL}
@@ -74,7 +81,9 @@ LINKS = (
     ("robot_modem", "wan0", "internet", "r-wan"),
     ("laptop_modem", "wan0", "internet", "l-wan"),
     ("carrier", "wan0", "internet", "c-wan"),
+    ("outsider", "eth0", "internet", "o-wan"),
 )
+OUTSIDER_LINK = ("outsider", "eth0", "internet", "o-wan")
 
 ROUTERS = ("robot_modem", "laptop_modem", "internet", "carrier", "travel_router")
 
@@ -99,12 +108,27 @@ def ip_batch(host: str, robot_wan: str = ADDR.ROBOT_PUBLIC) -> list[str]:
                   f"addr add {ADDR.INTERNET_ROBOT_SIDE}/24 dev r-wan", "link set r-wan up",
                   f"addr add {ADDR.INTERNET_LAPTOP_SIDE}/24 dev l-wan", "link set l-wan up",
                   f"addr add {ADDR.INTERNET_ROBOT_SIDE}/32 dev c-wan", "link set c-wan up",
-                  f"route add {ADDR.CARRIER_PUBLIC}/32 dev c-wan"]
+                  f"route add {ADDR.CARRIER_PUBLIC}/32 dev c-wan", *outsider_internet_lines()]
+    elif host == "outsider":
+        lines += outsider_lines()
     elif host == "carrier":
         lines += [f"addr add {ADDR.CARRIER_PUBLIC}/32 dev wan0", "link set wan0 up",
                   f"route add {ADDR.INTERNET_ROBOT_SIDE}/32 dev wan0",
                   f"route add default via {ADDR.INTERNET_ROBOT_SIDE}"]
     return lines
+
+
+def outsider_lines() -> list[str]:
+    """The outsider's own addressing: a point-to-point link to the internet."""
+    return [f"addr add {ADDR.OUTSIDER_IP}/32 dev eth0", "link set eth0 up",
+            f"route add {ADDR.OUTSIDER_GW}/32 dev eth0",
+            f"route add default via {ADDR.OUTSIDER_GW}"]
+
+
+def outsider_internet_lines() -> list[str]:
+    """The internet's end of the outsider's link (``o-wan``)."""
+    return [f"addr add {ADDR.OUTSIDER_GW}/32 dev o-wan", "link set o-wan up",
+            f"route add {ADDR.OUTSIDER_IP}/32 dev o-wan"]
 
 
 def sysctl_script(host: str) -> str:

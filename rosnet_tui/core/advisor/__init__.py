@@ -9,7 +9,8 @@ Where things live:
 - :mod:`.isp`, :mod:`.router`, :mod:`.linux`, :mod:`.ros` (:mod:`.ros2` for ROS 2, :mod:`.rosbridge`
   for web clients): the rules, one module per step,
   named like the checks whose data they read (Table 1 and security.exposed are the router's;
-  :mod:`.router_upnp` reads router.upnp, the modem's own word);
+  :mod:`.router_upnp` reads router.upnp, the modem's own word; :mod:`.security` reads
+  security.ssh_auth and security.outsider, what a stranger gets);
 - :mod:`.order`: :data:`RULE_ORDER`, the one list that orders findings, docs and ``--ids``;
 - :mod:`.docs`: docs/TROUBLESHOOTING.md (:func:`render_rules_markdown`);
 - ``__main__``: ``python -m rosnet_tui.core.advisor [--markdown | --ids]``.
@@ -19,7 +20,7 @@ The TUI's Advisor pane, ``rosnet-tui check``/``report`` and the docs all read th
 
 from __future__ import annotations
 
-from rosnet_tui.core.advisor import isp, linux, ros, ros2, rosbridge, router, router_upnp  # noqa: F401, E501  (declare the rules)
+from rosnet_tui.core.advisor import isp, linux, ros, ros2, rosbridge, router, router_upnp, security  # noqa: F401, E501  (declare the rules)
 from rosnet_tui.core.advisor.docs import render_rules_markdown
 from rosnet_tui.core.advisor.engine import (
     CATCH_ALL_IDS,

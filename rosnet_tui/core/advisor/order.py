@@ -87,6 +87,17 @@ RULE_ORDER: tuple[str, ...] = (
     "rosbridge.upgrade",
     "rosbridge.rosapi",
     "rosbridge.round_trip",
+    # security, what a stranger gets (issue 22): SSH (Linux step), the outsider (ROS step)
+    "security.ssh.password",
+    "security.ssh.root_password",
+    "security.outsider.off",
+    "security.outsider.plain",
+    "security.outsider.foreign_ca",
+    "security.outsider.expired",
+    "security.outsider.wrong_name",
+    "security.outsider.no_fleet_cert",
+    "security.outsider.firewall_missing",
+    "security.outsider.insider_blocked",
     # security (step 2: what the forwarding exposes)
     "security.zenoh_exposed",
     "security.rosbridge_exposed",

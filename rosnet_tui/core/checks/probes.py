@@ -314,19 +314,30 @@ done
                      2>/dev/null | tail -n 1) && L "$b"; }
 [ -n "$py" ] && exec "$py" - "$@"
 [ -n "$FALLBACK" ] && exec python3 -S - "$@"
-echo "ROSNET_ZENOH {\"error\": \"no_install\", \"detail\": \"no rosnet-tui installed\"}"
+echo "$MARK{\"error\": \"no_install\", \"detail\": \"no rosnet-tui installed\"}"
 exit @EXIT@
 """.replace("@EXIT@", str(NO_INSTALL_EXIT))
 
 
+def installed_python_command(*args: str, mark: str, fallback: bool = False) -> str:
+    """The command running a program fed on stdin on a peer with the interpreter of the
+    rosnet-tui installed there (its packages: eclipse-zenoh, paramiko, cryptography), found by
+    _FIND_INSTALL; one SSH round trip. Without an installation it prints ``<mark>{"error":
+    "no_install", ...}`` and exits NO_INSTALL_EXIT, unless *fallback* (a program that also runs
+    on the standard library alone: the peer's python3 runs it then). Run by ``sh -c``, so the
+    peer's login shell may be any shell. Never the peer's python3 for a program that needs the
+    install's packages."""
+    script = ("MARK=" + shq(mark) + "\n" + ("FALLBACK=1" if fallback else "") + _FIND_INSTALL)
+    return "sh -c " + shq(script) + " rosnet-tui-peer " + " ".join(shq(a) for a in args)
+
+
 def zenoh_peer_command(*args: str, need_zenoh: bool = True) -> str:
     """The command running the Zenoh peer program (core/zenohproto.py, fed on stdin) on a peer
-    with the interpreter of the rosnet-tui installed there, found by _FIND_INSTALL; one SSH round
-    trip. Without an installation it prints a ``no_install`` report and exits NO_INSTALL_EXIT,
-    unless not *need_zenoh* (``info`` needs only the standard library: the peer's python3 runs it
-    then). Run by ``sh -c``, so the peer's login shell may be any shell."""
-    script = _FIND_INSTALL if need_zenoh else "FALLBACK=1" + _FIND_INSTALL
-    return "sh -c " + shq(script) + " rosnet-tui-peer " + " ".join(shq(a) for a in args)
+    with the interpreter of the rosnet-tui installed there (:func:`installed_python_command`).
+    Without an installation it prints a ``no_install`` report and exits NO_INSTALL_EXIT, unless
+    not *need_zenoh* (``info`` needs only the standard library: the peer's python3 runs it
+    then)."""
+    return installed_python_command(*args, mark=zenohproto.REPORT_MARK, fallback=not need_zenoh)
 
 
 def peer_program_problem(res: SshResult, peer: Peer) -> str | None:

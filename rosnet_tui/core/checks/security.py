@@ -1,0 +1,323 @@
+"""security.*: what a stranger on the internet gets from this component (issue 22).
+
+- ``security.ssh_auth`` (Linux step): a peer asks this component's sshd, at its public address
+  and without logging in, which authentication methods it offers (``auth_none``); password or
+  keyboard-interactive is a finding with the fix, and so is a password offered to root.
+- ``security.outsider`` (ROS step): ROS 2: from a seat that is not the master (a member; the
+  master runs it on a member over SSH), a TLS probe at the master's Zenoh port with no client
+  certificate, with a foreign one and (read from the same answer) in plain TCP must all be
+  refused, and the seat's fleet certificate must get in. ROS 1: the configured echoip-style
+  port checker (not a peer) must find the master's port and a port of the range closed, and a
+  peer must still connect to both.
+The programs and their reading are in core/outsider.py.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import getpass
+import random
+import sys
+from typing import Any
+
+from rosnet_tui.core import outsider
+from rosnet_tui.core.checks import CheckContext, check
+from rosnet_tui.core.checks.probes import (
+    budget,
+    each_peer,
+    http_get,
+    installed_python_command,
+    peer_program_problem,
+    python_command,
+    ssh_peers,
+    stderr_tail,
+)
+from rosnet_tui.core.jsonsafe import loads_bounded
+from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
+from rosnet_tui.core.ssh import ssh_run
+
+SSH_PORT = 22
+
+
+def no_security_setting(s: Settings) -> str | None:
+    """The checks' gate: settings without ``[ros] security`` (a build before issue 22's settings,
+    S1's part) get no security.* checks, so nothing changes for them; every build with the
+    setting runs them (its default is "mtls" or "firewall", "none" keeps the finding)."""
+    if hasattr(s.ros, "security"):
+        return None
+    return "this build's settings have no [ros] security yet"
+
+
+def security_mode(s: Settings) -> str:
+    """``[ros] security`` ("mtls", "firewall", "none"); settings without it (before issue 22's
+    settings land) behave as "none"."""
+    return str(getattr(s.ros, "security", "none") or "none")
+
+
+def _public_target(s: Settings) -> str:
+    """Where the internet reaches this component: its public IP (a LAN profile: its name)."""
+    if s.this.profile == "remote" and s.this.public_ip:
+        return s.this.public_ip
+    return s.this.name
+
+
+# --------------------------------------------------------------------------- security.ssh_auth
+@check("security.ssh_auth", "linux", "SSH offers the internet no password (seen from a peer)",
+       2.0, gate=no_security_setting)
+async def check_ssh_auth(ctx: CheckContext) -> Outcome:
+    s = ctx.settings
+    target, user = _public_target(s), getpass.getuser()
+    data: dict[str, Any] = {"target": target, "port": SSH_PORT, "user": user}
+    peers = ssh_peers(s)
+    if not target:
+        return Outcome(Status.SKIP, "skipped: the settings give this component no public IP "
+                                    "or name to test", [], data)
+    if not peers:
+        return Outcome(Status.SKIP, "skipped: no peer has an SSH user in the settings "
+                                    "(peer.ssh_user), so nobody outside can look at our sshd",
+                       [], data)
+    t = budget(ctx, "security.ssh_auth")
+    users = [user] if user == "root" else [user, "root"]
+    cmd = installed_python_command(target, str(SSH_PORT), f"{t * 0.3:.1f}", *users,
+                                   mark=outsider.SSH_MARK)
+    got = await each_peer(peers[:2], lambda p: ssh_run(
+        ctx.ssh, p, cmd, stdin=outsider.SSH_AUDIT_PROGRAM, timeout=t * 0.9,
+        connect_timeout=t * 0.4, tcp_timeout=ctx.timeout_s))
+    ev: list[str] = []
+    for p, res in zip(peers[:2], got, strict=True):
+        rep = outsider.parse_marked(res.stdout, outsider.SSH_MARK)
+        if rep is None or rep.get("error"):
+            why = peer_program_problem(res, p) or (
+                f"rosnet-tui is not installed on {p.name} (the audit needs its paramiko)"
+                if rep and rep.get("error") == "no_install" else
+                f"the audit on {p.name} gave no report ({stderr_tail(res) or res.detail})")
+            ev.append(why)
+            continue
+        audit = outsider.read_ssh_audit(rep, user)
+        data.update({"from": p.name, "methods": audit.methods, "root_methods": audit.root_methods,
+                     "password": audit.password,
+                     "keyboard_interactive": audit.keyboard_interactive,
+                     "root_password": audit.root_password})
+        if audit.error and not audit.methods:
+            data["error"] = audit.error
+            return Outcome(Status.FAIL, f"{p.name} could not read what sshd at {target}:"
+                                        f"{SSH_PORT} offers: {audit.error}", ev, data)
+        ev.append(f"{p.name} -> {target}:{SSH_PORT} ({rep.get('banner') or 'sshd'}): "
+                  f"auth_none({user}) offers {', '.join(audit.methods) or 'nothing'}; "
+                  f"auth_none(root) offers {', '.join(audit.root_methods) or 'nothing'}")
+        bad = [m for m in audit.methods if m in outsider.PASSWORD_METHODS or m == "none"]
+        if bad:
+            return Outcome(Status.FAIL, f"sshd at {target}:{SSH_PORT} offers the internet "
+                                        f"{' and '.join(bad)}: anyone can try passwords",
+                           ev + outsider.ssh_fix(s.this.name or target, user), data)
+        if audit.root_password:
+            return Outcome(Status.FAIL, f"sshd at {target}:{SSH_PORT} offers root a password "
+                                        "(methods offered for the user root)",
+                           ev + outsider.ssh_fix(s.this.name or target, user), data)
+        return Outcome(Status.PASS, f"sshd at {target}:{SSH_PORT} offers only "
+                                    f"{', '.join(audit.methods) or 'nothing'} (no password, "
+                                    "also not to root)", ev, data)
+    data["from"] = ""     # not a finding about sshd: the audit could not run (linux.ssh says why)
+    return Outcome(Status.WARN, "no peer could run the SSH audit: " + "; ".join(ev), ev, data)
+
+
+# --------------------------------------------------------------------------- security.outsider
+@check("security.outsider", "ros", "An outsider is refused; the fleet still gets in", 3.0,
+       gate=no_security_setting)
+async def check_outsider(ctx: CheckContext) -> Outcome:
+    s = ctx.settings
+    data: dict[str, Any] = {"security": security_mode(s), "ros": s.ros.version}
+    if s.ros.version == 2:
+        return await _outsider_ros2(ctx, data)
+    return await _outsider_ros1(ctx, data)
+
+
+async def _run_here(program: bytes, args: list[str], timeout: float) -> tuple[str, str]:
+    """Run a probe program here (stdin), as a peer would: (stdout, why not)."""
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-", *args, stdin=asyncio.subprocess.PIPE,
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+    try:
+        out, err = await asyncio.wait_for(proc.communicate(program), timeout)
+    except asyncio.TimeoutError:
+        with contextlib.suppress(ProcessLookupError):
+            proc.kill()
+        await proc.wait()
+        return "", f"the probe gave no verdict within {timeout:.1f} s"
+    return out.decode(errors="replace"), err.decode(errors="replace").strip()[-200:]
+
+
+async def _outsider_ros2(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
+    s = ctx.settings
+    master, port = s.master_name, s.ros.zenoh_port
+    t = budget(ctx, "security.outsider")
+    data["target"] = f"{master}:{port}"
+    args = [master, str(port), f"{min(2.0, t * 0.2):.1f}", outsider.FLEET_TLS_DIR]
+    program = outsider.tls_probe_program()
+    if s.is_master:
+        members = [p for p in ssh_peers(s) if p.name != master]
+        if not members:
+            return Outcome(Status.SKIP, "skipped: no member has an SSH user in the settings, so "
+                                        "the master cannot be tested from outside it", [], data)
+        peer = members[0]
+        data["from"] = peer.name
+        res = await ssh_run(ctx.ssh, peer, installed_python_command(
+            *args, mark=outsider.TLS_MARK, fallback=True), stdin=program, timeout=t * 0.9,
+            connect_timeout=t * 0.4, tcp_timeout=ctx.timeout_s)
+        rep = outsider.parse_marked(res.stdout, outsider.TLS_MARK)
+        problem = None if rep is not None else (peer_program_problem(res, peer) or
+                                                f"no report ({stderr_tail(res) or res.detail})")
+    else:
+        data["from"] = "here"
+        out, err = await _run_here(program, args, t * 0.9)
+        rep = outsider.parse_marked(out, outsider.TLS_MARK)
+        problem = None if rep is not None else f"the probe gave no report ({err or 'no output'})"
+    if rep is None:
+        return Outcome(Status.FAIL, f"the TLS probe did not run: {problem}", [], data)
+    return ros2_verdict(s, rep, data)
+
+
+_ATTEMPT_WORDS = {"no_cert": "without a certificate", "foreign": "with a foreign CA's "
+                  "certificate", "plain": "in plain TCP", "insider": "with the fleet certificate"}
+
+
+def ros2_verdict(s: Settings, rep: dict[str, Any], data: dict[str, Any]) -> Outcome:
+    """The verdict on the TLS probe's report *rep* (any shape: a peer's output)."""
+    master, port = s.master_name, s.ros.zenoh_port
+    no_cert = outsider.as_dict(rep.get("no_cert"))
+    attempts = {"no_cert": no_cert, "foreign": outsider.as_dict(rep.get("foreign")),
+                "plain": outsider.plain_attempt(no_cert),
+                "insider": outsider.as_dict(rep.get("insider"))}
+    ev = [f"{data.get('from')}: {_ATTEMPT_WORDS[k]} -> {a.get('result')}"
+          + (f" ({a.get('detail')})" if a.get("detail") else "") for k, a in attempts.items()]
+    data["attempts"] = {k: {"result": str(a.get("result") or "none"),
+                            "detail": str(a.get("detail") or "")} for k, a in attempts.items()}
+    let_in = [k for k in ("no_cert", "foreign", "plain") if not outsider.refused(attempts[k])]
+    cert_b64 = next((a.get("server_cert") for a in attempts.values() if a.get("server_cert")), "")
+    facts = outsider.cert_facts(cert_b64) if cert_b64 else None
+    if facts is not None:
+        data["master_cert"] = {"names": facts.names, "not_after": facts.not_after,
+                               "expired": facts.expired}
+        ev.append(f"the master's certificate names {', '.join(facts.names) or 'nothing'}; "
+                  f"valid until {facts.not_after}")
+    if no_cert.get("result") == "closed" and attempts["insider"].get("result") != "accepted":
+        data["cause"] = "unreachable"
+        return Outcome(Status.FAIL, f"nothing answers at {master}:{port} from "
+                                    f"{data.get('from')} (see ros2.router): nothing to judge",
+                       ev, data)
+    insider_cause = outsider.insider_cause(attempts["insider"])
+    if facts is not None and master not in facts.names and insider_cause in (None, "refused"):
+        insider_cause = "wrong_name"
+    if let_in:
+        mode = security_mode(s)
+        data["cause"] = ("security_off" if mode == "none" else
+                         "plain_open" if "plain" in let_in else "no_mtls")
+        words = ", ".join(_ATTEMPT_WORDS[k] for k in let_in)
+        return Outcome(Status.FAIL, f"an outsider gets a Zenoh session at {master}:{port} "
+                                    f"({words})", ev, data)
+    if insider_cause:
+        data["cause"] = insider_cause
+        return Outcome(Status.FAIL, f"outsiders are refused at {master}:{port}, but so is the "
+                                    f"fleet certificate from {data.get('from')} "
+                                    f"({insider_cause.replace('_', ' ')})", ev, data)
+    data["cause"] = None
+    return Outcome(Status.PASS, f"{master}:{port} refuses a session without a certificate, with "
+                                "a foreign one and in plain TCP; the fleet certificate gets in",
+                   ev, data)
+
+
+async def _listens_here(port: int) -> bool:
+    """Whether something accepts TCP on *port* here (loopback)."""
+    try:
+        _r, w = await asyncio.wait_for(asyncio.open_connection("127.0.0.1", port), 0.5)
+    except (OSError, asyncio.TimeoutError):
+        return False
+    w.close()
+    with contextlib.suppress(Exception):
+        await asyncio.wait_for(w.wait_closed(), 0.5)
+    return True
+
+
+_CONNECT = r"""
+import socket, sys
+ip = sys.argv[1]; t = float(sys.argv[2])
+for p in sys.argv[3:]:
+    try:
+        socket.create_connection((ip, int(p)), timeout=t).close(); print("OPEN %s" % p)
+    except Exception as e:
+        print("SHUT %s %s" % (p, e))
+"""
+
+
+async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
+    s = ctx.settings
+    if s.this.profile != "remote":
+        return Outcome(Status.SKIP, "skipped: on a LAN profile nothing is forwarded from the "
+                                    "internet", [], data)
+    target = s.this.public_ip
+    peers = ssh_peers(s)
+    data["target"] = target
+    if not target or not peers:
+        why = "no public IP in the settings" if not target else "no peer has an SSH user"
+        return Outcome(Status.SKIP, f"skipped: {why}, so no outsider/insider pair can be made",
+                       [], data)
+    t = budget(ctx, "security.outsider")
+    rng = random.SystemRandom()
+    avoid = {s.ros.port, s.probe.port, SSH_PORT}
+    spare = next(p for p in iter(lambda: rng.randint(PORT_MIN, PORT_MAX), None) if p not in avoid)
+    ev: list[str] = []
+    ports = [spare]
+    if s.is_master:     # the master's port is judged only when something listens there
+        if await _listens_here(s.ros.port):
+            ports.insert(0, s.ros.port)
+        else:
+            ev.append(f"nothing listens on {s.ros.port} here (see ros.master): not judged")
+    base = s.probe.port_check_url.rstrip("/")
+    async with contextlib.AsyncExitStack() as stack:
+        try:
+            await stack.enter_async_context(ctx.listeners.hold(spare))
+        except OSError as exc:
+            return Outcome(Status.FAIL, f"cannot listen on port {spare} of the range for the "
+                                        f"test: {exc.strerror or exc}", ev, data)
+        data["ports"] = ports
+        cmd = python_command(_CONNECT, target, f"{t * 0.25:.2f}", *map(str, ports))
+        peer = peers[0]
+        res, *outs = await asyncio.gather(
+            ssh_run(ctx.ssh, peer, cmd, timeout=t * 0.8, connect_timeout=t * 0.4,
+                    tcp_timeout=ctx.timeout_s),
+            *(http_get(f"{base}/port/{p}", t * 0.4) for p in ports))
+    data["from"] = peer.name
+    outside: dict[str, Any] = {}
+    for p, ans in zip(ports, outs, strict=True):
+        reach = None
+        if ans.ok:
+            with contextlib.suppress(ValueError, AttributeError):
+                reach = loads_bounded(ans.text, unique_keys=False).get("reachable")
+        outside[str(p)] = reach if isinstance(reach, bool) else None
+        ev.append(f"outsider {base}: port {p} -> "
+                  + ({True: "reachable", False: "closed"}.get(reach, ans.describe())))
+    inside = {str(p): f"OPEN {p}" in res.stdout for p in ports}
+    ev.append(f"insider {peer.name} -> {target}: " + ", ".join(
+        f"{p} {'open' if ok else 'closed'}" for p, ok in inside.items()))
+    data["outsider_reachable"] = outside
+    data["insider_reachable"] = inside
+    if not res.ok:
+        ev.append(f"SSH to {peer.name} failed ({res.failure}): {res.detail}")
+    if any(v is None for v in outside.values()):
+        data["cause"] = "checker_unavailable"
+        return Outcome(Status.FAIL, f"the port checker ({base}) gave no verdict: the outsider's "
+                                    "view is unknown", ev, data)
+    if any(outside.values()):
+        data["cause"] = "security_off" if security_mode(s) == "none" else "firewall_missing"
+        open_ = [p for p, v in outside.items() if v]
+        return Outcome(Status.FAIL, f"an outsider ({base}) reaches port "
+                                    f"{', '.join(open_)} of {target}", ev, data)
+    if not all(inside.values()):
+        data["cause"] = "insider_blocked"
+        return Outcome(Status.FAIL, f"outsiders are refused, but {peer.name} cannot connect "
+                                    "either", ev, data)
+    data["cause"] = None
+    return Outcome(Status.PASS, f"{target} refuses an outsider on {', '.join(map(str, ports))}; "
+                                f"{peer.name} gets through", ev, data)
