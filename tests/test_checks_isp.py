@@ -20,7 +20,7 @@ from rosnet_tui.core.checks.probes import parse_ip
 from rosnet_tui.core.probe_server import ProbeServer
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import ProbeSettings, Settings, ThisComponent
-from rosnet_tui.core.ssh import SshOptions
+from rosnet_tui.core.ssh.options import SshOptions
 from rosnet_tui.core.state import public_ip_history, record_public_ip
 
 load_builtin_checks()

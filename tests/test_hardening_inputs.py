@@ -247,7 +247,8 @@ def test_more_files_that_are_fifos_do_not_hang(tmp_path, which):
         box = _returns_within(lambda: ros_env({}, str(fifo)), fifo)
         assert box == {"value": {}}
     else:
-        from rosnet_tui.core.ssh import SshOptions, trust_host_key
+        from rosnet_tui.core.ssh.known_hosts import trust_host_key
+        from rosnet_tui.core.ssh.options import SshOptions
 
         key = "ssh-ed25519 AAAAC3NzaC1lZDI1NTE5AAAAIEdz0LdBvGAIK3wAmPBkH3TkjCFRCe7Ddm6yZ8pHsH4j"
         opts = SshOptions(ssh_dir=str(tmp_path), known_hosts_files=[str(fifo)])

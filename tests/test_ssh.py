@@ -21,15 +21,10 @@ import pytest
 
 from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.settings import Peer, Settings, ThisComponent
-from rosnet_tui.core.ssh import (
-    SshOptions,
-    SshResult,
-    host_key_name,
-    run_blocking,
-    ssh_run,
-    ssh_session,
-    trust_host_key,
-)
+from rosnet_tui.core.ssh.connection import SshResult, run_blocking
+from rosnet_tui.core.ssh.known_hosts import host_key_name, trust_host_key
+from rosnet_tui.core.ssh.options import SshOptions
+from rosnet_tui.core.ssh.session import ssh_run, ssh_session
 
 SSHD = shutil.which("sshd") or "/usr/sbin/sshd"
 pytestmark = pytest.mark.skipif(not os.path.exists(SSHD) or not shutil.which("ssh-keygen"),

@@ -9,8 +9,8 @@ import time
 
 import pytest
 
-from rosnet_tui.core.ssh import ssh_run
-from rosnet_tui.core.ssh_pool import SshPool
+from rosnet_tui.core.ssh.pool import SshPool
+from rosnet_tui.core.ssh.session import ssh_run
 from tests.test_ssh import Sshd, free_port, ssh_client, sshd  # noqa: F401
 
 

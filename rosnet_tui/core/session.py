@@ -234,7 +234,7 @@ class WizardSession:
         return write_plan(step_id, self.runtime_settings(), self.write_paths())
 
     def trust_host_key(self, name: str, port: int, host_key: str) -> Path:
-        from rosnet_tui.core.ssh import trust_host_key
+        from rosnet_tui.core.ssh.known_hosts import trust_host_key
 
         return trust_host_key(self.make_context().ssh, name, port, host_key)
 
