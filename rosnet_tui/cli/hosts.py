@@ -20,6 +20,8 @@ from rosnet_tui.cli import (
     load_settings_or_say,
 )
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
+from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import (
     DEFAULT_HOSTS_PATH,
@@ -112,7 +114,7 @@ def add_writer_options(p: argparse.ArgumentParser, *, file_help: str) -> None:
                    help="do not re-run the affected checks after writing")
 
 
-def print_changes(changes: Iterable[mf.LineChange]) -> None:
+def print_changes(changes: Iterable[mt.LineChange]) -> None:
     for c in changes:
         print(f"  line {c.lineno}: {c.old.strip()}")
         print(f"    why: {c.why}")
@@ -169,10 +171,10 @@ def write_preview(args: argparse.Namespace, preview: mf.Preview, sudo_cmd: list[
         return run_as_root(sudo_cmd, f"writing {preview.path}", "write")
     try:
         result = mf.apply_preview(preview, state_dir=state_dir_of(args))
-    except mf.StalePreviewError as exc:
+    except mt.StalePreviewError as exc:
         err(f"rosnet-tui: {exc}")
         return EXIT_FAIL
-    except mf.ManagedFileError as exc:
+    except mt.ManagedFileError as exc:
         err(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     if result.changed:
@@ -257,10 +259,10 @@ def _decide_conflicts(args: argparse.Namespace, settings: Settings, profile: str
     if args.yes or args.dry_run or not interactive():
         return False
     try:
-        old = mf.read_bytes(path, state_dir=state_dir_of(args))
-        conflicts = find_hosts_conflicts(mf.decode(old) if old is not None else None,
+        old = mw.read_bytes(path, state_dir=state_dir_of(args))
+        conflicts = find_hosts_conflicts(mt.decode(old) if old is not None else None,
                                          settings, profile)
-    except mf.ManagedFileError:
+    except mt.ManagedFileError:
         return False
     if not conflicts:
         return False
@@ -281,7 +283,7 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
                                 state_dir=state_dir_of(args))
     except WriterSettingsError as exc:
         return report_settings_problems(exc), settings
-    except mf.ManagedFileError as exc:
+    except mt.ManagedFileError as exc:
         err(f"rosnet-tui: {exc}")
         return EXIT_FAIL, settings
     if args.expect_digest and preview.digest != args.expect_digest:
@@ -355,10 +357,10 @@ def run_show(args: argparse.Namespace) -> int:
     sys.stdout.write(block)
     try:
         preview = preview_hosts(settings, profile, path, state_dir=state_dir_of(args))
-    except mf.ManagedFileError as exc:
+    except mt.ManagedFileError as exc:
         print(f"\n{path}: {exc}")
         return EXIT_OK
-    text = mf.decode(preview.old) if preview.old is not None else None
+    text = mt.decode(preview.old) if preview.old is not None else None
     now = active_profile(text)
     print()
     if preview.old is None:

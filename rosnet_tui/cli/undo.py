@@ -17,6 +17,7 @@ from rosnet_tui.cli.hosts import (
 )
 from rosnet_tui.cli.ros import ROS_CHECKS
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings
@@ -61,10 +62,10 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     try:
         plan = mf.plan_undo(sd, entry_id=args.expect_entry)
-    except mf.NothingToUndoError as exc:
+    except mt.NothingToUndoError as exc:
         print(f"rosnet-tui: {exc}")
         return EXIT_FAIL
-    except mf.ManagedFileError as exc:
+    except mt.ManagedFileError as exc:
         err(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     e = plan.entry
@@ -100,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         try:
             result = mf.apply_undo(plan, force=args.force)
-        except mf.ManagedFileError as exc:
+        except mt.ManagedFileError as exc:
             err(f"rosnet-tui: {exc}")
             return EXIT_FAIL
         if result.files:

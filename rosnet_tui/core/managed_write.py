@@ -150,7 +150,7 @@ class WriteOutcome:
     deleted: bool = False
 
 
-def _fsync_dir(folder: Path) -> None:
+def fsync_dir(folder: Path) -> None:
     try:
         fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
     except OSError:
@@ -196,7 +196,7 @@ def sweep_state_dir(state_dir: Path) -> list[str]:
     return removed
 
 
-def _write_all(fd: int, data: bytes) -> None:
+def write_all(fd: int, data: bytes) -> None:
     view = memoryview(data)
     off = 0
     while off < len(data):
@@ -260,7 +260,7 @@ def _is_torn(cur: bytes, old: bytes, new: bytes) -> bool:
 def _rewrite(real: Path, data: bytes) -> None:
     fd = os.open(real, os.O_WRONLY | os.O_NOFOLLOW)
     try:
-        _write_all(fd, data)
+        write_all(fd, data)
         os.fsync(fd)
         if _before_truncate is not None:
             _before_truncate()
@@ -353,7 +353,7 @@ def _recover_from(real: Path, st: os.stat_result, jpath: Path, wait_s: float) ->
                 os.unlink(jpath)
             except OSError:
                 return effective              # e.g. a read-only mount: same as not allowed
-            _fsync_dir(jpath.parent)
+            fsync_dir(jpath.parent)
             return None
         finally:
             os.close(jfd)
@@ -386,10 +386,10 @@ def _write_in_place(real: Path, data: bytes, journal_dir: Path | None = None) ->
                       stat.S_IMODE(st.st_mode) & 0o644)
         try:
             fcntl.flock(jfd, fcntl.LOCK_EX)   # held until the write is done (or we die)
-            _write_all(jfd, _journal_bytes(real, st, old, data))
+            write_all(jfd, _journal_bytes(real, st, old, data))
             os.fsync(jfd)
             os.rename(tmp, jpath)
-            _fsync_dir(Path(folder))
+            fsync_dir(Path(folder))
         except BaseException:
             os.close(jfd)
             with contextlib.suppress(OSError):
@@ -410,7 +410,7 @@ def _write_in_place(real: Path, data: bytes, journal_dir: Path | None = None) ->
                                    "written; the previous content was put back")
         if jpath is not None:
             os.unlink(jpath)
-            _fsync_dir(jpath.parent)
+            fsync_dir(jpath.parent)
     finally:
         if jfd is not None:
             os.close(jfd)
@@ -431,7 +431,7 @@ def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: in
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
-            _write_all(fd, data)
+            write_all(fd, data)
             if uid is not None or gid is not None:
                 try:
                     os.fchown(fd, -1 if uid is None else uid, -1 if gid is None else gid)
@@ -450,7 +450,7 @@ def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: in
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
-    _fsync_dir(folder)
+    fsync_dir(folder)
 
 
 def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
@@ -472,7 +472,7 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
     if data is None:
         if st is not None:
             os.unlink(real)
-            _fsync_dir(real.parent)
+            fsync_dir(real.parent)
         return WriteOutcome(Path(path), False, deleted=True)
     if st is None:
         real.parent.mkdir(parents=True, exist_ok=True)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.managed_write import read_text
 from rosnet_tui.core.settings import Settings
 
@@ -49,7 +50,7 @@ def _read(path: Path, state_dir: Path) -> str | None:
     is missing or cannot be read (the preview then says why)."""
     try:
         return read_text(path, state_dir=state_dir, errors="replace")
-    except mf.ManagedFileError:
+    except mt.ManagedFileError:
         return None
 
 
