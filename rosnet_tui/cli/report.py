@@ -52,7 +52,7 @@ class ReportError(Exception):
 
 # --------------------------------------------------------------------------- CLI
 def register(sub: argparse._SubParsersAction) -> None:
-    from rosnet_tui.cli import add_config_option
+    from rosnet_tui.cli.common import add_config_option
 
     p = sub.add_parser(
         "report", help="write a shareable report: settings, results and advice",
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _load_settings(args: argparse.Namespace, *, required: bool) -> tuple[Settings | None, Path]:
-    from rosnet_tui.cli import config_path
+    from rosnet_tui.cli.common import config_path
     from rosnet_tui.core.settings import load_settings
 
     path = config_path(args)

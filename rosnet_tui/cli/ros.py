@@ -12,8 +12,8 @@ import os
 import sys
 from pathlib import Path
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option
-from rosnet_tui.cli.hosts import (
+from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option
+from rosnet_tui.cli.writing import (
     add_writer_options,
     ask,
     confirm,

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import rosnet_tui
-from rosnet_tui.cli import (
+from rosnet_tui.cli.common import (
     EXIT_FAIL,
     EXIT_OK,
     EXIT_USAGE,

@@ -6,16 +6,16 @@ import argparse
 import sys
 from pathlib import Path
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, state_dir_problem
-from rosnet_tui.cli.hosts import (
-    HOSTS_CHECKS,
-    confirm,
-    err,
-    rerun_checks,
-    run_as_root,
-    state_dir_of,
+from rosnet_tui.cli.common import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    state_dir_problem,
 )
+from rosnet_tui.cli.hosts import HOSTS_CHECKS
 from rosnet_tui.cli.ros import ROS_CHECKS
+from rosnet_tui.cli.writing import confirm, err, rerun_checks, run_as_root, state_dir_of
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import privilege
@@ -46,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _settings_quietly(args: argparse.Namespace) -> Settings | None:
-    from rosnet_tui.cli import config_path
+    from rosnet_tui.cli.common import config_path
 
     try:
         return load_settings(config_path(args))

@@ -34,6 +34,7 @@ from rosnet_tui.core.upnp.forwards import Renewer
 
 from .applied import applied_path, load_applied, save_applied
 from .backoff import Backoff, backoff_cap
+from .choose_store import make_store
 from .plan import Plan
 from .records import (
     Candidate,
@@ -52,7 +53,7 @@ from .status import (
     empty_status,
     load_status,
 )
-from .store import RecordStore, StoreConfigError, StoreError, make_store
+from .store import RecordStore, StoreConfigError, StoreError
 from .watcher import LocalAddress, PublicLookup, lookup_public_ip, observe_local
 from .workers import (  # noqa: F401 (re-exported)
     AFFECTED_CHECKS,
