@@ -191,7 +191,8 @@ def sweep_state_dir(state_dir: Path) -> list[str]:
             if e.is_dir(follow_symlinks=False):
                 removed += tempfiles.sweep(Path(e.path), tempfiles.PRIVATE_TMP)
     for folder in (sd, sd / "sync"):
-        removed += tempfiles.sweep(folder, tempfiles.ATOMIC_TMP)
+        removed += tempfiles.sweep(folder, tempfiles.MANAGED_TMP)
+        removed += tempfiles.sweep(folder, tempfiles.ATOMIC_TMP)    # an earlier version's
     removed += tempfiles.sweep(sd / "inplace", tempfiles.MANAGED_TMP)
     return removed
 
@@ -423,11 +424,23 @@ def _put_back(real: Path, old: bytes, jpath: Path | None) -> None:
         os.unlink(jpath)
 
 
-def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: int | None,
-                    xattr_src: Path | None) -> None:
-    folder = real.parent
-    tmp = folder / f".{real.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+def atomic_write(path: Path, data: bytes, *, create_mode: int = 0o600, mode: int | None = None,
+                 uid: int | None = None, gid: int | None = None, xattr_src: Path | None = None,
+                 owner_errors: tuple[type[OSError], ...] = (PermissionError,)) -> None:
+    """The one atomic writer: *data* to a temp file beside *path* (an unpredictable name,
+    created exclusively, never through a link, locked until renamed: see :mod:`.tempfiles`),
+    fsync, rename over *path*, fsync of the folder. A writer killed at any moment leaves the old
+    file or the new one; its temp file is removed by the next writer of *path* (or the state
+    dir's sweep).
+
+    The temp file is created with *create_mode* (the umask applies); *mode* (exact), *uid* and
+    *gid* (None: unchanged) and the extended attributes of *xattr_src* are then set on it.
+    An ownership change failing with one of *owner_errors* is skipped.
+    """
+    folder = path.parent
+    tempfiles.sweep(folder, tempfiles.MANAGED_TMP, path.name)
+    tmp = folder / f".{path.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, create_mode)
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
@@ -435,15 +448,16 @@ def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: in
             if uid is not None or gid is not None:
                 try:
                     os.fchown(fd, -1 if uid is None else uid, -1 if gid is None else gid)
-                except PermissionError:
-                    pass  # a normal user's own file: owner is already right
-            os.fchmod(fd, mode)
+                except owner_errors:
+                    pass  # e.g. a normal user's own file: owner is already right
+            if mode is not None:
+                os.fchmod(fd, mode)
             if xattr_src is not None:
                 _copy_xattrs(xattr_src, fd)
             os.fsync(fd)
             if _before_rename is not None:
                 _before_rename()
-            os.replace(tmp, real)
+            os.replace(tmp, path)
         finally:
             os.close(fd)
     except BaseException:
@@ -476,8 +490,7 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
         return WriteOutcome(Path(path), False, deleted=True)
     if st is None:
         real.parent.mkdir(parents=True, exist_ok=True)
-        _remove_stale_temps(real.parent, real.name)
-        _write_renaming(real, data, new_mode if mode is None else mode, uid, gid, None)
+        atomic_write(real, data, mode=new_mode if mode is None else mode, uid=uid, gid=gid)
         return WriteOutcome(Path(path), False)
     mode = stat.S_IMODE(st.st_mode) if mode is None else mode
     uid = st.st_uid if uid is None else uid
@@ -487,9 +500,8 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
                 or (euid != 0 and st.st_uid != euid)
                 or not os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True))
     if not in_place:
-        _remove_stale_temps(real.parent, real.name)
         try:
-            _write_renaming(real, data, mode, uid, gid, real)
+            atomic_write(real, data, mode=mode, uid=uid, gid=gid, xattr_src=real)
             return WriteOutcome(Path(path), False)
         except OSError as exc:
             if exc.errno not in (errno.EBUSY, errno.EXDEV):

@@ -18,7 +18,6 @@ import fcntl
 import json
 import os
 import re
-import secrets
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -27,7 +26,7 @@ from pathlib import Path
 
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.managed_text import ManagedFileError
-from rosnet_tui.core.managed_write import LOCK_TIMEOUT_S, MAX_FILE_BYTES, fsync_dir, write_all
+from rosnet_tui.core.managed_write import LOCK_TIMEOUT_S, MAX_FILE_BYTES, atomic_write
 from rosnet_tui.core.regular_file import read_regular
 
 JOURNAL_KEEP = 100  # applies remembered for undo; older ones (and their backups) are dropped
@@ -115,25 +114,9 @@ def make_private_dir(path: Path, owner: tuple[int, int] | None) -> None:
 
 
 def write_private(path: Path, data: bytes, owner: tuple[int, int] | None) -> None:
-    """Write a state file (journal, backup): temp + fsync + rename, never following links."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
-            write_all(fd, data)
-            if owner:
-                with contextlib.suppress(OSError):
-                    os.fchown(fd, *owner)
-            os.fsync(fd)
-            os.replace(tmp, path)
-        finally:
-            os.close(fd)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    fsync_dir(path.parent)
+    """Write a state file (journal, backup) atomically, 0600, handed to *owner* (if any)."""
+    atomic_write(path, data, create_mode=0o600, uid=owner[0] if owner else None,
+                 gid=owner[1] if owner else None, owner_errors=(OSError,))
 
 
 @contextlib.contextmanager
