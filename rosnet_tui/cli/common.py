@@ -63,7 +63,7 @@ def add_config_option(parser: argparse.ArgumentParser, *, top: bool = False) -> 
 
 
 def config_path(args: argparse.Namespace) -> Path:
-    from rosnet_tui.core.settings import default_config_path
+    from rosnet_tui.core.paths import default_config_path
 
     return Path(args.config).expanduser() if getattr(args, "config", None) else default_config_path()
 

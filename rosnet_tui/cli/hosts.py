@@ -26,7 +26,6 @@ from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import (
-    DEFAULT_HOSTS_PATH,
     PROFILE_TITLES,
     WriterSettingsError,
     active_profile,
@@ -35,6 +34,7 @@ from rosnet_tui.core.hosts import (
     preview_hosts,
     render_hosts_text,
 )
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import (
     PROFILES,
     Settings,

@@ -32,14 +32,9 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core import ros2
-from rosnet_tui.core.bashrc import (
-    ROS_IP_REASON,
-    default_bashrc_path,
-    find_ros_ip_lines,
-    preview_bashrc,
-    shell_lines,
-)
+from rosnet_tui.core.bashrc import ROS_IP_REASON, find_ros_ip_lines, preview_bashrc, shell_lines
 from rosnet_tui.core.hosts import WriterSettingsError
+from rosnet_tui.core.paths import default_bashrc_path
 
 ROS_CHECKS = ("ros.env",)
 ROS2_CHECKS = ("ros2.env",)

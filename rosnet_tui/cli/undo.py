@@ -19,7 +19,7 @@ from rosnet_tui.cli.writing import confirm, err, rerun_checks, run_as_root, stat
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import privilege
-from rosnet_tui.core.hosts import DEFAULT_HOSTS_PATH
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 

@@ -20,6 +20,7 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core.hosts import WriterSettingsError
+from rosnet_tui.core.paths import default_bashrc_path
 from rosnet_tui.core.settings import Settings
 
 ROS_IP_REASON = (
@@ -36,8 +37,7 @@ _COMMENTED_RE = re.compile(rf"^[ \t]*(?::[ \t]*)?# {_TAG}: .*ROS_(?:IP|HOSTNAME)
 _MASTER_URI_RE = re.compile(rf"^\s*(?:export\s+)?ROS_MASTER_URI=({_VALUE})")
 
 
-def default_bashrc_path() -> Path:
-    return Path.home() / ".bashrc"
+
 
 
 def ros_problems(settings: Settings) -> list[tuple[str, str]]:

@@ -12,6 +12,7 @@ from pathlib import Path
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import PROFILES, Peer, Settings, SettingsError, validate_ip
 
 
@@ -62,7 +63,6 @@ def hosts_entries(settings: Settings, profile: str | None = None) -> list[HostsE
 # Everything below writes /etc/hosts through rosnet_tui.core.managed_file: our block only, at the
 # top of the file (a resolver that stops at the first match then finds ours first).
 
-DEFAULT_HOSTS_PATH = Path("/etc/hosts")
 PROFILE_TITLES = {
     "remote": "remote (peers by their public IP, across the internet)",
     "office": "office (everyone by their address on the office LAN)",

@@ -275,7 +275,7 @@ def journal_dirs(journal_dir: Path | None = None) -> list[Path]:
     """Where the journal of a file whose folder may not be written can be: *journal_dir* (the
     writer's state dir), then the default state dir's in-place folder (so that a reader that is
     not told the writer's state dir, such as ``check``, still finds it)."""
-    from rosnet_tui.core.settings import default_state_dir
+    from rosnet_tui.core.paths import default_state_dir
 
     out = [Path(journal_dir)] if journal_dir else []
     with contextlib.suppress(RuntimeError, KeyError):   # no home folder: only the given one

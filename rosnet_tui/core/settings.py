@@ -63,17 +63,6 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-# --------------------------------------------------------------------------- paths
-def default_config_path() -> Path:
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "rosnet-tui" / "config.toml"
-
-
-def default_state_dir() -> Path:
-    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
-    return Path(base) / "rosnet-tui"
-
-
 # --------------------------------------------------------------------------- loading
 _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "this": {"name": str, "role": str, "connection": str, "profile": str, "local_ip": str,

@@ -77,7 +77,7 @@ class JournalEntry:
 
 def state_dir_path(state_dir: Path | None) -> Path:
     if state_dir is None:
-        from rosnet_tui.core.settings import default_state_dir
+        from rosnet_tui.core.paths import default_state_dir
 
         state_dir = default_state_dir()
     return Path(state_dir).expanduser().absolute()

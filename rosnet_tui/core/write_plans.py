@@ -14,6 +14,7 @@ from pathlib import Path
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.managed_write import read_text
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path
 from rosnet_tui.core.settings import Settings
 
 
@@ -41,8 +42,8 @@ class WritePaths:
 
     config_path: Path
     state_dir: Path
-    hosts_path: Path = Path("/etc/hosts")
-    bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
+    hosts_path: Path = DEFAULT_HOSTS_PATH
+    bashrc_path: Path = field(default_factory=default_bashrc_path)
 
 
 def _read(path: Path, state_dir: Path) -> str | None:

@@ -26,9 +26,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core.hosts import (
-    DEFAULT_HOSTS_PATH,
-)
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings
 from rosnet_tui.core.upnp.forwards import Renewer
 
