@@ -35,7 +35,8 @@ INPLACE_MAGIC = b"rosnet-tui in-place journal 1\n"
 # Where an in-place write journals when the target's folder may not be written.
 INPLACE_DIR = "inplace"
 
-# Test hook: called between the fsync of the temp file and the rename (crash tests set it).
+# Test hook: called between the fsync of a managed file's temp file and the rename (crash tests
+# set it).
 _before_rename: Callable[[], None] | None = None
 # Test hook: called between the in-place write and its truncation (crash tests set it).
 _before_truncate: Callable[[], None] | None = None
@@ -426,7 +427,8 @@ def _put_back(real: Path, old: bytes, jpath: Path | None) -> None:
 
 def atomic_write(path: Path, data: bytes, *, create_mode: int = 0o600, mode: int | None = None,
                  uid: int | None = None, gid: int | None = None, xattr_src: Path | None = None,
-                 owner_errors: tuple[type[OSError], ...] = (PermissionError,)) -> None:
+                 owner_errors: tuple[type[OSError], ...] = (PermissionError,),
+                 before_rename: Callable[[], None] | None = None) -> None:
     """The one atomic writer: *data* to a temp file beside *path* (an unpredictable name,
     created exclusively, never through a link, locked until renamed: see :mod:`.tempfiles`),
     fsync, rename over *path*, fsync of the folder. A writer killed at any moment leaves the old
@@ -435,7 +437,8 @@ def atomic_write(path: Path, data: bytes, *, create_mode: int = 0o600, mode: int
 
     The temp file is created with *create_mode* (the umask applies); *mode* (exact), *uid* and
     *gid* (None: unchanged) and the extended attributes of *xattr_src* are then set on it.
-    An ownership change failing with one of *owner_errors* is skipped.
+    An ownership change failing with one of *owner_errors* is skipped. *before_rename* is
+    called between the fsync and the rename (crash tests stop a writer there).
     """
     folder = path.parent
     tempfiles.sweep(folder, tempfiles.MANAGED_TMP, path.name)
@@ -455,8 +458,8 @@ def atomic_write(path: Path, data: bytes, *, create_mode: int = 0o600, mode: int
             if xattr_src is not None:
                 _copy_xattrs(xattr_src, fd)
             os.fsync(fd)
-            if _before_rename is not None:
-                _before_rename()
+            if before_rename is not None:
+                before_rename()
             os.replace(tmp, path)
         finally:
             os.close(fd)
@@ -490,7 +493,8 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
         return WriteOutcome(Path(path), False, deleted=True)
     if st is None:
         real.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write(real, data, mode=new_mode if mode is None else mode, uid=uid, gid=gid)
+        atomic_write(real, data, mode=new_mode if mode is None else mode, uid=uid, gid=gid,
+                     before_rename=_before_rename)
         return WriteOutcome(Path(path), False)
     mode = stat.S_IMODE(st.st_mode) if mode is None else mode
     uid = st.st_uid if uid is None else uid
@@ -501,7 +505,8 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
                 or not os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True))
     if not in_place:
         try:
-            atomic_write(real, data, mode=mode, uid=uid, gid=gid, xattr_src=real)
+            atomic_write(real, data, mode=mode, uid=uid, gid=gid, xattr_src=real,
+                         before_rename=_before_rename)
             return WriteOutcome(Path(path), False)
         except OSError as exc:
             if exc.errno not in (errno.EBUSY, errno.EXDEV):
