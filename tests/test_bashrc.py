@@ -12,6 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.bashrc import (
     apply_bashrc,
     export_line,
@@ -138,7 +139,7 @@ def test_commenting_never_breaks_the_shell_syntax(tmp_path):
 
 def test_a_later_master_uri_that_overrides_ours_is_noted(tmp_path):
     f = tmp_path / ".bashrc"
-    f.write_text(f"{mf.BEGIN_MARKER}\nexport ROS_MASTER_URI=http://x:1\n{mf.END_MARKER}\n"
+    f.write_text(f"{mt.BEGIN_MARKER}\nexport ROS_MASTER_URI=http://x:1\n{mt.END_MARKER}\n"
                  "export ROS_MASTER_URI=http://localhost:11311\n")
     notes = preview_bashrc(laptop(), f).notes
     assert any("overrides it" in n and "line 4" in n for n in notes)
@@ -183,19 +184,19 @@ def test_generated_bashrc_files_apply_undo_and_idempotence(data, member, comment
         once = f.read_bytes()
         assert not apply_bashrc(s, f, comment_ros_ip=comment, state_dir=sd).changed
         assert f.read_bytes() == once
-        old = mf.split_lines(data.decode())
-        new = mf.split_lines(once.decode())
+        old = mt.split_lines(data.decode())
+        new = mt.split_lines(once.decode())
         for i, line in enumerate(old):
             if comment and i in found:
-                assert mf.line_content(new[i]).endswith(line.strip().rstrip("\r"))
+                assert mt.line_content(new[i]).endswith(line.strip().rstrip("\r"))
                 assert "rosnet-tui" in new[i]
                 if line.endswith("\n"):  # the line ending is kept
-                    assert new[i][len(mf.line_content(new[i])):] == line[len(mf.line_content(line)):]
+                    assert new[i][len(mt.line_content(new[i])):] == line[len(mt.line_content(line)):]
             elif line.endswith("\n"):
                 assert new[i] == line
             else:
-                assert mf.line_content(new[i]) == line
-        assert f"export ROS_MASTER_URI={master_uri(s)}" in mf.extract_block(once.decode())
+                assert mt.line_content(new[i]) == line
+        assert f"export ROS_MASTER_URI={master_uri(s)}" in mt.extract_block(once.decode())
         if first.changed:
             mf.undo_last(sd)
         assert f.read_bytes() == data

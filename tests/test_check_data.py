@@ -25,7 +25,7 @@ from rosnet_tui.core.checks import (
 )
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
-from rosnet_tui.core.ssh import SshOptions
+from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,6 +15,8 @@ from pathlib import Path
 import pytest
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
+from rosnet_tui.core import undo_journal as uj
 from rosnet_tui.core.settings import load_settings
 
 REPO = Path(__file__).resolve().parent.parent
@@ -279,10 +281,10 @@ def test_when_root_is_needed_the_exact_sudo_command_is_run(box, tmp_path, monkey
     called = (fake / "called").read_text().split()
     called = [x for x in called if x != "-n"]  # no terminal here: sudo -n
     assert called[:4] == ["sudo", sys.executable, "-m", "rosnet_tui"]
-    assert f"--expect-digest {mf.file_digest(HOSTS)}" in " ".join(called)
+    assert f"--expect-digest {mt.file_digest(HOSTS)}" in " ".join(called)
     assert "needs root; running:" in out
     assert b"198.51.100.2    sami" in box.hosts.read_bytes()
-    assert [e.label for e in mf.journal_entries(box.state)] == ["hosts: remote set"]
+    assert [e.label for e in uj.journal_entries(box.state)] == ["hosts: remote set"]
     # and undo goes the same way
     rc = main(["undo", "--yes", "--no-checks"])
     assert rc == 0 and box.hosts.read_bytes() == HOSTS
@@ -312,7 +314,7 @@ def test_root_hands_the_users_journal_back_to_the_user(box):
     out = run(box, "hosts", "apply", "--file", str(box.hosts), "--yes", "--state-dir",
               str(box.state))
     assert out.returncode == 0, out.stderr
-    (entry,) = mf.journal_entries(box.state)
+    (entry,) = uj.journal_entries(box.state)
     for p in (box.state / "journal" / f"{entry.id}.json", box.state / "backups" / entry.id,
               box.state / "lock"):
         assert os.stat(p).st_uid == 65534, p

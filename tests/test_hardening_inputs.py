@@ -22,7 +22,9 @@ from pathlib import Path
 import pytest
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
+from rosnet_tui.core import undo_journal as uj
 from tests.hardening_tally import tally
 
 REPO = Path(__file__).resolve().parents[1]
@@ -70,7 +72,7 @@ def test_a_deeply_nested_undo_journal_entry_is_skipped_not_a_crash(tmp_path):
     sd = tmp_path / "state"
     mf.apply_preview(mf.preview_block(target, ["export A=1"]), state_dir=sd)
     (sd / "journal" / "000002.json").write_text(DEEP_OBJ)
-    assert [e.id for e in mf.journal_entries(sd)] == ["000001"]
+    assert [e.id for e in uj.journal_entries(sd)] == ["000001"]
     mf.undo_last(sd)
     assert target.read_text() == "# mine\n"
     tally(AREA, 1, 1, "undo journal")
@@ -201,7 +203,7 @@ def test_state_files_and_named_files_that_are_fifos_do_not_hang(tmp_path, which,
         (sd / "journal").mkdir(parents=True)
         fifo = sd / "journal" / "000001.json"
         os.mkfifo(fifo)
-        box = _returns_within(lambda: mf.journal_entries(sd), fifo)
+        box = _returns_within(lambda: uj.journal_entries(sd), fifo)
         assert box == {"value": []}
     elif which == "backup":
         target = tmp_path / "rc"
@@ -213,7 +215,7 @@ def test_state_files_and_named_files_that_are_fifos_do_not_hang(tmp_path, which,
         os.mkfifo(backup)
         fifo = backup
         box = _returns_within(lambda: mf.plan_undo(sd), fifo)
-        assert isinstance(box.get("error"), mf.ManagedFileError), box
+        assert isinstance(box.get("error"), mt.ManagedFileError), box
     else:
         from rosnet_tui.core.checks.ros2 import _read_router_config
 
@@ -247,7 +249,8 @@ def test_more_files_that_are_fifos_do_not_hang(tmp_path, which):
         box = _returns_within(lambda: ros_env({}, str(fifo)), fifo)
         assert box == {"value": {}}
     else:
-        from rosnet_tui.core.ssh import SshOptions, trust_host_key
+        from rosnet_tui.core.ssh.known_hosts import trust_host_key
+        from rosnet_tui.core.ssh.options import SshOptions
 
         key = "ssh-ed25519 AAAAC3NzaC1lZDI1NTE5AAAAIEdz0LdBvGAIK3wAmPBkH3TkjCFRCe7Ddm6yZ8pHsH4j"
         opts = SshOptions(ssh_dir=str(tmp_path), known_hosts_files=[str(fifo)])

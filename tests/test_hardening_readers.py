@@ -30,7 +30,6 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core.checks.linux import check_hosts
 from rosnet_tui.core.checks.runner import RunOptions, make_context
@@ -332,7 +331,7 @@ def test_the_hosts_preview_and_apply_complete_a_cut_write_in_their_state_dir(tmp
     cfg.write_text(CONFIG)
     preview = preview_hosts(load_settings(cfg), "remote", target, state_dir=sd)
     assert preview.old == new
-    assert mf.read_bytes(target) == new
+    assert mw.read_bytes(target) == new
 
 
 def test_hosts_show_finds_the_journal_in_the_state_dir_it_is_given(tmp_path, monkeypatch,

@@ -20,7 +20,8 @@ import time
 
 import pytest
 
-from rosnet_tui.core.ssh import host_key_name, ssh_run, trust_host_key
+from rosnet_tui.core.ssh.known_hosts import host_key_name, trust_host_key
+from rosnet_tui.core.ssh.session import ssh_run
 from tests.hardening_tally import tally
 from tests.plugins.ssh import SSHD, keygen
 

@@ -27,6 +27,7 @@ from pathlib import Path
 import pytest
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
 from tests.hardening_tally import tally
 
@@ -53,31 +54,32 @@ _CHILD = textwrap.dedent("""
     import sys
     from pathlib import Path
     from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core import managed_text as mt
     from rosnet_tui.core import managed_write as mw
+    from rosnet_tui.core import undo_journal as uj
     mode, dst, state, fa, fb = sys.argv[1:6]
     dst, state = Path(dst), Path(state)
     A, B = Path(fa).read_bytes(), Path(fb).read_bytes()
     out = sys.stdout
     def cls(x):
         return "A" if x == A else "B" if x == B else "X%d" % (len(x) if x is not None else -1)
-    out.write("S %s\\n" % cls(mf.read_bytes(dst))); out.flush()   # the next run: recovered?
+    out.write("S %s\\n" % cls(mw.read_bytes(dst))); out.flush()   # the next run: recovered?
     if mode == "check":
         sys.exit(0)
-    write_all = mw._write_all
+    write_all = mw.write_all
     def marked(fd, data):            # a mark before every large write: the parent kills then
         if len(data) > 100000:
             out.write("W\\n"); out.flush()
         write_all(fd, data)
-    mw._write_all = marked
-    prune = mf._prune
-    mf._prune = lambda sd, keep=3: prune(sd, keep)
+    mw.write_all = marked
+    uj.JOURNAL_KEEP = 3
     body = __BODY__
     for i in range(100000):
-        cur = mf.read_bytes(dst)
+        cur = mw.read_bytes(dst)
         if cls(cur)[0] == "X":
             out.write("BAD %s\\n" % cls(cur)); out.flush(); sys.exit(3)
         if mode == "raw":
-            mf.write_file(dst, B if cur == A else A)
+            mw.write_file(dst, B if cur == A else A)
         elif cur == A:
             mf.apply_preview(mf.preview_block(dst, body, position="top"), state_dir=state)
         else:
@@ -207,7 +209,7 @@ def test_hundreds_of_sigkills_during_apply_and_undo_in_place(tmp_path):
     """hosts apply / undo of a 3,000-line block on top of a 1 MB bind-mounted file: 100 kills;
     after each, the next run reads the old or the new file and undo never finds a conflict."""
     a = hosts_text(1_000_000, 3)
-    b = mf.encode(mf.compose_block(mf.decode(a), BODY, position="top"))
+    b = mt.encode(mt.compose_block(mt.decode(a), BODY, position="top"))
     bench = KillBench(tmp_path, a, b)
     stats = run_kills(bench, "apply", kills=100, budget_s=25, seed=16)
     print(stats)
@@ -239,7 +241,7 @@ def _crash() -> None:
 
 
 @pytest.mark.skipif(os.geteuid() != 0 or not shutil.which("mount"), reason="needs root, mount(8)")
-@pytest.mark.parametrize("hook", ["_before_truncate", "_write_all"])
+@pytest.mark.parametrize("hook", ["_before_truncate", "write_all"])
 def test_an_undo_cut_short_is_completed_by_the_next_undo_without_force(tmp_path, monkeypatch,
                                                                        hook):
     src, dst, sd = tmp_path / "netns-hosts", tmp_path / "hosts", tmp_path / "state"
@@ -250,15 +252,15 @@ def test_an_undo_cut_short_is_completed_by_the_next_undo_without_force(tmp_path,
     try:
         mf.apply_preview(mf.preview_block(dst, BODY, position="top"), state_dir=sd)
         applied = src.read_bytes()
-        if hook == "_write_all":     # die in the middle of the rewrite: half new, half old
-            real = mw._write_all
+        if hook == "write_all":     # die in the middle of the rewrite: half new, half old
+            real = mw.write_all
 
             def half(fd, data):
                 if len(data) == len(original) and data == original:
                     real(fd, data[: len(data) // 2])
                     raise _Crash
                 real(fd, data)
-            monkeypatch.setattr(mw, "_write_all", half)
+            monkeypatch.setattr(mw, "write_all", half)
         else:
             monkeypatch.setattr(mw, "_before_truncate", _crash)
         with pytest.raises(_Crash):
@@ -291,9 +293,9 @@ def test_an_apply_cut_short_is_completed_by_the_next_read(tmp_path, monkeypatch)
             mf.apply_preview(short, state_dir=sd)
         monkeypatch.undo()
         assert src.read_bytes() != short.new                    # the tail of the old is there
-        assert mf.read_bytes(dst) == short.new                  # the next read completes it
+        assert mw.read_bytes(dst) == short.new                  # the next read completes it
         assert src.read_bytes() == short.new
-        assert mf.extract_block(src.read_text()) == ["203.0.113.7  peer7"]
+        assert mt.extract_block(src.read_text()) == ["203.0.113.7  peer7"]
     finally:
         _umount(dst)
     tally(AREA, 1, 1, "apply cut before truncate")
@@ -309,10 +311,10 @@ def test_after_a_foreign_change_the_journal_is_dropped_and_the_file_left_alone(t
     try:
         monkeypatch.setattr(mw, "_before_truncate", _crash)
         with pytest.raises(_Crash):
-            mf.write_file(dst, b"short new content\n")
+            mw.write_file(dst, b"short new content\n")
         monkeypatch.undo()
         src.write_bytes(b"the admin fixed it by hand\n")        # someone else, after the kill
-        assert mf.read_bytes(dst) == b"the admin fixed it by hand\n"
+        assert mw.read_bytes(dst) == b"the admin fixed it by hand\n"
         assert src.read_bytes() == b"the admin fixed it by hand\n"
         assert not [p for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
     finally:
@@ -325,7 +327,7 @@ def _cut_in_place(path: Path, new: bytes, monkeypatch) -> None:
     monkeypatch.setattr(mw, "is_mount_point", lambda p: True)   # take the in-place path
     monkeypatch.setattr(mw, "_before_truncate", _crash)
     with pytest.raises(_Crash):
-        mf.write_file(path, new)
+        mw.write_file(path, new)
     monkeypatch.undo()
 
 
@@ -344,13 +346,13 @@ def test_a_user_reading_roots_cut_write_sees_what_it_will_be_and_changes_nothing
         os.setegid(65534)
         os.seteuid(65534)                                       # read as the user "nobody"
         try:
-            seen = mf.read_bytes(target)
+            seen = mw.read_bytes(target)
         finally:
             os.seteuid(0)
             os.setegid(0)
         assert seen == new
         assert target.read_bytes() == torn                      # nobody may not write it
-        assert mf.read_bytes(target) == new == target.read_bytes()   # root completes it
+        assert mw.read_bytes(target) == new == target.read_bytes()   # root completes it
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     tally(AREA, 1, 1, "reader without write permission")
@@ -365,12 +367,12 @@ def test_a_journal_that_someone_else_could_have_written_is_not_trusted(tmp_path,
     torn = target.read_bytes()
     (journal,) = [p for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
     os.chown(journal, 65534, 65534)                              # not root's, not ours
-    assert mf.read_bytes(target) == torn
+    assert mw.read_bytes(target) == torn
     os.chown(journal, 0, 0)
     os.chmod(journal, 0o666)                                     # anyone could have changed it
-    assert mf.read_bytes(target) == torn
+    assert mw.read_bytes(target) == torn
     os.chmod(journal, 0o600)
-    assert mf.read_bytes(target) == b"short\n"
+    assert mw.read_bytes(target) == b"short\n"
     tally(AREA, 2, 2, "untrusted journal")
 
 
@@ -379,17 +381,18 @@ _TEMP_CHILD = textwrap.dedent("""
     import sys
     from pathlib import Path
     from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core import managed_text as mt
     from rosnet_tui.core import managed_write as mw
+    from rosnet_tui.core import undo_journal as uj
     from rosnet_tui.core.settings import atomic_write_text
     target, state, status = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
     big = sys.argv[4]
-    write_all = mw._write_all
+    write_all = mw.write_all
     def marked(fd, data):
         sys.stdout.write("W\\n"); sys.stdout.flush()
         write_all(fd, data)
-    mw._write_all = marked
-    prune = mf._prune
-    mf._prune = lambda sd, keep=3: prune(sd, keep)
+    mw.write_all = marked
+    uj.JOURNAL_KEEP = 3
     text = Path(big).read_text()
     for i in range(100000):
         cur = target.read_text()
@@ -469,15 +472,15 @@ def test_in_a_folder_the_writer_may_not_write_the_journal_goes_to_the_state_dir(
         os.setegid(65534)
         os.seteuid(65534)
         try:
-            monkeypatch.setattr(mw, "_write_all", _half_then_crash(mw._write_all, new))
+            monkeypatch.setattr(mw, "write_all", _half_then_crash(mw.write_all, new))
             with pytest.raises(_Crash):
-                mf.write_file(target, new, journal_dir=sd / "inplace")
+                mw.write_file(target, new, journal_dir=sd / "inplace")
             monkeypatch.undo()
             torn = target.read_bytes()
             assert torn not in (original, new)
             assert list((sd / "inplace").iterdir())                       # its journal
             stale = mf.Preview(target, torn, torn + b"# more\n")
-            with pytest.raises(mf.StalePreviewError):                    # the next run
+            with pytest.raises(mt.StalePreviewError):                    # the next run
                 mf.apply_previews([stale], state_dir=sd)
             assert target.read_bytes() == new                             # completed first
             assert not list((sd / "inplace").iterdir())
@@ -502,7 +505,7 @@ def test_an_apply_interrupted_in_a_live_process_is_rolled_back_whole(tmp_path, m
     if place == "in place":
         monkeypatch.setattr(mw, "is_mount_point", lambda p: True)
     p = mf.preview_block(target, BODY, position="top")
-    real, fired = mw._write_all, []
+    real, fired = mw.write_all, []
 
     def interrupted(fd, chunk):
         if chunk == p.new and not fired:
@@ -510,12 +513,12 @@ def test_an_apply_interrupted_in_a_live_process_is_rolled_back_whole(tmp_path, m
             real(fd, chunk[: len(chunk) // 2])
             raise KeyboardInterrupt
         real(fd, chunk)
-    monkeypatch.setattr(mw, "_write_all", interrupted)
+    monkeypatch.setattr(mw, "write_all", interrupted)
     with pytest.raises(KeyboardInterrupt):
         mf.apply_preview(p, state_dir=sd)
-    monkeypatch.setattr(mw, "_write_all", real)
+    monkeypatch.setattr(mw, "write_all", real)
     assert fired
-    assert mf.read_bytes(target) == original == target.read_bytes()
+    assert mw.read_bytes(target) == original == target.read_bytes()
     assert mf.last_entry(sd) is None                              # nothing left to undo
     assert not [x for x in tmp_path.iterdir() if x.name.endswith((".inplace", ".tmp"))]
     tally(AREA, 1, 1, f"interrupted apply ({place})")
@@ -554,6 +557,6 @@ def test_a_target_that_is_not_a_regular_file_is_refused_without_reading_it(tmp_p
             assert "Traceback" not in r.stderr
             assert time.monotonic() - started < 15
             n += 1
-    with pytest.raises(mf.ManagedFileError, match="not a regular file"):
-        mf.read_bytes(fifo)
+    with pytest.raises(mt.ManagedFileError, match="not a regular file"):
+        mw.read_bytes(fifo)
     tally(AREA, n, n, "not a regular file")

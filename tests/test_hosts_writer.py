@@ -13,6 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.hosts import (
     WriterSettingsError,
     active_profile,
@@ -110,7 +111,7 @@ def test_apply_puts_the_block_on_top_and_keeps_the_rest(tmp_path):
     f.write_bytes(STOCK)
     r = apply_hosts(robot(), "remote", f, state_dir=sd)
     out = f.read_bytes()
-    assert r.changed and out.startswith(mf.BEGIN_MARKER.encode()) and out.endswith(STOCK)
+    assert r.changed and out.startswith(mt.BEGIN_MARKER.encode()) and out.endswith(STOCK)
     assert active_profile(out.decode()) == "remote"
     assert not apply_hosts(robot(), "remote", f, state_dir=sd).changed  # idempotent
 
@@ -134,7 +135,7 @@ def test_stale_digest_is_refused(tmp_path):
     p = preview_hosts(robot(), "remote", f)
     with open(f, "ab") as fh:
         fh.write(b"10.1.1.1 other\n")
-    with pytest.raises(mf.StalePreviewError):
+    with pytest.raises(mt.StalePreviewError):
         apply_hosts(robot(), "remote", f, expect_digest=p.digest, state_dir=tmp_path / "s")
     assert f.read_bytes() == STOCK + b"10.1.1.1 other\n"
 
@@ -150,7 +151,7 @@ def test_conflicting_lines_are_reported_and_fixed_only_when_asked(tmp_path):
     assert p.new.endswith(f.read_bytes())  # not asked: outside lines untouched
     apply_hosts(robot(), "remote", f, fix_conflicts=True, state_dir=sd)
     lines = f.read_bytes().split(b"\n")
-    i = lines.index(mf.END_MARKER.encode()) + 1
+    i = lines.index(mt.END_MARKER.encode()) + 1
     assert lines[i] == b"127.0.0.1\tlocalhost # rosnet-tui took out: turtlebot\r"
     assert lines[i + 1] == b"# rosnet-tui: 127.0.1.1\tturtlebot"
     assert lines[i + 2] == b"# rosnet-tui: 203.0.113.99 sami # stale"
@@ -217,10 +218,10 @@ def test_generated_hosts_files_apply_undo_and_idempotence(data, profile, fix):
             assert once.endswith(data)
         else:
             changed = {c.index for c in find_hosts_conflicts(data.decode(), robot(), profile)}
-            old = [mf.line_content(x) for x in mf.split_lines(data.decode())]
-            new = mf.split_lines(once.decode())
-            end = next(i for i, x in enumerate(new) if x.startswith(mf.END_MARKER))
-            new = [mf.line_content(x) for x in new[end + 1:]]
+            old = [mt.line_content(x) for x in mt.split_lines(data.decode())]
+            new = mt.split_lines(once.decode())
+            end = next(i for i, x in enumerate(new) if x.startswith(mt.END_MARKER))
+            new = [mt.line_content(x) for x in new[end + 1:]]
             assert len(new) == len(old)
             for i, (a, b) in enumerate(zip(old, new, strict=True)):
                 assert a == b or (i in changed and "rosnet-tui" in b)

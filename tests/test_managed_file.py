@@ -20,7 +20,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
+from rosnet_tui.core import undo_journal as uj
 
 REPO = Path(__file__).resolve().parent.parent
 BODY_A = ["10.10.10.1\tturtlebot", "198.51.100.2\tsami"]
@@ -36,7 +38,7 @@ _SAMPLE_LINES = [
     "# BEGINNING of something else", "#END rosnet-tuitorial", "   ", "\t\t",
 ]
 _line_text = st.text(st.characters(blacklist_characters="\n", blacklist_categories=("Cs",)),
-                     max_size=40).filter(lambda s: not mf._MARKER_RE.match(s))
+                     max_size=40).filter(lambda s: not mt._MARKER_RE.match(s))
 _line = st.one_of(st.sampled_from(_SAMPLE_LINES), _line_text)
 
 
@@ -54,11 +56,11 @@ def generated_files(draw) -> bytes:
         pos = draw(st.integers(0, len(out)))
         old_body = draw(st.lists(st.sampled_from(["1.2.3.4 old", "# old note"]), max_size=3))
         nl = "\r\n" if crlf == "always" else "\n"
-        out[pos:pos] = [x + nl for x in (mf.BEGIN_MARKER, *old_body, mf.END_MARKER)]
+        out[pos:pos] = [x + nl for x in (mt.BEGIN_MARKER, *old_body, mt.END_MARKER)]
     text = "".join(out)
     if text and draw(st.booleans()):
-        text = text.rstrip("\n").rstrip("\r") if not text.endswith(mf.END_MARKER + "\n") else text
-    data = mf.encode(text)
+        text = text.rstrip("\n").rstrip("\r") if not text.endswith(mt.END_MARKER + "\n") else text
+    data = mt.encode(text)
     if draw(st.booleans()):
         data += (b"" if not data or data.endswith(b"\n") else b"\n") + draw(st.sampled_from([b"\xff\xfe bad utf-8\n", b"caf\xe9\n", b"\x00nul\n"]))
     return data
@@ -66,9 +68,9 @@ def generated_files(draw) -> bytes:
 
 def outside_block(data: bytes, raw: bool = False) -> list[str]:
     """Lines outside our block (terminators dropped unless *raw*)."""
-    lines = mf.split_lines(mf.decode(data))
-    span = mf.find_block(lines)
-    return [x if raw else mf.line_content(x) for i, x in enumerate(lines)
+    lines = mt.split_lines(mt.decode(data))
+    span = mt.find_block(lines)
+    return [x if raw else mt.line_content(x) for i, x in enumerate(lines)
             if not (span and span[0] <= i <= span[1])]
 
 
@@ -79,46 +81,46 @@ PROP = settings(max_examples=60, deadline=None,
 
 # --------------------------------------------------------------------------- compose
 def test_new_block_at_end_and_top():
-    assert mf.compose_block("a\nb\n", ["x"]) == f"a\nb\n{mf.BEGIN_MARKER}\nx\n{mf.END_MARKER}\n"
-    assert mf.compose_block("a\n", ["x"], position="top") == \
-        f"{mf.BEGIN_MARKER}\nx\n{mf.END_MARKER}\na\n"
-    assert mf.compose_block(None, []) == f"{mf.BEGIN_MARKER}\n{mf.END_MARKER}\n"
+    assert mt.compose_block("a\nb\n", ["x"]) == f"a\nb\n{mt.BEGIN_MARKER}\nx\n{mt.END_MARKER}\n"
+    assert mt.compose_block("a\n", ["x"], position="top") == \
+        f"{mt.BEGIN_MARKER}\nx\n{mt.END_MARKER}\na\n"
+    assert mt.compose_block(None, []) == f"{mt.BEGIN_MARKER}\n{mt.END_MARKER}\n"
 
 
 def test_missing_final_newline_gets_one_before_the_block_and_nothing_else_changes():
-    out = mf.compose_block("a\r\nlast", ["x"])
-    assert out == f"a\r\nlast\r\n{mf.BEGIN_MARKER}\r\nx\r\n{mf.END_MARKER}\r\n"
+    out = mt.compose_block("a\r\nlast", ["x"])
+    assert out == f"a\r\nlast\r\n{mt.BEGIN_MARKER}\r\nx\r\n{mt.END_MARKER}\r\n"
 
 
 def test_existing_block_is_replaced_where_it_stands_in_its_own_line_endings():
-    text = f"a\n{mf.BEGIN_MARKER}\r\nold\r\n{mf.END_MARKER}\r\nb\tc\n# z"
-    out = mf.compose_block(text, ["new"])
-    assert out == f"a\n{mf.BEGIN_MARKER}\r\nnew\r\n{mf.END_MARKER}\r\nb\tc\n# z"
+    text = f"a\n{mt.BEGIN_MARKER}\r\nold\r\n{mt.END_MARKER}\r\nb\tc\n# z"
+    out = mt.compose_block(text, ["new"])
+    assert out == f"a\n{mt.BEGIN_MARKER}\r\nnew\r\n{mt.END_MARKER}\r\nb\tc\n# z"
 
 
 def test_block_at_end_of_file_without_final_newline_stays_so():
-    text = f"a\n{mf.BEGIN_MARKER}\nold\n{mf.END_MARKER}"
-    assert mf.compose_block(text, ["n"]) == f"a\n{mf.BEGIN_MARKER}\nn\n{mf.END_MARKER}"
+    text = f"a\n{mt.BEGIN_MARKER}\nold\n{mt.END_MARKER}"
+    assert mt.compose_block(text, ["n"]) == f"a\n{mt.BEGIN_MARKER}\nn\n{mt.END_MARKER}"
 
 
 @pytest.mark.parametrize("text", [
-    f"{mf.BEGIN_MARKER}\nx\n",                                             # no END
-    f"{mf.END_MARKER}\n",                                                  # END only
-    f"{mf.BEGIN_MARKER}\n{mf.END_MARKER}\n{mf.BEGIN_MARKER}\n{mf.END_MARKER}\n",  # two blocks
+    f"{mt.BEGIN_MARKER}\nx\n",                                             # no END
+    f"{mt.END_MARKER}\n",                                                  # END only
+    f"{mt.BEGIN_MARKER}\n{mt.END_MARKER}\n{mt.BEGIN_MARKER}\n{mt.END_MARKER}\n",  # two blocks
 ])
 def test_damaged_block_is_refused_and_the_file_is_left_alone(tmp_path, text):
     f = tmp_path / "hosts"
     f.write_text(text)
-    with pytest.raises(mf.DamagedBlockError, match="by hand"):
+    with pytest.raises(mt.DamagedBlockError, match="by hand"):
         mf.preview_block(f, ["x"])
     assert f.read_text() == text
 
 
 def test_block_lines_cannot_smuggle_newlines_or_markers():
     with pytest.raises(ValueError):
-        mf.compose_block("", ["a\nb"])
+        mt.compose_block("", ["a\nb"])
     with pytest.raises(ValueError):
-        mf.compose_block("", [mf.END_MARKER])
+        mt.compose_block("", [mt.END_MARKER])
 
 
 def test_diff_shows_changes_and_no_newline_marker(tmp_path):
@@ -126,8 +128,8 @@ def test_diff_shows_changes_and_no_newline_marker(tmp_path):
     f.write_bytes(b"a\nb")
     p = mf.preview_block(f, ["x"])
     d = p.diff()
-    assert f"+{mf.BEGIN_MARKER}" in d and "\\ No newline at end of file" in d
-    assert p.digest == mf.file_digest(b"a\nb") and p.changed
+    assert f"+{mt.BEGIN_MARKER}" in d and "\\ No newline at end of file" in d
+    assert p.digest == mt.file_digest(b"a\nb") and p.changed
 
 
 # --------------------------------------------------------------------------- properties
@@ -143,7 +145,7 @@ def test_apply_then_undo_restores_byte_for_byte(data, top):
         if p.changed:
             mf.undo_last(sd)
         assert f.read_bytes() == data
-        with pytest.raises(mf.NothingToUndoError):
+        with pytest.raises(mt.NothingToUndoError):
             mf.undo_last(sd)
 
 
@@ -161,12 +163,12 @@ def test_apply_twice_is_apply_once_and_outside_lines_never_change(data, top):
         assert mf.apply_preview(second, state_dir=sd).changed is False
         assert f.read_bytes() == once
         assert outside_block(once) == outside_block(data)
-        assert mf.extract_block(mf.decode(once)) == BODY_A
+        assert mt.extract_block(mt.decode(once)) == BODY_A
         # byte for byte (terminators too: CRLF, tabs, IPv6 lines, odd bytes), except that a
         # last line without a newline gains one when the block is appended after it
         before, after = outside_block(data, raw=True), outside_block(once, raw=True)
         if before and not before[-1].endswith("\n") and after[-1] != before[-1]:
-            assert after[-1] == before[-1] + mf.detect_newline(mf.decode(data))
+            assert after[-1] == before[-1] + mt.detect_newline(mt.decode(data))
             before, after = before[:-1], after[:-1]
         assert after == before
         # switching the body changes only the block
@@ -180,10 +182,10 @@ def test_stale_preview_is_refused_and_nothing_is_written(tmp_path):
     f.write_text("127.0.0.1 localhost\n")
     p = mf.preview_block(f, BODY_A)
     f.write_text("127.0.0.1 localhost\n10.0.0.9 edited-meanwhile\n")
-    with pytest.raises(mf.StalePreviewError, match="changed since the preview"):
+    with pytest.raises(mt.StalePreviewError, match="changed since the preview"):
         mf.apply_preview(p, state_dir=sd)
     assert f.read_text() == "127.0.0.1 localhost\n10.0.0.9 edited-meanwhile\n"
-    assert mf.journal_entries(sd) == []
+    assert uj.journal_entries(sd) == []
 
 
 def test_mode_owner_and_xattrs_are_kept(tmp_path):
@@ -225,7 +227,7 @@ def test_symlinked_dotfile_stays_a_link(tmp_path):
 def test_created_file_is_removed_by_undo(tmp_path):
     f, sd = tmp_path / "new" / "bashrc", tmp_path / "state"
     p = mf.preview_block(f, ["export A=1"], new_mode=0o644)
-    assert p.old is None and p.digest == mf.ABSENT
+    assert p.old is None and p.digest == mt.ABSENT
     r = mf.apply_preview(p, state_dir=sd)
     assert r.backups == [] and stat.S_IMODE(os.stat(f).st_mode) == 0o644
     mf.undo_last(sd)
@@ -244,7 +246,7 @@ def test_undo_goes_back_one_apply_per_call(tmp_path):
     assert f.read_bytes() == a
     mf.undo_last(sd)
     assert f.read_bytes() == b"orig\r\n"
-    with pytest.raises(mf.NothingToUndoError, match="nothing to undo"):
+    with pytest.raises(mt.NothingToUndoError, match="nothing to undo"):
         mf.plan_undo(sd)
 
 
@@ -255,7 +257,7 @@ def test_undo_refuses_to_lose_a_later_edit_unless_forced(tmp_path):
     f.write_text(f.read_text() + "edited later\n")
     plan = mf.plan_undo(sd)
     assert plan.conflicts == [str(f)]
-    with pytest.raises(mf.UndoConflictError, match="someone else"):
+    with pytest.raises(mt.UndoConflictError, match="someone else"):
         mf.apply_undo(plan)
     assert "edited later" in f.read_text()
     mf.apply_undo(mf.plan_undo(sd), force=True)
@@ -268,9 +270,9 @@ def test_undo_preview_goes_stale_too(tmp_path):
     mf.apply_preview(mf.preview_block(f, BODY_A), state_dir=sd)
     plan = mf.plan_undo(sd)
     f.write_text("someone\n")
-    with pytest.raises(mf.ManagedFileError):
+    with pytest.raises(mt.ManagedFileError):
         mf.apply_undo(plan, force=True)
-    with pytest.raises(mf.StalePreviewError):
+    with pytest.raises(mt.StalePreviewError):
         mf.plan_undo(sd, entry_id="999999")
 
 
@@ -278,9 +280,9 @@ def test_backups_are_timestamped_in_the_journal(tmp_path):
     f, sd = tmp_path / "hosts", tmp_path / "state"
     f.write_text("orig\n")
     r = mf.apply_preview(mf.preview_block(f, BODY_A, label="hosts: remote"), state_dir=sd)
-    (entry,) = mf.journal_entries(sd)
+    (entry,) = uj.journal_entries(sd)
     assert entry.id == r.entry_id and entry.label == "hosts: remote"
-    assert entry.created.endswith("Z") and entry.files[0].before == mf.file_digest(b"orig\n")
+    assert entry.created.endswith("Z") and entry.files[0].before == mt.file_digest(b"orig\n")
     assert r.backups[0].read_bytes() == b"orig\n"
     assert stat.S_IMODE(os.stat(r.backups[0]).st_mode) == 0o600
 
@@ -294,7 +296,7 @@ def test_temp_files_of_dead_writers_are_swept(tmp_path):
     stale.write_text("half")
     mine = tmp_path / f".hosts.rosnet-tui.{os.getpid()}.abcd1234.tmp"
     mine.write_text("in use")
-    mf.write_file(f, b"y\n")
+    mw.write_file(f, b"y\n")
     assert not stale.exists() and mine.exists()
 
 
@@ -303,6 +305,8 @@ _CHILD = textwrap.dedent("""
     import random, sys, time
     from pathlib import Path
     from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core import managed_text as mt
+    from rosnet_tui.core import undo_journal as uj
     from rosnet_tui.core import managed_write as mw
     path, state, mode = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3]
     a, b = Path(sys.argv[4]).read_bytes(), Path(sys.argv[5]).read_bytes()
@@ -314,7 +318,7 @@ _CHILD = textwrap.dedent("""
     for _ in range(10000):
         cur = path.read_bytes()
         if mode == "raw":
-            mf.write_file(path, b if cur == a else a)
+            mw.write_file(path, b if cur == a else a)
         else:
             body = ["x 1"] if b"x 1" not in cur else ["y 2"] * 300
             mf.apply_preview(mf.preview_block(path, body), state_dir=state)
@@ -372,11 +376,11 @@ def test_killing_the_writer_never_leaves_a_truncated_or_missing_file(tmp_path):
         if ok_contents is not None:
             assert now in ok_contents, f"iteration {i}: a torn file ({len(now)} bytes)"
         else:
-            text = mf.decode(now)
-            assert now == before or mf.extract_block(text) in (["x 1"], ["y 2"] * 300), i
+            text = mt.decode(now)
+            assert now == before or mt.extract_block(text) in (["x 1"], ["y 2"] * 300), i
             target.write_bytes(a)  # next raw round starts from a known content
     assert time.monotonic() - started < 20
-    mf.write_file(target, a)  # the next writer sweeps the dead writers' temp files
+    mw.write_file(target, a)  # the next writer sweeps the dead writers' temp files
     leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(".hosts.rosnet-tui")]
     assert leftovers == []
 
@@ -397,7 +401,7 @@ def test_bind_mounted_file_is_rewritten_in_place_with_a_backup(tmp_path):
     dst.write_bytes(b"the file underneath\n")
     _bind_mount(src, dst)
     try:
-        assert mf.is_mount_point(dst)
+        assert mw.is_mount_point(dst)
         p = mf.preview_block(dst, BODY_A, position="top")
         r = mf.apply_preview(p, state_dir=sd)
         assert r.changed and r.in_place
@@ -420,19 +424,18 @@ def test_rename_over_a_mount_point_falls_back_even_when_not_detected(tmp_path, m
     try:
         monkeypatch.setattr(mw, "is_mount_point", lambda p: False)  # detection missed it
         r = mf.apply_preview(mf.preview_block(dst, ["x"]), state_dir=sd)  # rename: EBUSY
-        assert r.in_place and mf.extract_block(src.read_text()) == ["x"]
+        assert r.in_place and mt.extract_block(src.read_text()) == ["x"]
     finally:
         subprocess.run(["umount", str(dst)], timeout=10, check=False)
 
 
 def test_the_journal_keeps_only_the_most_recent_applies(tmp_path, monkeypatch):
-    prune = mf._prune
-    monkeypatch.setattr(mf, "_prune", lambda sd: prune(sd, keep=3))
+    monkeypatch.setattr(uj, "JOURNAL_KEEP", 3)
     f, sd = tmp_path / "hosts", tmp_path / "state"
     f.write_text("orig\n")
     for i in range(5):
         mf.apply_preview(mf.preview_block(f, [f"# {i}"]), state_dir=sd)
-    assert [e.id for e in mf.journal_entries(sd)] == ["000003", "000004", "000005"]
+    assert [e.id for e in uj.journal_entries(sd)] == ["000003", "000004", "000005"]
     assert sorted(p.name for p in (sd / "backups").iterdir()) == ["000003", "000004", "000005"]
 
 
@@ -465,9 +468,9 @@ def test_a_crash_inside_an_in_place_shrink_is_completed_by_the_next_read(tmp_pat
         left = src.read_bytes()
         assert left.startswith(short.new) and left != short.new
         assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
-        left = mf.read_bytes(dst)
+        left = mw.read_bytes(dst)
         assert left == short.new == src.read_bytes()
-        assert mf.extract_block(left.decode()) == ["203.0.113.7  peer7"]
+        assert mt.extract_block(left.decode()) == ["203.0.113.7  peer7"]
         assert b"# keep me" in left and b"peer29" not in left
         assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
     finally:

@@ -19,7 +19,7 @@ import pytest
 from rosnet_tui.core import zenohproto
 from rosnet_tui.core.checks import probes
 from rosnet_tui.core.settings import Peer
-from rosnet_tui.core.ssh import SshResult
+from rosnet_tui.core.ssh.connection import SshResult
 
 SRC = Path(zenohproto.__file__).read_bytes()
 ROOT_INSTALLS = (Path("/usr/local/bin/rosnet-tui"), Path("/opt/pipx/venvs/rosnet-tui"))

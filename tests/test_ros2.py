@@ -140,6 +140,7 @@ def test_override_parsing_and_the_lone_node_rules():
 
 def test_ros_apply_writes_both_files_and_refuses_a_foreign_config(tmp_path):
     from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core import managed_text as mt
 
     rc, bashrc = tmp_path / "router.json5", tmp_path / "bashrc"
     bashrc.write_text("# mine\n")
@@ -157,7 +158,7 @@ def test_ros_apply_writes_both_files_and_refuses_a_foreign_config(tmp_path):
     mf.undo_last(tmp_path / "state")
     assert bashrc.read_text() == "# mine\n" and not rc.exists()
     rc.write_text("{ mode: 'router' }  // my own\n")
-    with pytest.raises(mf.ManagedFileError, match="not written by rosnet-tui"):
+    with pytest.raises(mt.ManagedFileError, match="not written by rosnet-tui"):
         ros2.previews(member(), bashrc, router_config_path=rc)
 
 

@@ -154,7 +154,7 @@ def test_validate_port(value, ok):
 
 
 def test_xdg_config_home_is_honoured(monkeypatch, tmp_path):
-    from rosnet_tui.core.settings import default_config_path
+    from rosnet_tui.core.paths import default_config_path
 
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
     assert default_config_path() == tmp_path / "rosnet-tui" / "config.toml"

@@ -1,4 +1,4 @@
-"""One SSH connection per peer per round (core/ssh_pool), against a real sshd on loopback."""
+"""One SSH connection per peer per round (core/ssh/pool.py), against a real sshd on loopback."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import time
 
 import pytest
 
-from rosnet_tui.core.ssh import ssh_run
-from rosnet_tui.core.ssh_pool import SshPool
+from rosnet_tui.core.ssh.pool import SshPool
+from rosnet_tui.core.ssh.session import ssh_run
 from tests.builders import free_port
 from tests.plugins.ssh import Sshd
 

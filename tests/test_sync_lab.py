@@ -20,7 +20,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.checks.linux import parse_hosts
 from rosnet_tui.core.sync import FolderStore, StoreError, new_record
 from rosnet_tui.core.sync.dnsstore import DnsStore
@@ -251,7 +251,7 @@ def test_sigkill_in_the_middle_of_a_write_leaves_the_hosts_file_whole(rig_lab, t
         lab.kill(proc)
     assert proc.returncode == -signal.SIGKILL
     assert hosts.read_bytes() == old                       # whole: the old file, byte for byte
-    assert mf.extract_block(old.decode()) is not None
+    assert mt.extract_block(old.decode()) is not None
 
     # The next run finishes the job and clears the dead writer's temp file.
     r = lab.run("laptop", sync_argv(cfg, state, *args), env=env, timeout=60)

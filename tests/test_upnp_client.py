@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 import pytest
 
-from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import undo_journal as uj
 from rosnet_tui.core.upnp import igd, pmp, wire
 from rosnet_tui.core.upnp.forwards import Wanted, explain_refusal, needs, wan_kind
 from rosnet_tui.core.upnp.modem import Modem
@@ -451,12 +451,12 @@ def test_needs_follow_the_settings():
 
 
 def test_journal_entries_without_forwards_are_written_as_before(tmp_path):
-    e = mf.JournalEntry("000001", "now", "hosts", [])
+    e = uj.JournalEntry("000001", "now", "hosts", [])
     assert "mappings" not in e.to_json()
     m = {"kind": "port_mapping", "protocol": "TCP", "port": 7447, "state": "made"}
-    e2 = mf.JournalEntry.from_json({**e.to_json(), "mappings": [m, "junk", 3]})
+    e2 = uj.JournalEntry.from_json({**e.to_json(), "mappings": [m, "junk", 3]})
     assert e2.mappings == [m]
-    assert mf.JournalEntry.from_json(e2.to_json()).mappings == [m]
+    assert uj.JournalEntry.from_json(e2.to_json()).mappings == [m]
 
 
 # --------------------------------------------------------------------------- the commands

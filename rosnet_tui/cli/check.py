@@ -11,7 +11,7 @@ import json
 import sys
 from typing import Any
 
-from rosnet_tui.cli import (
+from rosnet_tui.cli.common import (
     EXIT_FAIL,
     EXIT_OK,
     EXIT_USAGE,

@@ -1,28 +1,31 @@
-"""`rosnet-tui hosts apply|use|show`: this component's hosts set per network profile.
-
-Also home of the helpers the writer commands share (`ros`, `undo`): settings loading, the
-diff-and-ask flow, and re-running the affected checks after a write.
-"""
+"""`rosnet-tui hosts apply|use|show`: this component's hosts set per network profile."""
 
 from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Iterable
 from pathlib import Path
 
-from rosnet_tui.cli import (
-    EXIT_FAIL,
-    EXIT_OK,
-    EXIT_USAGE,
-    add_config_option,
-    config_path,
-    load_settings_or_say,
+from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, config_path
+from rosnet_tui.cli.writing import (
+    add_writer_options,
+    ask,
+    confirm,
+    err,
+    interactive,
+    load_settings_for,
+    print_changes,
+    report_settings_problems,
+    rerun_checks,
+    show_preview,
+    state_dir_of,
+    write_preview,
+    yes_to_all,
 )
-from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
+from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import (
-    DEFAULT_HOSTS_PATH,
     PROFILE_TITLES,
     WriterSettingsError,
     active_profile,
@@ -31,185 +34,16 @@ from rosnet_tui.core.hosts import (
     preview_hosts,
     render_hosts_text,
 )
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import (
     PROFILES,
     Settings,
     SettingsError,
-    default_state_dir,
     load_settings,
     save_settings,
 )
 
 HOSTS_CHECKS = ("linux.hosts", "linux.resolve")
-
-
-# --------------------------------------------------------------------------- shared helpers
-def err(msg: str) -> None:
-    print(msg, file=sys.stderr)
-
-
-def interactive() -> bool:
-    """A person at a terminal who can answer a question."""
-    try:
-        return sys.stdin.isatty() and sys.stdout.isatty()
-    except (AttributeError, ValueError):
-        return False
-
-
-def ask(question: str) -> bool:
-    """Ask a yes/no question on the terminal; anything but y/yes is no."""
-    try:
-        answer = input(f"{question} [y/N] ")
-    except EOFError:
-        print()
-        return False
-    return answer.strip().lower() in ("y", "yes")
-
-
-def load_settings_for(args: argparse.Namespace) -> Settings | None:
-    """The settings, or None after saying why (the caller exits 2).
-
-    A blank local IP (and interface) is filled in from this machine for this run, as `check`
-    and the wizard do: the documented settings leave local_ip out. Nothing is saved.
-    """
-    from rosnet_tui.core.netinfo import with_detected
-
-    settings = load_settings_or_say(args)
-    return with_detected(settings) if settings is not None else None
-
-
-def yes_to_all(args: argparse.Namespace) -> bool:
-    """--yes answers every question the command would ask, unless the command replays an exact
-    preview (--expect-digest, the privileged re-run): then only the flags decide."""
-    return bool(args.yes) and not getattr(args, "expect_digest", None)
-
-
-def report_settings_problems(exc: WriterSettingsError) -> int:
-    err("rosnet-tui: nothing was written; the settings are not usable for this:")
-    for key, why in exc.problems:
-        err(f"  {key}: {why}")
-    return EXIT_USAGE
-
-
-def state_dir_of(args: argparse.Namespace) -> Path:
-    sd = getattr(args, "state_dir", None)
-    return Path(sd).expanduser().absolute() if sd else default_state_dir()
-
-
-def add_writer_options(p: argparse.ArgumentParser, *, file_help: str) -> None:
-    add_config_option(p)
-    p.add_argument("--dry-run", action="store_true", help="show the diff, write nothing")
-    p.add_argument("--yes", "-y", action="store_true",
-                   help="answer yes to every question the command would ask: write, and fix "
-                        "what it would offer to fix (needed where there is no terminal)")
-    p.add_argument("--file", metavar="PATH", type=Path, default=None, help=file_help)
-    p.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
-                   help="where backups and the undo journal live "
-                        "(default: $XDG_STATE_HOME/rosnet-tui)")
-    p.add_argument("--expect-digest", metavar="SHA256", default=None,
-                   help="refuse unless the file is still the one previewed (used with sudo)")
-    p.add_argument("--no-checks", action="store_true",
-                   help="do not re-run the affected checks after writing")
-
-
-def print_changes(changes: Iterable[mf.LineChange]) -> None:
-    for c in changes:
-        print(f"  line {c.lineno}: {c.old.strip()}")
-        print(f"    why: {c.why}")
-        print(f"    becomes: {c.new.strip()}")
-
-
-def show_preview(preview: mf.Preview) -> None:
-    for note in preview.notes:
-        print(f"note: {note}")
-    if preview.changed:
-        sys.stdout.write(preview.diff())
-    else:
-        print(f"{preview.path} is already up to date: nothing to write.")
-    sys.stdout.flush()
-
-
-def confirm(args: argparse.Namespace, question: str) -> int | None:
-    """None to go on; an exit code to stop with (declined, or no terminal to ask on)."""
-    if args.yes:
-        return None
-    if interactive():
-        if ask(question):
-            return None
-        print("Cancelled: nothing was written.")
-        return EXIT_FAIL
-    err("rosnet-tui: not writing without a confirmation, and there is no terminal to ask on: "
-        "read the diff above, then run the same command with --yes")
-    return EXIT_USAGE
-
-
-def run_as_root(cmd: list[str], doing: str, what: str) -> int:
-    """Run our own sudo command *cmd* in this terminal, saying so first; an exit code."""
-    line = privilege.format_command(cmd)
-    if not privilege.sudo_available():
-        err(f"rosnet-tui: {doing} needs root, and sudo is not installed; run this as root:\n"
-            f"  {line}")
-        return EXIT_FAIL
-    print(f"{doing[0].upper()}{doing[1:]} needs root; running:\n  {line}")
-    sys.stdout.flush()
-    rc = privilege.run_privileged(cmd, interactive=interactive())
-    if rc != 0:
-        err(f"rosnet-tui: the privileged {what} did not succeed (exit {rc})")
-        return EXIT_FAIL
-    return EXIT_OK
-
-
-def write_preview(args: argparse.Namespace, preview: mf.Preview, sudo_cmd: list[str] | None
-                  ) -> int:
-    """Write *preview* here, or through *sudo_cmd* when this user may not; say what happened."""
-    if preview.needs_privilege:
-        if sudo_cmd is None:
-            err(f"rosnet-tui: this user may not write {preview.path}; nothing was written")
-            return EXIT_FAIL
-        return run_as_root(sudo_cmd, f"writing {preview.path}", "write")
-    try:
-        result = mf.apply_preview(preview, state_dir=state_dir_of(args))
-    except mf.StalePreviewError as exc:
-        err(f"rosnet-tui: {exc}")
-        return EXIT_FAIL
-    except mf.ManagedFileError as exc:
-        err(f"rosnet-tui: {exc}")
-        return EXIT_FAIL
-    if result.changed:
-        how = " in place (the file is a mount point)" if result.in_place else ""
-        backups = ", ".join(str(b) for b in result.backups) or "none (the file was new)"
-        print(f"Wrote {preview.path}{how}. Backup: {backups}. "
-              f"Undo with: rosnet-tui undo")
-    return EXIT_OK
-
-
-def rerun_checks(ids: Iterable[str], settings: Settings | None, *, hosts_path: Path | None = None,
-                 bashrc_path: Path | None = None, state_dir: Path | None = None) -> None:
-    """Re-run the checks a write affects and print them; skipped quietly if not available."""
-    ids = list(ids)
-    if settings is None or not ids:
-        return
-    try:
-        from rosnet_tui.core.checks.runner import RunOptions, run_now, select
-
-        specs = select(ids=ids)
-    except Exception as exc:  # a broken check module must not hide a successful write
-        print(f"(the checks could not be loaded: {type(exc).__name__}: {exc})")
-        return
-    if not specs:
-        print(f"(checks {', '.join(ids)} are not available in this version)")
-        return
-    opts = RunOptions(hosts_path=hosts_path, bashrc_path=bashrc_path, state_dir=state_dir)
-    results = {r.id: r for r in run_now(settings, specs, opts)}
-    print("Checks after the change:")
-    for spec in specs:
-        r = results.get(spec.id)
-        if r is None:
-            continue
-        print(f"  {r.status.label:<4} {r.id}: {r.summary}")
-        if r.status.value in ("fail", "warn"):
-            for line in r.evidence[:6]:
-                print(f"         {line}")
 
 
 # --------------------------------------------------------------------------- hosts
@@ -257,10 +91,10 @@ def _decide_conflicts(args: argparse.Namespace, settings: Settings, profile: str
     if args.yes or args.dry_run or not interactive():
         return False
     try:
-        old = mf.read_bytes(path, state_dir=state_dir_of(args))
-        conflicts = find_hosts_conflicts(mf.decode(old) if old is not None else None,
+        old = mw.read_bytes(path, state_dir=state_dir_of(args))
+        conflicts = find_hosts_conflicts(mt.decode(old) if old is not None else None,
                                          settings, profile)
-    except mf.ManagedFileError:
+    except mt.ManagedFileError:
         return False
     if not conflicts:
         return False
@@ -281,7 +115,7 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
                                 state_dir=state_dir_of(args))
     except WriterSettingsError as exc:
         return report_settings_problems(exc), settings
-    except mf.ManagedFileError as exc:
+    except mt.ManagedFileError as exc:
         err(f"rosnet-tui: {exc}")
         return EXIT_FAIL, settings
     if args.expect_digest and preview.digest != args.expect_digest:
@@ -355,10 +189,10 @@ def run_show(args: argparse.Namespace) -> int:
     sys.stdout.write(block)
     try:
         preview = preview_hosts(settings, profile, path, state_dir=state_dir_of(args))
-    except mf.ManagedFileError as exc:
+    except mt.ManagedFileError as exc:
         print(f"\n{path}: {exc}")
         return EXIT_OK
-    text = mf.decode(preview.old) if preview.old is not None else None
+    text = mt.decode(preview.old) if preview.old is not None else None
     now = active_profile(text)
     print()
     if preview.old is None:

@@ -7,7 +7,7 @@ import asyncio
 import logging
 import sys
 
-from rosnet_tui.cli import number_in
+from rosnet_tui.cli.common import number_in
 from rosnet_tui.core.probe_server import DEFAULT_LISTEN, ProbeLimits, parse_listen, run_probe_server
 
 

@@ -52,7 +52,7 @@ class ReportError(Exception):
 
 # --------------------------------------------------------------------------- CLI
 def register(sub: argparse._SubParsersAction) -> None:
-    from rosnet_tui.cli import add_config_option
+    from rosnet_tui.cli.common import add_config_option
 
     p = sub.add_parser(
         "report", help="write a shareable report: settings, results and advice",
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _load_settings(args: argparse.Namespace, *, required: bool) -> tuple[Settings | None, Path]:
-    from rosnet_tui.cli import config_path
+    from rosnet_tui.cli.common import config_path
     from rosnet_tui.core.settings import load_settings
 
     path = config_path(args)
@@ -232,27 +232,21 @@ def load_results_json(path: Path) -> tuple[list[CheckResult], Settings | None, d
 def _read_input(path: Path) -> str:
     """The text of *path* ('-': standard input), bounded: a regular file (or stdin) of at most
     MAX_INPUT_BYTES; a FIFO, a device or a folder is refused without reading."""
-    import stat
+    from rosnet_tui.core.regular_file import FileRefusedError, read_regular
 
+    too_big = ReportError(f"{path} is too big (over {MAX_INPUT_BYTES} bytes) for saved results")
     if str(path) == "-":
         data = sys.stdin.buffer.read(MAX_INPUT_BYTES + 1)
     else:
         try:
-            fd = os.open(path.expanduser(), os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+            data = read_regular(path.expanduser(), MAX_INPUT_BYTES)
+        except FileRefusedError as exc:
+            raise (too_big if exc.kind == "big" else
+                   ReportError(f"{path} is not a regular file")) from None
         except OSError as exc:
             raise ReportError(f"cannot read {path}: {exc.strerror or exc}") from None
-        try:
-            st = os.fstat(fd)
-            if not stat.S_ISREG(st.st_mode):
-                raise ReportError(f"{path} is not a regular file")
-            with os.fdopen(os.dup(fd), "rb") as f:
-                data = f.read(MAX_INPUT_BYTES + 1)
-        except OSError as exc:
-            raise ReportError(f"cannot read {path}: {exc.strerror or exc}") from None
-        finally:
-            os.close(fd)
     if len(data) > MAX_INPUT_BYTES:
-        raise ReportError(f"{path} is too big (over {MAX_INPUT_BYTES} bytes) for saved results")
+        raise too_big
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError:

@@ -12,8 +12,8 @@ import os
 import sys
 from pathlib import Path
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option
-from rosnet_tui.cli.hosts import (
+from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option
+from rosnet_tui.cli.writing import (
     add_writer_options,
     ask,
     confirm,
@@ -29,15 +29,12 @@ from rosnet_tui.cli.hosts import (
     yes_to_all,
 )
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
+from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core import ros2
-from rosnet_tui.core.bashrc import (
-    ROS_IP_REASON,
-    default_bashrc_path,
-    find_ros_ip_lines,
-    preview_bashrc,
-    shell_lines,
-)
+from rosnet_tui.core.bashrc import ROS_IP_REASON, find_ros_ip_lines, preview_bashrc, shell_lines
 from rosnet_tui.core.hosts import WriterSettingsError
+from rosnet_tui.core.paths import default_bashrc_path
 
 ROS_CHECKS = ("ros.env",)
 ROS2_CHECKS = ("ros2.env",)
@@ -77,9 +74,9 @@ def _decide_comment(args: argparse.Namespace, path: Path) -> bool:
     if args.yes or args.dry_run or not interactive():
         return False
     try:
-        old = mf.read_bytes(path, state_dir=state_dir_of(args))
-        found = find_ros_ip_lines(mf.decode(old) if old is not None else None)
-    except mf.ManagedFileError:
+        old = mw.read_bytes(path, state_dir=state_dir_of(args))
+        found = find_ros_ip_lines(mt.decode(old) if old is not None else None)
+    except mt.ManagedFileError:
         return False
     if not found:
         return False
@@ -103,7 +100,7 @@ def run_apply(args: argparse.Namespace) -> int:
         lines = shell_lines(settings, os.environ)
     except WriterSettingsError as exc:
         return report_settings_problems(exc)
-    except mf.ManagedFileError as exc:
+    except mt.ManagedFileError as exc:
         err(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     if args.expect_digest and preview.digest != args.expect_digest:
@@ -154,7 +151,7 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
         lines = ros2.shell_lines(settings, client=args.client)
     except WriterSettingsError as exc:
         return report_settings_problems(exc)
-    except mf.ManagedFileError as exc:
+    except mt.ManagedFileError as exc:
         err(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     role = ("the master (its router is the hub)" if settings.is_master else
@@ -173,7 +170,7 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
         try:
             result = mf.apply_previews(previews, state_dir=state_dir_of(args),
                                        label="ROS 2 environment and Zenoh config")
-        except mf.ManagedFileError as exc:
+        except mt.ManagedFileError as exc:
             err(f"rosnet-tui: {exc}")
             return EXIT_FAIL
         print(f"Wrote {', '.join(str(p.path) for p in changed)}. Backups: "

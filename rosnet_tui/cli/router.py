@@ -13,8 +13,14 @@ import sys
 import time
 from pathlib import Path
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, load_settings_or_say
-from rosnet_tui.cli.hosts import ask, err, interactive, rerun_checks, state_dir_of
+from rosnet_tui.cli.common import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    load_settings_or_say,
+)
+from rosnet_tui.cli.writing import ask, err, interactive, rerun_checks, state_dir_of
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp import journal
 from rosnet_tui.core.upnp.modem import LEASE_MAX_S, LEASE_MIN_S, Modem, find_modem

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import rosnet_tui
-from rosnet_tui.cli import (
+from rosnet_tui.cli.common import (
     EXIT_FAIL,
     EXIT_OK,
     EXIT_USAGE,
@@ -108,7 +108,7 @@ def _err(msg: str) -> None:
 
 
 def _state_dir(args: argparse.Namespace) -> Path:
-    from rosnet_tui.core.settings import default_state_dir
+    from rosnet_tui.core.paths import default_state_dir
 
     sd = getattr(args, "state_dir", None)
     return Path(sd).expanduser().absolute() if sd else default_state_dir()
@@ -119,7 +119,9 @@ def _bashrc(args: argparse.Namespace) -> Path | None:
         return None
     if getattr(args, "bashrc", None):
         return Path(args.bashrc).expanduser().absolute()
-    return Path.home() / ".bashrc"
+    from rosnet_tui.core.paths import default_bashrc_path
+
+    return default_bashrc_path()
 
 
 def _setup_logging(args: argparse.Namespace) -> None:
@@ -136,7 +138,7 @@ def _setup_logging(args: argparse.Namespace) -> None:
 
 # --------------------------------------------------------------------------- the service
 def run_service(args: argparse.Namespace) -> int:
-    from rosnet_tui.core.hosts import DEFAULT_HOSTS_PATH
+    from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
     from rosnet_tui.core.sync.service import SyncError, SyncService, install_signal_handlers
 
     _setup_logging(args)

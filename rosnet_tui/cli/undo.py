@@ -6,19 +6,20 @@ import argparse
 import sys
 from pathlib import Path
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, state_dir_problem
-from rosnet_tui.cli.hosts import (
-    HOSTS_CHECKS,
-    confirm,
-    err,
-    rerun_checks,
-    run_as_root,
-    state_dir_of,
+from rosnet_tui.cli.common import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    state_dir_problem,
 )
+from rosnet_tui.cli.hosts import HOSTS_CHECKS
 from rosnet_tui.cli.ros import ROS_CHECKS
+from rosnet_tui.cli.writing import confirm, err, rerun_checks, run_as_root, state_dir_of
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import privilege
-from rosnet_tui.core.hosts import DEFAULT_HOSTS_PATH
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 
@@ -45,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _settings_quietly(args: argparse.Namespace) -> Settings | None:
-    from rosnet_tui.cli import config_path
+    from rosnet_tui.cli.common import config_path
 
     try:
         return load_settings(config_path(args))
@@ -61,10 +62,10 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     try:
         plan = mf.plan_undo(sd, entry_id=args.expect_entry)
-    except mf.NothingToUndoError as exc:
+    except mt.NothingToUndoError as exc:
         print(f"rosnet-tui: {exc}")
         return EXIT_FAIL
-    except mf.ManagedFileError as exc:
+    except mt.ManagedFileError as exc:
         err(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     e = plan.entry
@@ -100,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         try:
             result = mf.apply_undo(plan, force=args.force)
-        except mf.ManagedFileError as exc:
+        except mt.ManagedFileError as exc:
             err(f"rosnet-tui: {exc}")
             return EXIT_FAIL
         if result.files:

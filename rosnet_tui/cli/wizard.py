@@ -7,7 +7,7 @@ import os
 import sys
 import threading
 
-from rosnet_tui.cli import EXIT_FAIL, EXIT_USAGE, config_path
+from rosnet_tui.cli.common import EXIT_FAIL, EXIT_USAGE, config_path
 
 # Terminals that cannot draw a full-screen program.
 NO_SCREEN_TERMS = ("dumb", "unknown", "")

@@ -17,7 +17,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
+from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core.hosts import WriterSettingsError
+from rosnet_tui.core.paths import default_bashrc_path
 from rosnet_tui.core.settings import Settings
 
 ROS_IP_REASON = (
@@ -34,8 +37,7 @@ _COMMENTED_RE = re.compile(rf"^[ \t]*(?::[ \t]*)?# {_TAG}: .*ROS_(?:IP|HOSTNAME)
 _MASTER_URI_RE = re.compile(rf"^\s*(?:export\s+)?ROS_MASTER_URI=({_VALUE})")
 
 
-def default_bashrc_path() -> Path:
-    return Path.home() / ".bashrc"
+
 
 
 def ros_problems(settings: Settings) -> list[tuple[str, str]]:
@@ -90,35 +92,35 @@ def render_bashrc_block(settings: Settings, *, commented: int = 0) -> list[str]:
     return lines
 
 
-def find_ros_ip_lines(text: str | None) -> list[mf.LineChange]:
+def find_ros_ip_lines(text: str | None) -> list[mt.LineChange]:
     """``ROS_IP`` / ``ROS_HOSTNAME`` assignments outside our block, each with its commented form.
 
     Only plain assignments are touched (not ``ROS_IP=x cmd``, nor continued lines). When a plain
     comment would break the file's syntax (the line is the only one in an ``if``), the line
     becomes the no-op ``:`` followed by the comment.
     """
-    lines = mf.split_lines(text or "")
-    span = mf.find_block(lines)
+    lines = mt.split_lines(text or "")
+    span = mt.find_block(lines)
     out = []
     for i, line in enumerate(lines):
         if span and span[0] <= i <= span[1]:
             continue
-        content = mf.line_content(line)
+        content = mt.line_content(line)
         m = _ROS_VAR_RE.match(content) or _ROS_EXPORT_ONLY_RE.match(content)
         if not m:
             continue
-        out.append(mf.LineChange(i, content, f"# {_TAG}: {content}",
+        out.append(mt.LineChange(i, content, f"# {_TAG}: {content}",
                                  f"sets {m.group(1)}: {ROS_IP_REASON}"))
     return out
 
 
 def master_uri_overrides(text: str | None) -> list[tuple[int, str]]:
     """ROS_MASTER_URI assignments after our block (they would win over ours): (lineno, line)."""
-    lines = mf.split_lines(text or "")
-    span = mf.find_block(lines)
+    lines = mt.split_lines(text or "")
+    span = mt.find_block(lines)
     start = span[1] + 1 if span else len(lines)
-    return [(i + 1, mf.line_content(x)) for i, x in enumerate(lines) if i >= start
-            and _MASTER_URI_RE.match(mf.line_content(x))]
+    return [(i + 1, mt.line_content(x)) for i, x in enumerate(lines) if i >= start
+            and _MASTER_URI_RE.match(mt.line_content(x))]
 
 
 def _indent(line: str) -> str:
@@ -138,19 +140,19 @@ def _syntax_ok(data: bytes) -> bool | None:
 
 
 def _guard_syntax(old: bytes | None, body: Sequence[str],
-                  changes: list[mf.LineChange]) -> list[mf.LineChange]:
+                  changes: list[mt.LineChange]) -> list[mt.LineChange]:
     """Keep a shell file that parsed before parsing after (comment -> ``: # ...`` if needed)."""
     if not changes or old is None or _syntax_ok(old) is not True:
         return changes
-    text = mf.decode(old)
+    text = mt.decode(old)
 
-    def compose(cs: list[mf.LineChange]) -> bytes:
-        return mf.encode(mf.compose_block(text, body, position="end",
+    def compose(cs: list[mt.LineChange]) -> bytes:
+        return mt.encode(mt.compose_block(text, body, position="end",
                                           replace_lines={c.index: c.new for c in cs}))
 
     if _syntax_ok(compose(changes)) is not False:
         return changes
-    safe = [mf.LineChange(c.index, c.old, f"{_indent(c.old)}: # {_TAG}: {c.old.strip()}", c.why)
+    safe = [mt.LineChange(c.index, c.old, f"{_indent(c.old)}: # {_TAG}: {c.old.strip()}", c.why)
             for c in changes]
     return safe if _syntax_ok(compose(safe)) is not False else changes
 
@@ -163,8 +165,8 @@ def preview_bashrc(settings: Settings, path: Path | None = None, *,
     agreed) they are commented out.
     """
     path = Path(path) if path is not None else default_bashrc_path()
-    old = mf.read_bytes(path, state_dir=state_dir)
-    text = mf.decode(old) if old is not None else None
+    old = mw.read_bytes(path, state_dir=state_dir)
+    text = mt.decode(old) if old is not None else None
     found = find_ros_ip_lines(text)
     earlier = len(_COMMENTED_RE.findall(text or ""))
     body = render_bashrc_block(settings,
@@ -191,5 +193,5 @@ def apply_bashrc(settings: Settings, path: Path | None = None, *, comment_ros_ip
     """Preview and write in one go; *expect_digest* (from an earlier preview) guards staleness."""
     preview = preview_bashrc(settings, path, comment_ros_ip=comment_ros_ip, state_dir=state_dir)
     if expect_digest is not None and preview.digest != expect_digest:
-        raise mf.StalePreviewError(f"{preview.path} changed since the preview; nothing was written")
+        raise mt.StalePreviewError(f"{preview.path} changed since the preview; nothing was written")
     return mf.apply_preview(preview, state_dir=state_dir)

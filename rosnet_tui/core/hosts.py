@@ -10,6 +10,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
+from rosnet_tui.core import managed_write as mw
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import PROFILES, Peer, Settings, SettingsError, validate_ip
 
 
@@ -60,7 +63,6 @@ def hosts_entries(settings: Settings, profile: str | None = None) -> list[HostsE
 # Everything below writes /etc/hosts through rosnet_tui.core.managed_file: our block only, at the
 # top of the file (a resolver that stops at the first match then finds ours first).
 
-DEFAULT_HOSTS_PATH = Path("/etc/hosts")
 PROFILE_TITLES = {
     "remote": "remote (peers by their public IP, across the internet)",
     "office": "office (everyone by their address on the office LAN)",
@@ -145,14 +147,14 @@ def render_hosts_block(settings: Settings, profile: str | None = None) -> list[s
 
 def render_hosts_text(settings: Settings, profile: str | None = None) -> str:
     """The whole block as text, markers included (for display)."""
-    return "\n".join([mf.BEGIN_MARKER, *render_hosts_block(settings, profile), mf.END_MARKER]) + "\n"
+    return "\n".join([mt.BEGIN_MARKER, *render_hosts_block(settings, profile), mt.END_MARKER]) + "\n"
 
 
 def active_profile(text: str | None) -> str | None:
     """Which profile our block in a hosts file's *text* has active (None: no block)."""
     try:
-        body = mf.extract_block(text)
-    except mf.DamagedBlockError:
+        body = mt.extract_block(text)
+    except mt.DamagedBlockError:
         return None
     for line in body or ():
         m = _ACTIVE_RE.match(line)
@@ -182,7 +184,7 @@ def _same_ip(a: str, b: str) -> bool:
 
 
 def find_hosts_conflicts(text: str | None, settings: Settings,
-                         profile: str | None = None) -> list[mf.LineChange]:
+                         profile: str | None = None) -> list[mt.LineChange]:
     """Lines outside our block that give one of our names another address, and their fix.
 
     The fix comments the line out, or, when the line also names others (``127.0.0.1 localhost
@@ -190,13 +192,13 @@ def find_hosts_conflicts(text: str | None, settings: Settings,
     """
     profile = profile or settings.this.profile
     wanted = {e.name.lower(): e.ip for e in hosts_entries(settings, profile)}
-    lines = mf.split_lines(text or "")
-    span = mf.find_block(lines)
-    out: list[mf.LineChange] = []
+    lines = mt.split_lines(text or "")
+    span = mt.find_block(lines)
+    out: list[mt.LineChange] = []
     for i, line in enumerate(lines):
         if span and span[0] <= i <= span[1]:
             continue
-        content = mf.line_content(line)
+        content = mt.line_content(line)
         parsed = _parse_hosts_line(content)
         if parsed is None:
             continue
@@ -212,7 +214,7 @@ def find_hosts_conflicts(text: str | None, settings: Settings,
             new += f" # {_TAG} took out: {' '.join(bad)}"
         else:
             new = f"# {_TAG}: {content}"
-        out.append(mf.LineChange(i, content, new,
+        out.append(mt.LineChange(i, content, new,
                                  f"maps {', '.join(bad)} to {ip}, not {wanted[bad[0].lower()]}: "
                                  f"{CONFLICT_REASON}"))
     return out
@@ -236,8 +238,8 @@ def preview_hosts(settings: Settings, profile: str | None = None,
     """
     profile = profile or settings.this.profile
     body = render_hosts_block(settings, profile)
-    old = mf.read_bytes(Path(path), state_dir=state_dir)
-    text = mf.decode(old) if old is not None else None
+    old = mw.read_bytes(Path(path), state_dir=state_dir)
+    text = mt.decode(old) if old is not None else None
     conflicts = find_hosts_conflicts(text, settings, profile)
     notes = _environment_notes(text)
     for c in conflicts:
@@ -257,5 +259,5 @@ def apply_hosts(settings: Settings, profile: str | None = None,
     preview = preview_hosts(settings, profile, path, fix_conflicts=fix_conflicts,
                             state_dir=state_dir)
     if expect_digest is not None and preview.digest != expect_digest:
-        raise mf.StalePreviewError(f"{path} changed since the preview was made; nothing was written")
+        raise mt.StalePreviewError(f"{path} changed since the preview was made; nothing was written")
     return mf.apply_preview(preview, state_dir=state_dir)

@@ -26,27 +26,13 @@ from __future__ import annotations
 
 import contextlib
 import difflib
-import fcntl
-import json
 import os
-import re
-import secrets
 import stat
-import time
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
 from pathlib import Path
 
-# The block text and the file writing live in their own modules; their names are ours too.
-from rosnet_tui.core.jsonsafe import loads_bounded
-from rosnet_tui.core.managed_text import (  # noqa: F401 (re-exported)
-    _MARKER_RE,
-    ABSENT,
-    BEGIN_MARKER,
-    END_MARKER,
-    DamagedBlockError,
-    LineChange,
+from rosnet_tui.core.managed_text import (
     ManagedFileError,
     NothingToUndoError,
     PermissionNeededError,
@@ -54,32 +40,38 @@ from rosnet_tui.core.managed_text import (  # noqa: F401 (re-exported)
     UndoConflictError,
     compose_block,
     decode,
-    detect_newline,
     encode,
-    extract_block,
     file_digest,
-    find_block,
     line_content,
     split_lines,
 )
-from rosnet_tui.core.managed_write import (  # noqa: F401 (re-exported)
+from rosnet_tui.core.managed_write import (
     INPLACE_DIR,
-    INPLACE_MAGIC,
-    LOCK_TIMEOUT_S,
     MAX_FILE_BYTES,
     WriteOutcome,
-    _fsync_dir,
-    _write_all,
     can_write,
-    is_mount_point,
     read_bytes,
     recover_in_place,
     sweep_state_dir,
     write_file,
 )
 from rosnet_tui.core.regular_file import FileRefusedError, read_regular
+from rosnet_tui.core.undo_journal import (
+    JournalEntry,
+    JournalFile,
+    journal_entries,
+    locked,
+    make_private_dir,
+    next_id,
+    now,
+    owner_for,
+    prune,
+    save_entry,
+    state_dir_path,
+    undo_changes,
+    write_private,
+)
 
-JOURNAL_KEEP = 100  # applies remembered for undo; older ones (and their backups) are dropped
 
 # --------------------------------------------------------------------------- preview
 @dataclass(frozen=True)
@@ -155,50 +147,6 @@ def preview_block(path: Path, body: Sequence[str], *, position: str = "end", lab
     return Preview(path, old, new, label, tuple(notes), new_mode)
 
 
-# --------------------------------------------------------------------------- journal
-@dataclass
-class JournalFile:
-    path: str            # as the user named it
-    real_path: str       # symlinks resolved: what was written
-    existed: bool
-    backup: str | None   # relative to the state dir
-    before: str          # digest before our apply
-    after: str           # digest after it
-    mode: int | None = None
-    uid: int | None = None
-    gid: int | None = None
-    in_place: bool = False
-
-
-@dataclass
-class JournalEntry:
-    id: str
-    created: str
-    label: str
-    files: list[JournalFile]
-    undone: str | None = None
-    version: int = 1
-    # Port forwards made on the modem (rosnet_tui.core.upnp.journal): no files, undone by
-    # removing them from the modem they were made on.
-    mappings: list[dict] = field(default_factory=list)
-
-    def to_json(self) -> dict:
-        d = {"version": self.version, "id": self.id, "created": self.created,
-             "label": self.label, "undone": self.undone,
-             "files": [f.__dict__ for f in self.files]}
-        if self.mappings:
-            d["mappings"] = self.mappings
-        return d
-
-    @classmethod
-    def from_json(cls, d: dict) -> JournalEntry:
-        return cls(id=str(d["id"]), created=str(d.get("created", "")),
-                   label=str(d.get("label", "")), undone=d.get("undone"),
-                   files=[JournalFile(**f) for f in d.get("files", [])],
-                   version=int(d.get("version", 1)),
-                   mappings=[m for m in d.get("mappings") or [] if isinstance(m, dict)])
-
-
 @dataclass
 class ApplyResult:
     changed: bool
@@ -209,142 +157,6 @@ class ApplyResult:
     @property
     def in_place(self) -> bool:
         return any(f.in_place for f in self.files)
-
-
-def _state_dir(state_dir: Path | None) -> Path:
-    if state_dir is None:
-        from rosnet_tui.core.settings import default_state_dir
-
-        state_dir = default_state_dir()
-    return Path(state_dir).expanduser().absolute()
-
-
-def _owner_for(state_dir: Path) -> tuple[int, int] | None:
-    """Root writing a user's state dir (sudo) hands what it creates back to that user."""
-    if os.geteuid() != 0:
-        return None
-    p = state_dir
-    while not p.exists() and p != p.parent:
-        p = p.parent
-    try:
-        st = os.stat(p)
-    except OSError:
-        return None
-    return (st.st_uid, st.st_gid) if st.st_uid != 0 else None
-
-
-def _mkdir(path: Path, owner: tuple[int, int] | None) -> None:
-    missing = []
-    p = path
-    while not p.exists():
-        missing.append(p)
-        p = p.parent
-    for d in reversed(missing):
-        with contextlib.suppress(FileExistsError):
-            os.mkdir(d, 0o700)
-        if owner:
-            with contextlib.suppress(OSError):
-                os.chown(d, *owner)
-    if path.is_symlink() or not path.is_dir():
-        raise ManagedFileError(f"{path} must be a folder (not a link)")
-
-
-def _write_private(path: Path, data: bytes, owner: tuple[int, int] | None) -> None:
-    """Write a state file (journal, backup): temp + fsync + rename, never following links."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
-            _write_all(fd, data)
-            if owner:
-                with contextlib.suppress(OSError):
-                    os.fchown(fd, *owner)
-            os.fsync(fd)
-            os.replace(tmp, path)
-        finally:
-            os.close(fd)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    _fsync_dir(path.parent)
-
-
-@contextlib.contextmanager
-def _locked(state_dir: Path, owner: tuple[int, int] | None,
-            timeout_s: float = LOCK_TIMEOUT_S) -> Iterator[None]:
-    """One writer at a time per state dir (bounded wait)."""
-    _mkdir(state_dir, owner)
-    lock = state_dir / "lock"
-    fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
-    try:
-        if owner:
-            with contextlib.suppress(OSError):
-                os.fchown(fd, *owner)
-        deadline = time.monotonic() + timeout_s
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    raise ManagedFileError(
-                        f"another rosnet-tui is writing (lock {lock} held for {timeout_s:g} s); "
-                        "try again when it is done") from None
-                time.sleep(0.05)
-        yield
-    finally:
-        os.close(fd)
-
-
-def journal_entries(state_dir: Path | None = None) -> list[JournalEntry]:
-    """Every recorded apply, oldest first (undone ones included, marked)."""
-    folder = _state_dir(state_dir) / "journal"
-    out = []
-    try:
-        names = sorted(n for n in os.listdir(folder) if re.fullmatch(r"\d{6,}\.json", n))
-    except FileNotFoundError:
-        return []
-    except NotADirectoryError:
-        raise ManagedFileError(f"{folder.parent} is not a folder: it cannot be the state "
-                               "dir") from None
-    except OSError as exc:
-        raise ManagedFileError(f"cannot read the journal in {folder}: {exc.strerror}") from None
-    for n in names:
-        try:
-            raw = read_regular(folder / n, MAX_FILE_BYTES).decode("utf-8")
-            out.append(JournalEntry.from_json(loads_bounded(raw, unique_keys=False)))
-        except (OSError, ValueError, TypeError, KeyError, AttributeError):
-            continue  # a damaged entry is skipped, never trusted
-    return out
-
-
-def _next_id(state_dir: Path) -> str:
-    entries = journal_entries(state_dir)
-    n = max((int(e.id) for e in entries if e.id.isdigit()), default=0) + 1
-    return f"{n:06d}"
-
-
-def _save_entry(state_dir: Path, entry: JournalEntry, owner: tuple[int, int] | None) -> None:
-    folder = state_dir / "journal"
-    _mkdir(folder, owner)
-    _write_private(folder / f"{entry.id}.json",
-                   (json.dumps(entry.to_json(), indent=2) + "\n").encode(), owner)
-
-
-def _prune(state_dir: Path, keep: int = JOURNAL_KEEP) -> None:
-    """Forget the oldest entries (and their backups) beyond the *keep* most recent."""
-    import shutil
-
-    for e in journal_entries(state_dir)[:-keep]:
-        with contextlib.suppress(OSError):
-            shutil.rmtree(state_dir / "backups" / e.id)
-            os.unlink(state_dir / "journal" / f"{e.id}.json")
-
-
-def _now() -> str:
-    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None,
@@ -364,18 +176,18 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
         raise PermissionNeededError(
             "this user may not write " + ", ".join(map(str, blocked))
             + "; run the writer with sudo", blocked)
-    sd = _state_dir(state_dir)
-    owner = _owner_for(sd)
-    with _locked(sd, owner):
+    sd = state_dir_path(state_dir)
+    owner = owner_for(sd)
+    with locked(sd, owner):
         sweep_state_dir(sd)
         for p in previews:
             # an in-place write of this file cut short, journaled in the state dir
             with contextlib.suppress(OSError):
                 recover_in_place(p.path, journal_dir=sd / INPLACE_DIR)
             _check_fresh(p)
-        entry = JournalEntry(_next_id(sd), _now(), label or "; ".join(p.label for p in todo if p.label), [])
+        entry = JournalEntry(next_id(sd), now(), label or "; ".join(p.label for p in todo if p.label), [])
         bdir = sd / "backups" / entry.id
-        _mkdir(bdir, owner)
+        make_private_dir(bdir, owner)
         result = ApplyResult(True, entry.id)
         for i, p in enumerate(todo):
             real = Path(os.path.realpath(p.path))
@@ -383,7 +195,7 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
             backup = None
             if p.old is not None:
                 bpath = bdir / f"{i}-{real.name}"
-                _write_private(bpath, p.old, owner)
+                write_private(bpath, p.old, owner)
                 backup = str(bpath.relative_to(sd))
                 result.backups.append(bpath)
             entry.files.append(JournalFile(
@@ -391,7 +203,7 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
                 backup=backup, before=p.digest, after=p.new_digest,
                 mode=stat.S_IMODE(st.st_mode) if st else None,
                 uid=st.st_uid if st else None, gid=st.st_gid if st else None))
-        _save_entry(sd, entry, owner)  # before any write: a crash leaves an undoable record
+        save_entry(sd, entry, owner)  # before any write: a crash leaves an undoable record
         done: list[int] = []
         try:
             for i, p in enumerate(todo):
@@ -409,9 +221,9 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
                     if file_digest(read_bytes(todo[cut].path)) != entry.files[cut].before:
                         done = [*done, cut]
             _roll_back(sd, entry, done)
-            entry.undone = _now() + " (rolled back: the apply failed)"
+            entry.undone = now() + " (rolled back: the apply failed)"
             with contextlib.suppress(Exception):
-                _save_entry(sd, entry, owner)
+                save_entry(sd, entry, owner)
             if isinstance(exc, PermissionError):
                 raise PermissionNeededError(f"this user may not write {exc.filename}",
                                             [Path(exc.filename or "")]) from exc
@@ -419,8 +231,8 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
                 raise ManagedFileError(f"could not write {exc.filename}: {exc.strerror}; "
                                        "nothing was changed") from exc
             raise
-        _save_entry(sd, entry, owner)
-        _prune(sd)
+        save_entry(sd, entry, owner)
+        prune(sd)
         return result
 
 
@@ -469,7 +281,7 @@ ROOT_RESTORABLE = ("/etc/hosts",)
 
 def _check_root_safe(sd: Path, entry: JournalEntry) -> None:
     """Root undoing from a user's journal restores only system files rosnet-tui writes."""
-    owner = _owner_for(sd)
+    owner = owner_for(sd)
     if owner is None:
         return
     for f in entry.files:
@@ -532,7 +344,7 @@ def last_entry(state_dir: Path | None = None) -> JournalEntry | None:
 
 def plan_undo(state_dir: Path | None = None, *, entry_id: str | None = None) -> UndoPlan:
     """Preview undoing the last apply (or *entry_id*, which must be the last one)."""
-    sd = _state_dir(state_dir)
+    sd = state_dir_path(state_dir)
     entry = last_entry(sd)
     if entry is None:
         raise NothingToUndoError("nothing to undo: every recorded change was undone already "
@@ -567,19 +379,17 @@ def apply_undo(plan: UndoPlan, *, force: bool = False) -> UndoResult:
         raise PermissionNeededError("this user may not write " + ", ".join(map(str, blocked))
                                     + "; run undo with sudo", blocked)
     sd = plan.state_dir
-    owner = _owner_for(sd)
+    owner = owner_for(sd)
     _check_root_safe(sd, plan.entry)
-    with _locked(sd, owner):
+    with locked(sd, owner):
         current = last_entry(sd)
         if current is None or current.id != plan.entry.id:
             raise StalePreviewError("the journal changed since the undo preview; try again")
         for p in plan.previews:
             _check_fresh(p)
         forwards: list[str] = []
-        if plan.entry.mappings:  # forwards on the modem: removed there (bounded), or refused
-            from rosnet_tui.core.upnp.journal import undo_mappings
-
-            forwards = undo_mappings(plan.entry, force=force)
+        if plan.entry.mappings:  # e.g. forwards on the modem: removed there (bounded), or refused
+            forwards = undo_changes(plan.entry, force=force)
         restored = []
         for p, f in zip(plan.previews, plan.entry.files, strict=True):
             if p.changed:
@@ -587,8 +397,8 @@ def apply_undo(plan: UndoPlan, *, force: bool = False) -> UndoResult:
             if file_digest(read_bytes(Path(f.real_path))) != f.before:
                 raise ManagedFileError(f"{f.path}: restored content does not match the backup")
             restored.append(Path(f.path))
-        plan.entry.undone = _now()
-        _save_entry(sd, plan.entry, owner)
+        plan.entry.undone = now()
+        save_entry(sd, plan.entry, owner)
         return UndoResult(plan.entry.id, plan.entry.label, restored, forwards)
 
 

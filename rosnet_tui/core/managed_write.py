@@ -35,7 +35,8 @@ INPLACE_MAGIC = b"rosnet-tui in-place journal 1\n"
 # Where an in-place write journals when the target's folder may not be written.
 INPLACE_DIR = "inplace"
 
-# Test hook: called between the fsync of the temp file and the rename (crash tests set it).
+# Test hook: called between the fsync of a managed file's temp file and the rename (crash tests
+# set it).
 _before_rename: Callable[[], None] | None = None
 # Test hook: called between the in-place write and its truncation (crash tests set it).
 _before_truncate: Callable[[], None] | None = None
@@ -150,7 +151,7 @@ class WriteOutcome:
     deleted: bool = False
 
 
-def _fsync_dir(folder: Path) -> None:
+def fsync_dir(folder: Path) -> None:
     try:
         fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
     except OSError:
@@ -191,12 +192,13 @@ def sweep_state_dir(state_dir: Path) -> list[str]:
             if e.is_dir(follow_symlinks=False):
                 removed += tempfiles.sweep(Path(e.path), tempfiles.PRIVATE_TMP)
     for folder in (sd, sd / "sync"):
-        removed += tempfiles.sweep(folder, tempfiles.ATOMIC_TMP)
+        removed += tempfiles.sweep(folder, tempfiles.MANAGED_TMP)
+        removed += tempfiles.sweep(folder, tempfiles.ATOMIC_TMP)    # an earlier version's
     removed += tempfiles.sweep(sd / "inplace", tempfiles.MANAGED_TMP)
     return removed
 
 
-def _write_all(fd: int, data: bytes) -> None:
+def write_all(fd: int, data: bytes) -> None:
     view = memoryview(data)
     off = 0
     while off < len(data):
@@ -260,7 +262,7 @@ def _is_torn(cur: bytes, old: bytes, new: bytes) -> bool:
 def _rewrite(real: Path, data: bytes) -> None:
     fd = os.open(real, os.O_WRONLY | os.O_NOFOLLOW)
     try:
-        _write_all(fd, data)
+        write_all(fd, data)
         os.fsync(fd)
         if _before_truncate is not None:
             _before_truncate()
@@ -274,7 +276,7 @@ def journal_dirs(journal_dir: Path | None = None) -> list[Path]:
     """Where the journal of a file whose folder may not be written can be: *journal_dir* (the
     writer's state dir), then the default state dir's in-place folder (so that a reader that is
     not told the writer's state dir, such as ``check``, still finds it)."""
-    from rosnet_tui.core.settings import default_state_dir
+    from rosnet_tui.core.paths import default_state_dir
 
     out = [Path(journal_dir)] if journal_dir else []
     with contextlib.suppress(RuntimeError, KeyError):   # no home folder: only the given one
@@ -353,7 +355,7 @@ def _recover_from(real: Path, st: os.stat_result, jpath: Path, wait_s: float) ->
                 os.unlink(jpath)
             except OSError:
                 return effective              # e.g. a read-only mount: same as not allowed
-            _fsync_dir(jpath.parent)
+            fsync_dir(jpath.parent)
             return None
         finally:
             os.close(jfd)
@@ -386,10 +388,10 @@ def _write_in_place(real: Path, data: bytes, journal_dir: Path | None = None) ->
                       stat.S_IMODE(st.st_mode) & 0o644)
         try:
             fcntl.flock(jfd, fcntl.LOCK_EX)   # held until the write is done (or we die)
-            _write_all(jfd, _journal_bytes(real, st, old, data))
+            write_all(jfd, _journal_bytes(real, st, old, data))
             os.fsync(jfd)
             os.rename(tmp, jpath)
-            _fsync_dir(Path(folder))
+            fsync_dir(Path(folder))
         except BaseException:
             os.close(jfd)
             with contextlib.suppress(OSError):
@@ -410,7 +412,7 @@ def _write_in_place(real: Path, data: bytes, journal_dir: Path | None = None) ->
                                    "written; the previous content was put back")
         if jpath is not None:
             os.unlink(jpath)
-            _fsync_dir(jpath.parent)
+            fsync_dir(jpath.parent)
     finally:
         if jfd is not None:
             os.close(jfd)
@@ -423,34 +425,49 @@ def _put_back(real: Path, old: bytes, jpath: Path | None) -> None:
         os.unlink(jpath)
 
 
-def _write_renaming(real: Path, data: bytes, mode: int, uid: int | None, gid: int | None,
-                    xattr_src: Path | None) -> None:
-    folder = real.parent
-    tmp = folder / f".{real.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+def atomic_write(path: Path, data: bytes, *, create_mode: int = 0o600, mode: int | None = None,
+                 uid: int | None = None, gid: int | None = None, xattr_src: Path | None = None,
+                 owner_errors: tuple[type[OSError], ...] = (PermissionError,),
+                 before_rename: Callable[[], None] | None = None) -> None:
+    """The one atomic writer: *data* to a temp file beside *path* (an unpredictable name,
+    created exclusively, never through a link, locked until renamed: see :mod:`.tempfiles`),
+    fsync, rename over *path*, fsync of the folder. A writer killed at any moment leaves the old
+    file or the new one; its temp file is removed by the next writer of *path* (or the state
+    dir's sweep).
+
+    The temp file is created with *create_mode* (the umask applies); *mode* (exact), *uid* and
+    *gid* (None: unchanged) and the extended attributes of *xattr_src* are then set on it.
+    An ownership change failing with one of *owner_errors* is skipped. *before_rename* is
+    called between the fsync and the rename (crash tests stop a writer there).
+    """
+    folder = path.parent
+    tempfiles.sweep(folder, tempfiles.MANAGED_TMP, path.name)
+    tmp = folder / f".{path.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, create_mode)
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
-            _write_all(fd, data)
+            write_all(fd, data)
             if uid is not None or gid is not None:
                 try:
                     os.fchown(fd, -1 if uid is None else uid, -1 if gid is None else gid)
-                except PermissionError:
-                    pass  # a normal user's own file: owner is already right
-            os.fchmod(fd, mode)
+                except owner_errors:
+                    pass  # e.g. a normal user's own file: owner is already right
+            if mode is not None:
+                os.fchmod(fd, mode)
             if xattr_src is not None:
                 _copy_xattrs(xattr_src, fd)
             os.fsync(fd)
-            if _before_rename is not None:
-                _before_rename()
-            os.replace(tmp, real)
+            if before_rename is not None:
+                before_rename()
+            os.replace(tmp, path)
         finally:
             os.close(fd)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
-    _fsync_dir(folder)
+    fsync_dir(folder)
 
 
 def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
@@ -472,12 +489,12 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
     if data is None:
         if st is not None:
             os.unlink(real)
-            _fsync_dir(real.parent)
+            fsync_dir(real.parent)
         return WriteOutcome(Path(path), False, deleted=True)
     if st is None:
         real.parent.mkdir(parents=True, exist_ok=True)
-        _remove_stale_temps(real.parent, real.name)
-        _write_renaming(real, data, new_mode if mode is None else mode, uid, gid, None)
+        atomic_write(real, data, mode=new_mode if mode is None else mode, uid=uid, gid=gid,
+                     before_rename=_before_rename)
         return WriteOutcome(Path(path), False)
     mode = stat.S_IMODE(st.st_mode) if mode is None else mode
     uid = st.st_uid if uid is None else uid
@@ -487,9 +504,9 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
                 or (euid != 0 and st.st_uid != euid)
                 or not os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True))
     if not in_place:
-        _remove_stale_temps(real.parent, real.name)
         try:
-            _write_renaming(real, data, mode, uid, gid, real)
+            atomic_write(real, data, mode=mode, uid=uid, gid=gid, xattr_src=real,
+                         before_rename=_before_rename)
             return WriteOutcome(Path(path), False)
         except OSError as exc:
             if exc.errno not in (errno.EBUSY, errno.EXDEV):

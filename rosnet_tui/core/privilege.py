@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import rosnet_tui
-from rosnet_tui.core.managed_file import can_write
+from rosnet_tui.core.managed_write import can_write
 
 SUDO = "sudo"
 

@@ -362,12 +362,14 @@ def bashrc_block(s: Settings, *, client: bool = False, router_config_path: Path 
 def preview_whole_file(path: Path, text: str, label: str, state_dir: Path | None = None) -> Any:
     """A preview replacing *path* with *text*, refused when the file exists and is not ours."""
     from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core import managed_text as mt
+    from rosnet_tui.core import managed_write as mw
 
-    old = mf.read_bytes(path, state_dir=state_dir)
-    if old is not None and not is_managed(mf.decode(old)):
-        raise mf.ManagedFileError(f"{path} exists and was not written by rosnet-tui: move it "
+    old = mw.read_bytes(path, state_dir=state_dir)
+    if old is not None and not is_managed(mt.decode(old)):
+        raise mt.ManagedFileError(f"{path} exists and was not written by rosnet-tui: move it "
                                   "away (or point the setting at another file), then try again")
-    return mf.Preview(Path(path), old, mf.encode(text), label, (), 0o644)
+    return mf.Preview(Path(path), old, mt.encode(text), label, (), 0o644)
 
 
 def previews(s: Settings, bashrc_path: Path, *, client: bool = False,
@@ -377,6 +379,7 @@ def previews(s: Settings, bashrc_path: Path, *, client: bool = False,
     the ~/.bashrc block, and the router's config (or, for a lone client node on Humble, the
     session config)."""
     from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core import managed_write as mw
     from rosnet_tui.core.hosts import WriterSettingsError
 
     problems = writer_problems(s)
@@ -388,7 +391,7 @@ def previews(s: Settings, bashrc_path: Path, *, client: bool = False,
     sc_path = session_config_path or default_session_config_path()
     body = bashrc_block(s, client=lone, router_config_path=rc_path,
                         session_config_path=sc_path, distro=distro)
-    old = mf.read_bytes(Path(bashrc_path), state_dir=state_dir)
+    old = mw.read_bytes(Path(bashrc_path), state_dir=state_dir)
     out = [mf.preview_block(bashrc_path, body, position="end",
                             label=f"ROS 2 environment in {Path(bashrc_path).name}",
                             new_mode=0o644, current=old, use_current=True)]

@@ -12,9 +12,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path, default_state_dir
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.settings import Settings, default_state_dir, save_settings
+from rosnet_tui.core.settings import Settings, save_settings
 from rosnet_tui.core.steps import STEP_BY_ID, step_for
 from rosnet_tui.core.ui_state import UiState, local_time
 
@@ -58,8 +59,8 @@ class WizardSession:
     config_path: Path
     settings: Settings
     state_dir: Path = field(default_factory=default_state_dir)
-    hosts_path: Path = Path("/etc/hosts")
-    bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
+    hosts_path: Path = DEFAULT_HOSTS_PATH
+    bashrc_path: Path = field(default_factory=default_bashrc_path)
     specs_for: Callable[[str], list[CheckSpec]] = registry_specs
     # Tests hand in their own context factory; None: the runner's everyday context.
     context_factory: Callable[[Settings], CheckContext] | None = None
@@ -234,7 +235,7 @@ class WizardSession:
         return write_plan(step_id, self.runtime_settings(), self.write_paths())
 
     def trust_host_key(self, name: str, port: int, host_key: str) -> Path:
-        from rosnet_tui.core.ssh import trust_host_key
+        from rosnet_tui.core.ssh.known_hosts import trust_host_key
 
         return trust_host_key(self.make_context().ssh, name, port, host_key)
 

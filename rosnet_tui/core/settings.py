@@ -7,16 +7,15 @@ comments and layout of a hand-edited file.
 
 from __future__ import annotations
 
-import fcntl
 import os
 import re
-import stat
 import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core import tempfiles
+from rosnet_tui.core.regular_file import FileRefusedError, read_regular
 from rosnet_tui.core.settings_model import (  # noqa: F401 (the model; re-exported)
     _NAME_RE,
     _SSH_USER_RE,
@@ -63,17 +62,6 @@ if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
-
-# --------------------------------------------------------------------------- paths
-def default_config_path() -> Path:
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "rosnet-tui" / "config.toml"
-
-
-def default_state_dir() -> Path:
-    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
-    return Path(base) / "rosnet-tui"
-
 
 # --------------------------------------------------------------------------- loading
 _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
@@ -309,34 +297,25 @@ def read_settings_text(path: Path) -> str | None:
     but a regular file (a FIFO, a device such as /dev/zero behind a link, a folder) is refused
     without reading, and so is a file over MAX_SETTINGS_BYTES. Raises SettingsError."""
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC)
+        data = read_regular(path, MAX_SETTINGS_BYTES)
     except FileNotFoundError:
         return None
-    except OSError as exc:
-        raise SettingsError(f"cannot read the file: {exc.strerror}", path=path) from None
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
+    except FileRefusedError as exc:
+        if exc.kind != "big":
             raise SettingsError("not a regular file (a folder, a FIFO or a device?): a settings "
-                                "file is a text file", path=path)
-        if st.st_size > MAX_SETTINGS_BYTES:
-            raise SettingsError(f"too big ({st.st_size} bytes; a settings file is a few KB, at "
-                                f"most {MAX_SETTINGS_BYTES})", path=path)
-        chunks, total = [], 0
-        while total <= MAX_SETTINGS_BYTES:
-            chunk = os.read(fd, 65536)
-            if not chunk:
-                break
-            chunks.append(chunk)
-            total += len(chunk)
-        if total > MAX_SETTINGS_BYTES:
-            raise SettingsError(f"too big (over {MAX_SETTINGS_BYTES} bytes)", path=path)
+                                "file is a text file", path=path) from None
+        try:
+            size = os.stat(path).st_size
+        except OSError:
+            size = 0
+        if size > MAX_SETTINGS_BYTES:
+            raise SettingsError(f"too big ({size} bytes; a settings file is a few KB, at "
+                                f"most {MAX_SETTINGS_BYTES})", path=path) from None
+        raise SettingsError(f"too big (over {MAX_SETTINGS_BYTES} bytes)", path=path) from None
     except OSError as exc:
         raise SettingsError(f"cannot read the file: {exc.strerror}", path=path) from None
-    finally:
-        os.close(fd)
     try:
-        return b"".join(chunks).decode("utf-8")
+        return data.decode("utf-8")
     except UnicodeDecodeError:
         raise SettingsError("the file is not UTF-8 text", path=path) from None
 
@@ -467,39 +446,19 @@ def _merge_table(doc: Any, name: str, values: dict[str, Any]) -> None:
 
 
 def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
-    """Write *text* to *path* atomically: a temp file in the same folder, fsync, rename."""
+    """Write *text* (UTF-8) to *path* atomically (:func:`~.managed_write.atomic_write`); a new
+    file gets *mode* (default: the file's mode now, or 0600), the umask applying."""
+    from rosnet_tui.core.managed_write import atomic_write
+
     path.parent.mkdir(parents=True, exist_ok=True)
-    # What a killed writer of this file left: removed (ours, its writer gone, not locked).
+    # What a killed writer of an earlier version left (its temp-file naming): removed too.
     tempfiles.sweep(path.parent, tempfiles.ATOMIC_TMP, path.name)
-    # An unpredictable name, created exclusively and never through a link.
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{os.urandom(4).hex()}")
     if mode is None:
         try:
             mode = path.stat().st_mode & 0o7777
         except FileNotFoundError:
             mode = 0o600
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, mode)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            fcntl.flock(f.fileno(), fcntl.LOCK_EX)   # ours until renamed
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-            os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    try:
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
+    atomic_write(path, text.encode("utf-8"), create_mode=mode)
 
 
 def save_settings(s: Settings, path: Path) -> None:

@@ -1,8 +1,8 @@
 """Temp files of our atomic writers, and removing the ones a killed writer left behind.
 
-Every writer (the managed-file writer, the state files, the settings file) writes a temp file
-beside its target, named with its process id, and holds an advisory lock on it until it is
-renamed into place. A temp file is left over when its writer is gone (or it is older than
+Every file we replace (managed files, state files, the settings file) goes through one writer,
+:func:`rosnet_tui.core.managed_write.atomic_write`, which writes a temp file beside its target,
+named with its process id, and holds an advisory lock on it until it is renamed into place. A temp file is left over when its writer is gone (or it is older than
 STALE_S) and nobody holds its lock: the next writer of the same folder removes it. Standard
 library only (the writers' crash tests run it with ``python -S``).
 """
@@ -19,11 +19,13 @@ from pathlib import Path
 
 STALE_S = 60.0
 
-# .NAME.rosnet-tui.PID.HEX.tmp    beside a managed file (hosts, bashrc)
+# .NAME.rosnet-tui.PID.HEX.tmp    the one writer's temp file (managed_write.atomic_write)
 MANAGED_TMP = re.compile(r"^\.(?P<name>.+)\.rosnet-tui\.(?P<pid>\d+)\.[0-9a-f]+\.tmp$")
+# Left by earlier versions, which named temp files differently; still swept. PRIVATE_TMP also
+# matches MANAGED_TMP names (NAME then ends in ".rosnet-tui").
 # .NAME.PID.HEX.tmp               journal entries and backups in the state dir
 PRIVATE_TMP = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]+\.tmp$")
-# .NAME.tmp-PID-HEX               settings, status and other small files (atomic_write_text)
+# .NAME.tmp-PID-HEX               settings, status and other small files
 ATOMIC_TMP = re.compile(r"^\.(?P<name>.+)\.tmp-(?P<pid>\d+)-[0-9a-f]+$")
 
 

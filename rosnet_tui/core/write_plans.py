@@ -12,7 +12,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.managed_write import read_text
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path
 from rosnet_tui.core.settings import Settings
 
 
@@ -40,8 +42,8 @@ class WritePaths:
 
     config_path: Path
     state_dir: Path
-    hosts_path: Path = Path("/etc/hosts")
-    bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
+    hosts_path: Path = DEFAULT_HOSTS_PATH
+    bashrc_path: Path = field(default_factory=default_bashrc_path)
 
 
 def _read(path: Path, state_dir: Path) -> str | None:
@@ -49,7 +51,7 @@ def _read(path: Path, state_dir: Path) -> str | None:
     is missing or cannot be read (the preview then says why)."""
     try:
         return read_text(path, state_dir=state_dir, errors="replace")
-    except mf.ManagedFileError:
+    except mt.ManagedFileError:
         return None
 
 

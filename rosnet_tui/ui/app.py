@@ -16,9 +16,10 @@ from typing import TYPE_CHECKING
 from textual.app import App
 from textual.binding import Binding
 
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path, default_state_dir
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.session import WizardSession, registry_specs
-from rosnet_tui.core.settings import Settings, default_state_dir
+from rosnet_tui.core.settings import Settings
 from rosnet_tui.core.steps import step_for
 from rosnet_tui.ui import textual_compat as tc
 from rosnet_tui.ui.keys import OrderedKeys
@@ -50,8 +51,8 @@ class AppDeps:
     specs_for: Callable[[str], list[CheckSpec]] = registry_specs
     make_context: Callable[[Settings], CheckContext] | None = None
     open_setup: bool = False
-    hosts_path: Path = Path("/etc/hosts")
-    bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
+    hosts_path: Path = DEFAULT_HOSTS_PATH
+    bashrc_path: Path = field(default_factory=default_bashrc_path)
 
     def session(self) -> WizardSession:
         return WizardSession(config_path=self.config_path, settings=self.settings,

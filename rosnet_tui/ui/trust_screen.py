@@ -10,7 +10,7 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Button, Static
 
-from rosnet_tui.core.ssh import verify_commands
+from rosnet_tui.core.ssh.known_hosts import verify_commands
 from rosnet_tui.ui.widgets import KeyBar
 
 

@@ -19,6 +19,7 @@ from textual.screen import ModalScreen
 from textual.widgets import Button, Checkbox, Static
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import privilege
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 from rosnet_tui.core.write_plans import WritePlan
@@ -79,7 +80,7 @@ class WriteScreen(ModalScreen[bool]):
         status = self.query_one("#write-status", Static)
         try:
             self.preview = self.plan.make_preview(self.option)
-        except (mf.ManagedFileError, ValueError, OSError) as exc:
+        except (mt.ManagedFileError, ValueError, OSError) as exc:
             self.preview = None
             self.query_one("#write-diff", Static).update("")
             status.update(f"Cannot write: {exc}")
@@ -118,7 +119,7 @@ class WriteScreen(ModalScreen[bool]):
         try:
             if p.needs_privilege:
                 if self.plan.sudo_command is None:
-                    raise mf.PermissionNeededError(f"this user may not write {p.path}", [p.path])
+                    raise mt.PermissionNeededError(f"this user may not write {p.path}", [p.path])
                 argv = self.plan.sudo_command(p, self.option)
                 with self.app.suspend():
                     print(f"\nrosnet-tui: running {privilege.format_command(argv)}\n", flush=True)
@@ -132,12 +133,12 @@ class WriteScreen(ModalScreen[bool]):
                 mf.apply_previews([p, *extra], state_dir=state_dir, label=self.plan.title)
             else:
                 mf.apply_preview(p, state_dir=state_dir)
-        except mf.StalePreviewError:
+        except mt.StalePreviewError:
             self.notify("The file changed since this preview: here is the new preview.",
                         severity="warning", timeout=6)
             self.refresh_preview()
             return
-        except (mf.ManagedFileError, OSError) as exc:
+        except (mt.ManagedFileError, OSError) as exc:
             self.notify(f"Not written: {exc}", severity="error", timeout=10)
             return
         self.notify(f"Wrote {p.path}. `rosnet-tui undo` reverts it.", timeout=5)
@@ -169,7 +170,7 @@ class UndoScreen(ModalScreen[bool]):
         status = self.query_one("#write-status", Static)
         try:
             self.plan = mf.plan_undo(self.state_dir)
-        except mf.ManagedFileError as exc:
+        except mt.ManagedFileError as exc:
             status.update(str(exc))
             self.query_one("#write-apply", Button).disabled = True
             return
@@ -213,7 +214,7 @@ class UndoScreen(ModalScreen[bool]):
                     return
             else:
                 mf.apply_undo(self.plan)
-        except mf.ManagedFileError as exc:
+        except mt.ManagedFileError as exc:
             self.notify(f"Not undone: {exc}", severity="error", timeout=10)
             return
         self.notify("Removed the forwards of the last change from the modem."

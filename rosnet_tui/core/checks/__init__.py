@@ -16,10 +16,11 @@ from typing import Any
 
 from rosnet_tui.core.checks import data as data_decl
 from rosnet_tui.core.listener import ListenerPool
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path, default_state_dir
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult, Outcome, Status
-from rosnet_tui.core.settings import Settings, default_state_dir
-from rosnet_tui.core.ssh import SshOptions
+from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.ssh.options import SshOptions
 
 
 @dataclass
@@ -29,8 +30,8 @@ class CheckContext:
 
     settings: Settings
     timeout_s: float = 3.0
-    hosts_path: Path = Path("/etc/hosts")
-    bashrc_path: Path = field(default_factory=lambda: Path.home() / ".bashrc")
+    hosts_path: Path = DEFAULT_HOSTS_PATH
+    bashrc_path: Path = field(default_factory=default_bashrc_path)
     state_dir: Path = field(default_factory=default_state_dir)
     env: dict[str, str] = field(default_factory=dict)
     # Results of checks that already ran in this round, by id (for checks that build on others).

@@ -25,7 +25,7 @@ from rosnet_tui.core.checks.probes import budget, fetch_public_ip, http_get, par
 from rosnet_tui.core.netinfo import is_overlay
 from rosnet_tui.core.procedure import is_ip
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.ssh import resolve_ipv4, run_blocking
+from rosnet_tui.core.ssh.connection import resolve_ipv4, run_blocking
 from rosnet_tui.core.state import PublicIpRecord, now_iso, record_public_ip
 
 CGNAT_NET = ipaddress.ip_network("100.64.0.0/10")

@@ -35,7 +35,8 @@ from rosnet_tui.core.managed_write import read_text
 from rosnet_tui.core.procedure import is_ip, is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer
-from rosnet_tui.core.ssh import SshResult, resolve_ipv4, ssh_run, ssh_session
+from rosnet_tui.core.ssh.connection import SshResult, resolve_ipv4
+from rosnet_tui.core.ssh.session import ssh_run, ssh_session
 
 
 def _is_loopback_ip(ip: str) -> bool:

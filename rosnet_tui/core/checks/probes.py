@@ -30,7 +30,8 @@ from rosnet_tui.core.checks.data import view
 from rosnet_tui.core.connect import kind_from_text, tcp_failure_kind
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer, Settings
-from rosnet_tui.core.ssh import SshResult, resolve_ipv4, run_blocking, ssh_run
+from rosnet_tui.core.ssh.connection import SshResult, resolve_ipv4, run_blocking
+from rosnet_tui.core.ssh.session import ssh_run
 
 MAX_BODY = 64 * 1024
 T = TypeVar("T")

@@ -27,7 +27,8 @@ from rosnet_tui.core.hosts import own_ip
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer, Settings
-from rosnet_tui.core.ssh import SshResult, run_blocking, ssh_run, ssh_session
+from rosnet_tui.core.ssh.connection import SshResult, run_blocking
+from rosnet_tui.core.ssh.session import ssh_run, ssh_session
 
 ROSPROTO_SOURCE = Path(rosproto.__file__).read_bytes()
 READY_MARK = '"rosnet_probe_ready"'

@@ -36,7 +36,8 @@ from rosnet_tui.core.managed_write import read_text
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer
-from rosnet_tui.core.ssh import resolve_ipv4, run_blocking, ssh_run
+from rosnet_tui.core.ssh.connection import resolve_ipv4, run_blocking
+from rosnet_tui.core.ssh.session import ssh_run
 
 FACTOR_ROUTER = 1.0
 DDS_VARS = ("CYCLONEDDS_URI", "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",

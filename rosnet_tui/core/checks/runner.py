@@ -24,8 +24,8 @@ from rosnet_tui.core.checks import (
 from rosnet_tui.core.managed_write import settle
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import Settings
-from rosnet_tui.core.ssh import SshOptions
-from rosnet_tui.core.ssh_pool import SshPool
+from rosnet_tui.core.ssh.options import SshOptions
+from rosnet_tui.core.ssh.pool import SshPool
 
 
 @dataclass(frozen=True)

@@ -12,12 +12,13 @@ peer's hosts entry and ROS_MASTER_URI follow without anyone touching them.
 from __future__ import annotations
 
 from .backoff import Backoff, backoff_cap
+from .choose_store import make_store
 from .folder import FolderStore
 from .plan import Plan, PlanError, plan_hosts
 from .records import Candidate, Record, RecordError, choose_best, new_record, parse_record
 from .service import AFFECTED_CHECKS, RoundResult, SyncError, SyncService, run_affected_checks
 from .status import load_status, render_status, status_path
-from .store import FetchResult, Refusal, StoreConfigError, StoreError, make_store
+from .store import FetchResult, Refusal, StoreConfigError, StoreError
 
 __all__ = [
     "AFFECTED_CHECKS", "Backoff", "Candidate", "FetchResult", "FolderStore", "Plan", "PlanError",

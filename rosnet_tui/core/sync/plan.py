@@ -13,7 +13,7 @@ import copy
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.hosts import HostsEntry, hosts_entries, render_hosts_block
 from rosnet_tui.core.settings import Settings
 
@@ -130,8 +130,8 @@ def plan_hosts(settings: Settings, *, local_ip: str, public_ip: str,
 def block_names(text: str | None) -> set[str]:
     """Names our block in a hosts file's *text* maps now (active set only)."""
     try:
-        body = mf.extract_block(text)
-    except mf.DamagedBlockError:
+        body = mt.extract_block(text)
+    except mt.DamagedBlockError:
         return set()
     names: set[str] = set()
     for line in body or ():

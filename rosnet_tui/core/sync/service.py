@@ -26,14 +26,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core.hosts import (
-    DEFAULT_HOSTS_PATH,
-)
+from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings
 from rosnet_tui.core.upnp.forwards import Renewer
 
 from .applied import applied_path, load_applied, save_applied
 from .backoff import Backoff, backoff_cap
+from .choose_store import make_store
 from .plan import Plan
 from .records import (
     Candidate,
@@ -52,7 +51,7 @@ from .status import (
     empty_status,
     load_status,
 )
-from .store import RecordStore, StoreConfigError, StoreError, make_store
+from .store import RecordStore, StoreConfigError, StoreError
 from .watcher import LocalAddress, PublicLookup, lookup_public_ip, observe_local
 from .workers import (  # noqa: F401 (re-exported)
     AFFECTED_CHECKS,

@@ -12,6 +12,8 @@ import time
 from typing import Any
 
 from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import managed_text as mt
+from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core.bashrc import preview_bashrc
 from rosnet_tui.core.hosts import (
     PROFILE_TITLES,
@@ -48,8 +50,8 @@ class ApplyMixin:
         plan = self._plan()
         self._last_plan = plan
         try:
-            old = mf.read_bytes(self.hosts_path, state_dir=self.state_dir)
-            text = mf.decode(old) if old is not None else None
+            old = mw.read_bytes(self.hosts_path, state_dir=self.state_dir)
+            text = mt.decode(old) if old is not None else None
             check_complete(plan, text)
             body = plan.body()
             notes = [f"line {c.lineno} '{c.old.strip()}' {c.why}" for c in
@@ -57,7 +59,7 @@ class ApplyMixin:
             previews = [mf.preview_block(self.hosts_path, body, position="top",
                                          label=f"hosts: {plan.profile} set", notes=notes,
                                          new_mode=0o644, current=old, use_current=True)]
-        except (PlanError, WriterSettingsError, mf.ManagedFileError) as exc:
+        except (PlanError, WriterSettingsError, mt.ManagedFileError) as exc:
             self.next_apply = self._fail("apply", f"{exc}; the hosts file is left as it is", mono)
             return False
         for n in notes:
@@ -68,7 +70,7 @@ class ApplyMixin:
             try:
                 previews.append(preview_bashrc(plan.settings, self.bashrc_path,
                                                state_dir=self.state_dir))
-            except (WriterSettingsError, mf.ManagedFileError) as exc:
+            except (WriterSettingsError, mt.ManagedFileError) as exc:
                 self._once(("bashrc", str(exc)), logging.WARNING,
                            "%s is left as it is: %s", self.bashrc_path, exc)
         self._update_peer_status(plan)
@@ -83,15 +85,15 @@ class ApplyMixin:
         log.info("applying: %s\n%s", summary, diff.rstrip("\n"))
         try:
             result = mf.apply_previews(previews, state_dir=self.state_dir, label=f"sync: {summary}")
-        except mf.StalePreviewError as exc:
+        except mt.StalePreviewError as exc:
             log.info("%s; trying again", exc)
             self.next_apply = mono + 0.2
             return False
-        except mf.PermissionNeededError as exc:
+        except mt.PermissionNeededError as exc:
             self.next_apply = self._fail("apply", f"{exc} (run the sync service as root: "
                                                   "rosnet-tui sync install-service)", mono)
             return False
-        except mf.ManagedFileError as exc:
+        except mt.ManagedFileError as exc:
             self.next_apply = self._fail("apply", f"{exc}; the files are left as they were", mono)
             return False
         self.dirty = False
@@ -116,8 +118,8 @@ class ApplyMixin:
         from rosnet_tui.core.checks.linux import parse_hosts
 
         try:
-            body = mf.extract_block(old_text) or []
-        except mf.DamagedBlockError:
+            body = mt.extract_block(old_text) or []
+        except mt.DamagedBlockError:
             body = []
         before: dict[str, str] = {}
         for _, ip, names in parse_hosts("\n".join(body)):

@@ -1,13 +1,13 @@
-"""What every record store offers (folder, DNS), and picking one from the settings."""
+"""What every record store offers (folder, DNS): the protocol, its results and errors.
+
+Picking one from the settings is :func:`rosnet_tui.core.sync.choose_store.make_store`.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Protocol
-
-from rosnet_tui.core.settings import Settings
 
 from .records import Candidate, Record, choose_best
 
@@ -65,27 +65,3 @@ class RecordStore(Protocol):
     def fetch(self, names: Iterable[str], own_name: str) -> FetchResult:
         """The best valid record of each of *names*. Raises StoreError when unreachable."""
         ...
-
-
-def make_store(settings: Settings, *, timeout_s: float | None = None) -> RecordStore:
-    """The store the settings' [sync] table names. Raises StoreConfigError when incomplete."""
-    y = settings.sync
-    timeout = timeout_s if timeout_s is not None else max(1.0, float(settings.checks.timeout_s))
-    if y.store == "folder":
-        from .folder import FolderStore
-
-        if not y.folder:
-            raise StoreConfigError("the folder store needs sync.folder (the shared folder) in "
-                                   "the settings")
-        return FolderStore(Path(y.folder).expanduser())
-    if y.store == "dns":
-        from .dnsstore import DnsStore
-
-        missing = [k for k in ("dns_server", "zone") if not getattr(y, k)]
-        if missing:
-            raise StoreConfigError("the dns store needs " + " and ".join(f"sync.{k}" for k in missing)
-                                   + " in the settings")
-        return DnsStore(y.dns_server, y.zone,
-                        Path(y.tsig_key_file).expanduser() if y.tsig_key_file else None,
-                        timeout_s=timeout)
-    raise StoreConfigError(f"unknown store {y.store!r} (sync.store is 'folder' or 'dns')")

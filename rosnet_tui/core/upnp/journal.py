@@ -3,7 +3,8 @@
 A forward is recorded in a journal entry of its own (``mappings``, no files) *before* the modem is
 asked, with the modem's identity (gateway address, MAC, UPnP device id) and, for PCP, the nonce
 that alone can renew or delete it. ``rosnet-tui undo`` (and the wizard's ``u``) removes the last
-entry's forwards through :func:`undo_mappings`; ``router unmap`` removes every live one; the sync
+entry's forwards through the undo handler this module registers with
+:mod:`rosnet_tui.core.undo_journal`; ``router unmap`` removes every live one; the sync
 service renews them. Only recorded forwards are ever removed, and only on the modem they were
 made on.
 """
@@ -14,46 +15,47 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import undo_journal as uj
+from rosnet_tui.core.managed_text import ManagedFileError
 from rosnet_tui.core.upnp.wire import ModemError
 
 KIND = "port_mapping"
 UNDO_TIMEOUT_S = 6.0
 
 
-class ForwardUndoError(mf.ManagedFileError):
+class ForwardUndoError(ManagedFileError):
     """A recorded forward could not be removed (the modem is gone, or is another one)."""
 
 
-def new_entry(label: str, mappings: list[dict], state_dir: Path | None = None) -> mf.JournalEntry:
+def new_entry(label: str, mappings: list[dict], state_dir: Path | None = None) -> uj.JournalEntry:
     """Record *mappings* (planned) as a new journal entry and return it."""
-    sd = mf._state_dir(state_dir)
-    owner = mf._owner_for(sd)
-    with mf._locked(sd, owner):
-        entry = mf.JournalEntry(mf._next_id(sd), mf._now(), label, [],
+    sd = uj.state_dir_path(state_dir)
+    owner = uj.owner_for(sd)
+    with uj.locked(sd, owner):
+        entry = uj.JournalEntry(uj.next_id(sd), uj.now(), label, [],
                                 mappings=[{"kind": KIND, **m} for m in mappings])
-        mf._save_entry(sd, entry, owner)
+        uj.save_entry(sd, entry, owner)
     return entry
 
 
-def save(entry: mf.JournalEntry, state_dir: Path | None = None) -> None:
-    sd = mf._state_dir(state_dir)
-    owner = mf._owner_for(sd)
-    with mf._locked(sd, owner):
-        mf._save_entry(sd, entry, owner)
-        mf._prune(sd)
+def save(entry: uj.JournalEntry, state_dir: Path | None = None) -> None:
+    sd = uj.state_dir_path(state_dir)
+    owner = uj.owner_for(sd)
+    with uj.locked(sd, owner):
+        uj.save_entry(sd, entry, owner)
+        uj.prune(sd)
 
 
-def close(entry: mf.JournalEntry, note: str, state_dir: Path | None = None) -> None:
+def close(entry: uj.JournalEntry, note: str, state_dir: Path | None = None) -> None:
     """Mark *entry* done with (undone), saying why."""
-    entry.undone = f"{mf._now()} ({note})"
+    entry.undone = f"{uj.now()} ({note})"
     save(entry, state_dir)
 
 
-def live(state_dir: Path | None = None) -> list[tuple[mf.JournalEntry, dict]]:
+def live(state_dir: Path | None = None) -> list[tuple[uj.JournalEntry, dict]]:
     """Every recorded forward not yet removed, oldest first, with its entry."""
     out = []
-    for e in mf.journal_entries(state_dir):
+    for e in uj.journal_entries(state_dir):
         if e.undone:
             continue
         for m in e.mappings:
@@ -112,6 +114,8 @@ def remove_recorded(mappings: Iterable[dict], *, force: bool = False,
     return said
 
 
-def undo_mappings(entry: mf.JournalEntry, *, force: bool = False) -> list[str]:
-    """The undo of an entry's forwards (managed_file's apply_undo calls this)."""
-    return remove_recorded(entry.mappings, force=force)
+def _undo(mappings: list[dict], force: bool) -> list[str]:
+    return remove_recorded(mappings, force=force)
+
+
+uj.register_undo(KIND, _undo)    # the undo of an entry's forwards (managed_file.apply_undo)

@@ -21,12 +21,11 @@ import contextlib
 import threading
 import time
 from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from rosnet_tui.core.settings import Peer
-
-if TYPE_CHECKING:
-    from rosnet_tui.core.ssh import SshOptions, SshSession, _Conn
+from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.ssh.connection import Conn, Holder, connect_blocking, failed
+from rosnet_tui.core.ssh.options import SshOptions
 
 
 def _key(peer: Peer) -> tuple[str, int, str]:
@@ -46,8 +45,6 @@ class SshPool:
         """The connection attempt to *peer* (a running or finished one is reused, unless its
         connection died). *timeout* bounds it (default: twice the round's timeout, the SSH
         check's own budget), *tcp_timeout* its TCP part (default: the round's timeout)."""
-        from rosnet_tui.core.ssh import _connect_blocking, _fail, _Holder
-
         base = float(getattr(opts, "timeout_s", 3.0) or 3.0)
         with self._lock:
             old = self._conns.get(_key(peer))
@@ -60,16 +57,16 @@ class SshPool:
                     if t is None or t.is_active():
                         return fut
             fut = concurrent.futures.Future()
-            holder = _Holder()
+            holder = Holder()
             now = time.monotonic()
             total = max(timeout or 0.0, 2 * base)
             deadline, tcp_deadline = now + total, now + min(tcp_timeout or base, total)
 
             def connect() -> None:
                 try:
-                    conn = _connect_blocking(opts, peer, deadline, holder, tcp_deadline)
+                    conn = connect_blocking(opts, peer, deadline, holder, tcp_deadline)
                 except Exception as exc:  # noqa: BLE001 - a failure is a result
-                    conn = _fail("sshd", f"the SSH connection to {peer.name} broke: "
+                    conn = failed("sshd", f"the SSH connection to {peer.name} broke: "
                                          f"{type(exc).__name__}: {exc}", tcp=None)
                 try:
                     fut.set_result(conn)
@@ -90,15 +87,13 @@ class SshPool:
                 self.start(opts, p)
 
     async def connect(self, opts: SshOptions | None, peer: Peer, timeout: float,
-                      tcp_timeout: float | None = None) -> tuple[_Conn, bool]:
+                      tcp_timeout: float | None = None) -> tuple[Conn, bool]:
         """(the connection, shared?) to *peer*, waiting at most *timeout* for it.
 
         The first caller starts the attempt (see :meth:`start`). *tcp_timeout* bounds this
         caller's wait for the TCP connection: once that is made (the peer answered), the caller
         may wait the rest of *timeout* for the SSH handshake.
         """
-        from rosnet_tui.core.ssh import _fail
-
         fut = self.start(opts, peer, timeout)
         holder = self._conns.get(_key(peer), (None, None))[1]
         loop = asyncio.get_running_loop()
@@ -114,7 +109,7 @@ class SshPool:
                 conn = await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(fut)),
                                               max(end - loop.time(), 0.05) + 0.5)
             except asyncio.TimeoutError:
-                return _fail("timeout", f"no SSH connection to {peer.name} within "
+                return failed("timeout", f"no SSH connection to {peer.name} within "
                                         f"{first if not connected else timeout:.1f} s",
                              tcp="connected" if connected else None), False
         return conn, not self.closed
@@ -133,45 +128,3 @@ class SshPool:
             else:     # its waiters are told now, while their event loop still runs
                 holder.close()
                 fut.cancel()
-
-
-async def open_session(opts: SshOptions | None, peer: Peer, command: str, timeout: float,
-                       tcp_timeout: float | None = None) -> SshSession:
-    """Connect (or share the pool's connection) and start *command*; never raises.
-
-    A shared connection that refuses one more channel (sshd's MaxSessions) makes way for a
-    connection of the session's own.
-    """
-    from rosnet_tui.core.ssh import SshResult, SshSession, _connect, run_blocking
-
-    pool = getattr(opts, "pool", None)
-    if pool is not None:
-        conn, shared = await pool.connect(opts, peer, timeout, tcp_timeout)
-    else:
-        conn, shared = await _connect(opts, peer, timeout, tcp_timeout), False
-    session = SshSession(peer, conn, timeout, shared=shared)
-    if conn.transport is None:
-        return session
-    try:
-        await run_blocking(session._start, command, timeout=timeout + 0.5)
-        return session
-    except Exception as exc:  # noqa: BLE001 - paramiko's channel errors, or no answer in time
-        problem = exc
-    if shared:
-        conn = await _connect(opts, peer, timeout, tcp_timeout)
-        session = SshSession(peer, conn, timeout)
-        if conn.transport is None:
-            return session
-        try:
-            await run_blocking(session._start, command, timeout=timeout + 0.5)
-            return session
-        except Exception as exc:  # noqa: BLE001
-            problem = exc
-    session.close()
-    r = conn.result
-    session.result = SshResult(False, None, "", "", "sshd",
-                               f"{peer.name} did not run the command: "
-                               f"{problem or type(problem).__name__}",
-                               r.fingerprint, r.host_key, r.address, r.tcp)
-    session._chan = None
-    return session

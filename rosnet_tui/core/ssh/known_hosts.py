@@ -18,26 +18,9 @@ import re
 import stat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    import paramiko
-
-    from rosnet_tui.core.ssh import SshOptions
-
-SYSTEM_KNOWN_HOSTS = Path("/etc/ssh/ssh_known_hosts")
-
-# --------------------------------------------------------------------------- host keys
-def ssh_dir(opts: SshOptions | None) -> Path:
-    d = getattr(opts, "ssh_dir", None) if opts is not None else None
-    return Path(d) if d else Path(os.path.expanduser("~")) / ".ssh"
-
-
-def known_hosts_files(opts: SshOptions | None) -> list[Path]:
-    files = getattr(opts, "known_hosts_files", None) if opts is not None else None
-    if files:
-        return [Path(f) for f in files]
-    return [ssh_dir(opts) / "known_hosts", SYSTEM_KNOWN_HOSTS]
+from rosnet_tui.core.regular_file import read_regular
+from rosnet_tui.core.ssh.options import SshOptions, ssh_dir
 
 
 def host_key_name(name: str, port: int) -> str:
@@ -68,22 +51,12 @@ def key_fingerprint(blob: bytes) -> str:
 
 
 def _read_known_hosts(path: Path) -> str | None:
-    """The text of one known_hosts file; None when missing, unreadable or not a regular file
-    (a FIFO there must not hang a check)."""
+    """The text of one known_hosts file; None when missing, unreadable, not a regular file (a
+    FIFO there must not hang a check) or over MAX_KNOWN_HOSTS_BYTES."""
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+        return read_regular(path, MAX_KNOWN_HOSTS_BYTES).decode("utf-8", "replace")
     except OSError:
         return None
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return None
-        with os.fdopen(os.dup(fd), "rb") as f:
-            data = f.read(MAX_KNOWN_HOSTS_BYTES)
-    except OSError:
-        return None
-    finally:
-        os.close(fd)
-    return data.decode("utf-8", "replace")
 
 
 def _pattern_matches(pattern: str, name: str) -> bool:
@@ -130,7 +103,7 @@ def _key_blob(ktype: str, b64: str) -> bytes | None:
     return blob
 
 
-def _known_host_keys(files: list[Path], lookup: str) -> KnownHostKeys:
+def known_host_keys(files: list[Path], lookup: str) -> KnownHostKeys:
     """Read *files* (OpenSSH known_hosts format) for the host spelled *lookup*.
 
     Never raises for a file's content: a line we cannot use is skipped. ``@cert-authority``
@@ -178,21 +151,6 @@ def _known_host_keys(files: list[Path], lookup: str) -> KnownHostKeys:
     return out
 
 
-def _known_keys(files: list[Path], lookup: str) -> dict[str, paramiko.PKey]:
-    """The first listed key of each type for *lookup* (see :func:`_known_host_keys`)."""
-    import paramiko
-
-    found: dict[str, paramiko.PKey] = {}
-    for ktype, blobs in _known_host_keys(files, lookup).keys.items():
-        for blob in blobs:
-            try:
-                found[ktype] = paramiko.PKey.from_type_string(ktype, blob)
-                break
-            except Exception:  # noqa: BLE001 - a type paramiko does not know
-                continue
-    return found
-
-
 def trust_host_key(opts: SshOptions | None, name: str, port: int, host_key: str) -> Path:
     """Append *host_key* ("<type> <base64>", as in SshResult.host_key) for *name* to known_hosts.
 
@@ -202,7 +160,7 @@ def trust_host_key(opts: SshOptions | None, name: str, port: int, host_key: str)
     ktype, _, b64 = host_key.strip().partition(" ")
     base64.b64decode(b64.split()[0], validate=True)  # refuse garbage
     path = ssh_dir(opts) / "known_hosts"
-    if _known_host_keys([path], host_key_name(name, port)).keys.get(ktype):
+    if known_host_keys([path], host_key_name(name, port)).keys.get(ktype):
         raise ValueError(f"{path} already has a {ktype} key for {name}; remove it first "
                          f"(ssh-keygen -R {host_key_name(name, port)})")
     path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)

@@ -1,0 +1,104 @@
+"""What every sub-command shares: exit codes, number and state-dir arguments, --config, and
+loading the settings it names (saying why on stderr when they cannot be used).
+
+Imported when rosnet-tui starts: heavy modules are imported inside the functions that need them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import re
+import stat
+import sys
+from pathlib import Path
+
+EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+
+_DECIMAL = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+_WHOLE = re.compile(r"[+-]?\d{1,18}")
+
+
+def number_in(lo: float, hi: float, *, whole: bool = False):
+    """An argparse type: a plain decimal number (a whole one with *whole*) from *lo* to *hi*.
+
+    NaN, infinities, hexadecimal, digit separators and values out of range are refused, so
+    argparse exits 2 naming the option. Say the range in the option's help (``lo-hi``)."""
+    def convert(text: str) -> float | int:
+        t = text.strip()
+        if not (_WHOLE if whole else _DECIMAL).fullmatch(t):
+            raise argparse.ArgumentTypeError(
+                f"'{text[:40]}' is not {'a whole number' if whole else 'a number'} "
+                f"(from {lo:g} to {hi:g})")
+        value: float | int = int(t) if whole else float(t)
+        if not math.isfinite(value) or not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{text[:40]} is out of range: from {lo:g} to "
+                                             f"{hi:g}")
+        return value
+    convert.__name__ = "whole number" if whole else "number"
+    return convert
+
+
+def state_dir_problem(path: Path) -> str | None:
+    """Why *path* cannot be a state dir (None: it can, or it does not exist yet)."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None
+    except NotADirectoryError:
+        return f"--state-dir {path}: a part of this path is a file, not a folder"
+    except OSError as exc:
+        return f"--state-dir {path}: {exc.strerror}"
+    if not stat.S_ISDIR(st.st_mode):
+        return f"--state-dir {path} is not a folder"
+    return None
+
+
+def add_config_option(parser: argparse.ArgumentParser, *, top: bool = False) -> None:
+    parser.add_argument(
+        "--config", metavar="FILE", type=Path,
+        default=None if top else argparse.SUPPRESS,
+        help="settings file (default: $XDG_CONFIG_HOME/rosnet-tui/config.toml)")
+
+
+def config_path(args: argparse.Namespace) -> Path:
+    from rosnet_tui.core.paths import default_config_path
+
+    return Path(args.config).expanduser() if getattr(args, "config", None) else default_config_path()
+
+
+def say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def load_settings_or_say(args: argparse.Namespace, *, complete: bool = False):
+    """The settings named by --config (Settings), or None after saying why on stderr.
+
+    With *complete*, blank local IP and interface are filled in from this machine for this run,
+    and settings that are still incomplete are refused (the caller exits 2).
+    """
+    from rosnet_tui.core.netinfo import with_detected
+    from rosnet_tui.core.settings import SettingsError, load_settings
+
+    path = config_path(args)
+    try:
+        settings = load_settings(path)
+    except SettingsError as exc:
+        say(f"rosnet-tui: the settings file cannot be used: {exc}")
+        return None
+    if settings is None:
+        say(f"rosnet-tui: no settings file at {path}; run 'rosnet-tui' (the wizard) first, "
+            "or pass --config FILE")
+        return None
+    if not complete:
+        return settings
+    settings = with_detected(settings)
+    problems = settings.problems()
+    if problems:
+        say(f"rosnet-tui: the settings in {path} are not complete:")
+        for key, why in problems:
+            say(f"  {key}: {why}")
+        say("Fix them by hand or with the wizard (rosnet-tui --setup).")
+        return None
+    return settings

@@ -1,0 +1,251 @@
+"""SSH to a peer by name (the sessions; connecting is in :mod:`.connection`): verified host keys, keys only, every step under a deadline.
+
+Two entry points, both async and both returning results rather than raising:
+
+- :func:`ssh_run` runs one command (optionally fed *stdin*) and returns an :class:`SshResult`.
+- :func:`ssh_session` starts a command and keeps it running while the caller does something
+  locally (e.g. the peer listens while we connect to it); the caller reads its output as it
+  arrives, writes to its stdin, then waits for it to end.
+
+Connecting follows what ``ssh user@name`` does, minus anything interactive: the peer's *name* is
+resolved by this machine, the server's host key must already be in ``~/.ssh/known_hosts`` (or
+``/etc/ssh/ssh_known_hosts``) — an unknown key stops before authentication and reports its
+fingerprint, a different key is refused — and authentication uses the keys in ``~/.ssh`` and the
+SSH agent, never a password. Failures are classified (network, sshd, host key, auth, ...) so the
+advisor can say what to fix. paramiko is blocking; it runs in daemon threads (see
+:func:`run_blocking`) and a cancelled caller closes the socket so the thread ends at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import AsyncIterator
+from typing import TYPE_CHECKING
+
+from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.ssh.connection import Conn, SshResult, connect, run_blocking
+from rosnet_tui.core.ssh.options import SshOptions
+
+if TYPE_CHECKING:
+    import paramiko
+
+_POLL_S = 0.02
+
+
+# --------------------------------------------------------------------------- sessions
+class SshSession:
+    """A remote command that keeps running while we work; see :func:`ssh_session`.
+
+    ``ok`` is False when the connection failed (``result`` says why); the I/O methods are then
+    no-ops. Reads never block the event loop: the channel is polled.
+    """
+
+    def __init__(self, peer: Peer, conn: Conn, timeout: float, *, shared: bool = False) -> None:
+        self.peer = peer
+        self.result = conn.result
+        self.timeout = timeout
+        self._shared = shared          # the connection belongs to a pool: close only our channel
+        self._transport = conn.transport
+        self._said = conn.said
+        self._chan: paramiko.Channel | None = None
+        self._out = bytearray()
+        self._err = bytearray()
+
+    @property
+    def ok(self) -> bool:
+        return self._chan is not None
+
+    @property
+    def stdout(self) -> str:
+        return self._out.decode("utf-8", "replace")
+
+    @property
+    def stderr(self) -> str:
+        return self._err.decode("utf-8", "replace")
+
+    def _start(self, command: str) -> None:
+        assert self._transport is not None
+        chan = self._transport.open_session(timeout=self.timeout)
+        chan.setblocking(False)
+        chan.exec_command(command)
+        self._chan = chan
+
+    def _pump(self) -> bool:
+        """Move whatever arrived into the buffers; True when the channel is finished."""
+        chan = self._chan
+        if chan is None:
+            return True
+        while chan.recv_ready():
+            data = chan.recv(65536)
+            if not data:
+                break
+            self._out += data
+        while chan.recv_stderr_ready():
+            data = chan.recv_stderr(65536)
+            if not data:
+                break
+            self._err += data
+        if chan.exit_status_ready() and not chan.recv_ready() and not chan.recv_stderr_ready():
+            return True
+        return chan.closed or not (self._transport and self._transport.is_active())
+
+    async def write(self, data: bytes | str) -> bool:
+        """Send *data* to the command's stdin; False when it could not be sent."""
+        import paramiko
+
+        if self._chan is None:
+            return False
+        buf = data.encode() if isinstance(data, str) else bytes(data)
+        deadline = time.monotonic() + self.timeout
+        while buf:
+            try:
+                if self._chan.send_ready():
+                    n = self._chan.send(buf)
+                    if n <= 0:
+                        return False
+                    buf = buf[n:]
+                    continue
+            except (OSError, paramiko.SSHException):
+                return False
+            if time.monotonic() > deadline or self._chan.closed:
+                return False
+            await asyncio.sleep(_POLL_S)
+        return True
+
+    async def close_stdin(self) -> None:
+        if self._chan is not None:
+            with contextlib.suppress(Exception):
+                self._chan.shutdown_write()
+
+    async def read_until(self, marker: str, timeout: float | None = None) -> str | None:
+        """Wait until stdout contains *marker*; the stdout so far, or None on timeout or exit."""
+        if self._chan is None:
+            return None
+        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
+        while True:
+            done = self._pump()
+            if marker in self.stdout:
+                return self.stdout
+            if done or time.monotonic() > deadline:
+                return None
+            await asyncio.sleep(_POLL_S)
+
+    async def wait(self, timeout: float | None = None) -> SshResult:
+        """Wait for the command to end; its result (failure "timeout" if it did not end)."""
+        if self._chan is None:
+            return self.result
+        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
+        while not self._pump():
+            if time.monotonic() > deadline:
+                return SshResult(False, None, self.stdout, self.stderr, "timeout",
+                                 f"the command on {self.peer.name} did not finish in time",
+                                 self.result.fingerprint, self.result.host_key, self.result.address,
+                                 self.result.tcp)
+            await asyncio.sleep(_POLL_S)
+        status = self._chan.recv_exit_status() if self._chan.exit_status_ready() else None
+        detail = (f"ran on {self.peer.name} as {self.peer.ssh_user}, exit status {status}"
+                  if status is not None else f"the session with {self.peer.name} closed")
+        detail += self._said
+        return SshResult(status is not None, status, self.stdout, self.stderr,
+                         None if status is not None else "sshd", detail,
+                         self.result.fingerprint, self.result.host_key, self.result.address,
+                         self.result.tcp)
+
+    def close(self) -> None:
+        if self._chan is not None:
+            with contextlib.suppress(Exception):
+                self._chan.close()
+        if self._transport is not None and not self._shared:
+            with contextlib.suppress(Exception):
+                self._transport.close()
+
+
+async def open_session(opts: SshOptions | None, peer: Peer, command: str, timeout: float,
+                       tcp_timeout: float | None = None) -> SshSession:
+    """Connect (or share the pool's connection) and start *command*; never raises.
+
+    A shared connection that refuses one more channel (sshd's MaxSessions) makes way for a
+    connection of the session's own.
+    """
+    pool = getattr(opts, "pool", None)
+    if pool is not None:
+        conn, shared = await pool.connect(opts, peer, timeout, tcp_timeout)
+    else:
+        conn, shared = await connect(opts, peer, timeout, tcp_timeout), False
+    session = SshSession(peer, conn, timeout, shared=shared)
+    if conn.transport is None:
+        return session
+    try:
+        await run_blocking(session._start, command, timeout=timeout + 0.5)
+        return session
+    except Exception as exc:  # noqa: BLE001 - paramiko's channel errors, or no answer in time
+        problem = exc
+    if shared:
+        conn = await connect(opts, peer, timeout, tcp_timeout)
+        session = SshSession(peer, conn, timeout)
+        if conn.transport is None:
+            return session
+        try:
+            await run_blocking(session._start, command, timeout=timeout + 0.5)
+            return session
+        except Exception as exc:  # noqa: BLE001
+            problem = exc
+    session.close()
+    r = conn.result
+    session.result = SshResult(False, None, "", "", "sshd",
+                               f"{peer.name} did not run the command: "
+                               f"{problem or type(problem).__name__}",
+                               r.fingerprint, r.host_key, r.address, r.tcp)
+    session._chan = None
+    return session
+
+
+@contextlib.asynccontextmanager
+async def ssh_session(opts: SshOptions | None, peer: Peer, command: str, *,
+                      timeout: float | None = None,
+                      tcp_timeout: float | None = None) -> AsyncIterator[SshSession]:
+    """Start *command* on *peer* and keep it running for the ``async with`` body.
+
+    ``timeout`` bounds the connection (and is the default for reads/waits), ``tcp_timeout`` its
+    TCP part (only a peer that answered may use the rest); with a pool in *opts* the session is a
+    channel on the round's connection to *peer*. On leaving the block
+    the channel and connection are closed; the remote command must bound itself (sshd does not
+    kill a command without a terminal when the channel closes). Usage::
+
+        async with ssh_session(opts, peer, "python3 -c ...") as s:
+            if not s.ok:
+                return s.result            # failure says why (network, host key, auth, ...)
+            await s.read_until("LISTENING")
+            ...                            # act locally while the peer listens
+            res = await s.wait(5)
+    """
+    t = float(timeout if timeout is not None else (getattr(opts, "timeout_s", 3.0) or 3.0))
+    session = await open_session(opts, peer, command, t, tcp_timeout)
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+async def ssh_run(opts: SshOptions | None, peer: Peer, command: str, *,
+                  stdin: bytes | str | None = None, timeout: float | None = None,
+                  connect_timeout: float | None = None,
+                  tcp_timeout: float | None = None) -> SshResult:
+    """Run *command* on *peer* (by name, as ``peer.ssh_user``) within *timeout* seconds overall.
+
+    *connect_timeout* (default: *timeout*) bounds reaching and logging in to the peer, so a
+    caller can keep time for something else when the peer is unreachable; *tcp_timeout* bounds
+    the TCP connection within it (see :func:`ssh_session`).
+    """
+    t = float(timeout if timeout is not None else (getattr(opts, "timeout_s", 3.0) or 3.0))
+    deadline = time.monotonic() + t
+    ct = min(float(connect_timeout), t) if connect_timeout is not None else t
+    async with ssh_session(opts, peer, command, timeout=ct, tcp_timeout=tcp_timeout) as s:
+        if not s.ok:
+            return s.result
+        if stdin:
+            await s.write(stdin)
+        await s.close_stdin()
+        return await s.wait(max(deadline - time.monotonic(), 0.05))

@@ -1,0 +1,55 @@
+"""The undo journal's handlers per kind of change (core/undo_journal): the file writer undoes
+what other modules recorded without knowing them, and never drops a change nobody can undo."""
+
+from __future__ import annotations
+
+import pytest
+
+from rosnet_tui.core import managed_file as mf
+from rosnet_tui.core import undo_journal as uj
+from rosnet_tui.core.managed_text import ManagedFileError
+
+
+def _entry_with(sd, mappings):
+    owner = uj.owner_for(sd)
+    with uj.locked(sd, owner):
+        entry = uj.JournalEntry(uj.next_id(sd), uj.now(), "test", [], mappings=mappings)
+        uj.save_entry(sd, entry, owner)
+    return entry
+
+
+def test_a_registered_handler_undoes_its_kind(tmp_path, monkeypatch):
+    seen = []
+
+    def handler(changes, force):
+        seen.append((changes, force))
+        for c in changes:
+            c["state"] = "removed"
+        return [f"removed {c['n']}" for c in changes]
+
+    monkeypatch.setitem(uj._UNDO_HANDLERS, "test_kind", handler)
+    sd = tmp_path / "state"
+    _entry_with(sd, [{"kind": "test_kind", "n": 1}, {"kind": "test_kind", "n": 2}])
+    result = mf.undo_last(sd)
+    assert result.forwards == ["removed 1", "removed 2"]
+    assert seen == [([{"kind": "test_kind", "n": 1, "state": "removed"},
+                      {"kind": "test_kind", "n": 2, "state": "removed"}], False)]
+    (entry,) = uj.journal_entries(sd)
+    assert entry.undone and [m["state"] for m in entry.mappings] == ["removed", "removed"]
+
+
+def test_a_kind_without_handler_is_refused_and_forgotten_only_with_force(tmp_path):
+    sd = tmp_path / "state"
+    _entry_with(sd, [{"kind": "nobody_knows", "n": 1}])
+    with pytest.raises(ManagedFileError, match="cannot undo"):
+        mf.undo_last(sd)
+    assert not uj.journal_entries(sd)[0].undone          # nothing was marked undone
+    result = mf.undo_last(sd, force=True)
+    assert result.forwards == ["1 change(s) of kind 'nobody_knows': forgotten, not undone"]
+    assert uj.journal_entries(sd)[0].undone
+
+
+def test_the_forward_journal_registers_its_undo():
+    from rosnet_tui.core.upnp import journal
+
+    assert uj._UNDO_HANDLERS[journal.KIND] is not None
