@@ -549,10 +549,11 @@ def test_a_failing_write_backs_off_without_spinning(tmp_path):
 
 
 def test_a_second_service_on_the_same_state_dir_is_refused(tmp_path):
-    from rosnet_tui.core.sync.service import SyncError, _ServiceLock
+    from rosnet_tui.core.sync.lock import ServiceLock
+    from rosnet_tui.core.sync.outcome import SyncError
 
     w = World(tmp_path)
-    lock = _ServiceLock(w.state)
+    lock = ServiceLock(w.state)
     lock.acquire()
     try:
         with pytest.raises(SyncError, match="another rosnet-tui sync is running"):

@@ -11,11 +11,13 @@ peer's hosts entry and ROS_MASTER_URI follow without anyone touching them.
 
 from __future__ import annotations
 
+from .affected import AFFECTED_CHECKS, run_affected_checks
 from .backoff import Backoff, backoff_cap
 from .folder import FolderStore
+from .outcome import RoundResult, SyncError
 from .plan import Plan, PlanError, plan_hosts
 from .records import Candidate, Record, RecordError, choose_best, new_record, parse_record
-from .service import AFFECTED_CHECKS, RoundResult, SyncError, SyncService, run_affected_checks
+from .service import SyncService
 from .status import load_status, render_status, status_path
 from .store import FetchResult, Refusal, StoreConfigError, StoreError, make_store
 

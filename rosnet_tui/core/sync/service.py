@@ -34,6 +34,7 @@ from rosnet_tui.core.upnp.forwards import Renewer
 
 from .applied import applied_path, load_applied, save_applied
 from .backoff import Backoff, backoff_cap
+from .outcome import RoundResult, SyncError
 from .plan import Plan
 from .records import (
     Candidate,
@@ -45,31 +46,17 @@ from .records import (
     parse_record,
     successor_problem,
 )
-from .service_apply import RECHECK_AFTER_S, ApplyMixin  # noqa: F401
-from .service_loop import LoopMixin, install_signal_handlers  # noqa: F401
+from .service_apply import ApplyMixin
+from .service_loop import LoopMixin
 from .status import (
     MAX_REFUSED,
     empty_status,
     load_status,
 )
 from .store import RecordStore, StoreConfigError, StoreError, make_store
+from .timing import FORCED_GAP_S, HEARTBEAT_S, read_period
 from .watcher import LocalAddress, PublicLookup, lookup_public_ip, observe_local
-from .workers import (  # noqa: F401 (re-exported)
-    AFFECTED_CHECKS,
-    DEBOUNCE_S,
-    FOLDER_SETTLE_S,
-    FORCED_GAP_S,
-    HEARTBEAT_S,
-    MAX_WAIT_S,
-    VERIFY_EVERY_S,
-    WORKER_STOP_S,
-    RoundResult,
-    SyncError,
-    _ServiceLock,
-    _Worker,
-    read_period,
-    run_affected_checks,
-)
+from .worker import Worker
 
 log = logging.getLogger("rosnet_tui.sync")
 
@@ -124,8 +111,8 @@ class SyncService(ApplyMixin, LoopMixin):
         self.next_verify = now
         self.recheck_at: float | None = None
         self._recheck_left: list[float] = []
-        self._checks: _Worker | None = None         # the checks' thread while run() runs
-        self._lookups: _Worker | None = None        # the public-IP lookup's thread, likewise
+        self._checks: Worker | None = None         # the checks' thread while run() runs
+        self._lookups: Worker | None = None        # the public-IP lookup's thread, likewise
         self._public_busy = False                   # a lookup is under way on that thread
         self._public_answered = False               # a lookup has answered (or failed) once
         self._last_plan: Plan | None = None

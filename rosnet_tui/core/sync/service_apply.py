@@ -20,17 +20,15 @@ from rosnet_tui.core.hosts import (
 )
 from rosnet_tui.core.settings import SettingsError, load_settings, save_settings
 
+from .affected import run_affected_checks
 from .plan import Plan, PlanError, check_complete, plan_hosts
 from .status import (
     ALIVE_EVERY_S,
     save_status,
 )
-from .workers import VERIFY_EVERY_S, run_affected_checks
+from .timing import RECHECK_AFTER_S, VERIFY_EVERY_S
 
 log = logging.getLogger("rosnet_tui.sync")
-
-RECHECK_AFTER_S = (5.0, 15.0, 45.0)   # re-run failing checks after a change, then give up
-
 
 class ApplyMixin:
     """Plan, write, check (the state lives in SyncService)."""

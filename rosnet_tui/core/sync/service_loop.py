@@ -10,23 +10,19 @@ import select
 import selectors
 import signal
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from .folder_watch import StoreWatch
+from .lock import ServiceLock
+from .outcome import RoundResult
+from .timing import DEBOUNCE_S, FOLDER_SETTLE_S, MAX_WAIT_S, WORKER_STOP_S, read_period
 from .watcher import NetlinkMonitor
-from .workers import (
-    DEBOUNCE_S,
-    FOLDER_SETTLE_S,
-    MAX_WAIT_S,
-    WORKER_STOP_S,
-    RoundResult,
-    _ServiceLock,
-    _Worker,
-    read_period,
-)
+from .worker import Worker
 
-if TYPE_CHECKING:
-    from .service import SyncService
+
+class Stoppable(Protocol):
+    def stop(self) -> None: ...
+
 
 log = logging.getLogger("rosnet_tui.sync")
 
@@ -54,7 +50,7 @@ class LoopMixin:
             cands.append(self.recheck_at)
         return min(cands)
 
-    def _start(self, lock: _ServiceLock) -> None:
+    def _start(self, lock: ServiceLock) -> None:
         lock.acquire()
         assert self.settings is not None
         self.status.update(pid=os.getpid(), started_at=time.time(), stopped_at=None)
@@ -64,14 +60,14 @@ class LoopMixin:
                  self.interval_s, read_period(self.interval_s), self.hosts_path,
                  f", ROS block in {self.bashrc_path}" if self.bashrc_path else "")
 
-    def _finish(self, lock: _ServiceLock) -> None:
+    def _finish(self, lock: ServiceLock) -> None:
         self.status["stopped_at"] = time.time()
         self._save_status(force=True)
         lock.release()
 
     def run_once(self) -> RoundResult:
         """One full round (the public IP asked now), for cron and tests."""
-        lock = _ServiceLock(self.state_dir)
+        lock = ServiceLock(self.state_dir)
         self._start(lock)
         try:
             return self.round(force_public=True)
@@ -81,7 +77,7 @@ class LoopMixin:
 
     def run(self) -> int:
         """Run until :meth:`stop` (SIGTERM/SIGINT through :func:`install_signal_handlers`)."""
-        lock = _ServiceLock(self.state_dir)
+        lock = ServiceLock(self.state_dir)
         self._start(lock)
         monitor = NetlinkMonitor.open() if self.use_netlink else None
         if self.use_netlink and monitor is None:
@@ -93,8 +89,8 @@ class LoopMixin:
             sel.register(monitor.fileno(), selectors.EVENT_READ, "netlink")
         folder_watch = StoreWatch(self.use_folder_watch)
         if self.do_checks:
-            self._checks = _Worker("checks", self._affected_checks, self._wake_loop)
-        self._lookups = _Worker("public-IP lookup", self._lookup_public, self._wake_loop)
+            self._checks = Worker("checks", self._affected_checks, self._wake_loop)
+        self._lookups = Worker("public-IP lookup", self._lookup_public, self._wake_loop)
         force_public = True
         try:
             while not self._stop:
@@ -200,7 +196,7 @@ class LoopMixin:
 
 
 
-def install_signal_handlers(service: SyncService) -> None:
+def install_signal_handlers(service: Stoppable) -> None:
     """SIGTERM and SIGINT (Ctrl-C) stop the service cleanly after the current step."""
     def handler(signum: int, frame: Any) -> None:
         log.info("stopping (%s)", signal.Signals(signum).name)
