@@ -19,8 +19,8 @@ from rosnet_tui.cli import (
     config_path,
     load_settings_or_say,
 )
+from rosnet_tui.core import affected, privilege
 from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import (
     DEFAULT_HOSTS_PATH,
     PROFILE_TITLES,
@@ -39,8 +39,6 @@ from rosnet_tui.core.settings import (
     load_settings,
     save_settings,
 )
-
-HOSTS_CHECKS = ("linux.hosts", "linux.resolve")
 
 
 # --------------------------------------------------------------------------- shared helpers
@@ -303,7 +301,7 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
         state_dir=state_dir_of(args), fix_conflicts=bool(fix))
     rc = write_preview(args, preview, sudo_cmd)
     if rc == EXIT_OK and not args.no_checks:
-        rerun_checks(HOSTS_CHECKS, settings, hosts_path=path, state_dir=state_dir_of(args))
+        rerun_checks(affected.HOSTS, settings, hosts_path=path, state_dir=state_dir_of(args))
     return rc, settings
 
 

@@ -28,8 +28,8 @@ from rosnet_tui.cli.hosts import (
     write_preview,
     yes_to_all,
 )
+from rosnet_tui.core import affected, ros2
 from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import ros2
 from rosnet_tui.core.bashrc import (
     ROS_IP_REASON,
     default_bashrc_path,
@@ -38,9 +38,6 @@ from rosnet_tui.core.bashrc import (
     shell_lines,
 )
 from rosnet_tui.core.hosts import WriterSettingsError
-
-ROS_CHECKS = ("ros.env",)
-ROS2_CHECKS = ("ros2.env",)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -126,7 +123,7 @@ def run_apply(args: argparse.Namespace) -> int:
         for line in lines:
             print(f"  {line}")
         if not args.no_checks:
-            rerun_checks(ROS_CHECKS, settings, bashrc_path=path, state_dir=state_dir_of(args))
+            rerun_checks(affected.ROS_ENV, settings, bashrc_path=path, state_dir=state_dir_of(args))
     return rc
 
 
@@ -185,5 +182,5 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
     if not (args.client and not settings.is_master):
         print("Then start the router: ros2 run rmw_zenoh_cpp rmw_zenohd")
     if not args.no_checks:
-        rerun_checks(ROS2_CHECKS, settings, bashrc_path=path, state_dir=state_dir_of(args))
+        rerun_checks(affected.ROS2_ENV, settings, bashrc_path=path, state_dir=state_dir_of(args))
     return EXIT_OK

@@ -11,6 +11,7 @@ from textual.containers import Container, Vertical, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import Static
 
+from rosnet_tui.core import affected
 from rosnet_tui.core.session import NOT_RUN, RUNNING, WizardSession
 from rosnet_tui.core.steps import Step, step_for
 from rosnet_tui.ui.messages import Navigate
@@ -205,8 +206,7 @@ class StepScreen(Screen):
 
         def done(mapped: bool | None) -> None:
             if mapped:
-                self.run_specs([s for s in self.specs if s.id in ("router.upnp",
-                                                                  "router.port_open")])
+                self.run_specs([s for s in self.specs if s.id in affected.FORWARD])
 
         settings = self.session.runtime_settings()
         self.app.push_screen(MapScreen(settings, self.session.state_dir,
@@ -262,12 +262,11 @@ class StepScreen(Screen):
                              done)
 
     def action_undo(self) -> None:
-        from rosnet_tui.core.write_plans import UNDO_AFFECTS
         from rosnet_tui.ui.write_screen import UndoScreen
 
         def done(undone: bool | None) -> None:
             if undone:
-                self.run_specs([s for s in self.specs if s.id in UNDO_AFFECTS])
+                self.run_specs([s for s in self.specs if s.id in affected.UNDO])
 
         self.app.push_screen(UndoScreen(self.session.state_dir), done)
 

@@ -11,7 +11,7 @@ peer's hosts entry and ROS_MASTER_URI follow without anyone touching them.
 
 from __future__ import annotations
 
-from .affected import AFFECTED_CHECKS, run_affected_checks
+from .affected import run_affected_checks
 from .backoff import Backoff, backoff_cap
 from .folder import FolderStore
 from .outcome import RoundResult, SyncError
@@ -22,7 +22,7 @@ from .status import load_status, render_status, status_path
 from .store import FetchResult, Refusal, StoreConfigError, StoreError, make_store
 
 __all__ = [
-    "AFFECTED_CHECKS", "Backoff", "Candidate", "FetchResult", "FolderStore", "Plan", "PlanError",
+    "Backoff", "Candidate", "FetchResult", "FolderStore", "Plan", "PlanError",
     "Record", "RecordError", "Refusal", "RoundResult", "StoreConfigError", "StoreError",
     "SyncError", "SyncService", "backoff_cap", "choose_best", "load_status", "make_store",
     "new_record", "parse_record", "plan_hosts", "render_status", "run_affected_checks",

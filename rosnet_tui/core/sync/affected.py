@@ -8,15 +8,14 @@ import os
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core import affected
 from rosnet_tui.core.bashrc import master_uri
 from rosnet_tui.core.hosts import WriterSettingsError
 from rosnet_tui.core.settings import Settings
 
-AFFECTED_CHECKS = ("linux.hosts", "linux.resolve", "linux.ssh", "ros.master")
-
 
 def run_affected_checks(settings: Settings, *, hosts_path: Path, bashrc_path: Path | None,
-                        state_dir: Path, ids: tuple[str, ...] = AFFECTED_CHECKS,
+                        state_dir: Path, ids: tuple[str, ...] = affected.SYNC,
                         ) -> list[dict[str, Any]]:
     """Run the checks a hosts/ROS change affects (concurrently, each under its timeout):
     [{"id", "status", "summary"}] in *ids* order."""
