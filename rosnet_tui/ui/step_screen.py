@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING
 
 from textual import work
@@ -12,13 +14,14 @@ from textual.screen import Screen
 from textual.widgets import Static
 
 from rosnet_tui.core import affected
-from rosnet_tui.core.session import NOT_RUN, RUNNING, WizardSession
+from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.steps import Step, step_for
 from rosnet_tui.ui.messages import Navigate
 from rosnet_tui.ui.widgets import CheckList, KeyBar, PlainHeader, StepBar
 
 if TYPE_CHECKING:
     from rosnet_tui.core.checks import CheckSpec
+    from rosnet_tui.core.results import CheckResult
 
 
 def _markdown(text: str):
@@ -309,28 +312,19 @@ class StepScreen(Screen):
         if not specs:
             self.notify("This step has no checks registered yet.", severity="warning")
             return
-        for s in specs:
-            self.session.set_check_state(s.id, RUNNING, None)
+        results = self.session.start_run(specs)
         self._sync_results()
-        self._run_worker(specs)
+        self._run_worker(results)
 
     @work(exclusive=True, exit_on_error=False, group="checks")
-    async def _run_worker(self, specs: list[CheckSpec]) -> None:
-        from rosnet_tui.core.checks.runner import stream
-
-        session = self.session
-        ctx = session.make_context()
-        ids = {s.id for s in specs}
+    async def _run_worker(self, results: AsyncIterator[CheckResult]) -> None:
         try:
-            async for result in stream(specs, ctx):
-                ids.discard(result.id)
-                session.set_check_state(result.id, result.status.value, result)
-                self._sync_results()
-                if result.id == "router.upnp":
-                    self._render_card()
+            async with contextlib.aclosing(results):
+                async for result in results:
+                    self._sync_results()
+                    if result.id == "router.upnp":
+                        self._render_card()
         finally:
-            for cid in ids:  # cancelled before a verdict: back to "not run"
-                session.set_check_state(cid, NOT_RUN, None)
             self._sync_results()
         for name, _d in self.unknown_host_keys():
             self.notify(f"{name} has an SSH host key this machine does not know yet. Press k "
