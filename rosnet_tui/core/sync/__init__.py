@@ -5,7 +5,8 @@ peer's hosts entry and ROS_MASTER_URI follow without anyone touching them.
 - :mod:`.folder`, :mod:`.dnsstore`: the stores (a shared folder; RFC 2136 + TSIG on DNS);
 - :mod:`.watcher`: this component's own addresses (netlink, public-IP polling);
 - :mod:`.plan`: the hosts set by evidence (same public IP -> on this LAN);
-- :mod:`.service`: the loop (back-off, the safe writer, the affected checks);
+- :mod:`.service`: the service (its rounds), with :mod:`.applier` (the safe writer, the affected
+  checks), :mod:`.loop` (wake-ups, stop) and :mod:`.state` (what it knows);
 - :mod:`.status`: what ``rosnet-tui sync status`` shows.
 """
 
