@@ -68,7 +68,7 @@ def run(lab: Any, opts: Options, state: Path) -> RowResult:
     if not ready:
         res.status, res.reason = "not available yet", why
         return res
-    from rosnet_tui.core.sync.service import read_period
+    from rosnet_tui.core.sync.timing import read_period
 
     mod = importlib.import_module(MODULE)
     stores = tuple(getattr(mod, "STORES", ("folder", "dns")))

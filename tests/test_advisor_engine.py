@@ -11,8 +11,8 @@ import pytest
 
 from rosnet_tui.core import advisor
 from rosnet_tui.core.advisor import engine
-from rosnet_tui.core.advisor.engine import Hit, RuleOrderError
-from rosnet_tui.core.advisor.evidence import Evidence
+from rosnet_tui.core.advisor.engine import Hit
+from rosnet_tui.core.advisor.evidence import Evidence, RuleOrderError
 from rosnet_tui.core.advisor.order import RULE_ORDER
 from tests.builders import healthy_laptop, laptop_settings
 from tests.golden import codec, record
@@ -123,8 +123,8 @@ def test_reading_an_undeclared_firing_is_an_error_even_when_not_strict(registry)
 
 
 def test_the_package_keeps_its_old_names():
-    from rosnet_tui.core.procedure import SEVERITIES, STEP_IDS
-    assert advisor.SEVERITIES == SEVERITIES and advisor.STEP_ORDER == STEP_IDS
+    from rosnet_tui.core.procedure import SEVERITIES
+    assert advisor.SEVERITIES == SEVERITIES
     assert advisor.T1 == "table1.listener_up_closed"
     assert advisor.step_title("router") == "step 2 (Router/modem)"
     assert advisor.rule_by_id("isp.cgnat").step == "isp"

@@ -15,6 +15,7 @@ import pytest
 
 from rosnet_tui.core import advisor
 from rosnet_tui.core.advisor import advice_by_check, advise, all_rules
+from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import Settings
 from tests.advisor_support import (
@@ -68,7 +69,7 @@ def test_rule_ids_are_unique_and_well_formed():
     assert len({r.id for r in rules}) == len(rules)
     for r in rules:
         assert r.severity in advisor.SEVERITIES
-        assert r.goto_step in (*advisor.STEP_ORDER, None)
+        assert r.goto_step in (*STEP_IDS, None)
         assert r.condition and r.meaning and r.action
 
 

@@ -7,7 +7,14 @@ import shutil
 
 import pytest
 
-from rosnet_tui.core.checks import REGISTRY, CheckContext, linux, load_builtin_checks, run_check
+from rosnet_tui.core.checks import (
+    REGISTRY,
+    CheckContext,
+    linux,
+    linux_chat,
+    load_builtin_checks,
+    run_check,
+)
 from rosnet_tui.core.hosts import HostsEntry
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
@@ -164,7 +171,7 @@ async def test_chat_in_by_name(ssh_client, tmp_path):
 
 @pytest.mark.skipif(shutil.which("nc") is None, reason="needs nc")
 async def test_chats_fall_back_to_nc_without_python3(ssh_client, tmp_path, monkeypatch):
-    monkeypatch.setattr(linux, "PYTHON", "no-such-python3")
+    monkeypatch.setattr(linux_chat, "PYTHON", "no-such-python3")
     out = await run("linux.chat_out", ctx(settings(peers=[ssh_client.peer()]), tmp_path,
                                           ssh_client, timeout=3.0))
     assert out.status is Status.PASS, out.evidence

@@ -21,7 +21,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rosnet_tui.cli import build_parser, report
+from rosnet_tui.cli import build_parser
+from rosnet_tui.core import report
 from rosnet_tui.core.probe_server import ProbeLimits, ProbeServer
 from tests.hardening_tally import tally
 from tests.test_probe_server import Listener, http

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.cli import report
+from rosnet_tui.core import report
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings import render_settings
 from tests.advisor_support import chat, unreachable

@@ -289,7 +289,7 @@ ROSBRIDGE_CASES = {
 
 def test_a_reports_settings_keep_rosbridge():
     """`rosnet-tui report --from-json` reads the settings back: the rosbridge rules need them."""
-    from rosnet_tui.cli.report import ReportError, public_settings, settings_from_dict
+    from rosnet_tui.core.report import ReportError, public_settings, settings_from_dict
 
     s = master(port=9091, host="sami")
     assert settings_from_dict(public_settings(s)).rosbridge == s.rosbridge

@@ -354,7 +354,7 @@ class World:
 
     def round(self):
         s = self.svc
-        s.next_fetch = s.next_publish = s.next_apply = 0.0  # no waiting in unit tests
+        s.state.next_fetch = s.state.next_publish = s.state.next_apply = 0.0  # no waiting in unit tests
         return s.round()
 
     def entry(self, name: str) -> str | None:
@@ -443,12 +443,12 @@ def test_service_keeps_the_last_good_state_when_things_fail_and_recovers(tmp_pat
     w.public = None
     with caplog.at_level("WARNING", logger="rosnet_tui.sync"):
         res = w.round()
-        w.svc.next_public = 0
+        w.svc.state.next_public = 0
         res = w.round()
     assert not res.ok and set(res.errors) == {"store", "public_ip"}
     assert "does not exist" in res.errors["store"] and "keeping" in res.errors["public_ip"]
     assert w.hosts.read_bytes() == good
-    assert w.svc.backoff["store"].failures == 2
+    assert w.svc.state.backoff["store"].failures == 2
     assert sum("store:" in r.getMessage() for r in caplog.records) == 1   # logged once
     st = load_status(w.state)
     assert set(st["errors"]) == {"store", "public_ip"}
@@ -456,9 +456,9 @@ def test_service_keeps_the_last_good_state_when_things_fail_and_recovers(tmp_pat
     # Everything comes back: the service recovers by itself.
     hidden.rename(w.folder)
     w.public = "198.51.100.2"
-    w.svc.next_public = 0
+    w.svc.state.next_public = 0
     res = w.round()
-    assert res.ok and not w.svc.backoff["store"].failing
+    assert res.ok and not w.svc.state.backoff["store"].failing
     assert load_status(w.state)["errors"] == {}
 
 
@@ -469,7 +469,7 @@ def test_service_own_address_changes_are_published_and_continue_the_seq(tmp_path
     w.round()
     assert w.own_record().seq == 41                         # same content: not republished
     w.public = "198.51.100.9"
-    w.svc.next_public = 0
+    w.svc.state.next_public = 0
     w.round()
     assert (w.own_record().seq, w.own_record().public_ip) == (42, "198.51.100.9")
     w.local = LocalAddress("eth0", "192.168.1.77", "192.168.1.254")
@@ -531,14 +531,15 @@ def test_a_failing_write_backs_off_without_spinning(tmp_path):
     assert 2 <= len(rounds) <= 12, len(rounds)
     st = load_status(w.state)
     assert "is a folder" in st["errors"]["apply"]["message"]
-    assert w.svc.backoff["apply"].failures >= 1
+    assert w.svc.state.backoff["apply"].failures >= 1
 
 
 def test_a_second_service_on_the_same_state_dir_is_refused(tmp_path):
-    from rosnet_tui.core.sync.service import SyncError, _ServiceLock
+    from rosnet_tui.core.sync.lock import ServiceLock
+    from rosnet_tui.core.sync.outcome import SyncError
 
     w = World(tmp_path)
-    lock = _ServiceLock(w.state)
+    lock = ServiceLock(w.state)
     lock.acquire()
     try:
         with pytest.raises(SyncError, match="another rosnet-tui sync is running"):

@@ -31,7 +31,7 @@ from rosnet_tui.core.settings import (
 from rosnet_tui.core.sync import FolderStore, SyncService, load_status, new_record
 from rosnet_tui.core.sync import folder_watch as fw
 from rosnet_tui.core.sync.folder_watch import FolderWatch, WatchUnavailable
-from rosnet_tui.core.sync.service import read_period
+from rosnet_tui.core.sync.timing import read_period
 from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
 from tests.builders import folder_sync_settings
 

@@ -22,9 +22,9 @@ from rosnet_tui.cli.writing import (
     write_preview,
     yes_to_all,
 )
+from rosnet_tui.core import affected, privilege
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
-from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import (
     PROFILE_TITLES,
     WriterSettingsError,
@@ -42,8 +42,6 @@ from rosnet_tui.core.settings import (
     load_settings,
     save_settings,
 )
-
-HOSTS_CHECKS = ("linux.hosts", "linux.resolve")
 
 
 # --------------------------------------------------------------------------- hosts
@@ -137,7 +135,7 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
         state_dir=state_dir_of(args), fix_conflicts=bool(fix))
     rc = write_preview(args, preview, sudo_cmd)
     if rc == EXIT_OK and not args.no_checks:
-        rerun_checks(HOSTS_CHECKS, settings, hosts_path=path, state_dir=state_dir_of(args))
+        rerun_checks(affected.HOSTS, settings, hosts_path=path, state_dir=state_dir_of(args))
     return rc, settings
 
 

@@ -28,16 +28,13 @@ from rosnet_tui.cli.writing import (
     write_preview,
     yes_to_all,
 )
+from rosnet_tui.core import affected, ros2
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
-from rosnet_tui.core import ros2
 from rosnet_tui.core.bashrc import ROS_IP_REASON, find_ros_ip_lines, preview_bashrc, shell_lines
 from rosnet_tui.core.hosts import WriterSettingsError
 from rosnet_tui.core.paths import default_bashrc_path
-
-ROS_CHECKS = ("ros.env",)
-ROS2_CHECKS = ("ros2.env",)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -123,7 +120,7 @@ def run_apply(args: argparse.Namespace) -> int:
         for line in lines:
             print(f"  {line}")
         if not args.no_checks:
-            rerun_checks(ROS_CHECKS, settings, bashrc_path=path, state_dir=state_dir_of(args))
+            rerun_checks(affected.ROS_ENV, settings, bashrc_path=path, state_dir=state_dir_of(args))
     return rc
 
 
@@ -182,5 +179,5 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
     if not (args.client and not settings.is_master):
         print("Then start the router: ros2 run rmw_zenoh_cpp rmw_zenohd")
     if not args.no_checks:
-        rerun_checks(ROS2_CHECKS, settings, bashrc_path=path, state_dir=state_dir_of(args))
+        rerun_checks(affected.ROS2_ENV, settings, bashrc_path=path, state_dir=state_dir_of(args))
     return EXIT_OK

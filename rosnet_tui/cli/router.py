@@ -21,12 +21,12 @@ from rosnet_tui.cli.common import (
     load_settings_or_say,
 )
 from rosnet_tui.cli.writing import ask, err, interactive, rerun_checks, state_dir_of
+from rosnet_tui.core import affected
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp import journal
 from rosnet_tui.core.upnp.modem import LEASE_MAX_S, LEASE_MIN_S, Modem, find_modem
 from rosnet_tui.core.upnp.wire import ModemError, label
 
-CHECKS_AFTER = ("router.upnp", "router.port_open")
 PROTOCOL_CHOICES = ("auto", "upnp", "pcp", "natpmp")
 
 
@@ -237,7 +237,7 @@ def run_map(args: argparse.Namespace) -> int:
         print(f"Recorded as change #{result.entry_id}. Undo with: rosnet-tui undo (or rosnet-tui "
               "router unmap). The sync service renews the lease; so does running this again.")
     if not args.no_checks:
-        rerun_checks(CHECKS_AFTER, settings, state_dir=sd)
+        rerun_checks(affected.FORWARD, settings, state_dir=sd)
     return EXIT_OK
 
 

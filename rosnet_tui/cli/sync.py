@@ -139,7 +139,9 @@ def _setup_logging(args: argparse.Namespace) -> None:
 # --------------------------------------------------------------------------- the service
 def run_service(args: argparse.Namespace) -> int:
     from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
-    from rosnet_tui.core.sync.service import SyncError, SyncService, install_signal_handlers
+    from rosnet_tui.core.sync.loop import install_signal_handlers
+    from rosnet_tui.core.sync.outcome import SyncError
+    from rosnet_tui.core.sync.service import SyncService
 
     _setup_logging(args)
     bad_dir = state_dir_problem(_state_dir(args))

@@ -13,12 +13,10 @@ from rosnet_tui.cli.common import (
     add_config_option,
     state_dir_problem,
 )
-from rosnet_tui.cli.hosts import HOSTS_CHECKS
-from rosnet_tui.cli.ros import ROS_CHECKS
 from rosnet_tui.cli.writing import confirm, err, rerun_checks, run_as_root, state_dir_of
+from rosnet_tui.core import affected, privilege
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core import privilege
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings
 from rosnet_tui.core.upnp.journal import describe as describe_forward
@@ -109,13 +107,13 @@ def run(args: argparse.Namespace) -> int:
         for line in result.forwards:
             print(line)
     if not args.no_checks and e.mappings:
-        rerun_checks(("router.upnp", "router.port_open"), _settings_quietly(args), state_dir=sd)
+        rerun_checks(affected.FORWARD, _settings_quietly(args), state_dir=sd)
     elif not args.no_checks:
         settings = _settings_quietly(args)
         paths = [Path(f.path) for f in e.files]
         hosts = [p for p in paths if p == DEFAULT_HOSTS_PATH or p.name == "hosts"]
         others = [p for p in paths if p not in hosts]
-        ids = (HOSTS_CHECKS if hosts else ()) + (ROS_CHECKS if others else ())
+        ids = (affected.HOSTS if hosts else ()) + (affected.ROS_ENV if others else ())
         rerun_checks(ids, settings, hosts_path=hosts[0] if hosts else None,
                      bashrc_path=others[0] if others else None, state_dir=sd)
     return EXIT_OK

@@ -7,7 +7,7 @@ layer that shows it, and tests can build one without an app.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -153,6 +153,30 @@ class WizardSession:
         return make_context(settings, RunOptions(state_dir=self.state_dir,
                                                  hosts_path=self.hosts_path,
                                                  bashrc_path=self.bashrc_path))
+
+    def start_run(self, specs: Iterable[CheckSpec]) -> AsyncIterator[CheckResult]:
+        """Start a run of *specs*: they show as running at once; iterating the answer runs them
+        through the one door (:func:`rosnet_tui.core.checks.runner.stream`) and keeps each
+        verdict as it lands (its state, the findings, the saved UI state) before yielding it.
+        Checks stopped before their verdict (the run cancelled) go back to "not run"."""
+        specs = list(specs)
+        for spec in specs:
+            self.set_check_state(spec.id, RUNNING, None)
+        return self._run(specs)
+
+    async def _run(self, specs: list[CheckSpec]) -> AsyncIterator[CheckResult]:
+        from rosnet_tui.core.checks.runner import stream
+
+        ctx = self.make_context()
+        ids = {s.id for s in specs}
+        try:
+            async for result in stream(specs, ctx):
+                ids.discard(result.id)
+                self.set_check_state(result.id, result.status.value, result)
+                yield result
+        finally:
+            for cid in ids:  # cancelled before a verdict: back to "not run"
+                self.set_check_state(cid, NOT_RUN, None)
 
     def check_state(self, check_id: str) -> tuple[str, CheckResult | None]:
         return self._states.get(check_id, (NOT_RUN, None))

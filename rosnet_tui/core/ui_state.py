@@ -15,7 +15,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core.results import CheckResult, Status
+from rosnet_tui.core.results import CheckResult, ResultFormatError
 from rosnet_tui.core.settings import atomic_write_text
 from rosnet_tui.core.state import read_json
 
@@ -56,21 +56,6 @@ class SavedFinding:
                 "meaning": self.meaning, "actions": list(self.actions),
                 "goto_step": self.goto_step, "check_ids": list(self.check_ids),
                 "order": self.order, "evidence": list(self.evidence)}
-
-
-def result_from_json(d: Any) -> CheckResult | None:
-    """A CheckResult from its JSON form (None when the record is not one)."""
-    if not isinstance(d, dict):
-        return None
-    try:
-        return CheckResult(id=str(d["id"]), step=str(d["step"]), status=Status(d["status"]),
-                           summary=str(d.get("summary", "")),
-                           evidence=[str(e) for e in d.get("evidence") or []],
-                           duration_s=float(d.get("duration_s", 0.0)),
-                           timeout_s=float(d.get("timeout_s", 0.0)),
-                           data=d.get("data") if isinstance(d.get("data"), dict) else {})
-    except (KeyError, TypeError, ValueError):
-        return None
 
 
 def now_iso() -> str:
@@ -128,7 +113,10 @@ class UiState:
         raw = self.data.get("results")
         for cid, rec in (raw.items() if isinstance(raw, dict) else ()):
             if isinstance(rec, dict):
-                r = result_from_json(rec.get("result"))
+                try:
+                    r = CheckResult.from_json(rec.get("result"))
+                except ResultFormatError:
+                    r = None
                 if r is not None and r.id == cid:
                     out[cid] = (r, str(rec.get("at", "")))
         return out

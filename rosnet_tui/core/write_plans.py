@@ -11,6 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rosnet_tui.core import affected
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.managed_write import read_text
@@ -76,7 +77,7 @@ def hosts_plan(settings: Settings, paths: WritePaths) -> WritePlan:
         sudo_command=lambda p, fix: privilege.hosts_apply_command(
             profile=profile, config=paths.config_path, digest=p.digest,
             hosts_file=paths.hosts_path, state_dir=paths.state_dir, fix_conflicts=fix),
-        after=("linux.hosts", "linux.resolve"))
+        after=affected.HOSTS)
 
 
 def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:
@@ -96,7 +97,7 @@ def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:
         companions=lambda client: make(client)[1:],
         option_label=("no router on this machine: its nodes connect to the master's router in "
                       "client mode") if member else "",
-        after=("ros2.env",),
+        after=affected.ROS2_ENV,
         footnote="Then start the router: ros2 run rmw_zenoh_cpp rmw_zenohd (the master's first). "
                  "For the shell you are in now: " + "; ".join(ros2.shell_lines(settings)))
 
@@ -119,7 +120,7 @@ def ros_plan(settings: Settings, paths: WritePaths) -> WritePlan:
         option_label="comment out ROS_IP / ROS_HOSTNAME lines (they break remote networks: a "
                      "node then publishes but cannot subscribe, or the reverse)",
         option_count=ros_ip_lines,
-        after=("ros.env",),
+        after=affected.ROS_ENV,
         footnote=f"For the shell you are in now: {bashrc.export_line(settings)}")
 
 
@@ -127,10 +128,6 @@ PLANS: dict[str, Callable[[Settings, WritePaths], WritePlan]] = {
     "linux": hosts_plan,
     "ros": ros_plan,
 }
-
-# The checks an undo may change.
-UNDO_AFFECTS = ("linux.hosts", "linux.resolve", "ros.env", "ros2.env", "router.upnp")
-
 
 def write_plan(step_id: str, settings: Settings, paths: WritePaths) -> WritePlan | None:
     """The plan of *step_id*, or None when the step writes nothing."""

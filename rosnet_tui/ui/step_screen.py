@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING
 
 from textual import work
@@ -11,7 +13,8 @@ from textual.containers import Container, Vertical, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import Static
 
-from rosnet_tui.core.session import NOT_RUN, RUNNING, WizardSession
+from rosnet_tui.core import affected
+from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.steps import Step, step_for
 from rosnet_tui.ui.messages import Navigate
 from rosnet_tui.ui.textual_compat import installed_screens
@@ -19,6 +22,7 @@ from rosnet_tui.ui.widgets import CheckList, KeyBar, PlainHeader, StepBar
 
 if TYPE_CHECKING:
     from rosnet_tui.core.checks import CheckSpec
+    from rosnet_tui.core.results import CheckResult
 
 
 def _markdown(text: str):
@@ -205,8 +209,7 @@ class StepScreen(Screen):
 
         def done(mapped: bool | None) -> None:
             if mapped:
-                self.run_specs([s for s in self.specs if s.id in ("router.upnp",
-                                                                  "router.port_open")])
+                self.run_specs([s for s in self.specs if s.id in affected.FORWARD])
 
         settings = self.session.runtime_settings()
         self.app.push_screen(MapScreen(settings, self.session.state_dir,
@@ -262,12 +265,11 @@ class StepScreen(Screen):
                              done)
 
     def action_undo(self) -> None:
-        from rosnet_tui.core.write_plans import UNDO_AFFECTS
         from rosnet_tui.ui.write_screen import UndoScreen
 
         def done(undone: bool | None) -> None:
             if undone:
-                self.run_specs([s for s in self.specs if s.id in UNDO_AFFECTS])
+                self.run_specs([s for s in self.specs if s.id in affected.UNDO])
 
         self.app.push_screen(UndoScreen(self.session.state_dir), done)
 
@@ -310,28 +312,19 @@ class StepScreen(Screen):
         if not specs:
             self.notify("This step has no checks registered yet.", severity="warning")
             return
-        for s in specs:
-            self.session.set_check_state(s.id, RUNNING, None)
+        results = self.session.start_run(specs)
         self._sync_results()
-        self._run_worker(specs)
+        self._run_worker(results)
 
     @work(exclusive=True, exit_on_error=False, group="checks")
-    async def _run_worker(self, specs: list[CheckSpec]) -> None:
-        from rosnet_tui.core.checks.runner import stream
-
-        session = self.session
-        ctx = session.make_context()
-        ids = {s.id for s in specs}
+    async def _run_worker(self, results: AsyncIterator[CheckResult]) -> None:
         try:
-            async for result in stream(specs, ctx):
-                ids.discard(result.id)
-                session.set_check_state(result.id, result.status.value, result)
-                self._sync_results()
-                if result.id == "router.upnp":
-                    self._render_card()
+            async with contextlib.aclosing(results):
+                async for result in results:
+                    self._sync_results()
+                    if result.id == "router.upnp":
+                        self._render_card()
         finally:
-            for cid in ids:  # cancelled before a verdict: back to "not run"
-                session.set_check_state(cid, NOT_RUN, None)
             self._sync_results()
         for name, _d in self.unknown_host_keys():
             self.notify(f"{name} has an SSH host key this machine does not know yet. Press k "

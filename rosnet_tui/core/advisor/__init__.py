@@ -39,14 +39,13 @@ from rosnet_tui.core.advisor.engine import (
 from rosnet_tui.core.advisor.evidence import FORWARD_RANGE, Evidence, RuleOrderError, uri_host
 from rosnet_tui.core.advisor.order import RULE_ORDER
 from rosnet_tui.core.advisor.router import T1
-from rosnet_tui.core.procedure import SEVERITIES, STEP_IDS, step_title
+from rosnet_tui.core.procedure import SEVERITIES, step_title
 
 seal(RULE_ORDER)
 
 # The names this module had before it became a package.
-STEP_ORDER = STEP_IDS
 
-__all__ = ["CATCH_ALL_IDS", "FORWARD_RANGE", "RULES", "RULE_ORDER", "SEVERITIES", "STEP_ORDER",
+__all__ = ["CATCH_ALL_IDS", "FORWARD_RANGE", "RULES", "RULE_ORDER", "SEVERITIES",
            "T1", "Evidence", "Finding", "Hit", "Rule", "RuleOrderError", "advice_by_check",
            "advise", "all_rules", "first_failure", "render_rules_markdown", "rule",
            "rule_by_id", "step_title", "uri_host"]

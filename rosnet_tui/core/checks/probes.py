@@ -27,11 +27,8 @@ from rosnet_tui import __version__
 from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext
 from rosnet_tui.core.checks.data import view
-from rosnet_tui.core.connect import kind_from_text, tcp_failure_kind
-from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import Peer, Settings
-from rosnet_tui.core.ssh.connection import SshResult, resolve_ipv4, run_blocking
-from rosnet_tui.core.ssh.session import ssh_run
+from rosnet_tui.core.ssh.connection import SshResult, run_blocking
 
 MAX_BODY = 64 * 1024
 T = TypeVar("T")
@@ -233,6 +230,9 @@ def ssh_peers(s: Settings) -> list[Peer]:
     return [p for p in s.peers if p.ssh_user]
 
 
+NO_SSH_USER = ("no peer has an SSH user in the settings (peer.ssh_user), so the peer's side cannot "
+               "be run from here")
+
 PEER_CONCURRENCY = 8  # peers one check works with at once (the largest fleet: 8 members)
 
 
@@ -427,118 +427,3 @@ def zenoh_peer_problem(res: SshResult, peer: Peer, rep: dict | None) -> str | No
 def router_links(info: dict) -> list[str]:
     """Ids of the routers a router (its admin space *info*) has sessions with."""
     return [x["zid"] for x in info.get("sessions") or [] if x.get("whatami") == "router"]
-
-
-# --------------------------------------------------------------------------- ROS 2: the Linux chats
-_ROS2_CONNECT = r"""
-import socket, sys
-name = sys.argv[1]; port = int(sys.argv[2]); t = float(sys.argv[3])
-try:
-    ip = socket.gethostbyname(name)
-except Exception as e:
-    print("RESOLVE-ERROR %s" % e); sys.exit(2)
-print("RESOLVED %s" % ip); sys.stdout.flush()
-try:
-    socket.create_connection((ip, port), timeout=t).close()
-except Exception as e:
-    print("CONNECT-ERROR %s" % e); sys.exit(3)
-print("CONNECTED")
-"""
-
-
-def _listening_here(port: int) -> bool:
-    """Whether a process listens on TCP *port* here (the master's router, normally)."""
-    import psutil  # noqa: PLC0415
-
-    try:
-        return any(c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == port
-                   for c in psutil.net_connections(kind="tcp"))
-    except (psutil.AccessDenied, OSError):
-        return False
-
-
-async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
-    """linux.chat_out / linux.chat_in under ROS 2 (they call it first thing).
-
-    Under ROS 2 only one connection crosses the modems: from each member, by name, to the
-    master's router port. So the chat toward the master is a TCP connection by name to
-    turtlebot:<zenoh_port> (made here on a member; made by each member over SSH on the master),
-    and the other direction is skipped: members accept nothing."""
-    s = ctx.settings
-    data: dict[str, Any] = {"peers": {}}
-    port, me = s.ros.zenoh_port, s.this.name or "this component"
-    if out == s.is_master:
-        why = (f"{me} is the ROS 2 master: it never connects to the members (their routers "
-               "connect in to it; linux.chat_in tests that way)" if out else
-               f"{me} is a ROS 2 member: it accepts no connections (its router connects out "
-               "to the master's; linux.chat_out tests that way)")
-        return Outcome(Status.SKIP, f"skipped: {why}", [], data)
-    t = budget(ctx, "linux.chat_in" if not out else "linux.chat_out") * 0.8
-    if out:
-        master = s.master_name
-        addrs, err = await resolve_ipv4(master, min(1.0, t * 0.3))
-        if not addrs:
-            data["peers"][master] = {"ok": False, "failure": "resolve"}
-            return Outcome(Status.FAIL, f"{master} does not resolve here: {err}", [], data)
-        ok, line, kind = await _tcp_connect(addrs[0], port, t * 0.6)
-        data["peers"][master] = {"ok": ok, "failure": None if ok else "connect", "tcp": kind}
-        ev = [f"{master} -> {addrs[0]}", line]
-        if ok:
-            return Outcome(Status.PASS, f"{me} reaches {master}:{port} by name (the master's "
-                                        "router port, through its modem)", ev, data)
-        return Outcome(Status.FAIL, f"{me} cannot connect to {master}:{port} by name "
-                                    f"({addrs[0]}): the master's modem does not forward TCP "
-                                    f"{port}, or nothing listens there", ev, data)
-    peers = ssh_peers(s)
-    for p in s.peers:
-        if not p.ssh_user:
-            data["peers"][p.name] = {"ok": False, "failure": "no_user"}
-    if not peers:
-        return Outcome(Status.SKIP, "no peer has an SSH user in the settings (peer.ssh_user), so "
-                                    "the members' side cannot be run from here", data=data)
-    async with contextlib.AsyncExitStack() as stack:
-        if not await run_blocking(_listening_here, port, timeout=1.0):
-            with contextlib.suppress(OSError):
-                await stack.enter_async_context(ctx.listeners.hold(port))
-        cmd = python_command(_ROS2_CONNECT, me, str(port), f"{t * 0.5:.1f}")
-        got = await each_peer(peers, lambda p: ssh_run(ctx.ssh, p, cmd, timeout=t,
-                                                       connect_timeout=t * 0.5,
-                                                       tcp_timeout=ctx.timeout_s))
-    ev: list[str] = []
-    bad: list[str] = []
-    for p, res in zip(peers, got, strict=True):
-        text = res.stdout
-        if "CONNECTED" in text:
-            data["peers"][p.name] = {"ok": True, "failure": None, "tcp": "connected"}
-            ev.append(f"{p.name} connected to {me}:{port} by name ({text.split()[1]})")
-            continue
-        failure = ("peer_resolve" if "RESOLVE-ERROR" in text else "connect" if text else
-                   f"ssh:{res.failure or 'sshd'}")
-        data["peers"][p.name] = {"ok": False, "failure": failure}
-        err_line = next((ln for ln in text.splitlines() if ln.startswith("CONNECT-ERROR")), None)
-        if err_line is not None:
-            data["peers"][p.name]["tcp"] = kind_from_text(err_line)
-        ev.append(f"{p.name}: {text.strip() or res.detail}")
-        bad.append(f"{p.name} ({failure})")
-    if bad:
-        return Outcome(Status.FAIL, f"members cannot reach {me}:{port} by name: {', '.join(bad)}",
-                       ev, data)
-    return Outcome(Status.PASS, f"every member reaches {me}:{port} by name (the router port)",
-                   ev, data)
-
-
-async def _tcp_connect(host: str, port: int, timeout: float) -> tuple[bool, str, str]:
-    """(connected, the line saying how, core.connect's kind of the attempt)."""
-    writer = None
-    try:
-        _r, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
-        return True, f"TCP {host}:{port}: connected", "connected"
-    except asyncio.TimeoutError as exc:
-        return False, f"TCP {host}:{port}: no answer within {timeout:.1f} s", tcp_failure_kind(exc)
-    except OSError as exc:
-        return False, f"TCP {host}:{port}: {exc.strerror or exc}", tcp_failure_kind(exc)
-    finally:
-        if writer is not None:
-            writer.close()
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer.wait_closed(), 0.5)

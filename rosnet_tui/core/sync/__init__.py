@@ -5,23 +5,26 @@ peer's hosts entry and ROS_MASTER_URI follow without anyone touching them.
 - :mod:`.folder`, :mod:`.dnsstore`: the stores (a shared folder; RFC 2136 + TSIG on DNS);
 - :mod:`.watcher`: this component's own addresses (netlink, public-IP polling);
 - :mod:`.plan`: the hosts set by evidence (same public IP -> on this LAN);
-- :mod:`.service`: the loop (back-off, the safe writer, the affected checks);
+- :mod:`.service`: the service (its rounds), with :mod:`.applier` (the safe writer, the affected
+  checks), :mod:`.loop` (wake-ups, stop) and :mod:`.state` (what it knows);
 - :mod:`.status`: what ``rosnet-tui sync status`` shows.
 """
 
 from __future__ import annotations
 
+from .affected import run_affected_checks
 from .backoff import Backoff, backoff_cap
 from .choose_store import make_store
 from .folder import FolderStore
+from .outcome import RoundResult, SyncError
 from .plan import Plan, PlanError, plan_hosts
 from .records import Candidate, Record, RecordError, choose_best, new_record, parse_record
-from .service import AFFECTED_CHECKS, RoundResult, SyncError, SyncService, run_affected_checks
+from .service import SyncService
 from .status import load_status, render_status, status_path
 from .store import FetchResult, Refusal, StoreConfigError, StoreError
 
 __all__ = [
-    "AFFECTED_CHECKS", "Backoff", "Candidate", "FetchResult", "FolderStore", "Plan", "PlanError",
+    "Backoff", "Candidate", "FetchResult", "FolderStore", "Plan", "PlanError",
     "Record", "RecordError", "Refusal", "RoundResult", "StoreConfigError", "StoreError",
     "SyncError", "SyncService", "backoff_cap", "choose_best", "load_status", "make_store",
     "new_record", "parse_record", "plan_hosts", "render_status", "run_affected_checks",

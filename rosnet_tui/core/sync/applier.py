@@ -1,6 +1,7 @@
 """The service's apply side: plan the hosts set and the ROS block from the records, write them
 through the safe writer, remember what was learned, run and re-run the affected checks, save
-the status. A mixin of :class:`~rosnet_tui.core.sync.service.SyncService`."""
+the status. The service's :class:`Applier`; the state it works on is the service's
+:class:`~rosnet_tui.core.sync.state.SyncState`."""
 
 from __future__ import annotations
 
@@ -22,95 +23,105 @@ from rosnet_tui.core.hosts import (
 )
 from rosnet_tui.core.settings import SettingsError, load_settings, save_settings
 
+from .affected import run_affected_checks
 from .plan import Plan, PlanError, check_complete, plan_hosts
+from .state import SyncConfig, SyncState
 from .status import (
     ALIVE_EVERY_S,
     save_status,
 )
-from .workers import VERIFY_EVERY_S, run_affected_checks
+from .timing import RECHECK_AFTER_S, VERIFY_EVERY_S
 
 log = logging.getLogger("rosnet_tui.sync")
 
-RECHECK_AFTER_S = (5.0, 15.0, 45.0)   # re-run failing checks after a change, then give up
 
+class Applier:
+    """Plan, write, check; reads and changes the service's :class:`SyncState`."""
 
-class ApplyMixin:
-    """Plan, write, check (the state lives in SyncService)."""
+    def __init__(self, state: SyncState, config: SyncConfig) -> None:
+        self.state = state
+        self.config = config
 
     def _plan(self) -> Plan:
-        assert self.settings is not None
-        return plan_hosts(self.settings, local_ip=self.local.local_ip if self.local else "",
-                          public_ip=self._known_public(),
-                          records={n: c.record for n, c in self.peers.items()})
+        assert self.state.settings is not None
+        st = self.state
+        return plan_hosts(st.settings, local_ip=st.local.local_ip if st.local else "",
+                          public_ip=st.known_public(),
+                          records={n: c.record for n, c in st.peers.items()})
 
-    def _apply(self, mono: float) -> bool:
+    def apply(self, mono: float) -> bool:
         """Write the hosts set (and the ROS block) when they differ from the files; True if
         something was written."""
-        self.next_verify = mono + VERIFY_EVERY_S
+        self.state.next_verify = mono + VERIFY_EVERY_S
         plan = self._plan()
-        self._last_plan = plan
+        self.state.last_plan = plan
         try:
-            old = mw.read_bytes(self.hosts_path, state_dir=self.state_dir)
+            old = mw.read_bytes(self.config.hosts_path, state_dir=self.config.state_dir)
             text = mt.decode(old) if old is not None else None
             check_complete(plan, text)
             body = plan.body()
             notes = [f"line {c.lineno} '{c.old.strip()}' {c.why}" for c in
                      find_hosts_conflicts(text, plan.settings, plan.profile)]
-            previews = [mf.preview_block(self.hosts_path, body, position="top",
+            previews = [mf.preview_block(self.config.hosts_path, body, position="top",
                                          label=f"hosts: {plan.profile} set", notes=notes,
                                          new_mode=0o644, current=old, use_current=True)]
         except (PlanError, WriterSettingsError, mt.ManagedFileError) as exc:
-            self.next_apply = self._fail("apply", f"{exc}; the hosts file is left as it is", mono)
+            self.state.next_apply = self.state.fail(
+                "apply", f"{exc}; the hosts file is left as it is", mono)
             return False
         for n in notes:
-            self._once(("conflict", n), logging.WARNING, "%s: %s (rosnet-tui hosts apply "
-                       "--comment-conflicts fixes it, with your consent)", self.hosts_path, n)
-        if self.bashrc_path is not None and not plan.settings.ros2:
+            self.state.once(("conflict", n), logging.WARNING, "%s: %s (rosnet-tui hosts apply "
+                            "--comment-conflicts fixes it, with your consent)",
+                            self.config.hosts_path, n)
+        if self.config.bashrc_path is not None and not plan.settings.ros2:
             # (ROS 2: the member's router dials the master by name; the hosts line is all)
             try:
-                previews.append(preview_bashrc(plan.settings, self.bashrc_path,
-                                               state_dir=self.state_dir))
+                previews.append(preview_bashrc(plan.settings, self.config.bashrc_path,
+                                               state_dir=self.config.state_dir))
             except (WriterSettingsError, mt.ManagedFileError) as exc:
-                self._once(("bashrc", str(exc)), logging.WARNING,
-                           "%s is left as it is: %s", self.bashrc_path, exc)
+                self.state.once(("bashrc", str(exc)), logging.WARNING,
+                                "%s is left as it is: %s", self.config.bashrc_path, exc)
         self._update_peer_status(plan)
         changed = [p for p in previews if p.changed]
         if not changed:
-            self.dirty = False
-            self.backoff["apply"].succeed()
-            self._clear_error("apply")
+            self.state.dirty = False
+            self.state.backoff["apply"].succeed()
+            self.state.clear_error("apply")
             return False
         summary = self._summary(plan, text)
         diff = "".join(p.diff() for p in changed)
         log.info("applying: %s\n%s", summary, diff.rstrip("\n"))
         try:
-            result = mf.apply_previews(previews, state_dir=self.state_dir, label=f"sync: {summary}")
+            result = mf.apply_previews(previews, state_dir=self.config.state_dir,
+                                       label=f"sync: {summary}")
         except mt.StalePreviewError as exc:
             log.info("%s; trying again", exc)
-            self.next_apply = mono + 0.2
+            self.state.next_apply = mono + 0.2
             return False
         except mt.PermissionNeededError as exc:
-            self.next_apply = self._fail("apply", f"{exc} (run the sync service as root: "
-                                                  "rosnet-tui sync install-service)", mono)
+            self.state.next_apply = self.state.fail(
+                "apply", f"{exc} (run the sync service as root: rosnet-tui sync install-service)",
+                mono)
             return False
         except mt.ManagedFileError as exc:
-            self.next_apply = self._fail("apply", f"{exc}; the files are left as they were", mono)
+            self.state.next_apply = self.state.fail(
+                "apply", f"{exc}; the files are left as they were", mono)
             return False
-        self.dirty = False
-        self.backoff["apply"].succeed()
-        self._clear_error("apply", "writing works again")
+        self.state.dirty = False
+        self.state.backoff["apply"].succeed()
+        self.state.clear_error("apply", "writing works again")
         backups = ", ".join(str(b) for b in result.backups) or "none (new file)"
         log.info("wrote %s (journal #%s, backup %s; 'rosnet-tui undo' puts it back)",
                  ", ".join(str(p.path) for p in changed), result.entry_id, backups)
-        self.status["profile"] = plan.profile
-        self.status["last_change"] = {"at": time.time(), "summary": summary, "diff": diff,
+        self.state.status["profile"] = plan.profile
+        self.state.status["last_change"] = {"at": time.time(), "summary": summary, "diff": diff,
                                       "journal": result.entry_id, "checks": []}
-        self._status_dirty = True
+        self.state.status_dirty = True
         self._save_learned(plan)
-        self._save_status()
-        if self.do_checks:
-            self._recheck_left = list(RECHECK_AFTER_S)
-            self.recheck_at = None
+        self.save_status()
+        if self.config.run_checks:
+            self.state.recheck_left = list(RECHECK_AFTER_S)
+            self.state.recheck_at = None
             self._run_checks(plan)
         return True
 
@@ -137,23 +148,23 @@ class ApplyMixin:
         return f"{'; '.join(parts)} [{PROFILE_TITLES[plan.profile].split(' (')[0]} set]"
 
     def _update_peer_status(self, plan: Plan) -> None:
-        self.status["profile"] = plan.profile
+        self.state.status["profile"] = plan.profile
         for c in plan.choices:
-            p = self.status["peers"].setdefault(c.name, {})
+            p = self.state.status["peers"].setdefault(c.name, {})
             if p.get("address") != c.address or p.get("where") != c.where:
                 p.update(address=c.address, where=c.where, why=c.why)
-                self._status_dirty = True
+                self.state.status_dirty = True
 
     def _save_learned(self, plan: Plan) -> None:
         """Keep the observed addresses in the settings file too, so `check`, `hosts apply` and
         the wizard agree with the hosts file (comments and layout kept)."""
-        if not self.save_learned:
+        if not self.config.save_learned:
             return
         try:
-            fresh = load_settings(self.config_path)
+            fresh = load_settings(self.config.config_path)
         except SettingsError as exc:
-            self._once(("learned", str(exc)), logging.WARNING,
-                       "the settings file was not updated: %s", exc)
+            self.state.once(("learned", str(exc)), logging.WARNING,
+                            "the settings file was not updated: %s", exc)
             return
         if fresh is None:
             return
@@ -166,7 +177,7 @@ class ApplyMixin:
                 setattr(fresh.this, key, new)
         for p in fresh.peers:
             lp = next((x for x in learned.peers if x.name == p.name), None)
-            if lp is None or p.name not in self.peers:
+            if lp is None or p.name not in self.state.peers:
                 continue
             for key in ("local_ip", "public_ip"):
                 new = getattr(lp, key)
@@ -176,39 +187,40 @@ class ApplyMixin:
         if not changes:
             return
         try:
-            st = os.stat(self.config_path)
-            save_settings(fresh, self.config_path)
+            st = os.stat(self.config.config_path)
+            save_settings(fresh, self.config.config_path)
             if os.geteuid() == 0 and (st.st_uid, st.st_gid) != (0, 0):
                 with contextlib.suppress(OSError):
-                    os.chown(self.config_path, st.st_uid, st.st_gid)
+                    os.chown(self.config.config_path, st.st_uid, st.st_gid)
             with contextlib.suppress(OSError):
-                st2 = os.stat(self.config_path)
-                self._settings_key = (st2.st_mtime_ns, st2.st_size, st2.st_ino)
-                self.settings = fresh
+                st2 = os.stat(self.config.config_path)
+                self.state.settings_key = (st2.st_mtime_ns, st2.st_size, st2.st_ino)
+                self.state.settings = fresh
         except (SettingsError, OSError) as exc:
-            self._once(("learned", str(exc)), logging.WARNING,
-                       "the settings file was not updated: %s", exc)
+            self.state.once(("learned", str(exc)), logging.WARNING,
+                            "the settings file was not updated: %s", exc)
             return
-        log.info("settings updated (%s): %s", self.config_path, "; ".join(changes))
+        log.info("settings updated (%s): %s", self.config.config_path, "; ".join(changes))
 
     # ------------------------------------------------------------------ checks
     def _run_checks(self, plan: Plan) -> None:
         """The affected checks for *plan*: on the checks thread while the service runs (records
         are read and applied meanwhile), here and now otherwise (--once, tests)."""
-        tag = (self.status.get("last_change") or {}).get("journal")
-        if self._checks is not None:
-            self._checks.submit(tag, copy.deepcopy(plan))
+        tag = (self.state.status.get("last_change") or {}).get("journal")
+        if self.state.checks is not None:
+            self.state.checks.submit(tag, copy.deepcopy(plan))
             return
-        self._take_checks(tag, self._affected_checks(plan))
+        self.take_checks(tag, self.affected_checks(plan))
 
-    def _affected_checks(self, plan: Plan) -> list[dict[str, Any]]:
-        return run_affected_checks(plan.settings, hosts_path=self.hosts_path,
-                                   bashrc_path=self.bashrc_path, state_dir=self.state_dir)
+    def affected_checks(self, plan: Plan) -> list[dict[str, Any]]:
+        return run_affected_checks(plan.settings, hosts_path=self.config.hosts_path,
+                                   bashrc_path=self.config.bashrc_path,
+                                   state_dir=self.config.state_dir)
 
-    def _take_checks(self, tag: Any, results: list[dict[str, Any]] | None) -> None:
+    def take_checks(self, tag: Any, results: list[dict[str, Any]] | None) -> None:
         """Keep the verdicts of the checks run for the change *tag* (its journal entry), unless
         a newer change came meanwhile (its own checks follow); then plan the re-checks."""
-        change = self.status.get("last_change")
+        change = self.state.status.get("last_change")
         if results is None:
             return
         if change is not None and change.get("journal") != tag:
@@ -222,37 +234,36 @@ class ApplyMixin:
             change["checks"] = results
             change["checked_at"] = time.time()
         if not bad:
-            self._recheck_left = []
-        self._status_dirty = True
+            self.state.recheck_left = []
+        self.state.status_dirty = True
         self._schedule_recheck()
 
     def _schedule_recheck(self) -> None:
-        changes = self.status.get("last_change") or {}
+        changes = self.state.status.get("last_change") or {}
         failing = any(c["status"] == "fail" for c in changes.get("checks") or [])
-        if failing and self._recheck_left:
-            self.recheck_at = time.monotonic() + self._recheck_left.pop(0)
+        if failing and self.state.recheck_left:
+            self.state.recheck_at = time.monotonic() + self.state.recheck_left.pop(0)
         else:
-            self.recheck_at = None
+            self.state.recheck_at = None
 
-    def _recheck(self) -> None:
-        self.recheck_at = None
-        if self._last_plan is None:
+    def recheck(self) -> None:
+        self.state.recheck_at = None
+        if self.state.last_plan is None:
             return
         log.info("running the failing checks again")
-        self._run_checks(self._last_plan)
+        self._run_checks(self.state.last_plan)
 
     # ------------------------------------------------------------------ status
-    def _save_status(self, force: bool = False) -> None:
+    def save_status(self, force: bool = False) -> None:
         now = time.time()
-        if not (force or self._status_dirty or now - self._alive_saved > ALIVE_EVERY_S):
+        if not (force or self.state.status_dirty or now - self.state.alive_saved > ALIVE_EVERY_S):
             return
-        self.status["alive_at"] = now
+        self.state.status["alive_at"] = now
         try:
-            save_status(self.state_dir, self.status)
+            save_status(self.config.state_dir, self.state.status)
         except OSError as exc:
-            self._once(("status", str(exc)), logging.WARNING, "cannot save the status: %s", exc)
+            self.state.once(("status", str(exc)), logging.WARNING,
+                            "cannot save the status: %s", exc)
             return
-        self._status_dirty = False
-        self._alive_saved = now
-
-    # ================================================================== running
+        self.state.status_dirty = False
+        self.state.alive_saved = now

@@ -1,0 +1,11 @@
+"""Which checks a write affects: the one table the wizard, the CLI, an undo and the sync service
+read to know what to run again after they changed something."""
+
+from __future__ import annotations
+
+HOSTS = ("linux.hosts", "linux.resolve")          # the hosts file's marked block
+ROS_ENV = ("ros.env",)                            # the ROS block of ~/.bashrc
+ROS2_ENV = ("ros2.env",)                          # ROS 2: that block and the router's config
+FORWARD = ("router.upnp", "router.port_open")     # a forward mapped on (or removed from) the modem
+UNDO = (*HOSTS, *ROS_ENV, *ROS2_ENV, "router.upnp")   # an undo in the wizard: any of the above
+SYNC = (*HOSTS, "linux.ssh", "ros.master")        # the sync service: a peer's new address

@@ -1,0 +1,427 @@
+"""Step 3, Linux: the TCP chat by name, both ways (linux.chat_out, linux.chat_in); under ROS 2
+the one connection that crosses the modems, from each member to the master's router port.
+
+The peer's side runs over SSH (:mod:`rosnet_tui.core.ssh`) as small stdlib-only ``python3``
+programs (nothing to install on the peer), with ``nc`` as the fallback when there is no python3.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import re
+import secrets
+import time
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+from rosnet_tui.core.checks import CheckContext, check
+from rosnet_tui.core.checks.probes import (
+    NO_SSH_USER,
+    budget,
+    each_peer,
+    python_command,
+    shq,
+    ssh_peers,
+)
+from rosnet_tui.core.connect import kind_from_text, tcp_failure_kind
+from rosnet_tui.core.listener import ECHO, GREETING
+from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.settings import Peer
+from rosnet_tui.core.ssh.connection import SshResult, resolve_ipv4, run_blocking
+from rosnet_tui.core.ssh.session import ssh_run, ssh_session
+
+# --------------------------------------------------------------------------- chats
+CHAT = "ROSNET-TUI CHAT"
+PYTHON = "python3"  # what the peer's side runs with; without it, nc does the job
+
+_LISTEN_SCRIPT = r"""
+import random, socket, sys
+port = int(sys.argv[1]); token = sys.argv[2]; wait = float(sys.argv[3])
+srv = None; last = ""
+for p in [port] + [random.randint(20000, 60000) for _ in range(5)]:
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        s.bind(("0.0.0.0", p)); s.listen(4); srv = s; port = p; break
+    except Exception as e:
+        last = str(e); s.close()
+if srv is None:
+    print("ERROR cannot listen: " + last); sys.exit(3)
+print("LISTENING %d" % port); sys.stdout.flush()
+srv.settimeout(wait)
+try:
+    c, a = srv.accept()
+except socket.timeout:
+    print("TIMEOUT nobody connected"); sys.exit(4)
+c.settimeout(3)
+try:
+    c.sendall(("ROSNET-TUI CHAT %s\n" % token).encode())
+    data = b""
+    while b"\n" not in data and len(data) < 512:
+        chunk = c.recv(512)
+        if not chunk:
+            break
+        data += chunk
+    print("FROM %s" % a[0])
+    print("GOT " + data.decode("utf-8", "replace").strip())
+except Exception as e:
+    print("ERROR " + str(e)); sys.exit(5)
+finally:
+    c.close(); srv.close()
+"""
+
+_CONNECT_SCRIPT = r"""
+import socket, sys
+name = sys.argv[1]; port = int(sys.argv[2]); token = sys.argv[3]; t = float(sys.argv[4])
+try:
+    ip = socket.gethostbyname(name)
+except Exception as e:
+    print("RESOLVE-ERROR %s" % e); sys.exit(2)
+print("RESOLVED %s" % ip); sys.stdout.flush()
+try:
+    c = socket.create_connection((ip, port), timeout=t)
+except Exception as e:
+    print("CONNECT-ERROR %s" % e); sys.exit(3)
+c.settimeout(t)
+def line():
+    b = b""
+    while b"\n" not in b and len(b) < 512:
+        x = c.recv(512)
+        if not x:
+            break
+        b += x
+    return b.decode("utf-8", "replace").strip()
+try:
+    print("HELLO " + line()); sys.stdout.flush()
+    c.sendall(("ROSNET-TUI CHAT %s\n" % token).encode())
+    print("ECHO " + line())
+except Exception as e:
+    print("ERROR %s" % e); sys.exit(4)
+finally:
+    c.close()
+"""
+
+
+_IS_OPENBSD_NC = "nc -h 2>&1 | grep -q OpenBSD"
+
+
+def listen_command(port: int, token: str, wait: float) -> str:
+    """Peer side of chat_out: python3 when present, else ``nc -l`` (OpenBSD or traditional)."""
+    py = python_command(_LISTEN_SCRIPT, str(port), token, f"{wait:.1f}", python=PYTHON)
+    w = max(int(wait + 0.999), 1)
+    msg = shq(f"{CHAT} {token}")
+    nc = (f"echo LISTENING {port}; echo NC; if {_IS_OPENBSD_NC}; then "
+          f"echo {msg} | timeout {w} nc -N -l {port}; else "
+          f"echo {msg} | timeout {w} nc -l -p {port}; fi")
+    return f"if command -v {PYTHON} >/dev/null 2>&1; then {py}; else {nc}; fi"
+
+
+def connect_command(name: str, port: int, token: str, t: float) -> str:
+    """Peer side of chat_in: connect to *name* as the peer resolves it."""
+    py = python_command(_CONNECT_SCRIPT, name, str(port), token, f"{t:.1f}", python=PYTHON)
+    w = max(int(t + 0.999), 1)
+    msg = shq(f"{CHAT} {token}")
+    nc = (f"echo NC; echo RESOLVED $(getent ahostsv4 {shq(name)} | head -n1 | cut -d' ' -f1); "
+          f"if {_IS_OPENBSD_NC}; then echo {msg} | timeout {w} nc -N {shq(name)} {port}; "
+          f"else echo {msg} | timeout {w} nc {shq(name)} {port}; fi")
+    return f"if command -v {PYTHON} >/dev/null 2>&1; then {py}; else {nc}; fi"
+
+
+async def _chat_per_peer(ctx: CheckContext, check_id: str,
+                         one: Callable[[Peer, float], Awaitable[tuple[bool, str | None, list[str]]]],
+                         what: str, kinds: dict[str, str] | None = None) -> Outcome:
+    data: dict[str, Any] = {"peers": {}}
+    peers = ssh_peers(ctx.settings)
+    for p in ctx.settings.peers:
+        if not p.ssh_user:
+            data["peers"][p.name] = {"ok": False, "failure": "no_user"}
+    if not peers:
+        return Outcome(Status.SKIP, NO_SSH_USER, data=data)
+    t = budget(ctx, check_id) * 0.9
+    got = await each_peer(peers, lambda p: one(p, t))
+    evidence: list[str] = []
+    good: list[str] = []
+    bad: list[str] = []
+    for p, (ok, failure, lines) in zip(peers, got, strict=True):
+        data["peers"][p.name] = {"ok": ok, "failure": failure}
+        if kinds and p.name in kinds:
+            data["peers"][p.name]["tcp"] = kinds[p.name]
+        evidence.extend(lines)
+        (good if ok else bad).append(f"{p.name}" if ok else f"{p.name} ({failure})")
+    if bad:
+        return Outcome(Status.FAIL, f"{what} failed: {', '.join(bad)}", evidence, data)
+    return Outcome(Status.PASS, f"{what} works: {', '.join(good)}", evidence, data)
+
+
+def _ssh_failure(res: SshResult, peer: Peer) -> tuple[bool, str, list[str]]:
+    return False, f"ssh:{res.failure}", [f"could not run the peer's side on {peer.name} over SSH "
+                                         f"({res.failure}): {res.detail}"]
+
+
+@check("linux.chat_out", "linux", "Chat by name: we connect to the peer", 3.0)
+async def check_chat_out(ctx: CheckContext) -> Outcome:
+    if ctx.settings.ros2:  # ROS 2 over rmw_zenoh: only the way to the master's router matters
+        return await chat_ros2(ctx, out=True)
+    me = ctx.settings.this.name or "this component"
+    kinds: dict[str, str] = {}      # how our TCP connection to each peer's listener went
+
+    async def one(peer: Peer, total: float) -> tuple[bool, str | None, list[str]]:
+        start = time.monotonic()
+
+        def left() -> float:
+            return max(total - (time.monotonic() - start), 0.2)
+
+        peer_token = secrets.token_hex(6)
+        my_token = secrets.token_hex(6)
+        port = ctx.settings.probe.port
+        ev: list[str] = []
+        async with ssh_session(ctx.ssh, peer, listen_command(port, peer_token, total * 0.6),
+                               timeout=total * 0.45, tcp_timeout=ctx.timeout_s) as sess:
+            if not sess.ok:
+                return _ssh_failure(sess.result, peer)
+            out = await sess.read_until("LISTENING", left() * 0.6)
+            if out is None:
+                res = await sess.wait(0.3)
+                text = (res.stdout + res.stderr).strip().splitlines()
+                return False, "peer_listen", [f"{peer.name} did not start listening: "
+                                              f"{text[-1] if text else 'no output'}"]
+            m = re.search(r"LISTENING (\d+)", out)
+            rport = int(m.group(1)) if m else port
+            use_nc = "\nNC" in out or out.startswith("NC")
+            ev.append(f"{peer.name} listens on TCP {rport} (over SSH, "
+                      f"{'nc' if use_nc else 'python3'})")
+            addrs, err = await resolve_ipv4(peer.name, min(left() * 0.3, 2.0))
+            if not addrs:
+                return False, "resolve", ev + [f"{peer.name} does not resolve here: {err}"]
+            reader = writer = None
+            connect_err = ""
+            for _ in range(8 if use_nc else 1):
+                try:
+                    reader, writer = await asyncio.wait_for(
+                        asyncio.open_connection(addrs[0], rport),
+                        min(left() * 0.5, ctx.timeout_s))
+                    kinds[peer.name] = "connected"
+                    break
+                except (OSError, asyncio.TimeoutError) as exc:
+                    kinds[peer.name] = tcp_failure_kind(exc)
+                    connect_err = str(exc) or "no answer (timed out)"
+                    if not use_nc:
+                        break
+                    await asyncio.sleep(0.15)
+            if writer is None:
+                await sess.wait(0.2)
+                return False, "connect", ev + [
+                    f"connect {peer.name} ({addrs[0]}):{rport}: {connect_err}: the peer listens, "
+                    f"but its modem does not let the connection in (port forwarding on "
+                    f"{peer.name}'s side), or the name points to the wrong address"]
+            assert reader is not None
+            try:
+                hello = await asyncio.wait_for(reader.readline(), left() * 0.5)
+                writer.write(f"{CHAT} hello from {me} {my_token}\n".encode())
+                await asyncio.wait_for(writer.drain(), left() * 0.5)
+            except (OSError, asyncio.TimeoutError) as exc:
+                hello = b""
+                ev.append(f"exchange with {peer.name}: {exc or 'timed out'}")
+            finally:
+                writer.close()
+                with contextlib.suppress(Exception):
+                    await asyncio.wait_for(writer.wait_closed(), 0.5)
+            hello_text = hello.decode(errors="replace").strip()
+            ev.append(f"connect {peer.name} ({addrs[0]}):{rport}: connected, read {hello_text!r}")
+            res = await sess.wait(left())
+        got_line = next((ln for ln in res.stdout.splitlines() if my_token in ln), None)
+        src = next((ln[5:] for ln in res.stdout.splitlines() if ln.startswith("FROM ")), None)
+        if peer_token not in hello_text:
+            return False, "wrong_peer", ev + [f"the answer did not come from our listener on "
+                                              f"{peer.name}: the name or the forwarding leads "
+                                              "to another machine"]
+        if got_line is None:
+            return False, "no_message", ev + [f"{peer.name} did not receive our message "
+                                              f"(its output: {res.stdout.strip()[-120:]!r})"]
+        ev.append(f"{peer.name} received {got_line.removeprefix('GOT ')!r}"
+                  + (f" from {src}" if src else ""))
+        return True, None, ev
+
+    return await _chat_per_peer(ctx, "linux.chat_out", one, f"chat from {me} to the peer", kinds)
+
+
+@check("linux.chat_in", "linux", "Chat by name: the peer connects to us", 3.0)
+async def check_chat_in(ctx: CheckContext) -> Outcome:
+    if ctx.settings.ros2:  # ROS 2 over rmw_zenoh: only the way to the master's router matters
+        return await chat_ros2(ctx, out=False)
+    me = ctx.settings.this.name
+    if not me:
+        return Outcome(Status.SKIP, "this component has no name in the settings yet",
+                       data={"peers": {}})
+    kinds: dict[str, str] = {}      # how the peer's TCP connection to our listener went
+
+    async def one(peer: Peer, total: float) -> tuple[bool, str | None, list[str]]:
+        start = time.monotonic()
+        token = secrets.token_hex(6)
+        ev: list[str] = []
+        port = ctx.settings.probe.port
+        async with contextlib.AsyncExitStack() as stack:
+            try:
+                lst = await stack.enter_async_context(ctx.listeners.hold(port))
+            except OSError as exc:
+                return False, "local_listen", [f"cannot listen on our test port {port}: "
+                                               f"{exc.strerror or exc} (see router.port_free)"]
+            ev.append(f"we listen on TCP {port}")
+            left = max(total - (time.monotonic() - start), 0.5)
+            res = await ssh_run(ctx.ssh, peer,
+                                connect_command(me, port, token, min(left * 0.45, ctx.timeout_s)),
+                                timeout=left * 0.95, connect_timeout=left * 0.45,
+                                tcp_timeout=ctx.timeout_s)
+            if not res.ok and res.failure != "timeout" and not res.stdout:
+                return _ssh_failure(res, peer)
+            seen = await lst.wait_for_line(token, 0.3)
+        out = res.stdout
+        resolved = next((ln[9:] for ln in out.splitlines() if ln.startswith("RESOLVED ")), None)
+        hello = next((ln[6:] for ln in out.splitlines() if ln.startswith("HELLO ")), None)
+        if hello is None:
+            hello = next((ln for ln in out.splitlines() if ln.startswith(GREETING)), None)
+        for ln in out.splitlines():
+            if ln.startswith(("RESOLVE-ERROR", "CONNECT-ERROR", "ERROR")):
+                ev.append(f"on {peer.name}: {ln}")
+            if ln.startswith("CONNECT-ERROR"):
+                kinds[peer.name] = kind_from_text(ln)
+            elif ln.startswith("HELLO ") or ln.startswith(GREETING):
+                kinds[peer.name] = "connected"
+        if resolved is not None and not resolved.strip():
+            resolved = None
+        if resolved is None:
+            return False, "peer_resolve", ev + [f"{peer.name} cannot resolve {me}: add it to "
+                                                f"{peer.name}'s hosts file"]
+        ev.append(f"{peer.name} resolves {me} -> {resolved}")
+        if hello is None:
+            return False, "connect", ev + [
+                f"{peer.name} could not connect to {me} ({resolved}):{port}: our modem does not "
+                f"forward the port to us, or {peer.name}'s hosts entry for {me} is stale"]
+        if ctx.listeners.token not in hello:
+            return False, "wrong_peer", ev + [f"{peer.name} reached something else on "
+                                              f"{resolved}:{port} ({hello[:60]!r}), not our listener"]
+        if seen is None:
+            return False, "no_message", ev + [f"{peer.name} connected but its message did not "
+                                              "arrive here"]
+        echo = next((ln[5:] for ln in out.splitlines() if ln.startswith("ECHO ")), "")
+        ev.append(f"we received {seen.line!r} from {seen.address}"
+                  + (f"; {peer.name} got our reply" if ECHO in echo else ""))
+        return True, None, ev
+
+    return await _chat_per_peer(ctx, "linux.chat_in", one, f"chat from the peer to {me}", kinds)
+
+
+# --------------------------------------------------------------------------- ROS 2: the Linux chats
+_ROS2_CONNECT = r"""
+import socket, sys
+name = sys.argv[1]; port = int(sys.argv[2]); t = float(sys.argv[3])
+try:
+    ip = socket.gethostbyname(name)
+except Exception as e:
+    print("RESOLVE-ERROR %s" % e); sys.exit(2)
+print("RESOLVED %s" % ip); sys.stdout.flush()
+try:
+    socket.create_connection((ip, port), timeout=t).close()
+except Exception as e:
+    print("CONNECT-ERROR %s" % e); sys.exit(3)
+print("CONNECTED")
+"""
+
+
+def _listening_here(port: int) -> bool:
+    """Whether a process listens on TCP *port* here (the master's router, normally)."""
+    import psutil  # noqa: PLC0415
+
+    try:
+        return any(c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == port
+                   for c in psutil.net_connections(kind="tcp"))
+    except (psutil.AccessDenied, OSError):
+        return False
+
+
+async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
+    """linux.chat_out / linux.chat_in under ROS 2 (they call it first thing).
+
+    Under ROS 2 only one connection crosses the modems: from each member, by name, to the
+    master's router port. So the chat toward the master is a TCP connection by name to
+    turtlebot:<zenoh_port> (made here on a member; made by each member over SSH on the master),
+    and the other direction is skipped: members accept nothing."""
+    s = ctx.settings
+    data: dict[str, Any] = {"peers": {}}
+    port, me = s.ros.zenoh_port, s.this.name or "this component"
+    if out == s.is_master:
+        why = (f"{me} is the ROS 2 master: it never connects to the members (their routers "
+               "connect in to it; linux.chat_in tests that way)" if out else
+               f"{me} is a ROS 2 member: it accepts no connections (its router connects out "
+               "to the master's; linux.chat_out tests that way)")
+        return Outcome(Status.SKIP, f"skipped: {why}", [], data)
+    t = budget(ctx, "linux.chat_in" if not out else "linux.chat_out") * 0.8
+    if out:
+        master = s.master_name
+        addrs, err = await resolve_ipv4(master, min(1.0, t * 0.3))
+        if not addrs:
+            data["peers"][master] = {"ok": False, "failure": "resolve"}
+            return Outcome(Status.FAIL, f"{master} does not resolve here: {err}", [], data)
+        ok, line, kind = await _tcp_connect(addrs[0], port, t * 0.6)
+        data["peers"][master] = {"ok": ok, "failure": None if ok else "connect", "tcp": kind}
+        ev = [f"{master} -> {addrs[0]}", line]
+        if ok:
+            return Outcome(Status.PASS, f"{me} reaches {master}:{port} by name (the master's "
+                                        "router port, through its modem)", ev, data)
+        return Outcome(Status.FAIL, f"{me} cannot connect to {master}:{port} by name "
+                                    f"({addrs[0]}): the master's modem does not forward TCP "
+                                    f"{port}, or nothing listens there", ev, data)
+    peers = ssh_peers(s)
+    for p in s.peers:
+        if not p.ssh_user:
+            data["peers"][p.name] = {"ok": False, "failure": "no_user"}
+    if not peers:
+        return Outcome(Status.SKIP, "no peer has an SSH user in the settings (peer.ssh_user), so "
+                                    "the members' side cannot be run from here", data=data)
+    async with contextlib.AsyncExitStack() as stack:
+        if not await run_blocking(_listening_here, port, timeout=1.0):
+            with contextlib.suppress(OSError):
+                await stack.enter_async_context(ctx.listeners.hold(port))
+        cmd = python_command(_ROS2_CONNECT, me, str(port), f"{t * 0.5:.1f}")
+        got = await each_peer(peers, lambda p: ssh_run(ctx.ssh, p, cmd, timeout=t,
+                                                       connect_timeout=t * 0.5,
+                                                       tcp_timeout=ctx.timeout_s))
+    ev: list[str] = []
+    bad: list[str] = []
+    for p, res in zip(peers, got, strict=True):
+        text = res.stdout
+        if "CONNECTED" in text:
+            data["peers"][p.name] = {"ok": True, "failure": None, "tcp": "connected"}
+            ev.append(f"{p.name} connected to {me}:{port} by name ({text.split()[1]})")
+            continue
+        failure = ("peer_resolve" if "RESOLVE-ERROR" in text else "connect" if text else
+                   f"ssh:{res.failure or 'sshd'}")
+        data["peers"][p.name] = {"ok": False, "failure": failure}
+        err_line = next((ln for ln in text.splitlines() if ln.startswith("CONNECT-ERROR")), None)
+        if err_line is not None:
+            data["peers"][p.name]["tcp"] = kind_from_text(err_line)
+        ev.append(f"{p.name}: {text.strip() or res.detail}")
+        bad.append(f"{p.name} ({failure})")
+    if bad:
+        return Outcome(Status.FAIL, f"members cannot reach {me}:{port} by name: {', '.join(bad)}",
+                       ev, data)
+    return Outcome(Status.PASS, f"every member reaches {me}:{port} by name (the router port)",
+                   ev, data)
+
+
+async def _tcp_connect(host: str, port: int, timeout: float) -> tuple[bool, str, str]:
+    """(connected, the line saying how, core.connect's kind of the attempt)."""
+    writer = None
+    try:
+        _r, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
+        return True, f"TCP {host}:{port}: connected", "connected"
+    except asyncio.TimeoutError as exc:
+        return False, f"TCP {host}:{port}: no answer within {timeout:.1f} s", tcp_failure_kind(exc)
+    except OSError as exc:
+        return False, f"TCP {host}:{port}: {exc.strerror or exc}", tcp_failure_kind(exc)
+    finally:
+        if writer is not None:
+            writer.close()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(writer.wait_closed(), 0.5)

@@ -1,0 +1,52 @@
+"""One sync service per state dir: an flock held while it runs."""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+from pathlib import Path
+
+from .outcome import SyncError
+from .status import state_owner, sync_dir
+
+
+class ServiceLock:
+    """One sync service per state dir: an flock held while it runs."""
+
+    def __init__(self, state_dir: Path) -> None:
+        self.path = sync_dir(state_dir) / "service.lock"
+        self.fd: int | None = None
+
+    def acquire(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+        except OSError as exc:
+            raise SyncError(f"cannot open the lock {self.path}: {exc.strerror} (is the service "
+                            "running as another user?)") from None
+        owner = state_owner(self.path.parent.parent)
+        if owner:
+            with contextlib.suppress(OSError):
+                os.fchown(fd, *owner)
+                os.chown(self.path.parent, *owner)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                other = os.read(fd, 32).decode(errors="replace").strip()
+            except OSError:
+                other = "?"
+            os.close(fd)
+            raise SyncError(f"another rosnet-tui sync is running with this state dir "
+                            f"(pid {other or '?'}; lock {self.path})") from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self.fd = fd
+
+    def release(self) -> None:
+        if self.fd is not None:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self.fd, 0)
+            os.close(self.fd)
+            self.fd = None
