@@ -16,7 +16,7 @@ from pathlib import Path
 
 from rosnet_tui.core.netinfo import LocalNet
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings import Peer, Settings, ThisComponent
+from rosnet_tui.core.settings_model import Peer, Settings, ThisComponent
 from rosnet_tui.core.steps import STEPS
 
 SIZES = ((80, 24), (120, 40))

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from rosnet_tui.core.netinfo import LocalNet
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings import (
+from rosnet_tui.core.settings_model import (
     Peer,
     ProbeSettings,
     RosSettings,

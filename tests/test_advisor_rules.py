@@ -17,7 +17,7 @@ from rosnet_tui.core import advisor
 from rosnet_tui.core.advisor import advice_by_check, advise, all_rules
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 from tests.advisor_support import (
     GENERAL_CASES,
     ISP_CASES,

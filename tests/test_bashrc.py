@@ -22,7 +22,7 @@ from rosnet_tui.core.bashrc import (
     shell_lines,
 )
 from rosnet_tui.core.hosts import WriterSettingsError
-from rosnet_tui.core.settings import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
 
 needs_bash = pytest.mark.skipif(not shutil.which("bash"), reason="bash is not installed")
 

@@ -24,7 +24,7 @@ from rosnet_tui.core.checks import (
     run_check,
 )
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.settings_model import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 

@@ -17,7 +17,7 @@ from rosnet_tui.core.checks import (
 )
 from rosnet_tui.core.hosts import HostsEntry
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.settings_model import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 from tests.builders import probe_settings as settings

@@ -21,7 +21,7 @@ import pytest
 from rosnet_tui.core import rosproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext, checks_for, run_check
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 from tests.plugins.roscore import RosCore

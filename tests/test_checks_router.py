@@ -26,7 +26,7 @@ from rosnet_tui.core.checks.router import port_probe_command
 from rosnet_tui.core.listener import GREETING, ListenerPool
 from rosnet_tui.core.netinfo import detect_local_net
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings import ProbeSettings, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.settings_model import ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 

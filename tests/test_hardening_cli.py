@@ -212,7 +212,7 @@ def test_property_saved_results_make_a_report_or_a_report_error(tmp_path_factory
     path.write_text(json.dumps(doc))
     try:
         results, saved, meta = report.load_results_json(path)
-        from rosnet_tui.core.settings import Settings
+        from rosnet_tui.core.settings_model import Settings
 
         d = report.build_report(results, saved or Settings(), source="x",
                                 environment=meta.get("environment"))

@@ -23,7 +23,7 @@ from rosnet_tui.core.hosts import (
     preview_hosts,
     render_hosts_block,
 )
-from rosnet_tui.core.settings import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
 
 
 def robot(**this) -> Settings:

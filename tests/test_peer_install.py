@@ -18,7 +18,7 @@ import pytest
 
 from rosnet_tui.core import zenohproto
 from rosnet_tui.core.checks import probes
-from rosnet_tui.core.settings import Peer
+from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import SshResult
 
 SRC = Path(zenohproto.__file__).read_bytes()

@@ -13,12 +13,8 @@ import pytest
 from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks.runner import select
 from rosnet_tui.core.forwarding import ports_to_forward, required_ports
-from rosnet_tui.core.settings import (
-    RosSettings,
-    SettingsError,
-    parse_settings,
-    render_settings,
-)
+from rosnet_tui.core.settings import parse_settings, render_settings
+from rosnet_tui.core.settings_model import RosSettings, SettingsError
 from rosnet_tui.core.steps import STEP_BY_ID, step_for
 from tests.builders import ros2_master as master
 from tests.builders import ros2_member as member

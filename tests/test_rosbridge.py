@@ -17,15 +17,14 @@ from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.checks import REGISTRY, CheckContext, data, load_builtin_checks, run_check
 from rosnet_tui.core.forwarding import ports_to_forward, required_ports
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings import (
+from rosnet_tui.core.settings import parse_settings, render_settings
+from rosnet_tui.core.settings_model import (
     Peer,
     RosbridgeSettings,
     RosSettings,
     Settings,
     SettingsError,
     ThisComponent,
-    parse_settings,
-    render_settings,
 )
 from rosnet_tui.core.steps import STEP_BY_ID, step_for
 from rosnet_tui.core.upnp.forwards import description, needs

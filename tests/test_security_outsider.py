@@ -22,7 +22,7 @@ import pytest
 
 from rosnet_tui.core import outsider
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
-from rosnet_tui.core.settings import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
 
 ZROUTER = Path(__file__).resolve().parent / "lab" / "ros2_scripts" / "zrouter.py"
 pytest.importorskip("zenoh")

@@ -7,14 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core.settings import (
+from rosnet_tui.core.settings import load_settings, parse_settings, render_settings, save_settings
+from rosnet_tui.core.settings_model import (
     Peer,
     Settings,
     SettingsError,
-    load_settings,
-    parse_settings,
-    render_settings,
-    save_settings,
     validate_ip,
     validate_name,
     validate_port,

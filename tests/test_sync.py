@@ -14,13 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core.settings import (
-    Peer,
-    Settings,
-    atomic_write_text,
-    load_settings,
-    render_settings,
-)
+from rosnet_tui.core.settings import atomic_write_text, load_settings, render_settings
+from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.sync import (
     Backoff,
     Candidate,

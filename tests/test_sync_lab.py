@@ -382,7 +382,8 @@ def test_a_slow_public_ip_lookup_does_not_hold_back_a_peers_record(rig_lab, tmp_
     changes meanwhile is applied at once all the same."""
     import random
 
-    from rosnet_tui.core.settings import SyncSettings, atomic_write_text, render_settings
+    from rosnet_tui.core.settings import atomic_write_text, render_settings
+    from rosnet_tui.core.settings_model import SyncSettings
 
     lab = rig_lab
     folder = tmp_path / "shared"

@@ -12,7 +12,8 @@ from textual.widgets import DataTable, Input
 from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.netinfo import LocalNet
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import Peer, Settings, load_settings
+from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.options import SshOptions
 from rosnet_tui.ui.app import AppDeps, RosnetApp
 from rosnet_tui.ui.setup_screen import SetupScreen

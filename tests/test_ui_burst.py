@@ -21,7 +21,8 @@ from textual.widgets import Input, Select
 from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.netinfo import LocalNet
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import Settings, load_settings
+from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.ui.app import AppDeps, RosnetApp
 from tests.builders import complete_settings
 

@@ -79,7 +79,8 @@ def load_settings_or_say(args: argparse.Namespace, *, complete: bool = False):
     and settings that are still incomplete are refused (the caller exits 2).
     """
     from rosnet_tui.core.netinfo import with_detected
-    from rosnet_tui.core.settings import SettingsError, load_settings
+    from rosnet_tui.core.settings import load_settings
+    from rosnet_tui.core.settings_model import SettingsError
 
     path = config_path(args)
     try:

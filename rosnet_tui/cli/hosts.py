@@ -35,13 +35,8 @@ from rosnet_tui.core.hosts import (
     render_hosts_text,
 )
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
-from rosnet_tui.core.settings import (
-    PROFILES,
-    Settings,
-    SettingsError,
-    load_settings,
-    save_settings,
-)
+from rosnet_tui.core.settings import load_settings, save_settings
+from rosnet_tui.core.settings_model import PROFILES, Settings, SettingsError
 
 
 # --------------------------------------------------------------------------- hosts

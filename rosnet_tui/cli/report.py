@@ -20,7 +20,8 @@ from rosnet_tui.core.report import (
     ros_environment,
 )
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.settings import Settings, SettingsError, atomic_write_text
+from rosnet_tui.core.settings import atomic_write_text
+from rosnet_tui.core.settings_model import Settings, SettingsError
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
 

@@ -18,7 +18,8 @@ from rosnet_tui.core import affected, privilege
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
-from rosnet_tui.core.settings import Settings, SettingsError, load_settings
+from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.settings_model import Settings, SettingsError
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 
 

@@ -14,7 +14,8 @@ NO_SCREEN_TERMS = ("dumb", "unknown", "")
 
 
 def run_wizard(args: argparse.Namespace) -> int:
-    from rosnet_tui.core.settings import SettingsError, load_settings, new_settings
+    from rosnet_tui.core.settings import load_settings
+    from rosnet_tui.core.settings_model import SettingsError, new_settings
 
     path = config_path(args)
     try:

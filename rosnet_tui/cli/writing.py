@@ -22,7 +22,7 @@ from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import WriterSettingsError
 from rosnet_tui.core.paths import default_state_dir
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 
 
 def err(msg: str) -> None:

@@ -21,7 +21,7 @@ from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core.hosts import WriterSettingsError
 from rosnet_tui.core.paths import default_bashrc_path
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 
 ROS_IP_REASON = (
     "on a remote network ROS_IP and ROS_HOSTNAME override the names in the hosts files: this "

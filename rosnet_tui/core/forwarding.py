@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from rosnet_tui.core.rosbridge import forward_needed
-from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
+from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Settings
 
 
 @dataclass(frozen=True)

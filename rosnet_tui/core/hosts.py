@@ -13,7 +13,7 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
-from rosnet_tui.core.settings import PROFILES, Peer, Settings, SettingsError, validate_ip
+from rosnet_tui.core.settings_model import PROFILES, Peer, Settings, SettingsError, validate_ip
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ import netifaces
 import psutil
 
 if TYPE_CHECKING:
-    from rosnet_tui.core.settings import Settings
+    from rosnet_tui.core.settings_model import Settings
 
 # Overlay and virtual interfaces that are never the LAN the modem forwards to.
 OVERLAY_PREFIXES = ("lo", "tailscale", "zt", "hnet", "docker", "br-", "veth", "virbr", "wg", "tun")

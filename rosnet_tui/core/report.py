@@ -24,7 +24,7 @@ from rosnet_tui import __version__
 from rosnet_tui.core.advisor import advice_by_check, advise
 from rosnet_tui.core.procedure import STEP_IDS, STEP_TITLES, step_title
 from rosnet_tui.core.results import CheckResult, ResultFormatError, Status
-from rosnet_tui.core.settings import (
+from rosnet_tui.core.settings_model import (
     CheckSettings,
     Peer,
     ProbeSettings,

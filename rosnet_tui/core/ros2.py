@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 
 RMW_ZENOH = "rmw_zenoh_cpp"
 NODE_ROUTER_PORT = 7447          # where rmw_zenoh's nodes look for their local router

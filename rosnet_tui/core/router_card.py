@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 from rosnet_tui.core import netinfo
 from rosnet_tui.core.netinfo import LocalNet
-from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
+from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Settings
 
 PORT_RANGE = f"{PORT_MIN}-{PORT_MAX}"
 

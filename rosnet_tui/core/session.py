@@ -15,7 +15,8 @@ from typing import TYPE_CHECKING
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path, default_state_dir
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.settings import Settings, save_settings
+from rosnet_tui.core.settings import save_settings
+from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.steps import STEP_BY_ID, step_for
 from rosnet_tui.core.ui_state import UiState, local_time
 
@@ -110,7 +111,8 @@ class WizardSession:
     def save_settings(self, settings: Settings) -> None:
         """Save *settings*; a file that already says the same is left untouched (not a byte,
         not its time)."""
-        from rosnet_tui.core.settings import SettingsError, load_settings
+        from rosnet_tui.core.settings import load_settings
+        from rosnet_tui.core.settings_model import SettingsError
 
         try:
             saved = load_settings(self.config_path) if self.config_path.exists() else None

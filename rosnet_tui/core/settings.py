@@ -16,46 +16,17 @@ from typing import Any
 
 from rosnet_tui.core import tempfiles
 from rosnet_tui.core.regular_file import FileRefusedError, read_regular
-from rosnet_tui.core.settings_model import (  # noqa: F401 (the model; re-exported)
-    _NAME_RE,
-    _SSH_USER_RE,
-    CONNECTIONS,
-    DEFAULT_PORT_CHECK_URL,
-    DEFAULT_PUBLIC_IP_URLS,
-    DOMAIN_ID_MAX,
-    FIELD_SHOWN_CHARS,
+from rosnet_tui.core.settings_model import (
     MAX_NESTING,
     MAX_SETTINGS_BYTES,
-    PORT_MAX,
-    PORT_MIN,
-    PROFILES,
-    RESERVED_NAMES,
-    RESERVED_PREFIXES,
-    ROLES,
-    ROS_VERSIONS,
-    SHOWN_VALUE_CHARS,
-    SYNC_STORES,
     ZENOH_PORT_DEFAULT,
-    CheckSettings,
     Peer,
-    ProbeSettings,
     RosbridgeSettings,
-    RosSettings,
     Settings,
     SettingsError,
     SyncSettings,
-    ThisComponent,
-    _number_within,
     default_ros_version,
-    new_settings,
     shown,
-    validate_domain_id,
-    validate_ip,
-    validate_name,
-    validate_port,
-    validate_ros_version,
-    validate_ssh_user,
-    validate_url,
 )
 
 if sys.version_info >= (3, 11):

@@ -34,8 +34,8 @@ MAX_SETTINGS_BYTES = 1 << 20      # a settings file is a few KB: anything over 1
 MAX_NESTING = 32                  # arrays/inline tables inside each other (the schema needs 1)
 SHOWN_VALUE_CHARS = 60            # a value quoted in a message is cut to this many characters
 
-_NAME_RE = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*$")
-_SSH_USER_RE = re.compile(r"^[a-z_][a-z0-9_.-]{0,31}$", re.IGNORECASE)
+NAME_RE = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*$")
+SSH_USER_RE = re.compile(r"^[a-z_][a-z0-9_.-]{0,31}$", re.IGNORECASE)
 
 
 def shown(value: object, limit: int = SHOWN_VALUE_CHARS) -> str:
@@ -97,7 +97,7 @@ def validate_name(value: str) -> str | None:
         return "a name is required"
     if any(c.isspace() for c in value):
         return "a name cannot contain spaces"
-    if len(value) > 253 or not _NAME_RE.match(value):
+    if len(value) > 253 or not NAME_RE.match(value):
         return "use letters, digits and '-' only (like turtlebot or sami-laptop)"
     if value.replace(".", "").isdigit():
         return "a name cannot be only digits"
@@ -138,7 +138,7 @@ def validate_port(value: int | str, *, lo: int = PORT_MIN, hi: int = PORT_MAX) -
 
 
 def validate_ssh_user(value: str) -> str | None:
-    if value and not _SSH_USER_RE.match(value):
+    if value and not SSH_USER_RE.match(value):
         return f"'{echoed(value)}' is not a valid user name"
     return None
 
@@ -338,7 +338,7 @@ class Settings:
         for url in self.probe.public_ip_urls:
             add("probe.public_ip_urls", validate_url(url))
         add("probe.port_check_url", validate_url(self.probe.port_check_url))
-        if not _number_within(self.checks.timeout_s, 0.1, 120):
+        if not number_within(self.checks.timeout_s, 0.1, 120):
             add("checks.timeout_s", "must be between 0.1 and 120 seconds")
         b = self.rosbridge
         if not isinstance(b.enabled, bool):
@@ -351,7 +351,7 @@ class Settings:
         y = self.sync
         add("sync.store", None if y.store in SYNC_STORES
             else f"must be one of {', '.join(SYNC_STORES)}")
-        if not _number_within(y.interval_s, 1, 86400):
+        if not number_within(y.interval_s, 1, 86400):
             add("sync.interval_s", "must be between 1 and 86400 seconds")
         if y.dns_server:
             add("sync.dns_server", validate_ip(y.dns_server))
@@ -365,7 +365,7 @@ class Settings:
         return not self.problems()
 
 
-def _number_within(value: Any, lo: float, hi: float) -> bool:
+def number_within(value: Any, lo: float, hi: float) -> bool:
     """A real number (not true/false, not NaN or infinite, any size of int) in lo..hi."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return False

@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 
 from rosnet_tui.core import rosbridge
 from rosnet_tui.core.procedure import STEP_IDS, STEP_TITLES, step_number
-from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
+from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Settings
 
 
 @dataclass(frozen=True)

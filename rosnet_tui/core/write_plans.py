@@ -16,7 +16,7 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.managed_write import read_text
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 
 
 @dataclass

@@ -19,7 +19,7 @@ from textual.binding import Binding
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path, default_state_dir
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.session import WizardSession, registry_specs
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.steps import step_for
 from rosnet_tui.ui import textual_compat as tc
 from rosnet_tui.ui.keys import OrderedKeys

@@ -17,7 +17,7 @@ from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Button, Static
 
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp.wire import ModemError
 from rosnet_tui.ui.widgets import KeyBar

@@ -13,7 +13,7 @@ from textual.screen import Screen
 from textual.validation import ValidationResult, Validator
 from textual.widgets import Button, Input, Label, Select, Static
 
-from rosnet_tui.core import settings as S
+from rosnet_tui.core import settings_model as S
 from rosnet_tui.core.session import WizardSession
 from rosnet_tui.ui.fields import OrderedInput
 from rosnet_tui.ui.messages import SettingsSaved

@@ -13,7 +13,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings import (
+from rosnet_tui.core.settings_model import (
     CheckSettings,
     Peer,
     ProbeSettings,

@@ -351,7 +351,7 @@ class Fleet(Lab):
     def settings(self, host: str):
         """rosnet-tui Settings of *host*: the master turtlebot, every other computer a peer
         reached over SSH as root."""
-        from rosnet_tui.core.settings import (
+        from rosnet_tui.core.settings_model import (
             CheckSettings,
             Peer,
             ProbeSettings,

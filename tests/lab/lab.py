@@ -494,7 +494,7 @@ class Lab:
     # ================================================================== settings for the product
     def settings(self, host: str):
         """The rosnet-tui Settings of *host* (robot: master turtlebot; laptop: member sami)."""
-        from rosnet_tui.core.settings import (
+        from rosnet_tui.core.settings_model import (
             CheckSettings,
             Peer,
             ProbeSettings,

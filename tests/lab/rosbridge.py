@@ -39,7 +39,7 @@ def start_bridge(lab: Lab, *, rosapi: bool = True, port: int = ROSBRIDGE_PORT,
 
 def settings(lab: Lab, host: str, version: int = 1, **bridge):
     """*host*'s settings with [rosbridge] enabled (the master, turtlebot, runs it)."""
-    from rosnet_tui.core.settings import RosbridgeSettings
+    from rosnet_tui.core.settings_model import RosbridgeSettings
 
     s = lab.settings(host)
     return replace(s, ros=replace(s.ros, version=version),

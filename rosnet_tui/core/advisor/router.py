@@ -18,7 +18,7 @@ from rosnet_tui.core.advisor.evidence import (
     offline_ids,
 )
 from rosnet_tui.core.advisor.ranking import Cause, local_ip_moved, nat_seen, table1_causes
-from rosnet_tui.core.settings import PORT_MAX
+from rosnet_tui.core.settings_model import PORT_MAX
 
 
 # ---- link (its symptom is step 1: nothing gets out) -----------------------------------------

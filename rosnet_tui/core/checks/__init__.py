@@ -19,7 +19,7 @@ from rosnet_tui.core.listener import ListenerPool
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path, default_state_dir
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult, Outcome, Status
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.ssh.options import SshOptions
 
 

@@ -27,7 +27,7 @@ from rosnet_tui.core.checks.probes import (
 from rosnet_tui.core.connect import kind_from_text, tcp_failure_kind
 from rosnet_tui.core.listener import ECHO, GREETING
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import Peer
+from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import SshResult, resolve_ipv4, run_blocking
 from rosnet_tui.core.ssh.session import ssh_run, ssh_session
 

@@ -27,7 +27,7 @@ from rosnet_tui import __version__
 from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext
 from rosnet_tui.core.checks.data import view
-from rosnet_tui.core.settings import Peer, Settings
+from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.connection import SshResult, run_blocking
 
 MAX_BODY = 64 * 1024

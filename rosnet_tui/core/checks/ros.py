@@ -26,7 +26,7 @@ from rosnet_tui.core.checks.probes import (
 from rosnet_tui.core.hosts import own_ip
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import Peer, Settings
+from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.connection import SshResult, run_blocking
 from rosnet_tui.core.ssh.session import ssh_run, ssh_session
 

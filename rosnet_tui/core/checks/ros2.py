@@ -35,7 +35,7 @@ from rosnet_tui.core.managed_text import ManagedFileError
 from rosnet_tui.core.managed_write import read_text
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import Peer
+from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import resolve_ipv4, run_blocking
 from rosnet_tui.core.ssh.session import ssh_run
 

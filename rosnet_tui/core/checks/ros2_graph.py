@@ -30,7 +30,7 @@ from rosnet_tui.core.checks.probes import (
 )
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import Peer
+from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import run_blocking
 from rosnet_tui.core.ssh.session import ssh_run, ssh_session
 

@@ -31,7 +31,7 @@ from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.listener import GREETING, TestListener
 from rosnet_tui.core.netinfo import detect_local_net, interface_ipv4
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Peer
+from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Peer
 from rosnet_tui.core.ssh.connection import run_blocking
 from rosnet_tui.core.ssh.session import ssh_run
 from rosnet_tui.core.state import record_local_ip

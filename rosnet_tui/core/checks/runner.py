@@ -23,7 +23,7 @@ from rosnet_tui.core.checks import (
 )
 from rosnet_tui.core.managed_write import settle
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.ssh.options import SshOptions
 from rosnet_tui.core.ssh.pool import SshPool
 

@@ -35,7 +35,7 @@ from rosnet_tui.core.checks.probes import (
 )
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import PORT_MAX, PORT_MIN, Settings
+from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Settings
 from rosnet_tui.core.ssh.session import ssh_run
 
 SSH_PORT = 22

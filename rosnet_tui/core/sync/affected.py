@@ -11,7 +11,7 @@ from typing import Any
 from rosnet_tui.core import affected
 from rosnet_tui.core.bashrc import master_uri
 from rosnet_tui.core.hosts import WriterSettingsError
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 
 
 def run_affected_checks(settings: Settings, *, hosts_path: Path, bashrc_path: Path | None,

@@ -21,7 +21,8 @@ from rosnet_tui.core.hosts import (
     WriterSettingsError,
     find_hosts_conflicts,
 )
-from rosnet_tui.core.settings import SettingsError, load_settings, save_settings
+from rosnet_tui.core.settings import load_settings, save_settings
+from rosnet_tui.core.settings_model import SettingsError
 
 from .affected import run_affected_checks
 from .plan import Plan, PlanError, check_complete, plan_hosts

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.hosts import HostsEntry, hosts_entries, render_hosts_block
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 
 from .records import Record
 

@@ -26,7 +26,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
-from rosnet_tui.core.settings import Settings, SettingsError, load_settings
+from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.settings_model import Settings, SettingsError
 from rosnet_tui.core.upnp.forwards import Renewer
 
 from .applied import applied_path, load_applied, save_applied

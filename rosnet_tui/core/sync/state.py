@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 
 from .backoff import Backoff, backoff_cap
 from .plan import Plan

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rosnet_tui.core.netinfo import default_gateway, detect_local_net, interface_ipv4
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 
 # rtnetlink multicast groups and message types (linux/rtnetlink.h)
 RTMGRP_LINK = 0x1

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rosnet_tui.core.forwarding import required_ports
-from rosnet_tui.core.settings import Settings
+from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.upnp import journal
 from rosnet_tui.core.upnp.modem import LEASE_MAX_S, LEASE_MIN_S, Forward, Modem
 from rosnet_tui.core.upnp.wire import ModemError, Refused, label
