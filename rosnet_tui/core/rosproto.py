@@ -413,11 +413,19 @@ _SCALARS = ("int", "i4", "i8", "boolean", "double", "string", "nil", "base64",
             "dateTime.iso8601")
 
 
+class _Struct:
+    __slots__ = ("members", "name")
+
+    def __init__(self) -> None:
+        self.members: Dict[str, Any] = {}
+        self.name = ""
+
+
 def load_xmlrpc(data: bytes) -> Tuple[Optional[str], List[Any], bool]:
     """(methodName or None, params, is_fault) of an XML-RPC methodCall or methodResponse.
     XmlRpcError when it is not well-formed XML-RPC."""
     from xml.parsers import expat
-    stack: List[Any] = []          # open arrays (list) and structs ([dict, name])
+    stack: List[Any] = []          # open arrays (list) and structs (_Struct)
     params: List[Any] = []
     text: List[str] = []
     done: List[bool] = []          # per open <value>: has a typed child given its value
@@ -431,7 +439,7 @@ def load_xmlrpc(data: bytes) -> Tuple[Optional[str], List[Any], bool]:
         elif isinstance(stack[-1], list):
             stack[-1].append(v)
         else:
-            stack[-1][0][stack[-1][1]] = v
+            stack[-1].members[stack[-1].name] = v
 
     def start(tag: str, attrs: Any) -> None:
         if state["root"] is None:
@@ -441,7 +449,7 @@ def load_xmlrpc(data: bytes) -> Tuple[Optional[str], List[Any], bool]:
         elif tag == "array":
             stack.append([])
         elif tag == "struct":
-            stack.append([{}, None])
+            stack.append(_Struct())
         elif tag == "fault":
             state["fault"] = True
         text.clear()
@@ -468,11 +476,13 @@ def load_xmlrpc(data: bytes) -> Tuple[Optional[str], List[Any], bool]:
             if not stack:
                 raise XmlRpcError(f"unbalanced <{tag}>")
             top = stack.pop()
-            put(top if tag == "array" else top[0])
+            if isinstance(top, list) != (tag == "array"):
+                raise XmlRpcError(f"unbalanced <{tag}>")
+            put(top if tag == "array" else top.members)
         elif tag == "name":
             if not stack or isinstance(stack[-1], list):
                 raise XmlRpcError("<name> outside a struct")
-            stack[-1][1] = t
+            stack[-1].name = t
         elif tag == "value":
             if not done.pop():
                 put(t)         # a <value> without a type is a string
@@ -1494,7 +1504,7 @@ class _Args:
         self.include: List[str] = []
 
 
-def _parse_args(argv: List[str]) -> _Args:
+def parse_args(argv: List[str]) -> _Args:
     """The command line (argparse would cost every start ~7 ms of imports). ValueError when bad;
     ``--name value`` and ``--name=value`` both work."""
     args = _Args()
@@ -1539,7 +1549,7 @@ def _parse_args(argv: List[str]) -> _Args:
 def main(argv: Optional[List[str]] = None) -> int:
     """``python3 - {sub|pub|nodes|whoami} ...``: run one probe, print one JSON line."""
     try:
-        args = _parse_args(sys.argv[1:] if argv is None else argv)
+        args = parse_args(sys.argv[1:] if argv is None else argv)
     except ValueError as exc:
         sys.stderr.write(f"{USAGE}\nrosproto: error: {exc}\n")
         return 2
