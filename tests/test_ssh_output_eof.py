@@ -8,10 +8,14 @@ status. A background writer that outlives the shell makes that ordering certain 
 
 from __future__ import annotations
 
+import pytest
+
 from rosnet_tui.core.ssh import ssh_run
 from tests.test_ssh import ssh_client, sshd  # noqa: F401 (fixtures: a real sshd on loopback)
 
 
+@pytest.mark.xfail(strict=True, reason="SshSession._pump ends at the exit status, not at the "
+                   "output's EOF (issue 25); the fix belongs in core/ssh: drop this mark then")
 async def test_output_written_after_the_exit_status_is_kept(ssh_client):  # noqa: F811
     res = await ssh_run(ssh_client.opts(), ssh_client.peer(),
                         "(sleep 0.4; echo late-marker) & echo early; exit 0", timeout=10)
