@@ -21,13 +21,10 @@ Python 3.8+ syntax, no imports from rosnet_tui.
 
 from __future__ import annotations
 
-import argparse
 import errno
-import http.client
 import json
 import os
 import re
-import secrets
 import select
 import shlex
 import socket
@@ -37,13 +34,13 @@ import struct
 import sys
 import threading
 import time
-import xmlrpc.client
-from concurrent.futures import ThreadPoolExecutor
-from concurrent.futures import wait as wait_futures
-from dataclasses import asdict, dataclass, field
-from typing import Any, Dict, Iterable, List, Optional, Tuple
-from urllib.parse import urlparse
-from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
+
+# A peer runs this program once per check, so its start-up counts (issue 25): no typing,
+# dataclasses, http.client, xmlrpc.*, argparse, urllib, secrets or concurrent.futures at run
+# time (~75 ms of CPU per start together); the XML-RPC and HTTP it needs are below, on a socket.
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import Any, Dict, Iterable, List, Optional, Tuple
 
 STRING_TYPE = "std_msgs/String"
 STRING_MD5 = "992ce8a1687cec8c8bd883ec73ca41d1"
@@ -57,6 +54,66 @@ MAX_MESSAGE = 1 << 20
 HOPS = ("registration", "xmlrpc_callback", "tcpros", "no_message")
 
 
+
+# --------------------------------------------------------------------------- records
+_NEW_LIST = object()   # a field default: a fresh empty list per record
+
+
+class Record:
+    """A plain record in the manner of a dataclass (whose import costs ~6 ms per start): the
+    fields are the class's annotations in order, a class attribute is a field's default.
+    Positional and keyword construction, ==, repr and :meth:`to_dict` (dataclasses.asdict)."""
+
+    FIELDS: Tuple[Tuple[str, Any], ...] = ()
+    _REQUIRED = object()
+
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        names = [n for n in cls.__dict__.get("__annotations__", {}) if n != "FIELDS"]
+        cls.FIELDS = tuple((n, cls.__dict__.get(n, Record._REQUIRED)) for n in names)
+
+    def __init__(self, *args: Any, **kw: Any) -> None:
+        if len(args) > len(self.FIELDS):
+            raise TypeError(f"{type(self).__name__} takes at most {len(self.FIELDS)} values")
+        given = {self.FIELDS[i][0]: a for i, a in enumerate(args)}
+        for k, v in kw.items():
+            if k in given or all(k != n for n, _ in self.FIELDS):
+                raise TypeError(f"{type(self).__name__}: unexpected or repeated field {k!r}")
+            given[k] = v
+        for name, default in self.FIELDS:
+            if name in given:
+                value = given[name]
+            elif default is Record._REQUIRED:
+                raise TypeError(f"{type(self).__name__}: missing field {name!r}")
+            else:
+                value = [] if default is _NEW_LIST else default
+            setattr(self, name, value)
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {n: _plain(getattr(self, n)) for n, _ in self.FIELDS}
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return all(getattr(self, n) == getattr(other, n) for n, _ in self.FIELDS)
+
+    __hash__ = None  # type: ignore[assignment]  (mutable, like a dataclass with eq)
+
+    def __repr__(self) -> str:
+        inner = ", ".join(f"{n}={getattr(self, n)!r}" for n, _ in self.FIELDS)
+        return f"{type(self).__name__}({inner})"
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, Record):
+        return value.to_dict()
+    if isinstance(value, (list, tuple)):
+        return type(value)(_plain(v) for v in value)
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
+
+
 # --------------------------------------------------------------------------- errors
 class MasterCallError(Exception):
     """The master answered, but with a failure code (code, status message)."""
@@ -64,6 +121,26 @@ class MasterCallError(Exception):
     def __init__(self, method: str, code: int, message: str) -> None:
         self.method, self.code, self.message = method, code, message
         super().__init__(f"{method} returned code {code}: {message}")
+
+
+class HttpError(Exception):
+    """An HTTP answer other than 200 to an XML-RPC call."""
+
+    def __init__(self, errcode: int, errmsg: str) -> None:
+        self.errcode, self.errmsg = errcode, errmsg
+        super().__init__(f"HTTP {errcode} {errmsg}")
+
+
+class XmlRpcFault(Exception):
+    """An XML-RPC fault answer."""
+
+    def __init__(self, fault_code: Any, fault_string: Any) -> None:
+        self.faultCode, self.faultString = fault_code, fault_string  # noqa: N815 (XML-RPC names)
+        super().__init__(f"fault {fault_code}: {fault_string}")
+
+
+class XmlRpcError(ValueError):
+    """An answer or request that is not XML-RPC over HTTP."""
 
 
 def describe_error(exc: BaseException, timeout: Optional[float] = None) -> Tuple[str, str]:
@@ -80,11 +157,11 @@ def describe_error(exc: BaseException, timeout: Optional[float] = None) -> Tuple
         return "timeout", f"no answer{within} (timed out)"
     if isinstance(exc, ConnectionResetError):
         return "reset", "the connection was reset by the other side"
-    if isinstance(exc, xmlrpc.client.ProtocolError):
+    if isinstance(exc, HttpError):
         return "http", f"HTTP error {exc.errcode} {exc.errmsg}"
-    if isinstance(exc, xmlrpc.client.Fault):
+    if isinstance(exc, XmlRpcFault):
         return "fault", f"XML-RPC fault {exc.faultCode}: {exc.faultString}"
-    if isinstance(exc, (http.client.HTTPException, xmlrpc.client.ResponseError, ValueError)):
+    if isinstance(exc, ValueError):
         return "protocol", f"the answer is not ROS XML-RPC ({type(exc).__name__}: {exc})"
     if isinstance(exc, OSError):
         if exc.errno in (errno.EHOSTUNREACH, errno.ENETUNREACH):
@@ -222,14 +299,36 @@ def bind_address(host: str) -> str:
 
 def split_uri(uri: str) -> Tuple[str, int]:
     """(host, port) of an http:// URI; port 80 when absent. ValueError when unusable."""
-    p = urlparse(uri)
-    if p.scheme not in ("http", "rosrpc") or not p.hostname:
+    scheme, host, port, _ = parse_uri(uri)
+    if scheme not in ("http", "rosrpc") or not host:
         raise ValueError(f"not an http:// URI: {uri!r}")
-    return p.hostname, p.port or 80
+    return host, port or 80
+
+
+def parse_uri(uri: str) -> Tuple[str, str, Optional[int], str]:
+    """(scheme, host, port or None, path) of ``scheme://[user@]host[:port][/path]``, host in
+    lower case, IPv6 literals without brackets (urllib.parse's answers, without its import).
+    ValueError when the port is not a number in 0..65535."""
+    scheme, sep, rest = str(uri).partition("://")
+    if not sep:
+        return "", "", None, str(uri)
+    netloc, _, path = rest.partition("/")
+    netloc = netloc.split("?", 1)[0].split("#", 1)[0].rpartition("@")[2]
+    if netloc.startswith("["):
+        host, _, tail = netloc[1:].partition("]")
+        port_s = tail[1:] if tail.startswith(":") else ""
+    else:
+        host, _, port_s = netloc.partition(":")
+    port = None
+    if port_s:
+        if not (port_s.isascii() and port_s.isdigit()) or int(port_s) > 65535:
+            raise ValueError(f"bad port in {uri!r}")
+        port = int(port_s)
+    return scheme.lower(), host.lower(), port, "/" + path.split("#", 1)[0]
 
 
 def new_probe_id() -> str:
-    return secrets.token_hex(4)
+    return os.urandom(4).hex()
 
 
 def probe_caller_id(role: str, probe_id: str) -> str:
@@ -242,26 +341,231 @@ def probe_caller_id(role: str, probe_id: str) -> str:
 
 
 # --------------------------------------------------------------------------- XML-RPC clients
-class _TimeoutTransport(xmlrpc.client.Transport):
-    """xmlrpc.client's transport with a socket timeout for connect and every read."""
+MAX_XMLRPC = 64 << 20    # an XML-RPC message longer than this is not from a ROS node
+_HTTP_LINE = 65536
 
-    def __init__(self, timeout: float) -> None:
-        super().__init__()
-        self.timeout = timeout
 
-    def make_connection(self, host: Any) -> http.client.HTTPConnection:
-        conn = super().make_connection(host)
-        conn.timeout = self.timeout
-        return conn
+def _escape(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def _dump(value: Any, out: List[str]) -> None:
+    """XML-RPC <value> of *value* (xmlrpc.client's encoding, None as <nil/>)."""
+    if value is None:
+        out.append("<value><nil/></value>")
+    elif value is True or value is False:
+        out.append(f"<value><boolean>{int(value)}</boolean></value>")
+    elif isinstance(value, int):
+        if not -(1 << 31) <= value < (1 << 31):
+            raise OverflowError(f"int {value} exceeds XML-RPC limits")
+        out.append(f"<value><int>{int(value)}</int></value>")
+    elif isinstance(value, float):
+        out.append(f"<value><double>{value!r}</double></value>")
+    elif isinstance(value, str):
+        out.append(f"<value><string>{_escape(value)}</string></value>")
+    elif isinstance(value, (bytes, bytearray)):
+        import base64
+        out.append(f"<value><base64>{base64.b64encode(value).decode('ascii')}</base64></value>")
+    elif isinstance(value, (list, tuple)):
+        out.append("<value><array><data>")
+        for v in value:
+            _dump(v, out)
+        out.append("</data></array></value>")
+    elif isinstance(value, dict):
+        out.append("<value><struct>")
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise TypeError("XML-RPC struct keys must be strings")
+            out.append(f"<member><name>{_escape(k)}</name>")
+            _dump(v, out)
+            out.append("</member>")
+        out.append("</struct></value>")
+    else:
+        raise TypeError(f"cannot marshal {type(value).__name__} objects")
+
+
+def dump_call(method: str, params: Any) -> bytes:
+    out = ["<?xml version='1.0'?>\n<methodCall>\n<methodName>", _escape(method),
+           "</methodName>\n<params>\n"]
+    for p in params:
+        out.append("<param>\n")
+        _dump(p, out)
+        out.append("\n</param>\n")
+    out.append("</params>\n</methodCall>\n")
+    return "".join(out).encode("utf-8")
+
+
+def dump_response(value: Any) -> bytes:
+    out = ["<?xml version='1.0'?>\n<methodResponse>\n<params>\n<param>\n"]
+    _dump(value, out)
+    out.append("\n</param>\n</params>\n</methodResponse>\n")
+    return "".join(out).encode("utf-8")
+
+
+def dump_fault(code: int, message: str) -> bytes:
+    out = ["<?xml version='1.0'?>\n<methodResponse>\n<fault>\n"]
+    _dump({"faultCode": code, "faultString": message}, out)
+    out.append("\n</fault>\n</methodResponse>\n")
+    return "".join(out).encode("utf-8")
+
+
+_SCALARS = ("int", "i4", "i8", "boolean", "double", "string", "nil", "base64",
+            "dateTime.iso8601")
+
+
+class _Struct:
+    __slots__ = ("members", "name")
+
+    def __init__(self) -> None:
+        self.members: Dict[str, Any] = {}
+        self.name = ""
+
+
+def load_xmlrpc(data: bytes) -> Tuple[Optional[str], List[Any], bool]:
+    """(methodName or None, params, is_fault) of an XML-RPC methodCall or methodResponse.
+    XmlRpcError when it is not well-formed XML-RPC."""
+    from xml.parsers import expat
+    stack: List[Any] = []          # open arrays (list) and structs (_Struct)
+    params: List[Any] = []
+    text: List[str] = []
+    done: List[bool] = []          # per open <value>: has a typed child given its value
+    state = {"method": None, "fault": False, "root": None}
+
+    def put(v: Any) -> None:
+        if done:
+            done[-1] = True
+        if not stack:
+            params.append(v)
+        elif isinstance(stack[-1], list):
+            stack[-1].append(v)
+        else:
+            stack[-1].members[stack[-1].name] = v
+
+    def start(tag: str, attrs: Any) -> None:
+        if state["root"] is None:
+            state["root"] = tag
+        if tag == "value":
+            done.append(False)
+        elif tag == "array":
+            stack.append([])
+        elif tag == "struct":
+            stack.append(_Struct())
+        elif tag == "fault":
+            state["fault"] = True
+        text.clear()
+
+    def end(tag: str) -> None:
+        t = "".join(text)
+        text.clear()
+        if tag in ("int", "i4", "i8"):
+            put(int(t.strip()))
+        elif tag == "boolean":
+            if t.strip() not in ("0", "1"):
+                raise XmlRpcError(f"bad boolean {t!r}")
+            put(t.strip() == "1")
+        elif tag == "double":
+            put(float(t.strip()))
+        elif tag in ("string", "dateTime.iso8601"):
+            put(t)
+        elif tag == "nil":
+            put(None)
+        elif tag == "base64":
+            import base64
+            put(base64.b64decode(t.encode("ascii")))
+        elif tag in ("array", "struct"):
+            if not stack:
+                raise XmlRpcError(f"unbalanced <{tag}>")
+            top = stack.pop()
+            if isinstance(top, list) != (tag == "array"):
+                raise XmlRpcError(f"unbalanced <{tag}>")
+            put(top if tag == "array" else top.members)
+        elif tag == "name":
+            if not stack or isinstance(stack[-1], list):
+                raise XmlRpcError("<name> outside a struct")
+            stack[-1].name = t
+        elif tag == "value":
+            if not done.pop():
+                put(t)         # a <value> without a type is a string
+        elif tag == "methodName":
+            state["method"] = t
+
+    parser = expat.ParserCreate("utf-8")
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    parser.CharacterDataHandler = text.append
+    try:
+        parser.Parse(data, True)
+    except (expat.ExpatError, ValueError, TypeError, KeyError, IndexError) as exc:
+        raise XmlRpcError(f"not XML-RPC: {exc}") from None
+    if state["root"] not in ("methodCall", "methodResponse"):
+        raise XmlRpcError(f"not XML-RPC: root element {state['root']!r}")
+    return state["method"], params, bool(state["fault"])
+
+
+def read_http(rfile: Any, response: bool) -> Tuple[List[str], Dict[str, str], bytes]:
+    """One HTTP/1.x message from a binary file: (start line's words, headers with lower-case
+    names, body). A response without Content-Length is read to EOF; a request needs it."""
+    line = rfile.readline(_HTTP_LINE + 1)
+    if not line:
+        raise ConnectionResetError(errno.ECONNRESET, "the connection closed without an answer")
+    first = line.decode("latin-1").strip().split(None, 2)
+    if len(first) < 2 or not (first[0] if response else first[-1]).startswith("HTTP/"):
+        raise XmlRpcError(f"not HTTP: {line[:80]!r}")
+    headers: Dict[str, str] = {}
+    for _ in range(200):
+        line = rfile.readline(_HTTP_LINE + 1)
+        if line in (b"\r\n", b"\n", b""):
+            break
+        name, sep, value = line.decode("latin-1").partition(":")
+        if sep:
+            headers[name.strip().lower()] = value.strip()
+    else:
+        raise XmlRpcError("too many HTTP header lines")
+    length = headers.get("content-length")
+    if length is not None:
+        if not length.isdigit() or int(length) > MAX_XMLRPC:
+            raise XmlRpcError(f"bad Content-Length {length!r}")
+        body = rfile.read(int(length))
+        if len(body) < int(length):
+            raise ConnectionResetError(errno.ECONNRESET, "the connection closed mid-answer")
+    elif response:
+        body = rfile.read(MAX_XMLRPC + 1)
+        if len(body) > MAX_XMLRPC:
+            raise XmlRpcError("answer too long")
+    else:
+        body = b""
+    return first, headers, body
 
 
 def xmlrpc_call(uri: str, method: str, *args: Any, timeout: float = 3.0) -> Any:
-    """Call *method* on the XML-RPC server at *uri*, bounded by *timeout* per socket operation."""
-    proxy = xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(timeout), allow_none=True)
+    """Call *method* on the XML-RPC server at *uri*, bounded by *timeout* per socket operation
+    (connect, and every send and read). Raises OSError, HttpError, XmlRpcFault, XmlRpcError."""
+    scheme, host, port, path = parse_uri(uri)
+    if scheme != "http" or not host:
+        raise XmlRpcError(f"not an http:// URI: {uri!r}")
+    port = port or 80
+    body = dump_call(method, args)
+    hostport = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    head = (f"POST {path} HTTP/1.1\r\nHost: {hostport}\r\nUser-Agent: rosnet-tui\r\n"
+            f"Content-Type: text/xml\r\nContent-Length: {len(body)}\r\n"
+            "Connection: close\r\n\r\n").encode("latin-1")
+    sock = socket.create_connection((host, port), timeout=timeout)
     try:
-        return getattr(proxy, method)(*args)
+        sock.sendall(head + body)
+        with sock.makefile("rb") as rfile:
+            first, _, answer = read_http(rfile, response=True)
     finally:
-        proxy("close")()
+        sock.close()
+    if first[1] != "200":
+        raise HttpError(int(first[1]) if first[1].isdigit() else 0,
+                        first[2] if len(first) > 2 else "")
+    _, params, fault = load_xmlrpc(answer)
+    if fault:
+        f = params[0] if params and isinstance(params[0], dict) else {}
+        raise XmlRpcFault(f.get("faultCode"), f.get("faultString"))
+    if len(params) != 1:
+        raise XmlRpcError(f"an answer with {len(params)} values, not 1")
+    return params[0]
 
 
 def ros_call(uri: str, method: str, *args: Any, timeout: float = 3.0) -> Any:
@@ -276,8 +580,7 @@ def ros_call(uri: str, method: str, *args: Any, timeout: float = 3.0) -> Any:
     return value
 
 
-@dataclass
-class SystemState:
+class SystemState(Record):
     publishers: List[Tuple[str, List[str]]]
     subscribers: List[Tuple[str, List[str]]]
     services: List[Tuple[str, List[str]]]
@@ -430,15 +733,13 @@ def publisher_header(caller_id: str, topic: str) -> Dict[str, str]:
 
 
 # --------------------------------------------------------------------------- reports
-@dataclass
-class Hop:
+class Hop(Record):
     hop: str            # registration | xmlrpc_callback | tcpros | no_message | info
     ok: bool
     detail: str
 
 
-@dataclass
-class ProbeReport:
+class ProbeReport(Record):
     """What one probe node saw. failed_hop/node/uri name the first hop that failed and whose
     advertised address it was (for registration: our node and the master's URI)."""
 
@@ -452,7 +753,7 @@ class ProbeReport:
     failed_hop: Optional[str] = None
     node: Optional[str] = None
     uri: Optional[str] = None
-    hops: List[Hop] = field(default_factory=list)
+    hops: List[Hop] = _NEW_LIST  # type: ignore[assignment]
     received: Optional[str] = None
     sent: int = 0
     served: int = 0
@@ -468,13 +769,13 @@ class ProbeReport:
         self.ok = False
 
     def to_json(self) -> Dict[str, Any]:
-        out = asdict(self)
+        out = self.to_dict()
         out[REPORT_KEY] = 1
         return out
 
     @classmethod
     def from_json(cls, data: Dict[str, Any]) -> ProbeReport:
-        known = {k: data.get(k) for k in cls.__dataclass_fields__ if k in data and k != "hops"}
+        known = {k: data.get(k) for k, _ in cls.FIELDS if k in data and k != "hops"}
         rep = cls(**known)
         rep.hops = [Hop(str(h.get("hop")), bool(h.get("ok")), str(h.get("detail")))
                     for h in data.get("hops") or []]
@@ -501,25 +802,54 @@ def parse_report_line(stdout: str) -> Optional[Dict[str, Any]]:
 
 
 # --------------------------------------------------------------------------- slave server
-class _Handler(SimpleXMLRPCRequestHandler):
-    rpc_paths = ()           # any path (ROS URIs end in "/")
+class _Handler(socketserver.StreamRequestHandler):
+    """One XML-RPC request per connection, answered with HTTP/1.0 and closed (what Python's
+    SimpleXMLRPCServer does, which rospy and roscore speak to)."""
+
     timeout = 5              # a slow caller cannot hold a thread for long
 
-    def do_POST(self) -> None:  # noqa: N802 (http.server naming)
+    def handle(self) -> None:
+        try:
+            first, _, body = read_http(self.rfile, response=False)
+        except (OSError, ValueError):
+            return
+        if first[0] != "POST":
+            self._send(501, "Unsupported method", b"")
+            return
         _caller.addr = self.client_address
-        super().do_POST()
+        try:
+            method, params, _ = load_xmlrpc(body)
+            fn = self.server.functions.get(method or "")  # type: ignore[attr-defined]
+            if fn is None:
+                raise LookupError(f'method "{method}" is not supported')
+            answer = dump_response(fn(*params))
+        except Exception as exc:
+            answer = dump_fault(1, f"{type(exc)}:{exc}")
+        self._send(200, "OK", answer)
 
-    def log_message(self, format: str, *args: Any) -> None:  # noqa: A002
-        pass
+    def _send(self, code: int, reason: str, body: bytes) -> None:
+        head = (f"HTTP/1.0 {code} {reason}\r\nServer: rosnet-tui\r\n"
+                f"Content-Type: text/xml\r\nContent-Length: {len(body)}\r\n\r\n")
+        try:
+            self.wfile.write(head.encode("latin-1") + body)
+        except OSError:
+            pass
 
 
 _caller = threading.local()
 
 
-class _Server(socketserver.ThreadingMixIn, SimpleXMLRPCServer):
+class _Server(socketserver.ThreadingTCPServer):
     daemon_threads = True
     block_on_close = False   # closing never waits for a slow caller
     allow_reuse_address = True
+
+    def __init__(self, addr: Tuple[str, int]) -> None:
+        self.functions: Dict[str, Any] = {}
+        super().__init__(addr, _Handler)
+
+    def register_function(self, fn: Any, name: str) -> None:
+        self.functions[name] = fn
 
 
 class ProbeNode:
@@ -593,8 +923,7 @@ class ProbeNode:
         return t
 
     def start_server(self) -> None:
-        server = _Server((self.bind, 0), requestHandler=_Handler, logRequests=False,
-                         allow_none=True)
+        server = _Server((self.bind, 0))
         self._register(server)
         self._server = server
         port = server.server_address[1]
@@ -1043,8 +1372,7 @@ def run_publisher(master_uri: str, topic: str, timeout: float, *,
     return pub.stop()
 
 
-@dataclass
-class NodeReach:
+class NodeReach(Record):
     node: str
     uri: str = ""
     host: str = ""
@@ -1120,15 +1448,30 @@ def check_node_uris(master_uri: str, timeout: float, *, include: Iterable[str] =
             r.reachable, r.reason = False, f"{r.ip}:{r.port}: {describe_error(exc, t)[1]}"
         return r
 
-    pool = ThreadPoolExecutor(max_workers=max(1, min(workers, len(names) or 1)))
-    futs = {pool.submit(one, n): n for n in names}
-    done, _ = wait_futures(list(futs), timeout=max(0.0, deadline - time.monotonic()))
-    pool.shutdown(wait=False)
-    for fut, name in futs.items():
-        if fut in done:
-            out["nodes"].append(asdict(fut.result()))
-        else:
-            out["nodes"].append(asdict(NodeReach(name, reason="no verdict in time (timed out)")))
+    # Plain daemon threads (concurrent.futures would cost this program's start ~5 ms of imports).
+    todo, results, lock = list(names), {}, threading.Lock()
+
+    def worker() -> None:
+        while True:
+            with lock:
+                if not todo:
+                    return
+                name = todo.pop()
+            r = one(name)
+            with lock:
+                results[name] = r
+
+    threads = [threading.Thread(target=worker, daemon=True)
+               for _ in range(max(1, min(workers, len(names))))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(max(0.0, deadline - time.monotonic()))
+    with lock:
+        final = dict(results)
+    for name in names:
+        r = final.get(name) or NodeReach(name, reason="no verdict in time (timed out)")
+        out["nodes"].append(r.to_dict())
     out["nodes"].sort(key=lambda d: d["node"])
     out["ok"] = all(d["reachable"] for d in out["nodes"])
     return out
@@ -1145,27 +1488,70 @@ def _announce_ready(pub: ProbePublisher) -> None:
     sys.stdout.flush()
 
 
+USAGE = ("usage: rosproto {sub|pub|nodes|whoami} [--master URI] [--timeout S] [--bashrc PATH]"
+         " [--topic T (sub, pub)] [--linger (pub)] [--include NODE ... (nodes)]")
+
+
+class _Args:
+    cmd = ""
+    master = ""
+    timeout = 5.0
+    bashrc = "~/.bashrc"     # rc file for ROS_IP/ROS_HOSTNAME absent from the environment
+    topic = ""
+    linger = False           # pub: publish for the whole timeout (default: stop once served)
+
+    def __init__(self) -> None:
+        self.include: List[str] = []
+
+
+def parse_args(argv: List[str]) -> _Args:
+    """The command line (argparse would cost every start ~7 ms of imports). ValueError when bad;
+    ``--name value`` and ``--name=value`` both work."""
+    args = _Args()
+    if not argv or argv[0] not in ("sub", "pub", "nodes", "whoami"):
+        raise ValueError("the first word must be sub, pub, nodes or whoami")
+    args.cmd = argv[0]
+    allowed = {"--master", "--timeout", "--bashrc"}
+    allowed |= {"--topic"} if args.cmd in ("sub", "pub") else set()
+    allowed |= {"--linger"} if args.cmd == "pub" else set()
+    allowed |= {"--include"} if args.cmd == "nodes" else set()
+    rest = list(argv[1:])
+    while rest:
+        word = rest.pop(0)
+        name, eq, value = word.partition("=")
+        if name not in allowed:
+            raise ValueError(f"unrecognized argument {word!r}")
+        if name == "--linger":
+            if eq:
+                raise ValueError("--linger takes no value")
+            args.linger = True
+            continue
+        if not eq:
+            if not rest:
+                raise ValueError(f"{name} needs a value")
+            value = rest.pop(0)
+        if name == "--timeout":
+            try:
+                args.timeout = float(value)
+            except ValueError:
+                raise ValueError(f"--timeout: not a number: {value!r}") from None
+            if args.timeout != args.timeout:
+                raise ValueError("--timeout: not a number: nan")
+        elif name == "--include":
+            args.include.append(value)
+        else:
+            setattr(args, name[2:], value)
+    if args.cmd in ("sub", "pub") and not args.topic:
+        raise ValueError("--topic is required")
+    return args
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     """``python3 - {sub|pub|nodes|whoami} ...``: run one probe, print one JSON line."""
-    p = argparse.ArgumentParser(prog="rosproto", description="ROS 1 network probe (rosnet-tui)")
-    sub = p.add_subparsers(dest="cmd")
-    for name in ("sub", "pub", "nodes", "whoami"):
-        sp = sub.add_parser(name)
-        sp.add_argument("--master", default="")
-        sp.add_argument("--timeout", type=float, default=5.0)
-        sp.add_argument("--bashrc", default="~/.bashrc",
-                        help="rc file for ROS_IP/ROS_HOSTNAME absent from the environment "
-                             "('' for none)")
-        if name in ("sub", "pub"):
-            sp.add_argument("--topic", required=True)
-        if name == "pub":
-            sp.add_argument("--linger", action="store_true",
-                            help="publish for the whole timeout (default: stop once served)")
-        if name == "nodes":
-            sp.add_argument("--include", action="append", default=[])
-    args = p.parse_args(argv)
-    if not args.cmd:
-        p.print_usage(sys.stderr)
+    try:
+        args = parse_args(sys.argv[1:] if argv is None else argv)
+    except ValueError as exc:
+        sys.stderr.write(f"{USAGE}\nrosproto: error: {exc}\n")
         return 2
     bashrc = os.path.expanduser(args.bashrc) if args.bashrc else None
     master = args.master or effective_ros_env(None, bashrc).get("ROS_MASTER_URI", ("", ""))[0]
