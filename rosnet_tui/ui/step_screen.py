@@ -56,22 +56,23 @@ class StepScreen(Screen):
         self.step = step_for(self.step.id, self.session.settings)  # settings may have changed
         yield PlainHeader()
         yield StepBar(self.step.id, id="step-bar")
-        with Container(id="panes"):
-            with VerticalScroll(id="expected-pane", classes="pane") as expected:
-                expected.border_title = f"{self.step.number} {self.step.title}: expected outcome"
-                yield Static(self.step.expected, id="expected-text")
-            with Container(id="lower"):
-                with VerticalScroll(id="config-pane", classes="pane") as config:
-                    config.border_title = "Configuration"
-                    if self.step.id == "router":  # the card: plain text, fit to the pane
-                        yield Static("", id="router-card", markup=False)
-                    else:
-                        self.config_source = self.session.configuration_text(self.step.id)
-                        yield Static(_markdown(self.config_source), id="config-text")
-                with Vertical(id="verify-pane", classes="pane") as verify:
-                    verify.border_title = "Verification"
-                    yield CheckList(self.session.check_rows(self.step.id),
-                                    advice=self.session.findings_for, id="check-list")
+        # The panes sit on the screen itself (no container around them: one widget less to
+        # style and lay out before the first frame).
+        with VerticalScroll(id="expected-pane", classes="pane") as expected:
+            expected.border_title = f"{self.step.number} {self.step.title}: expected outcome"
+            yield Static(self.step.expected, id="expected-text")
+        with Container(id="lower"):
+            with VerticalScroll(id="config-pane", classes="pane") as config:
+                config.border_title = "Configuration"
+                if self.step.id == "router":  # the card: plain text, fit to the pane
+                    yield Static("", id="router-card", markup=False)
+                else:
+                    self.config_source = self.session.configuration_text(self.step.id)
+                    yield Static(_markdown(self.config_source), id="config-text")
+            with Vertical(id="verify-pane", classes="pane") as verify:
+                verify.border_title = "Verification"
+                yield CheckList(self.session.check_rows(self.step.id),
+                                advice=self.session.findings_for, id="check-list")
         yield KeyBar()
 
     def on_mount(self) -> None:
