@@ -91,6 +91,12 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
         # (choosing them later restyles every widget, at start-up).
         self.register_theme(THEME)
         self.theme = THEME.name
+        # Setting the theme queues a refresh of the CSS, which parses every stylesheet again
+        # (twice: once for the check, once more as the next widget class adds its own). Nothing is
+        # parsed or styled yet, so the stylesheet takes the theme's variables now and the queued
+        # refresh is skipped (refresh_css below): one parse before the first frame, not three.
+        self._theme_variables: dict[str, str] | None = self.get_css_variables()
+        self.stylesheet.set_variables(self._theme_variables)
         if self.no_color:  # NO_COLOR: the terminal's own colours only (Textual chose its filter
             from textual.filter import Monochrome, NoColor  # for its default theme: greys)
 
@@ -113,6 +119,12 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
         self.push_screen(f"step-{self.current_step}")
         if self.deps.open_setup or not self.session.settings.complete or self.session.draft():
             self.action_setup()
+
+    def refresh_css(self, animate: bool = True) -> None:
+        first, self._theme_variables = self._theme_variables, None
+        if first is not None and first == self.get_css_variables():
+            return  # the refresh queued by setting the theme in __init__: nothing to change
+        super().refresh_css(animate)
 
     def on_resize(self, event) -> None:
         self.set_class(event.size.width >= self.WIDE_AT, "wide")

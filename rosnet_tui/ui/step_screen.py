@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Container, Vertical, VerticalScroll
+from textual.containers import Container, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import Static
 
@@ -61,22 +61,24 @@ class StepScreen(Screen):
         self.step = step_for(self.step.id, self.session.settings)  # settings may have changed
         yield PlainHeader()
         yield StepBar(self.step.id, id="step-bar")
-        with Container(id="panes"):
-            with VerticalScroll(id="expected-pane", classes="pane") as expected:
-                expected.border_title = f"{self.step.number} {self.step.title}: expected outcome"
-                yield Static(self.step.expected, id="expected-text")
-            with Container(id="lower"):
-                with VerticalScroll(id="config-pane", classes="pane") as config:
-                    config.border_title = "Configuration"
-                    if self.step.id == "router":  # the card: plain text, fit to the pane
-                        yield Static("", id="router-card", markup=False)
-                    else:
-                        self.config_source = self.session.configuration_text(self.step.id)
-                        yield Static(_markdown(self.config_source), id="config-text")
-                with Vertical(id="verify-pane", classes="pane") as verify:
-                    verify.border_title = "Verification"
-                    yield CheckList(self.session.check_rows(self.step.id),
-                                    advice=self.session.findings_for, id="check-list")
+        # The panes sit on the screen itself (no container around them: one widget less to
+        # style and lay out before the first frame).
+        with VerticalScroll(id="expected-pane", classes="pane") as expected:
+            expected.border_title = f"{self.step.number} {self.step.title}: expected outcome"
+            yield Static(self.step.expected, id="expected-text")
+        with Container(id="lower"):
+            with VerticalScroll(id="config-pane", classes="pane") as config:
+                config.border_title = "Configuration"
+                if self.step.id == "router":  # the card: plain text, fit to the pane
+                    yield Static("", id="router-card", markup=False)
+                else:
+                    self.config_source = self.session.configuration_text(self.step.id)
+                    yield Static(_markdown(self.config_source), id="config-text")
+            # The check list is the Verification pane itself (one container less).
+            verify = CheckList(self.session.check_rows(self.step.id),
+                               advice=self.session.findings_for, id="verify-pane", classes="pane")
+            verify.border_title = "Verification"
+            yield verify
         yield KeyBar()
 
     def on_mount(self) -> None:
@@ -113,13 +115,15 @@ class StepScreen(Screen):
     async def _replace_check_list(self, rows: list[tuple[str, str]]) -> None:
         """The ROS version changed: a new list of checks (the old one removed first: the new
         one takes its ids)."""
-        old = self.query_one("#check-list", CheckList)
+        old = self.query_one(CheckList)
         parent = old.parent
         had_focus = self.focused is not None and (self.focused is old
                                                   or old in self.focused.ancestors)
         await old.remove()
         if parent is not None:
-            new = CheckList(rows, advice=self.session.findings_for, id="check-list")
+            new = CheckList(rows, advice=self.session.findings_for, id="verify-pane",
+                            classes="pane")
+            new.border_title = old.border_title
             await parent.mount(new)
             if had_focus:
                 self.query_one("#check-table").focus()

@@ -19,7 +19,7 @@ from __future__ import annotations
 import re
 import unicodedata
 
-from rich.cells import get_character_cell_size
+from rich.cells import cell_len
 
 # An SGR state: (foreground, background, underline colour, attribute bits). Colours are the SGR
 # parameters that set them ("31", "38;5;12", "38;2;1;2;3"), None for the default.
@@ -162,7 +162,9 @@ def _width(ch: str) -> int:
         return 1
     if unicodedata.combining(ch):
         return 0
-    return get_character_cell_size(ch)
+    # cell_len knows the common one-cell glyphs (box drawing, Latin-1...) without loading Rich's
+    # table of every character's width, which takes 10-30 ms before the first frame.
+    return cell_len(ch)
 
 
 class FrugalScreen:

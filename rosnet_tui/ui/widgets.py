@@ -234,12 +234,22 @@ class CheckList(Vertical):
         # check id -> list of advisor findings (objects with meaning, actions, goto_step)
         self.advice = advice or (lambda check_id: [])
         self._widths = (4, TITLE_MAX, 40)
+        self._evidence: Static | None = None
 
     def compose(self) -> ComposeResult:
+        # The evidence box is hidden until asked for: it is mounted then (_evidence_text), which
+        # keeps two widgets and their scrollbars out of the first frame.
         yield RowTable(cursor_type="row", zebra_stripes=False, id="check-table")
-        with VerticalScroll(id="evidence-box", classes="zoomable") as box:
+
+    def _evidence_text(self) -> Static:
+        """The evidence's text, in its scrolling box (mounted on first use)."""
+        if self._evidence is None:
+            box = VerticalScroll(id="evidence-box", classes="zoomable")
             box.can_focus = True
-            yield Static("", id="evidence", markup=False)
+            self.mount(box)
+            self._evidence = Static("", id="evidence", markup=False)
+            box.mount(self._evidence)
+        return self._evidence
 
     def on_mount(self) -> None:
         table = self.query_one(DataTable)
@@ -366,7 +376,7 @@ class CheckList(Vertical):
             self._show_evidence()
 
     def _show_evidence(self) -> None:
-        self.query_one("#evidence", Static).update(self.evidence_text(self.highlighted_id))
+        self._evidence_text().update(self.evidence_text(self.highlighted_id))
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
         event.stop()
