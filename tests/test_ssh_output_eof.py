@@ -8,22 +8,17 @@ status. A background writer that outlives the shell makes that ordering certain 
 
 from __future__ import annotations
 
-import pytest
-
-from rosnet_tui.core.ssh import ssh_run
-from tests.test_ssh import ssh_client, sshd  # noqa: F401 (fixtures: a real sshd on loopback)
+from rosnet_tui.core.ssh.session import ssh_run
 
 
-@pytest.mark.xfail(strict=True, reason="SshSession._pump ends at the exit status, not at the "
-                   "output's EOF (issue 25); the fix belongs in core/ssh: drop this mark then")
-async def test_output_written_after_the_exit_status_is_kept(ssh_client):  # noqa: F811
+async def test_output_written_after_the_exit_status_is_kept(ssh_client):
     res = await ssh_run(ssh_client.opts(), ssh_client.peer(),
                         "(sleep 0.4; echo late-marker) & echo early; exit 0", timeout=10)
     assert res.ok and res.exit_status == 0
     assert res.stdout == "early\nlate-marker\n", res.stdout
 
 
-async def test_a_quick_command_never_loses_its_output(ssh_client):  # noqa: F811
+async def test_a_quick_command_never_loses_its_output(ssh_client):
     missing = 0
     for _ in range(25):
         res = await ssh_run(ssh_client.opts(), ssh_client.peer(),

@@ -32,6 +32,9 @@ if TYPE_CHECKING:
     import paramiko
 
 _POLL_S = 0.02
+EOF_GRACE_S = 1.0
+"""How long after the exit status the output's end is waited for: sshd may send the status before
+the last output (a process the command left behind may also hold the output open)."""
 
 
 # --------------------------------------------------------------------------- sessions
@@ -52,6 +55,7 @@ class SshSession:
         self._chan: paramiko.Channel | None = None
         self._out = bytearray()
         self._err = bytearray()
+        self._exited_at: float | None = None   # when the exit status arrived
 
     @property
     def ok(self) -> bool:
@@ -87,9 +91,15 @@ class SshSession:
             if not data:
                 break
             self._err += data
-        if chan.exit_status_ready() and not chan.recv_ready() and not chan.recv_stderr_ready():
+        if chan.closed or not (self._transport and self._transport.is_active()):
             return True
-        return chan.closed or not (self._transport and self._transport.is_active())
+        if not chan.exit_status_ready() or chan.recv_ready() or chan.recv_stderr_ready():
+            return False
+        if chan.eof_received:           # the output ended: nothing more can come
+            return True
+        if self._exited_at is None:
+            self._exited_at = time.monotonic()
+        return time.monotonic() - self._exited_at > EOF_GRACE_S
 
     async def write(self, data: bytes | str) -> bool:
         """Send *data* to the command's stdin; False when it could not be sent."""
