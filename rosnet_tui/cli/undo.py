@@ -16,8 +16,8 @@ from rosnet_tui.cli.hosts import (
     state_dir_of,
 )
 from rosnet_tui.cli.ros import ROS_CHECKS
+from rosnet_tui.core import firewall, privilege
 from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings
 from rosnet_tui.core.upnp.journal import describe as describe_forward
@@ -74,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {f.path}: {what}")
     forwards = [m for m in e.mappings if m.get("state") == "made"]
     for m in forwards:
-        print(f"  the forward {describe_forward(m)}: removed from the modem")
+        print(f"  {firewall.describe(m)}" if m.get("kind") == firewall.KIND else
+              f"  the forward {describe_forward(m)}: removed from the modem")
     diff = plan.diff()
     if diff:
         sys.stdout.write(diff)
@@ -89,7 +90,9 @@ def run(args: argparse.Namespace) -> int:
         print("Dry run: nothing was restored.")
         return EXIT_OK
     if diff or forwards:
-        stop = confirm(args, "Restore these files?" if diff else "Remove these forwards?")
+        stop = confirm(args, "Restore these files?" if diff else
+                       "Put the firewall back?" if e.mappings[0].get("kind") == firewall.KIND
+                       else "Remove these forwards?")
         if stop is not None:
             return stop
     if plan.needs_privilege:
@@ -107,7 +110,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"Restored: {', '.join(str(p) for p in result.files)}")
         for line in result.forwards:
             print(line)
-    if not args.no_checks and e.mappings:
+    if not args.no_checks and any(m.get("kind") == firewall.KIND for m in e.mappings):
+        rerun_checks(("linux.firewall",), _settings_quietly(args), state_dir=sd)
+    elif not args.no_checks and e.mappings:
         rerun_checks(("router.upnp", "router.port_open"), _settings_quietly(args), state_dir=sd)
     elif not args.no_checks:
         settings = _settings_quietly(args)

@@ -429,6 +429,17 @@ def apply_preview(preview: Preview, *, state_dir: Path | None = None) -> ApplyRe
     return apply_previews([preview], state_dir=state_dir, label=preview.label)
 
 
+def record_entry(label: str, records: list[dict], *, state_dir: Path | None = None) -> str:
+    """Journal a change that is not a file (each record a dict with a ``kind``); its id."""
+    sd = _state_dir(state_dir)
+    owner = _owner_for(sd)
+    with _locked(sd, owner):
+        entry = JournalEntry(_next_id(sd), _now(), label, [], mappings=list(records))
+        _save_entry(sd, entry, owner)
+        _prune(sd)
+    return entry.id
+
+
 def _check_fresh(p: Preview) -> None:
     now = file_digest(read_bytes(p.path))
     if now != p.digest:
@@ -510,7 +521,9 @@ class UndoPlan:
 
     @property
     def needs_privilege(self) -> bool:
-        return any(p.needs_privilege for p in self.previews)
+        nft = any(m.get("kind") == "nft_table" and m.get("state") == "made"
+                  for m in self.entry.mappings)
+        return any(p.needs_privilege for p in self.previews) or (nft and os.geteuid() != 0)
 
     def diff(self) -> str:
         return "".join(p.diff() for p in self.previews)
@@ -580,6 +593,10 @@ def apply_undo(plan: UndoPlan, *, force: bool = False) -> UndoResult:
             from rosnet_tui.core.upnp.journal import undo_mappings
 
             forwards = undo_mappings(plan.entry, force=force)
+        if any(m.get("kind") == "nft_table" for m in plan.entry.mappings):  # our firewall table
+            from rosnet_tui.core.firewall import undo_records
+
+            forwards += undo_records(plan.entry.mappings)
         restored = []
         for p, f in zip(plan.previews, plan.entry.files, strict=True):
             if p.changed:
