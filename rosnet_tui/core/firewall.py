@@ -23,6 +23,8 @@ import difflib
 import hashlib
 import ipaddress
 import json
+import logging
+import os
 import re
 import shutil
 import subprocess
@@ -386,3 +388,19 @@ def follow_peers(addresses: list[str]) -> tuple[list[str], list[str]] | None:
         return None
     load(set_update_text(clean))
     return now, clean
+
+
+def follow_for_sync(settings: Settings, addresses: list[str], log: logging.Logger) -> None:
+    """The sync service's hook (its apply step): keep our set equal to the peers' addresses it
+    just planned. Only when the settings want the table, this process is root and our table is
+    loaded; never creates the table. Failures are logged, never raised."""
+    if not wanted(settings) or os.geteuid() != 0 or nft_path() is None:
+        return
+    try:
+        changed = follow_peers([a for a in addresses if a])
+    except (FirewallError, ValueError) as exc:
+        log.warning("firewall: the allowed set was not updated: %s", exc)
+        return
+    if changed:
+        log.info("firewall: allowed set %s -> %s (table %s, one transaction)",
+                 ", ".join(changed[0]) or "-", ", ".join(changed[1]), TABLE)

@@ -317,7 +317,7 @@ STEPS: tuple[Step, ...] = (
          "messages over TCP by name, whichever side starts.",
          configure_linux,
          ("linux.hosts", "linux.resolve", "linux.ping", "linux.ssh", "linux.chat_out",
-          "linux.chat_in")),
+          "linux.chat_in", "linux.firewall")),
     Step("ros",
          "Every component registers with the one ROS master, and each can both publish and "
          "subscribe.",
