@@ -24,6 +24,7 @@ STEP_OF = {"isp": "isp", "router": "router", "linux": "linux", "ros": "ros"}
 
 from tests.test_advisor_ros2 import ROS2_CASES  # noqa: E402
 from tests.test_advisor_upnp import UPNP_CASES  # noqa: E402
+from tests.test_firewall import FIREWALL_CASES  # noqa: E402
 from tests.test_rosbridge import ROSBRIDGE_CASES  # noqa: E402
 
 
@@ -614,6 +615,7 @@ CASES: dict[str, Case] = {
 CASES.update(ROS2_CASES)  # the ROS 2 rules' cases (tests/test_advisor_ros2.py)
 CASES.update(UPNP_CASES)  # router.upnp's rules (tests/test_advisor_upnp.py)
 CASES.update(ROSBRIDGE_CASES)  # ros.rosbridge's rules (tests/test_rosbridge.py)
+CASES.update(FIREWALL_CASES)  # linux.firewall's rules (tests/test_firewall.py)
 
 
 def test_every_rule_has_a_case():

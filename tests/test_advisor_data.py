@@ -21,7 +21,7 @@ from tests.golden import codec, record
 
 ADVISOR = Path(__file__).resolve().parents[1] / "rosnet_tui" / "core" / "advisor"
 RULE_FILES = ("evidence.py", "isp.py", "router.py", "linux.py", "ros.py", "ros2.py",
-              "router_upnp.py", "rosbridge.py")
+              "router_upnp.py", "rosbridge.py", "firewall.py")
 
 
 def _cases() -> list[dict]:

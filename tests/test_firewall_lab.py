@@ -142,7 +142,7 @@ def test_only_the_peer_gets_through_and_undo_leaves_a_foreign_table(fw_lab, tmp_
         assert nft(lab, "robot", "list", "table", "inet", "foreign_fw").stdout == foreign
         assert lab.call_in("internet", tcp_try, OUTSIDER, ADDR.ROBOT_PUBLIC, 11311) == "connected"
         robot = check(lab, "robot", tmp_path, "linux")
-        assert robot["linux.firewall"]["status"] == "fail", explain(robot)
+        assert robot["linux.firewall"]["status"] == "warn", explain(robot)
         assert "rosnet-tui firewall apply" in robot["linux.firewall"]["summary"]
     finally:
         lab.call_in("robot", srv.close)

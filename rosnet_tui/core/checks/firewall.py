@@ -55,7 +55,8 @@ async def check_firewall(ctx: CheckContext) -> Outcome:
                            "ROS range, the master's port) are open to anyone on the internet",
                            ["no table inet rosnet_tui is loaded (opted out in the settings)"],
                            data)
-        return Outcome(Status.FAIL, "no firewall: the forwarded ports are open to anyone on the "
+        # Exposure, not a broken link (every peer still gets through): a warning.
+        return Outcome(Status.WARN, "no firewall: the forwarded ports are open to anyone on the "
                        "internet (rosnet-tui firewall apply)",
                        [f"no table {fw.TABLE} is loaded"], data)
     evidence = [f"table {fw.TABLE} loaded; allowed: {', '.join(allowed or []) or 'nobody'}"]
@@ -68,10 +69,12 @@ async def check_firewall(ctx: CheckContext) -> Outcome:
     data["rules_match"] = fw.normalize(now) == fw.normalize(fw.render_ruleset(s, allowed or []))
     evidence.append(f"the peers' addresses now: {', '.join(expected)}")
     if missing or extra:
-        parts = ([f"missing {', '.join(missing)}"] if missing else []) + \
+        # A peer left out is shut out (fail); a past address still allowed is only a leftover.
+        parts = ([f"missing {', '.join(missing)} (that peer is shut out)"] if missing else []) + \
                 ([f"no peer has {', '.join(extra)}"] if extra else [])
-        return Outcome(Status.FAIL, "the allowed set is stale: " + "; ".join(parts)
-                       + " (rosnet-tui firewall apply, or the sync service)", evidence, data)
+        return Outcome(Status.FAIL if missing else Status.WARN, "the allowed set is stale: "
+                       + "; ".join(parts) + " (rosnet-tui firewall apply, or the sync service)",
+                       evidence, data)
     if not data["rules_match"]:
         return Outcome(Status.WARN, "the table's rules differ from the ones the settings give "
                        "(ports or priority changed): rosnet-tui firewall apply", evidence, data)
