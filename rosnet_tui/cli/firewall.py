@@ -88,8 +88,8 @@ def _abs(p: Path) -> str:
     return str(Path(p).expanduser().absolute())
 
 
-def _sudo(args: argparse.Namespace, *tail: str) -> list[str]:
-    return privilege.sudo_argv(["--config", _abs(config_path(args)), "firewall", *tail,
+def _sudo_undo(args: argparse.Namespace) -> list[str]:
+    return privilege.sudo_argv(["--config", _abs(config_path(args)), "firewall", "undo",
                                 "--yes", "--state-dir", _abs(state_dir_of(args)),
                                 "--no-checks"])
 
@@ -129,7 +129,8 @@ def run_apply(args: argparse.Namespace) -> int:
     if stop is not None:
         return stop
     if not privilege.is_root():
-        cmd = _sudo(args, "apply", "--profile", profile, "--expect-digest", pv.digest)
+        cmd = fw.apply_command(config=config_path(args), profile=profile, digest=pv.digest,
+                               state_dir=state_dir_of(args))
         rc = run_as_root(cmd, f"loading the table {fw.TABLE}", "firewall apply")
     else:
         try:
@@ -205,7 +206,7 @@ def run_undo(args: argparse.Namespace) -> int:
     if stop is not None:
         return stop
     if not privilege.is_root():
-        rc = run_as_root(_sudo(args, "undo"), f"removing the table {fw.TABLE}", "firewall undo")
+        rc = run_as_root(_sudo_undo(args), f"removing the table {fw.TABLE}", "firewall undo")
     else:
         try:
             entry = fw.remove(state_dir=state_dir_of(args))

@@ -266,6 +266,14 @@ class FirewallPreview:
     def changed(self) -> bool:
         return not self.readable or normalize(self.current) != normalize(self.ruleset)
 
+    @property
+    def path(self) -> str:            # what the wizard's write screen names
+        return f"the firewall (nft table {TABLE})"
+
+    @property
+    def needs_privilege(self) -> bool:
+        return os.geteuid() != 0
+
     def diff(self) -> str:
         old = (self.current or "").splitlines(keepends=True)
         new = self.ruleset.splitlines(keepends=True)
@@ -298,6 +306,17 @@ def preview(settings: Settings, profile: str | None = None) -> FirewallPreview:
         current, readable = None, False
         notes.append(f"the table loaded now is not shown: {exc}")
     return FirewallPreview(ruleset, current, addresses, readable, notes)
+
+
+def apply_command(*, config: Path, profile: str, digest: str, state_dir: Path) -> list[str]:
+    """The exact sudo command that loads the previewed table (and nothing else)."""
+    from rosnet_tui.core import privilege
+
+    def ab(p: Path) -> str:
+        return str(Path(p).expanduser().absolute())
+    return privilege.sudo_argv(["--config", ab(config), "firewall", "apply", "--profile", profile,
+                                "--expect-digest", digest, "--yes", "--state-dir", ab(state_dir),
+                                "--no-checks"])
 
 
 def apply(pv: FirewallPreview, *, state_dir: Path | None = None) -> str | None:

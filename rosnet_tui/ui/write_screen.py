@@ -128,6 +128,8 @@ class WriteScreen(ModalScreen[bool]):
                                 "else was changed.", severity="error", timeout=8)
                     self.refresh_preview()
                     return
+            elif self.plan.apply is not None:   # not a file (the firewall)
+                self.plan.apply(p)
             elif extra:
                 mf.apply_previews([p, *extra], state_dir=state_dir, label=self.plan.title)
             else:
