@@ -205,3 +205,41 @@ def test_the_set_follows_a_peers_address_change_within_the_sync_latency(lab, tmp
         nft(lab, "laptop", "delete", "table", "inet", "rosnet_tui")
         lab.reset()
         lab.stop_roscore()
+
+
+def test_as_a_user_the_exact_sudo_command_loads_the_previewed_table(fw_lab, tmp_path,
+                                                                    monkeypatch, capsys):
+    """In process, inside the robot's namespace, as if this user were not root: a stand-in sudo
+    on PATH runs the command it is given (we are root already), so the path is exercised but the
+    password."""
+    import os
+    import sys
+
+    from rosnet_tui.cli import main
+    from rosnet_tui.core import privilege
+
+    lab = fw_lab
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "sudo").write_text('#!/bin/sh\necho "sudo $*" > "$(dirname "$0")/called"\n'
+                               '[ "$1" = "-n" ] && shift\nexec "$@"\n')
+    os.chmod(fake / "sudo", 0o755)
+    monkeypatch.setenv("PATH", f"{fake}{os.pathsep}{os.environ.get('PATH', '')}")
+    monkeypatch.setattr(privilege, "is_root", lambda: False)
+    cfg, state = lab.config_path("robot"), tmp_path / "state"
+    rc = lab.call_in("robot", main, ["--config", str(cfg), "firewall", "apply", "--yes",
+                                     "--no-checks", "--state-dir", str(state)])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    called = [x for x in (fake / "called").read_text().split() if x != "-n"]
+    assert called[:4] == ["sudo", sys.executable, "-m", "rosnet_tui"]
+    joined = " ".join(called)
+    assert "firewall apply --profile remote --expect-digest" in joined and "--yes" in joined
+    assert "needs root; running:" in out and "+table inet rosnet_tui {" in out
+    assert ADDR.LAPTOP_PUBLIC in nft(lab, "robot", "list", "table", "inet", "rosnet_tui").stdout
+    # The digest names what was previewed: another ruleset is refused, nothing loaded.
+    nft(lab, "robot", "delete", "table", "inet", "rosnet_tui")
+    r = fw(lab, "robot", state, "firewall", "apply", "--yes", "--no-checks",
+           "--expect-digest", "0" * 64, "--state-dir", str(state))
+    assert r.returncode == 1 and "not the one previewed" in r.stderr, r.stdout + r.stderr
+    assert nft(lab, "robot", "list", "table", "inet", "rosnet_tui").returncode != 0
