@@ -14,6 +14,7 @@ import time
 import pytest
 
 from tests.lab import ADDR
+from tests.sync_support.bench import goal_s
 from tests.sync_support.lab_sync import SyncRig, prepare_lab, wait_for
 
 pytest_plugins = ["tests.lab.fixtures"]
@@ -196,6 +197,9 @@ def test_the_set_follows_a_peers_address_change_within_the_sync_latency(lab, tmp
         assert wait_for(lambda: new_ip in allowed(), WAIT), rig.log("laptop")[-3000:]
         took = time.monotonic() - t0
         print(f"the laptop's firewall set followed the robot's new address in {took:.2f} s")
+        # No longer than the sync latency (the hosts file's budget, tests/sync_support/bench.py),
+        # plus the polling of this wait.
+        assert took <= goal_s("folder", rig.interval_s) + 0.5, took
         assert ADDR.ROBOT_PUBLIC not in allowed()
         assert "firewall: allowed set" in rig.log("laptop")
         listing = nft(lab, "laptop", "list", "table", "inet", "rosnet_tui").stdout
