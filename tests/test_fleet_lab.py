@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from tests.lab import procs
+from tests.lab.firewall import apply_firewall, remove_firewall
 from tests.lab.fleet import Fleet
 from tests.lab.fleet_ros2 import ROS2_IDS, FleetRos2, explain
 
@@ -129,8 +130,12 @@ def test_nine_site_ros1_every_check_passes_from_master_and_member(fleet):
         assert fleet.wait_output(listener, r"heard: hello from member8 \d+", timeout=20), \
             fleet.output(listener)
         for host in ("turtlebot", "member8"):
+            apply_firewall(fleet, host, fleet_config(fleet, host))  # ROS 1 as set up
             t0 = time.monotonic()
-            results = full_check(fleet, host, fleet.ros_env(host))
+            try:
+                results = full_check(fleet, host, fleet.ros_env(host))
+            finally:
+                remove_firewall(fleet, host)
             print(f"ROS 1, every check from {host} with {len(fleet.sites) - 1} peers: "
                   f"{time.monotonic() - t0:.2f} s")
             assert results and all(c["status"] == "pass" for c in results.values()), \
@@ -141,10 +146,13 @@ def test_nine_site_ros1_every_check_passes_from_master_and_member(fleet):
         fleet.reset()
 
 
+def fleet_config(fleet: Fleet, host: str) -> Path:
+    return fleet.home(host) / ".config" / "rosnet-tui" / "config.toml"
+
+
 def full_check(fleet: Fleet, host: str, env: dict[str, str]) -> dict[str, dict]:
     """`rosnet-tui check --json` (every step) on *host*: {check id: entry}."""
-    r = fleet.rosnet(host, "check", "--json", "--config", str(fleet.home(host) / ".config" /
-                                                              "rosnet-tui" / "config.toml"),
+    r = fleet.rosnet(host, "check", "--json", "--config", str(fleet_config(fleet, host)),
                      env=env, timeout=120)
     assert r.stdout.strip(), r.stderr
     return {c["id"]: c for c in json.loads(r.stdout)["checks"]}

@@ -322,6 +322,12 @@ async def test_write_hosts_and_bashrc_with_preview_then_undo(tmp_path):
         assert hosts.read_text() == stock  # a preview writes nothing
         await pilot.click("#write-apply")
         await pilot.pause()
+        # ROS 1: the peers-only firewall is offered next, as a preview (cancelled here).
+        assert type(app.screen).__name__ == "WriteScreen"
+        assert "nft table inet rosnet_tui" in app.screen.plan.title
+        assert "tcp dport { 22, 1024-65000 } drop" in app.screen.preview.ruleset
+        await pilot.press("escape")
+        await pilot.pause()
         assert isinstance(app.screen, StepScreen)
         text = hosts.read_text()
         assert "# BEGIN rosnet-tui" in text and "# keep me" in text and "sami" in text

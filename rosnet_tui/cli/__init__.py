@@ -16,7 +16,8 @@ from rosnet_tui import __version__
 from rosnet_tui.cli.common import EXIT_USAGE, add_config_option
 
 # Sub-command modules, in the order --help lists them.
-SUBCOMMAND_MODULES = ("check", "hosts", "ros", "router", "undo", "report", "sync", "probe_server")
+SUBCOMMAND_MODULES = ("check", "hosts", "ros", "router", "firewall", "undo", "report", "sync",
+                      "probe_server")
 # What `rosnet-tui --help` says of each without importing it (a test keeps these equal to the
 # modules' own help): only the command being run is imported, so start-up stays light.
 SUBCOMMAND_HELP = {
@@ -24,6 +25,7 @@ SUBCOMMAND_HELP = {
     "hosts": "write this component's hosts set into /etc/hosts",
     "ros": "write ROS_MASTER_URI for this component's role into ~/.bashrc",
     "router": "let the modem forward this component's port itself (UPnP IGD, NAT-PMP, PCP)",
+    "firewall": "ROS 1: let only the peers reach the forwarded ports",
     "undo": "restore the files of the last change rosnet-tui made",
     "report": "write a shareable report: settings, results and advice",
     "sync": "keep hosts entries and ROS_MASTER_URI right when public IPs change (a service)",

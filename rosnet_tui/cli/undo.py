@@ -14,7 +14,7 @@ from rosnet_tui.cli.common import (
     state_dir_problem,
 )
 from rosnet_tui.cli.writing import confirm, err, rerun_checks, run_as_root, state_dir_of
-from rosnet_tui.core import affected, privilege
+from rosnet_tui.core import affected, firewall, privilege
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
@@ -74,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {f.path}: {what}")
     forwards = [m for m in e.mappings if m.get("state") == "made"]
     for m in forwards:
-        print(f"  the forward {describe_forward(m)}: removed from the modem")
+        print(f"  {firewall.describe(m)}" if m.get("kind") == firewall.KIND else
+              f"  the forward {describe_forward(m)}: removed from the modem")
     diff = plan.diff()
     if diff:
         sys.stdout.write(diff)
@@ -89,7 +90,9 @@ def run(args: argparse.Namespace) -> int:
         print("Dry run: nothing was restored.")
         return EXIT_OK
     if diff or forwards:
-        stop = confirm(args, "Restore these files?" if diff else "Remove these forwards?")
+        stop = confirm(args, "Restore these files?" if diff else
+                       "Put the firewall back?" if e.mappings[0].get("kind") == firewall.KIND
+                       else "Remove these forwards?")
         if stop is not None:
             return stop
     if plan.needs_privilege:
@@ -107,7 +110,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"Restored: {', '.join(str(p) for p in result.files)}")
         for line in result.forwards:
             print(line)
-    if not args.no_checks and e.mappings:
+    if not args.no_checks and any(m.get("kind") == firewall.KIND for m in e.mappings):
+        rerun_checks(affected.FIREWALL, _settings_quietly(args), state_dir=sd)
+    elif not args.no_checks and e.mappings:
         rerun_checks(affected.FORWARD, _settings_quietly(args), state_dir=sd)
     elif not args.no_checks:
         settings = _settings_quietly(args)

@@ -7,5 +7,7 @@ HOSTS = ("linux.hosts", "linux.resolve")          # the hosts file's marked bloc
 ROS_ENV = ("ros.env",)                            # the ROS block of ~/.bashrc
 ROS2_ENV = ("ros2.env",)                          # ROS 2: that block and the router's config
 FORWARD = ("router.upnp", "router.port_open")     # a forward mapped on (or removed from) the modem
-UNDO = (*HOSTS, *ROS_ENV, *ROS2_ENV, "router.upnp")   # an undo in the wizard: any of the above
+FIREWALL = ("linux.firewall",)                    # our nftables table (ROS 1's peers-only set)
+UNDO = (*HOSTS, *ROS_ENV, *ROS2_ENV, "router.upnp", *FIREWALL)   # an undo in the wizard: any of
+                                                                   # the above
 SYNC = (*HOSTS, "linux.ssh", "ros.master")        # the sync service: a peer's new address

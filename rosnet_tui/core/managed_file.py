@@ -322,7 +322,9 @@ class UndoPlan:
 
     @property
     def needs_privilege(self) -> bool:
-        return any(p.needs_privilege for p in self.previews)
+        nft = any(m.get("kind") == "nft_table" and m.get("state") == "made"
+                  for m in self.entry.mappings)
+        return any(p.needs_privilege for p in self.previews) or (nft and os.geteuid() != 0)
 
     def diff(self) -> str:
         return "".join(p.diff() for p in self.previews)
@@ -388,7 +390,7 @@ def apply_undo(plan: UndoPlan, *, force: bool = False) -> UndoResult:
         for p in plan.previews:
             _check_fresh(p)
         forwards: list[str] = []
-        if plan.entry.mappings:  # e.g. forwards on the modem: removed there (bounded), or refused
+        if plan.entry.mappings:  # forwards on the modem, our firewall table: each kind's undo
             forwards = undo_changes(plan.entry, force=force)
         restored = []
         for p, f in zip(plan.previews, plan.entry.files, strict=True):

@@ -137,13 +137,29 @@ def configure_router(s: Settings) -> str:
     parts.append(
         "**Exposure.** Forwarding every port shows SSH and the ROS master (port "
         f"{s.ros.port}) to the whole internet, and ROS 1 has no authentication: anyone who "
-        "reaches the master can drive the robot. Allow only your peers' addresses if the modem "
-        "can, and use SSH keys, not passwords.")
+        "reaches the master can drive the robot. Use SSH keys, not passwords.")
+    parts.append(_source_restriction(s))
     if bridge:
         parts.append(bridge)
     parts.append("**To verify:** a port tested from outside the modem is reported *Open* while "
                  "a listener runs on it, and *Closed* when nothing listens.")
     return "\n\n".join(parts)
+
+
+def _source_restriction(s: Settings) -> str:
+    """ROS 1: restricting the forward by source on the modem (the better place, where it can),
+    and the peers-only firewall of the Linux step (where it cannot)."""
+    peers = ", ".join(f"**{p.public_ip}** ({p.name})" for p in s.peers if p.public_ip)
+    return (
+        "**Only the peers, better on the modem.** Some modems let a forwarding rule name a "
+        "source (fields like *Remote IP*, *Source IP*, *Allowed remote host* or *External "
+        "host*; business routers: an access list on the rule). Where yours does, give each "
+        "forward (the range, 22) one rule per peer, with the peer's public address as the "
+        f"source{': ' + peers if peers else ''}. The modem then drops strangers before they reach "
+        "this machine. When a peer's public address changes, that rule must change too (the "
+        "modem has no sync). Where the modem cannot, the Linux step's firewall "
+        "(`rosnet-tui firewall apply`) does the same on this machine, and the sync service "
+        "keeps it current.")
 
 
 # --------------------------------------------------------------------------- step 3: Linux
@@ -168,6 +184,15 @@ def configure_linux(s: Settings) -> str:
         "easier to solve on a shared LAN first.",
         "**To verify:** ping, SSH and a TCP chat work by name, started from either side.",
     ]
+    if not s.ros2:
+        from rosnet_tui.core import firewall
+
+        parts.insert(-1, "**Only the peers get in (ROS 1).** " + (
+            "`rosnet-tui firewall apply` (or `w`, after the hosts set) loads an nftables table "
+            f"of ours, `{firewall.TABLE}`: on the forwarded ports (22, {PORT_MIN}-{PORT_MAX}, "
+            f"{s.ros.port}) only the peers' addresses, loopback and replies get in; no other "
+            "table is touched, and `rosnet-tui undo` removes it." if firewall.wanted(s) else
+            "`[ros] security = \"none\"`: no firewall; the forwarded ports answer anyone."))
     if s.ros2:
         parts[-1] = (f"**To verify (ROS 2):** ping and SSH by name, and the one connection ROS 2 "
                      f"needs: from each member, by name, to the master's router port "
@@ -317,7 +342,7 @@ STEPS: tuple[Step, ...] = (
          "messages over TCP by name, whichever side starts.",
          configure_linux,
          ("linux.hosts", "linux.resolve", "linux.ping", "linux.ssh", "linux.chat_out",
-          "linux.chat_in")),
+          "linux.chat_in", "linux.firewall")),
     Step("ros",
          "Every component registers with the one ROS master, and each can both publish and "
          "subscribe.",

@@ -202,6 +202,18 @@ UndoHandler = Callable[[list[dict], bool], list[str]]
 _UNDO_HANDLERS: dict[str, UndoHandler] = {}
 
 
+def record_entry(label: str, records: list[dict], *, state_dir: Path | None = None) -> str:
+    """Journal a change that is not a file (each record a dict with a ``kind`` whose undo is
+    registered); the new entry's id."""
+    sd = state_dir_path(state_dir)
+    owner = owner_for(sd)
+    with locked(sd, owner):
+        entry = JournalEntry(next_id(sd), now(), label, [], mappings=list(records))
+        save_entry(sd, entry, owner)
+        prune(sd)
+    return entry.id
+
+
 def register_undo(kind: str, handler: UndoHandler) -> None:
     """Say how changes of *kind* (``mappings`` with that ``kind``) are undone: *handler* gets the
     entry's changes of that kind and ``force``, undoes them (updating their dicts), and returns

@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from rosnet_tui.core import affected
 from rosnet_tui.core import managed_file as mf
@@ -35,6 +36,11 @@ class WritePlan:
     footnote: str = ""
     # More files written in the same apply (one undo restores all), for the option's answer.
     companions: Callable[[bool], list[mf.Preview]] = lambda _option: []
+    # A write that is not a file (the firewall): applies the preview itself (as root) instead of
+    # managed_file; raises ManagedFileError.
+    apply: Callable[[Any], object] | None = None
+    # The write offered next on the same step, once this one is closed (None: none).
+    then: Callable[[], WritePlan | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -77,7 +83,43 @@ def hosts_plan(settings: Settings, paths: WritePaths) -> WritePlan:
         sudo_command=lambda p, fix: privilege.hosts_apply_command(
             profile=profile, config=paths.config_path, digest=p.digest,
             hosts_file=paths.hosts_path, state_dir=paths.state_dir, fix_conflicts=fix),
-        after=affected.HOSTS)
+        after=affected.HOSTS,
+        then=lambda: firewall_plan(settings, paths))
+
+
+def firewall_plan(settings: Settings, paths: WritePaths) -> WritePlan | None:
+    """ROS 1 with [ros] security = "firewall": the peers-only nftables table (Linux step, after
+    the hosts set). None when the settings do not ask for it."""
+    from rosnet_tui.core import firewall as fw
+
+    if not fw.wanted(settings):
+        return None
+    profile = settings.this.profile
+
+    def make(_option: bool) -> fw.FirewallPreview:
+        try:
+            return fw.preview(settings, profile)
+        except fw.FirewallError as exc:
+            raise mf.ManagedFileError(str(exc)) from None
+
+    def apply(pv: fw.FirewallPreview) -> None:
+        try:
+            fw.apply(pv, state_dir=paths.state_dir)
+        except fw.FirewallError as exc:
+            raise mf.ManagedFileError(str(exc)) from None
+
+    return WritePlan(
+        title=f"Load the peers-only firewall (nft table {fw.TABLE})",
+        explain="ROS 1: on the forwarded TCP ports (22, the ROS range, the master's port) only "
+                "the peers, loopback and replies get in. One nft transaction; no other table "
+                "is touched. Review it:",
+        make_preview=make,
+        sudo_command=lambda p, _o: fw.apply_command(config=paths.config_path, profile=profile,
+                                                    digest=p.digest, state_dir=paths.state_dir),
+        apply=apply,
+        after=affected.FIREWALL,
+        footnote="The sync service keeps the allowed addresses current; `rosnet-tui undo` "
+                 "removes the table.")
 
 
 def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:

@@ -220,15 +220,21 @@ class StepScreen(Screen):
                                        float(settings.checks.timeout_s)), done)
 
     def action_write(self) -> None:
+        self._offer_write(self.session.write_plan(self.step.id))
+
+    def _offer_write(self, plan) -> None:
+        """Preview and apply *plan*, then offer the write that follows it (the firewall after
+        the hosts set)."""
         from rosnet_tui.ui.write_screen import WriteScreen
 
-        plan = self.session.write_plan(self.step.id)
         if plan is None:
             return
 
         def done(written: bool | None) -> None:
             if written:
                 self.run_specs([s for s in self.specs if s.id in plan.after])
+            if plan.then is not None:
+                self._offer_write(plan.then())
 
         self.app.push_screen(WriteScreen(plan, self.session.state_dir), done)
 

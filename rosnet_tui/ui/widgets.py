@@ -175,6 +175,7 @@ SHORT_TITLES = {
     "linux.ssh": "SSH by name",
     "linux.chat_out": "Chat out (we connect)",
     "linux.chat_in": "Chat in (peer connects)",
+    "linux.firewall": "Only peers get in",
     "ros.env": "ROS environment",
     "ros.master": "ROS master answers",
     "ros.node_uris": "Node addresses reachable",

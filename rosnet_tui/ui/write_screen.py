@@ -18,9 +18,9 @@ from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Button, Checkbox, Static
 
+from rosnet_tui.core import firewall, privilege
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core import privilege
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 from rosnet_tui.core.write_plans import WritePlan
 from rosnet_tui.ui.widgets import KeyBar
@@ -129,6 +129,8 @@ class WriteScreen(ModalScreen[bool]):
                                 "else was changed.", severity="error", timeout=8)
                     self.refresh_preview()
                     return
+            elif self.plan.apply is not None:   # not a file (the firewall)
+                self.plan.apply(p)
             elif extra:
                 mf.apply_previews([p, *extra], state_dir=state_dir, label=self.plan.title)
             else:
@@ -175,8 +177,9 @@ class UndoScreen(ModalScreen[bool]):
             self.query_one("#write-apply", Button).disabled = True
             return
         diff = self.plan.diff()
-        forwards = [f"Remove the forward {describe_forward(m)}" for m in self.plan.entry.mappings
-                    if m.get("state") == "made"]
+        forwards = [(firewall.describe(m) if m.get("kind") == firewall.KIND else
+                     f"Remove the forward {describe_forward(m)}")
+                    for m in self.plan.entry.mappings if m.get("state") == "made"]
         self.query_one("#write-diff", Static).update(diff_text(diff) if diff else
                                                      Text("\n".join(forwards)))
         notes = [f"Changed since by someone else: {c}" for c in self.plan.conflicts]
@@ -217,7 +220,10 @@ class UndoScreen(ModalScreen[bool]):
         except mt.ManagedFileError as exc:
             self.notify(f"Not undone: {exc}", severity="error", timeout=10)
             return
-        self.notify("Removed the forwards of the last change from the modem."
+        kinds = {m.get("kind") for m in self.plan.entry.mappings}
+        self.notify("Put the firewall back as it was before the last change."
+                    if firewall.KIND in kinds else
+                    "Removed the forwards of the last change from the modem."
                     if self.plan.entry.mappings else "Restored the files of the last write.",
                     timeout=5)
         self.dismiss(True)

@@ -20,7 +20,17 @@ The TUI's Advisor pane, ``rosnet-tui check``/``report`` and the docs all read th
 
 from __future__ import annotations
 
-from rosnet_tui.core.advisor import isp, linux, ros, ros2, rosbridge, router, router_upnp, security  # noqa: F401, E501  (declare the rules)
+from rosnet_tui.core.advisor import (  # noqa: F401  (declare the rules)
+    firewall,
+    isp,
+    linux,
+    ros,
+    ros2,
+    rosbridge,
+    router,
+    router_upnp,
+    security,
+)
 from rosnet_tui.core.advisor.docs import render_rules_markdown
 from rosnet_tui.core.advisor.engine import (
     CATCH_ALL_IDS,

@@ -58,6 +58,9 @@ RULE_ORDER: tuple[str, ...] = (
     "linux.chat.in_fails",
     "linux.chat.out_fails",
     "linux.chat.both_fail",
+    "security.firewall.stale",              # ROS 1: the peers-only table (linux.firewall)
+    "security.firewall.missing",
+    "security.firewall.off",
     # step 4: ROS
     "ros.env.master_uri",
     "ros.env.bashrc",

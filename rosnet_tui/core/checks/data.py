@@ -230,6 +230,18 @@ class LinuxSshData(TypedDict, total=False):
     peers: dict[str, SshPeer]  # by peer name (every peer, those without an SSH user too)
 
 
+class LinuxFirewallData(TypedDict, total=False):
+    security: str            # [ros] security: "firewall", "none" (opted out), "mtls" (ROS 2)
+    wanted: bool             # the settings ask for the table (ROS 1, security "firewall")
+    present: bool | None     # our table (table inet rosnet_tui) is loaded (None: not readable)
+    readable: bool | None    # nftables could be read (reading needs root)
+    allowed: list[str]       # the addresses in our set now
+    expected: list[str]      # the peers' current addresses (the profile's: public or LAN)
+    missing: list[str]       # peers' addresses not in the set (those peers are shut out)
+    extra: list[str]         # addresses in the set no peer has now (stale: a past address)
+    rules_match: bool | None  # the table's rules are the ones the settings give
+
+
 class ChatPeer(TypedDict, total=False):
     ok: bool             # the message went both ways
     failure: str | None  # where it broke: no_user, ssh:<SSH failure>, resolve, peer_resolve,
@@ -449,6 +461,7 @@ DATA: dict[str, type] = {
     "linux.ssh": LinuxSshData,
     "linux.chat_out": LinuxChatData,
     "linux.chat_in": LinuxChatData,
+    "linux.firewall": LinuxFirewallData,
     "ros.env": RosEnvData,
     "ros.master": RosMasterData,
     "ros.node_uris": RosNodeUrisData,

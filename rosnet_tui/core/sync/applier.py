@@ -16,6 +16,7 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core.bashrc import preview_bashrc
+from rosnet_tui.core.firewall import follow_for_sync
 from rosnet_tui.core.hosts import (
     PROFILE_TITLES,
     WriterSettingsError,
@@ -83,6 +84,7 @@ class Applier:
                 self.state.once(("bashrc", str(exc)), logging.WARNING,
                                 "%s is left as it is: %s", self.config.bashrc_path, exc)
         self._update_peer_status(plan)
+        follow_for_sync(plan.settings, [c.address for c in plan.choices], log)  # ROS 1 firewall
         changed = [p for p in previews if p.changed]
         if not changed:
             self.state.dirty = False

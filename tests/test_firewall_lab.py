@@ -1,0 +1,249 @@
+"""`rosnet-tui firewall` on the network lab (ROS 1): the robot loads its peers-only table; the
+laptop (a peer) still passes every Linux and ROS check, while an address that is no peer (the
+lab internet's probe address, 192.0.2.10) is dropped at the master's port and at a port of the
+range; `undo` removes our table and leaves a foreign table alone; the sync service follows a
+peer's address change with the set.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import time
+
+import pytest
+
+from tests.lab import ADDR
+from tests.sync_support.bench import goal_s
+from tests.sync_support.lab_sync import SyncRig, prepare_lab, wait_for
+
+pytest_plugins = ["tests.lab.fixtures"]
+pytestmark = pytest.mark.lab
+
+OUTSIDER = ADDR.PROBE_IP          # the internet's probe address: no peer of anyone
+RANGE_PORT = 40123
+WAIT = 30.0
+
+
+def tcp_try(source: str, host: str, port: int, timeout: float = 1.5) -> str:
+    """One TCP connection attempt from *source*: connected, refused, timeout or the error."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.settimeout(timeout)
+    try:
+        s.bind((source, 0))
+        s.connect((host, port))
+        return "connected"
+    except ConnectionRefusedError:
+        return "refused"
+    except TimeoutError:
+        return "timeout"
+    except OSError as exc:
+        return f"error: {exc}"
+    finally:
+        s.close()
+
+
+def tcp_try_any(host: str, port: int, timeout: float = 1.5) -> str:
+    return tcp_try("0.0.0.0", host, port, timeout)
+
+
+def listen(port: int) -> socket.socket:
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    s.bind(("0.0.0.0", port))
+    s.listen(16)
+    return s
+
+
+def nft(lab, host: str, *args: str):
+    return lab.run(host, ["nft", *args], timeout=10)
+
+
+def fw(lab, host: str, state, *args: str, config=None):
+    env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
+    return lab.rosnet(host, "--config", str(config or lab.config_path(host)), *args,
+                      env=env, timeout=60)
+
+
+def check(lab, host: str, state, *steps: str) -> dict[str, dict]:
+    env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
+    argv = ["check", "--json", "-q"] + [a for s in steps for a in ("--step", s)]
+    r = lab.rosnet(host, *argv, "--config", str(lab.config_path(host)), env=env, timeout=90)
+    assert r.stdout.strip(), r.stderr
+    return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+
+
+def explain(results: dict[str, dict]) -> str:
+    return "\n".join(f"{c['status']:4} {c['id']}: {c['summary']} {c['evidence']}"
+                     for c in results.values())
+
+
+@pytest.fixture
+def fw_lab(lab):
+    lab.reset()
+    yield lab
+    for host in ("robot", "laptop"):
+        nft(lab, host, "delete", "table", "inet", "rosnet_tui")
+        nft(lab, host, "delete", "table", "inet", "foreign_fw")
+    lab.reset()
+    lab.stop_roscore()
+
+
+def test_only_the_peer_gets_through_and_undo_leaves_a_foreign_table(fw_lab, tmp_path):
+    lab = fw_lab
+    lab.start_roscore()
+    # Someone else's table, which we must never touch.
+    assert nft(lab, "robot", "add", "table", "inet", "foreign_fw").returncode == 0
+    assert nft(lab, "robot", "add", "chain", "inet", "foreign_fw", "keep").returncode == 0
+    foreign = nft(lab, "robot", "list", "table", "inet", "foreign_fw").stdout
+    srv = lab.call_in("robot", listen, RANGE_PORT)
+    try:
+        # Before: the outsider reaches the master through the forward.
+        assert lab.call_in("internet", tcp_try, OUTSIDER, ADDR.ROBOT_PUBLIC, 11311) == "connected"
+
+        # The preview, then one transaction.
+        r = fw(lab, "robot", tmp_path, "firewall", "apply", "--dry-run")
+        assert r.returncode == 0, r.stderr
+        assert "+table inet rosnet_tui {" in r.stdout and ADDR.LAPTOP_PUBLIC in r.stdout
+        assert "Dry run: nothing was changed." in r.stdout
+        assert nft(lab, "robot", "list", "table", "inet", "rosnet_tui").returncode != 0
+        t0 = time.monotonic()
+        r = fw(lab, "robot", tmp_path, "firewall", "apply", "--yes")
+        print(f"firewall apply on the robot: {time.monotonic() - t0:.2f} s")
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert "Loaded the table inet rosnet_tui (journal #" in r.stdout
+        assert "PASS linux.firewall" in r.stdout, r.stdout       # the check re-run after it
+        listing = nft(lab, "robot", "list", "table", "inet", "rosnet_tui").stdout
+        assert ADDR.LAPTOP_PUBLIC in listing and "drop" in listing
+        assert nft(lab, "robot", "list", "table", "inet", "foreign_fw").stdout == foreign
+
+        # The outsider: the master's port and a port of the range are dropped.
+        for port in (11311, RANGE_PORT):
+            got = lab.call_in("internet", tcp_try, OUTSIDER, ADDR.ROBOT_PUBLIC, port)
+            assert got in ("timeout", "refused"), (port, got)
+        # The peer still gets through, to the same ports.
+        for port in (11311, RANGE_PORT):
+            assert lab.call_in("laptop", tcp_try_any, ADDR.ROBOT_PUBLIC, port) == "connected"
+
+        # From the peer, every Linux and ROS check passes; the robot's own check too.
+        laptop = check(lab, "laptop", tmp_path / "l", "linux", "ros")
+        laptop_bad = {k: c for k, c in laptop.items()
+                      if c["status"] != "pass" and k != "linux.firewall"}
+        assert not laptop_bad, explain(laptop)
+        robot = check(lab, "robot", tmp_path, "linux")
+        assert robot["linux.firewall"]["status"] == "pass", explain(robot)
+        d = robot["linux.firewall"]["data"]
+        assert d["present"] and d["allowed"] == [ADDR.LAPTOP_PUBLIC] and d["rules_match"]
+
+        # undo: our table gone, the foreign one as it was, the outsider back in.
+        r = fw(lab, "robot", tmp_path, "undo", "--yes")
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert "the firewall table inet rosnet_tui: removed (rosnet-tui created it)" in r.stdout
+        assert nft(lab, "robot", "list", "table", "inet", "rosnet_tui").returncode != 0
+        assert nft(lab, "robot", "list", "table", "inet", "foreign_fw").stdout == foreign
+        assert lab.call_in("internet", tcp_try, OUTSIDER, ADDR.ROBOT_PUBLIC, 11311) == "connected"
+        robot = check(lab, "robot", tmp_path, "linux")
+        assert robot["linux.firewall"]["status"] == "warn", explain(robot)
+        assert "rosnet-tui firewall apply" in robot["linux.firewall"]["summary"]
+    finally:
+        lab.call_in("robot", srv.close)
+
+
+def test_firewall_undo_then_undo_loads_it_again_and_bad_input_exits_2(fw_lab, tmp_path):
+    lab = fw_lab
+    assert fw(lab, "robot", tmp_path, "firewall", "apply", "--yes", "--no-checks").returncode == 0
+    before = nft(lab, "robot", "list", "table", "inet", "rosnet_tui").stdout
+    r = fw(lab, "robot", tmp_path, "firewall", "undo", "--yes", "--no-checks")
+    assert r.returncode == 0 and "Removed the table inet rosnet_tui" in r.stdout, r.stderr
+    assert nft(lab, "robot", "list", "table", "inet", "rosnet_tui").returncode != 0
+    r = fw(lab, "robot", tmp_path, "undo", "--yes", "--no-checks")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert nft(lab, "robot", "list", "table", "inet", "rosnet_tui").stdout == before
+    # Bad input: a refusal with exit 2, never a traceback, and nothing loaded.
+    bad = tmp_path / "bad.toml"
+    bad.write_text(lab.config_path("robot").read_text().replace(
+        f'public_ip = "{ADDR.LAPTOP_PUBLIC}"', 'public_ip = "not-an-ip"'))
+    for argv in (("firewall", "apply", "--yes", "--profile", "nowhere"),
+                 ("firewall", "apply", "--yes"), ("firewall", "frobnicate")):
+        r = fw(lab, "robot", tmp_path, *argv, config=bad)
+        assert r.returncode == 2, (argv, r.stdout, r.stderr)
+        assert "Traceback" not in r.stderr
+    assert nft(lab, "robot", "list", "table", "inet", "rosnet_tui").stdout == before
+
+
+def test_the_set_follows_a_peers_address_change_within_the_sync_latency(lab, tmp_path):
+    """The laptop's table allows the robot; the robot's modem restarts with a new public
+    address; the laptop's sync service replaces the set (one transaction) within the sync
+    latency, and the outsider-facing rules stay."""
+    prepare_lab(lab)
+    folder = tmp_path / "shared"
+    folder.mkdir()
+    rig = SyncRig(lab, tmp_path, "folder", folder=folder)
+    rig.configure()
+    try:
+        r = fw(lab, "laptop", tmp_path / "fw", "firewall", "apply", "--yes", "--no-checks",
+               config=rig.configs["laptop"])
+        assert r.returncode == 0, r.stdout + r.stderr
+
+        def allowed() -> str:
+            return nft(lab, "laptop", "list", "set", "inet", "rosnet_tui", "peers4").stdout
+
+        assert ADDR.ROBOT_PUBLIC in allowed()
+        rig.start()
+        assert rig.published("robot", ADDR.ROBOT_PUBLIC, WAIT), rig.log("robot")
+        new_ip = "203.0.113.78"
+        t0 = time.monotonic()
+        lab.set_robot_wan(new_ip)
+        assert wait_for(lambda: new_ip in allowed(), WAIT), rig.log("laptop")[-3000:]
+        took = time.monotonic() - t0
+        print(f"the laptop's firewall set followed the robot's new address in {took:.2f} s")
+        # No longer than the sync latency (the hosts file's budget, tests/sync_support/bench.py),
+        # plus the polling of this wait.
+        assert took <= goal_s("folder", rig.interval_s) + 0.5, took
+        assert ADDR.ROBOT_PUBLIC not in allowed()
+        assert "firewall: allowed set" in rig.log("laptop")
+        listing = nft(lab, "laptop", "list", "table", "inet", "rosnet_tui").stdout
+        assert "drop" in listing
+    finally:
+        rig.stop()
+        nft(lab, "laptop", "delete", "table", "inet", "rosnet_tui")
+        lab.reset()
+        lab.stop_roscore()
+
+
+def test_as_a_user_the_exact_sudo_command_loads_the_previewed_table(fw_lab, tmp_path,
+                                                                    monkeypatch, capsys):
+    """In process, inside the robot's namespace, as if this user were not root: a stand-in sudo
+    on PATH runs the command it is given (we are root already), so the path is exercised but the
+    password."""
+    import os
+    import sys
+
+    from rosnet_tui.cli import main
+    from rosnet_tui.core import privilege
+
+    lab = fw_lab
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "sudo").write_text('#!/bin/sh\necho "sudo $*" > "$(dirname "$0")/called"\n'
+                               '[ "$1" = "-n" ] && shift\nexec "$@"\n')
+    os.chmod(fake / "sudo", 0o755)
+    monkeypatch.setenv("PATH", f"{fake}{os.pathsep}{os.environ.get('PATH', '')}")
+    monkeypatch.setattr(privilege, "is_root", lambda: False)
+    cfg, state = lab.config_path("robot"), tmp_path / "state"
+    rc = lab.call_in("robot", main, ["--config", str(cfg), "firewall", "apply", "--yes",
+                                     "--no-checks", "--state-dir", str(state)])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    called = [x for x in (fake / "called").read_text().split() if x != "-n"]
+    assert called[:4] == ["sudo", sys.executable, "-m", "rosnet_tui"]
+    joined = " ".join(called)
+    assert "firewall apply --profile remote --expect-digest" in joined and "--yes" in joined
+    assert "needs root; running:" in out and "+table inet rosnet_tui {" in out
+    assert ADDR.LAPTOP_PUBLIC in nft(lab, "robot", "list", "table", "inet", "rosnet_tui").stdout
+    # The digest names what was previewed: another ruleset is refused, nothing loaded.
+    nft(lab, "robot", "delete", "table", "inet", "rosnet_tui")
+    r = fw(lab, "robot", state, "firewall", "apply", "--yes", "--no-checks",
+           "--expect-digest", "0" * 64, "--state-dir", str(state))
+    assert r.returncode == 1 and "not the one previewed" in r.stderr, r.stdout + r.stderr
+    assert nft(lab, "robot", "list", "table", "inet", "rosnet_tui").returncode != 0
