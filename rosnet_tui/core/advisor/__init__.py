@@ -19,7 +19,16 @@ The TUI's Advisor pane, ``rosnet-tui check``/``report`` and the docs all read th
 
 from __future__ import annotations
 
-from rosnet_tui.core.advisor import isp, linux, ros, ros2, rosbridge, router, router_upnp  # noqa: F401, E501  (declare the rules)
+from rosnet_tui.core.advisor import (  # noqa: F401  (declare the rules)
+    isp,
+    linux,
+    ros,
+    ros2,
+    ros2_tls,
+    rosbridge,
+    router,
+    router_upnp,
+)
 from rosnet_tui.core.advisor.docs import render_rules_markdown
 from rosnet_tui.core.advisor.engine import (
     CATCH_ALL_IDS,
