@@ -108,7 +108,8 @@ def run_pair(args: argparse.Namespace) -> int:
     if not res.ok:
         err(f"rosnet-tui: pairing failed: {res.detail}")
         return EXIT_FAIL
-    print(f"{res.detail.capitalize()} ({res.seconds:.1f} s). Restart the router to use it.")
+    print(f"{res.detail[:1].upper()}{res.detail[1:]} ({res.seconds:.1f} s). Restart the router "
+          "to use it.")
     return EXIT_OK
 
 
