@@ -238,3 +238,17 @@ def test_a_real_router_with_the_masters_config_admits_only_the_fleet(tmp_path):
     finally:
         proc.kill()
         proc.wait(5)
+
+
+def test_the_sync_service_renews_the_masters_certificate_before_expiry(tmp_path):
+    from rosnet_tui.core import pairing
+
+    p = fleet_tls.tls_paths(tmp_path)
+    assert pairing.renew_due(master(), p) == ([], 6 * 3600.0)   # no CA: the service makes none
+    assert not p.ca_key.exists()
+    pairing.prepare_master(master(), p)
+    old = dt.datetime.now(dt.timezone.utc) - dt.timedelta(days=380)
+    fleet_tls.issue_test_cert(p, p, "turtlebot", days=400, not_before=old)   # 20 days left
+    said, _ = pairing.renew_due(master(), p)
+    assert said and fleet_tls.cert_summary(p.node_crt)["days_left"] > 300
+    assert pairing.renew_due(master(security="none"), p) == ([], 6 * 3600.0)

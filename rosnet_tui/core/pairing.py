@@ -158,3 +158,62 @@ def report_of(text: str) -> dict[str, Any] | None:
         if line.startswith("ROSNET_ZENOH ") and "no_install" in line:
             return {"error": "no_install"}
     return None
+
+
+def renew_due(s: Settings, paths: TlsPaths, opts: Any = None) -> tuple[list[str], float]:
+    """The sync service's part: renew this component's certificate when it expires within 30
+    days (on a member over SSH, as ``ros pair --renew``). (lines to log, seconds to the next
+    look: 6 h, or 10 min after a failure)."""
+    import asyncio
+
+    from rosnet_tui.core.ros2 import mtls
+
+    if not mtls(s):
+        return [], 6 * 3600.0
+    if s.is_master:
+        if not paths.ca_key.exists():
+            return [], 6 * 3600.0     # `ros apply` makes the CA; the sync service never does
+        made = prepare_master(s, paths)
+        return [f"TLS: made {m}" for m in made], 6 * 3600.0
+    why = needs_pairing(s, paths)
+    if why is None or "expire" not in why:   # never paired: `ros apply` / `ros pair` do that
+        return [], 6 * 3600.0
+    res = asyncio.run(pair_over_ssh(s, paths, opts))
+    return [f"TLS: renewing ({why}): {res.detail}"], 6 * 3600.0 if res.ok else 600.0
+
+
+class CertRenewer:
+    """Renews the fleet certificate before it expires, on a thread of its own while the sync
+    service runs (same shape as the forwards' Renewer: ``tick`` each round)."""
+
+    def __init__(self, log: Any) -> None:
+        self.log = log
+        self.next_at = 0.0
+        self._thread: Any = None
+
+    def tick(self, settings: Settings | None, *, background: bool) -> None:
+        import copy
+        import threading
+
+        if settings is None or time.monotonic() < self.next_at or \
+                (self._thread is not None and self._thread.is_alive()):
+            return
+        self.next_at = float("inf")
+        s = copy.deepcopy(settings)
+
+        def work() -> None:
+            from rosnet_tui.core.ros2 import config_dir
+
+            try:
+                said, nxt = renew_due(s, fleet_tls.tls_paths(config_dir()))
+            except Exception as exc:  # noqa: BLE001 - a renewal's trouble must not stop the sync
+                said, nxt = [f"TLS: renewing the certificate failed: {exc}"], 600.0
+            for line in said:
+                self.log.info("%s", line)
+            self.next_at = time.monotonic() + nxt
+
+        if not background:
+            work()
+            return
+        self._thread = threading.Thread(target=work, name="certificate renewal", daemon=True)
+        self._thread.start()

@@ -29,6 +29,7 @@ from typing import Any
 from rosnet_tui.core.hosts import (
     DEFAULT_HOSTS_PATH,
 )
+from rosnet_tui.core.pairing import CertRenewer
 from rosnet_tui.core.settings import Settings, SettingsError, load_settings
 from rosnet_tui.core.upnp.forwards import Renewer
 
@@ -99,6 +100,7 @@ class SyncService(ApplyMixin, LoopMixin):
         self.use_folder_watch = watch_folder
         self.unmap_on_stop = unmap_on_stop       # remove our forwards on the modem when stopped
         self.forwards = Renewer(self.state_dir, log)  # our forwards' leases (router map)
+        self.certs = CertRenewer(log)        # ROS 2 mTLS: the fleet certificate before expiry
         self._folder_watched = False             # the loop watches the store's folder now
         self._store_fixed = store is not None
         self.store: RecordStore | None = store
@@ -291,6 +293,7 @@ class SyncService(ApplyMixin, LoopMixin):
         if self.recheck_at is not None and time.monotonic() >= self.recheck_at:
             self._recheck()
         self.forwards.tick(self.settings, background=self._lookups is not None)
+        self.certs.tick(self.settings, background=self._lookups is not None)
         self._save_status()
         errors = {k: v["message"] for k, v in self.status["errors"].items()}
         return RoundResult(not errors, applied, errors)
