@@ -32,6 +32,8 @@ def ros2(world):
     world.healthy()
     yield world
     world.remove_tls("laptop")
+    for h in ("robot", "laptop"):     # certificates may have changed: routers read them at start
+        world.stop_router(h)
     world.healthy()
 
 
@@ -107,3 +109,58 @@ def test_security_none_writes_plain_tcp(ros2):
     assert "Security is off" in r.stdout
     r = lab.rosnet("laptop", "undo", "--yes", env=ros2.env("laptop"))
     assert r.returncode == 0 and not rc.exists(), r.stderr
+
+
+def _full(ros2, host: str) -> tuple[dict, float]:
+    import json
+
+    t0 = time.monotonic()
+    r = ros2.lab.rosnet(host, "check", "--json", "--config", str(ros2.config_path(host)),
+                        env=ros2.env(host), timeout=90)
+    took = time.monotonic() - t0
+    assert r.stdout.strip(), r.stderr
+    return {c["id"]: c for c in json.loads(r.stdout)["checks"]}, took
+
+
+def _rules(entry: dict) -> list[str]:
+    return [a["rule"] for a in entry.get("advice") or []]
+
+
+def test_security_none_brings_back_plain_tcp_and_the_exposure_finding(ros2):
+    """Full verification on the master: under mTLS the open port is no finding (only the fleet
+    gets in); with security "none" the routers run plain tcp/ and security.zenoh_exposed is
+    back. Also the cost of TLS to full verification from the member's seat (printed)."""
+    times: dict[str, list[float]] = {"mtls": [], "none": []}
+    for mode in ("mtls", "none"):
+        if mode == "none":
+            ros2.set_security("none")
+        robot, _ = _full(ros2, "robot")
+        exposed = "security.zenoh_exposed" in _rules(robot["router.port_open"])
+        assert exposed == (mode == "none"), explain(robot)
+        assert robot["ros2.router"]["data"]["endpoint"] == (
+            "tls/turtlebot:7447" if mode == "mtls" else "tcp/turtlebot:7447")
+        for _ in range(3):
+            laptop, took = _full(ros2, "laptop")
+            assert all(c["status"] in ("pass", "skip") for c in laptop.values()), explain(laptop)
+            times[mode].append(took)
+    med = {m: sorted(v)[1] for m, v in times.items()}
+    print(f"full verification from the laptop, median of 3: mtls {med['mtls']:.2f} s, none "
+          f"{med['none']:.2f} s, TLS adds {med['mtls'] - med['none']:+.2f} s; all {times}")
+
+
+def test_removing_a_member_shuts_it_out_at_once(ros2):
+    """`ros pair --remove sami` on the master: a new CA (the others would be re-paired over SSH;
+    here sami is the only member); after the master's router restarts, sami's certificate from
+    the old CA is refused and ros2.router names it."""
+    lab = ros2.lab
+    old_ca = fleet_tls.ca_key_id(ros2.tls_paths("robot").ca_crt)
+    r = lab.rosnet("robot", "ros", "pair", "--remove", "sami", "--config",
+                   str(ros2.config_path("robot")), env=ros2.env("robot"))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "sami is out of the fleet" in r.stdout
+    assert fleet_tls.ca_key_id(ros2.tls_paths("robot").ca_crt) != old_ca
+    ros2.start_router("robot")
+    router = ros2.check("laptop")["ros2.router"]
+    assert router["status"] == "fail", router
+    assert router["data"]["tls"]["handshake"] in ("master_foreign_ca", "rejected_foreign"), router
+    assert "ros2.tls.foreign_ca" in [a["rule"] for a in router.get("advice") or []], router

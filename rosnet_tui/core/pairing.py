@@ -217,3 +217,28 @@ class CertRenewer:
             return
         self._thread = threading.Thread(target=work, name="certificate renewal", daemon=True)
         self._thread.start()
+
+
+async def after_apply(s: Settings, opts: Any = None) -> str:
+    """What the wizard's ``w`` on the ROS step does after writing under mTLS (as ``ros apply``):
+    the CA and certificate on the master; on a member, pairing over SSH when needed. A line for
+    the user ("" when nothing was needed)."""
+    from rosnet_tui.core.ros2 import config_dir, mtls
+
+    if not mtls(s):
+        return ""
+    paths = fleet_tls.tls_paths(config_dir())
+    try:
+        if s.is_master:
+            made = prepare_master(s, paths)
+            return ("Made " + "; ".join(made) + ".") if made else ""
+        why = needs_pairing(s, paths)
+        if why is None:
+            return ""
+        res = await pair_over_ssh(s, paths, opts)
+    except (TlsError, OSError) as exc:
+        return f"Mutual TLS: {exc}"
+    if res.ok:
+        return f"{res.detail[:1].upper()}{res.detail[1:]} ({res.seconds:.1f} s)."
+    return (f"Pairing failed: {res.detail}. Without SSH to the master: `rosnet-tui ros pair "
+            "--print-request` here, `--sign` there, `--install` here.")

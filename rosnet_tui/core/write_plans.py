@@ -7,7 +7,7 @@ block of ~/.bashrc) write files.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,6 +32,9 @@ class WritePlan:
     footnote: str = ""
     # More files written in the same apply (one undo restores all), for the option's answer.
     companions: Callable[[bool], list[mf.Preview]] = lambda _option: []
+    # Run after a successful write (ROS 2 mutual TLS: make the CA, or pair with the master);
+    # returns a line for the user ("": nothing to say).
+    after_write: Callable[[], Awaitable[str]] | None = None
 
 
 @dataclass(frozen=True)
@@ -78,8 +81,9 @@ def hosts_plan(settings: Settings, paths: WritePaths) -> WritePlan:
 
 
 def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:
-    """ROS 2: the ~/.bashrc block and the Zenoh router's config file, in one apply."""
-    from rosnet_tui.core import ros2
+    """ROS 2: the ~/.bashrc block and the Zenoh router's config file, in one apply; under
+    mutual TLS then the fleet CA (master) or pairing with the master over SSH (member)."""
+    from rosnet_tui.core import pairing, ros2
 
     def make(client: bool) -> list[mf.Preview]:
         return ros2.previews(settings, paths.bashrc_path, client=client,
@@ -94,7 +98,8 @@ def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:
         companions=lambda client: make(client)[1:],
         option_label=("no router on this machine: its nodes connect to the master's router in "
                       "client mode") if member else "",
-        after=("ros2.env",),
+        after=("ros2.env", "ros2.router") if ros2.mtls(settings) else ("ros2.env",),
+        after_write=lambda: pairing.after_apply(settings),
         footnote="Then start the router: ros2 run rmw_zenoh_cpp rmw_zenohd (the master's first). "
                  "For the shell you are in now: " + "; ".join(ros2.shell_lines(settings)))
 

@@ -178,10 +178,6 @@ class SetupScreen(Screen[bool]):
                 yield Label("ROS", classes="field-label")
                 yield Select(ROS_VERSION_OPTIONS, value=s.ros.version if s.ros.version in (1, 2)
                              else 1, allow_blank=False, id="ros-version", compact=True)
-            with Horizontal(classes="field"):
-                yield Label("Security", classes="field-label")
-                yield Select(SECURITY_OPTIONS, value="none" if s.ros.security == "none" else "on",
-                             allow_blank=False, id="ros-security", compact=True)
             with Horizontal(classes="field", id="zenoh-field"):
                 yield Label("Zenoh port", classes="field-label")
                 yield OrderedInput(str(s.ros.zenoh_port), id="ros-zenoh-port", compact=True,
@@ -214,6 +210,10 @@ class SetupScreen(Screen[bool]):
                                    id="rosbridge-host", compact=True,
                                    validators=[CoreValidator(validate_optional_name)])
             yield Label("", id="rosbridge-host-error", classes="field-error")
+            with Horizontal(classes="field"):
+                yield Label("Security", classes="field-label")
+                yield Select(SECURITY_OPTIONS, value="none" if s.ros.security == "none" else "on",
+                             allow_blank=False, id="ros-security", compact=True)
             yield Static("Peers  (name · local IP · public IP · SSH user, optional)",
                          classes="section")
             with Vertical(id="peer-rows"):
