@@ -252,3 +252,30 @@ def test_the_sync_service_renews_the_masters_certificate_before_expiry(tmp_path)
     said, _ = pairing.renew_due(master(), p)
     assert said and fleet_tls.cert_summary(p.node_crt)["days_left"] > 300
     assert pairing.renew_due(master(security="none"), p) == ([], 6 * 3600.0)
+
+
+def test_ros_apply_on_the_master_makes_the_ca_and_writes_the_tls_config(tmp_path):
+    home = tmp_path / "m"
+    (home / "rosnet-tui").mkdir(parents=True)
+    (home / "rosnet-tui" / "config.toml").write_text(render_settings(master()))
+    rc, bashrc = tmp_path / "router.json5", tmp_path / "bashrc"
+    r = _cli(home, "ros", "apply", "--yes", "--no-checks", "--file", str(bashrc),
+             "--router-config", str(rc), "--state-dir", str(tmp_path / "state"))
+    assert r.returncode == 0, r.stdout + r.stderr
+    p = fleet_tls.tls_paths(home / "rosnet-tui")
+    assert "Made the fleet CA" in r.stdout and stat.S_IMODE(p.ca_key.stat().st_mode) == 0o600
+    cfg = ros2.loads_json5(rc.read_text())
+    assert cfg["listen"]["endpoints"][0] == "tls/10.10.10.1:7447"
+    assert cfg["transport"]["link"]["tls"]["listen_certificate"] == str(p.node_crt)
+    again = _cli(home, "ros", "apply", "--yes", "--no-checks", "--file", str(bashrc),
+                 "--router-config", str(rc), "--state-dir", str(tmp_path / "state"))
+    assert again.returncode == 0 and "Made" not in again.stdout     # made once
+    # a member that cannot reach its master over SSH is told the text path, exit 1
+    mem = tmp_path / "s"
+    (mem / "rosnet-tui").mkdir(parents=True)
+    s = member()
+    s.peers[0].ssh_user = ""
+    (mem / "rosnet-tui" / "config.toml").write_text(render_settings(s))
+    r = _cli(mem, "ros", "apply", "--yes", "--no-checks", "--file", str(tmp_path / "b2"),
+             "--router-config", str(tmp_path / "r2.json5"), "--state-dir", str(tmp_path / "s2"))
+    assert r.returncode == 1 and "--print-request" in r.stderr and "Traceback" not in r.stderr

@@ -164,3 +164,31 @@ def test_removing_a_member_shuts_it_out_at_once(ros2):
     assert router["status"] == "fail", router
     assert router["data"]["tls"]["handshake"] in ("master_foreign_ca", "rejected_foreign"), router
     assert "ros2.tls.foreign_ca" in [a["rule"] for a in router.get("advice") or []], router
+
+
+def test_a_member_pairs_from_the_wizard_in_one_flow(ros2, tmp_path):
+    """The wizard on the laptop (Pilot, headless, in the laptop's namespace): ROS step, `w`, `y`:
+    the ROS 2 files are written and the master signs the laptop's certificate over SSH, within
+    5 s; the router started from the written config then passes every ros2.* check."""
+    import json
+    import sys
+
+    from tests.lab.lab import REPO
+
+    lab = ros2.lab
+    ros2.stop_router("laptop")
+    ros2.remove_tls("laptop")
+    env = ros2.env("laptop")
+    env["PYTHONPATH"] = str(REPO)
+    r = lab.run("laptop", [sys.executable, "-m", "tests.ui_support.drive_pair",
+                           str(ros2.config_path("laptop")), str(tmp_path / "state"),
+                           str(lab.bashrc_path("laptop"))], timeout=120, env=env)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-4000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    print(f"wizard: y to certificate installed {out['paired_s']} s")
+    assert out["screen"] == "WriteScreen" and out["paired_s"] is not None, out
+    assert out["paired_s"] <= 5.0
+    assert '"tls/turtlebot:7447"' in ros2.router_config_path("laptop").read_text()
+    ros2.start_router("laptop")
+    results = ros2.check("laptop")
+    assert all(c["status"] == "pass" for c in results.values()), explain(results)
