@@ -146,13 +146,13 @@ async def pair_over_ssh(s: Settings, paths: TlsPaths, opts: Any = None,
 
 def report_of(text: str) -> dict[str, Any] | None:
     """The ``ROSNET_TLS`` line of the master's answer (the last one), or None."""
-    import json
+    from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
 
     for line in reversed((text or "").splitlines()):
         if line.startswith(fleet_tls.REPORT_PREFIX):
             try:
-                value = json.loads(line[len(fleet_tls.REPORT_PREFIX):])
-            except ValueError:
+                value = loads_bounded(line[len(fleet_tls.REPORT_PREFIX):])
+            except JsonInputError:
                 return None
             return value if isinstance(value, dict) else None
         if line.startswith("ROSNET_ZENOH ") and "no_install" in line:
