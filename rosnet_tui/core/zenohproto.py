@@ -435,6 +435,17 @@ def peer_endpoint(env: dict[str, str], local: str) -> tuple[str, str]:
     return local, "router"
 
 
+def override_tls(env: dict[str, str]) -> dict[str, Any]:
+    """The ``transport/link/tls/*`` keys of ZENOH_CONFIG_OVERRIDE (a lone node under mutual TLS:
+    its certificate, written by ``ros apply --client``), as a tls dict for open_client."""
+    out: dict[str, Any] = {}
+    for m in re.finditer(r'transport/link/tls/(\w+)\s*=\s*("(?:[^"\\]|\\.)*"|true|false)',
+                         env.get("ZENOH_CONFIG_OVERRIDE", "")):
+        v = m.group(2)
+        out[m.group(1)] = v == "true" if v in ("true", "false") else v[1:-1]
+    return out
+
+
 def session_mode(how: str) -> str:
     """The Zenoh mode of a node that connects *how* (``router`` means: a peer of that router)."""
     return "client" if how == "client" else "peer"
@@ -461,7 +472,8 @@ def run_program(argv: list[str]) -> int:
     domain = int(a.get("domain", env.get("ROS_DOMAIN_ID") or "0") or 0)
     base.update(endpoint=endpoint, how=how, domain=domain)
     try:
-        session = open_client(endpoint, min(2.0, timeout * 0.4), session_mode(how))
+        session = open_client(endpoint, min(2.0, timeout * 0.4), session_mode(how),
+                              override_tls(env) if endpoint.startswith("tls/") else None)
     except OpenFailed as exc:
         _report(error="open", detail=f"{endpoint}: {exc}", **base)
         return 0
