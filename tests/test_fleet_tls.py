@@ -283,3 +283,23 @@ def test_ros_apply_on_the_master_makes_the_ca_and_writes_the_tls_config(tmp_path
     r = _cli(mem, "ros", "apply", "--yes", "--no-checks", "--file", str(tmp_path / "b2"),
              "--router-config", str(tmp_path / "r2.json5"), "--state-dir", str(tmp_path / "s2"))
     assert r.returncode == 1 and "--print-request" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_undo_after_turning_mtls_on_restores_the_plain_configs(tmp_path):
+    home = tmp_path / "m"
+    (home / "rosnet-tui").mkdir(parents=True)
+    cfg = home / "rosnet-tui" / "config.toml"
+    rc, bashrc, state = tmp_path / "router.json5", tmp_path / "bashrc", tmp_path / "state"
+    args = ("--yes", "--no-checks", "--file", str(bashrc), "--router-config", str(rc),
+            "--state-dir", str(state))
+    cfg.write_text(render_settings(master(security="none")))
+    r = _cli(home, "ros", "apply", *args)
+    assert r.returncode == 0 and "Security is off" in r.stdout, r.stderr
+    plain = rc.read_text()
+    assert '"tcp/0.0.0.0:7447"' in plain and "tls" not in plain
+    cfg.write_text(render_settings(master()))
+    assert _cli(home, "ros", "apply", *args).returncode == 0
+    assert '"enable_mtls": true' in rc.read_text()
+    u = _cli(home, "undo", "--yes", "--state-dir", str(state))
+    assert u.returncode == 0, u.stderr
+    assert rc.read_text() == plain
