@@ -167,7 +167,7 @@ def test_router_and_session_configs_under_mtls(tmp_path):
     assert sess["transport"]["link"]["tls"]["connect_private_key"] == str(p.node_key)
     values, bad = ros2.parse_override(ros2.client_override(member(), p))
     assert bad == [] and values["transport/link/tls/connect_certificate"] == str(p.node_crt)
-    from rosnet_tui.core import zenohproto   # a peer's lone client node dials with these keys
+    from rosnet_tui.core import zenohproto  # a peer's lone client node dials with these keys
     env = {"ZENOH_CONFIG_OVERRIDE": ros2.client_override(member(), p)}
     assert zenohproto.peer_endpoint(env, "x") == ("tls/turtlebot:7447", "client")
     assert zenohproto.override_tls(env) == ros2.tls_settings(member(), p, listen=False)
