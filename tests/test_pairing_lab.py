@@ -32,6 +32,8 @@ def ros2(world):
     world.healthy()
     yield world
     world.remove_tls("laptop")
+    from rosnet_tui.core import pairing  # the master's own certificate back to its name
+    pairing.prepare_master(world.settings("robot"), world.tls_paths("robot"), renew=True)
     for h in ("robot", "laptop"):     # certificates may have changed: routers read them at start
         world.stop_router(h)
     world.healthy()
@@ -192,3 +194,17 @@ def test_a_member_pairs_from_the_wizard_in_one_flow(ros2, tmp_path):
     ros2.start_router("laptop")
     results = ros2.check("laptop")
     assert all(c["status"] == "pass" for c in results.values()), explain(results)
+
+
+def test_a_master_certificate_with_the_wrong_name_is_named(ros2):
+    """The master's router certificate names another host than the one members dial: the
+    member's TLS handshake says so, and the advisor's rule points at the master."""
+    robot = ros2.tls_paths("robot")
+    fleet_tls.issue_test_cert(robot, robot, "robot-old-name")
+    ros2.start_router("robot")
+    router = ros2.check("laptop")["ros2.router"]
+    assert router["status"] == "fail", router
+    assert router["data"]["tls"]["handshake"] == "wrong_name", router
+    assert "ros2.tls.wrong_name" in [a["rule"] for a in router.get("advice") or []], router
+    robot_view = ros2.check("robot")["ros2.router"]
+    assert robot_view["data"]["tls"]["problem"] == "wrong_name", robot_view
