@@ -190,6 +190,7 @@ def test_a_member_pairs_from_the_wizard_in_one_flow(ros2, tmp_path):
     print(f"wizard: y to certificate installed {out['paired_s']} s")
     assert out["screen"] == "WriteScreen" and out["paired_s"] is not None, out
     assert out["paired_s"] <= 5.0
+    assert out["after"]["ros2.env"] == "pass", out   # re-run after the write, as in the wizard
     assert '"tls/turtlebot:7447"' in ros2.router_config_path("laptop").read_text()
     ros2.start_router("laptop")
     results = ros2.check("laptop")

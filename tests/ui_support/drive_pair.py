@@ -18,6 +18,7 @@ from rosnet_tui.core import fleet_tls
 from rosnet_tui.core.ros2 import config_dir
 from rosnet_tui.core.settings import load_settings
 from rosnet_tui.ui.app import AppDeps, RosnetApp
+from rosnet_tui.ui.widgets import CheckList
 
 LIMIT_S = 15.0
 
@@ -42,6 +43,14 @@ async def drive(config: Path, state_dir: Path, bashrc: Path) -> dict:
             await pilot.pause(0.05)
         if crt.exists():
             out["paired_s"] = round(time.monotonic() - t0, 2)
+        # the checks re-run after the write (ros2.env, ros2.router): let them finish, bounded,
+        # so no Zenoh session is left open while the interpreter exits
+        rows = app.screen.query_one(CheckList).rows
+        deadline = time.monotonic() + LIMIT_S
+        while time.monotonic() < deadline and any(r.state == "running" for r in rows.values()):
+            await pilot.pause(0.1)
+        out["after"] = {cid: r.state for cid, r in rows.items() if cid in ("ros2.env",
+                                                                           "ros2.router")}
     return out
 
 
