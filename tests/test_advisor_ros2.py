@@ -134,5 +134,32 @@ ROS2_CASES = {
         "cgnat": True, "double_nat": False, "hop": "100.64.0.1", "method": "traceroute"}, "isp")),
     "security.zenoh_exposed": _case(master, r("router.port_open", "pass", {
         "zenoh_port": 7447, "zenoh_port_open": True, "zenoh_listener": "router", "ports": []},
-        "router")),
+        "router")),    # mutual TLS (ros2.router's tls data)
+    "ros2.tls.missing": _case(member, r("ros2.router", "fail", {
+        "security": "mtls", "tls": {"problem": "missing"}, "endpoint": "tls/turtlebot:7447"})),
+    "ros2.tls.foreign_ca": _case(member, r("ros2.router", "fail", {
+        "security": "mtls", "endpoint": "tls/turtlebot:7447",
+        "tls": {"problem": "foreign_ca", "cn": "sami", "not_after": "2027-12-01T00:00:00+00:00",
+                "handshake": "rejected_foreign"}})),
+    "ros2.tls.expired": _case(member, r("ros2.router", "fail", {
+        "security": "mtls", "endpoint": "tls/turtlebot:7447",
+        "tls": {"problem": "expired", "cn": "sami", "not_after": "2026-01-01T00:00:00+00:00",
+                "handshake": "rejected_expired"}})),
+    "ros2.tls.wrong_name": _case(member, r("ros2.router", "fail", {
+        "security": "mtls", "endpoint": "tls/turtlebot:7447",
+        "tls": {"problem": None, "cn": "sami", "handshake": "wrong_name"}})),
 }
+
+
+def test_mtls_closes_the_exposure_finding_and_security_none_keeps_it():
+    port = r("router.port_open", "pass", {"zenoh_port": 7447, "zenoh_port_open": True,
+                                          "zenoh_listener": "router", "ports": []}, "router")
+    on = r("ros2.router", "pass", {"security": "mtls", "tls": {"problem": None}})
+    off = r("ros2.router", "pass", {"security": "none"})
+    assert "security.zenoh_exposed" not in ids(advise([port, on], master()))
+    assert "security.zenoh_exposed" in ids(advise([port, off], master(security="none")))
+    expiring = r("ros2.router", "warn", {"security": "mtls", "tls": {
+        "problem": "expiring", "not_after": "2026-12-01T00:00:00+00:00"}})
+    fs = advise([expiring], member())
+    assert ids(fs)[:1] == ["ros2.tls.expired"] and "2026-12-01" in fs[0].meaning
+

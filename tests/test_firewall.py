@@ -91,11 +91,11 @@ def test_listing_layout_does_not_count_as_a_change():
 
 
 def test_security_is_read_in_one_place_with_the_versions_default():
-    assert fw.security_mode(robot()) == "firewall" and fw.wanted(robot())
+    assert robot().ros.security == "firewall" and fw.wanted(robot())
     s = robot()
     s.ros.security = "none"     # the setting S1 adds; read through getattr until then
-    assert fw.security_mode(s) == "none" and not fw.wanted(s)
-    assert fw.security_mode(robot(version=2)) == "mtls" and not fw.wanted(robot(version=2))
+    assert s.ros.security == "none" and not fw.wanted(s)
+    assert robot(version=2).ros.security == "mtls" and not fw.wanted(robot(version=2))
 
 
 def _cli(tmp_path, *args, settings: Settings | None = None):

@@ -112,25 +112,25 @@ def test_the_peer_program_says_when_zenoh_is_missing(tmp_path):
 
 # --------------------------------------------------------------------------- configuration
 def test_router_configs_per_role():
-    m, s = ros2.router_config(master()), ros2.router_config(member())
+    m, s = ros2.router_config(master(security="none")), ros2.router_config(member(security="none"))
     assert m["listen"]["endpoints"] == ["tcp/0.0.0.0:7447"] and m["connect"]["endpoints"] == []
     assert s["connect"]["endpoints"] == ["tcp/turtlebot:7447"]
-    other = ros2.router_config(master(zenoh_port=17447))["listen"]["endpoints"]
+    other = ros2.router_config(master(zenoh_port=17447, security="none"))["listen"]["endpoints"]
     assert other == ["tcp/0.0.0.0:17447", "tcp/127.0.0.1:7447"]
-    text = ros2.render_router_config(member())
+    text = ros2.render_router_config(member(security="none"))
     assert text.startswith(ros2.MANAGED_HEADER) and ros2.loads_json5(text) == s
-    assert ros2.router_config_problems(member(), ["tcp/[::]:7447"], [], True)
-    assert "no IPv6" in ros2.router_config_problems(master(), ["tcp/[::]:7447"], [], False)[0]
-    assert "loopback" in ros2.router_config_problems(master(), ["tcp/127.0.0.1:7447"], [], True)[0]
-    assert ros2.router_config_problems(master(), ["tcp/0.0.0.0:7447"], [], False) == []
+    assert ros2.router_config_problems(member(security="none"), ["tcp/[::]:7447"], [], True)
+    assert "no IPv6" in ros2.router_config_problems(master(security="none"), ["tcp/[::]:7447"], [], False)[0]
+    assert "loopback" in ros2.router_config_problems(master(security="none"), ["tcp/127.0.0.1:7447"], [], True)[0]
+    assert ros2.router_config_problems(master(security="none"), ["tcp/0.0.0.0:7447"], [], False) == []
 
 
 def test_override_parsing_and_the_lone_node_rules():
-    values, bad = ros2.parse_override(ros2.client_override(member()))
+    values, bad = ros2.parse_override(ros2.client_override(member(security="none")))
     assert bad == [] and values == {"mode": "client", "connect/endpoints": ["tcp/turtlebot:7447"]}
-    assert ros2.override_problems(member(), values) == []
+    assert ros2.override_problems(member(security="none"), values) == []
     peer, _ = ros2.parse_override('mode="peer";connect/endpoints=["tcp/turtlebot:7447"]')
-    assert "peers connected straight" in ros2.override_problems(member(), peer)[0]
+    assert "peers connected straight" in ros2.override_problems(member(security="none"), peer)[0]
     assert ros2.parse_override("mode")[1]
 
 
@@ -140,22 +140,22 @@ def test_ros_apply_writes_both_files_and_refuses_a_foreign_config(tmp_path):
 
     rc, bashrc = tmp_path / "router.json5", tmp_path / "bashrc"
     bashrc.write_text("# mine\n")
-    ps = ros2.previews(member(), bashrc, router_config_path=rc, distro="jazzy")
+    ps = ros2.previews(member(security="none"), bashrc, router_config_path=rc, distro="jazzy")
     mf.apply_previews(ps, state_dir=tmp_path / "state")
     text = bashrc.read_text()
     assert text.startswith("# mine\n# BEGIN rosnet-tui") and f"ZENOH_ROUTER_CONFIG_URI={rc}" in text
     assert json.loads(rc.read_text().split("\n", 4)[4])["connect"]["endpoints"] == [
         "tcp/turtlebot:7447"]
-    client = ros2.previews(member(), bashrc, client=True, router_config_path=rc, distro="jazzy")
+    client = ros2.previews(member(security="none"), bashrc, client=True, router_config_path=rc, distro="jazzy")
     assert len(client) == 1 and "ZENOH_CONFIG_OVERRIDE='mode=\"client\"" in client[0].new.decode()
-    humble = ros2.previews(member(), bashrc, client=True, distro="humble",
+    humble = ros2.previews(member(security="none"), bashrc, client=True, distro="humble",
                            session_config_path=tmp_path / "s.json5")
     assert "ZENOH_SESSION_CONFIG_URI" in humble[0].new.decode() and len(humble) == 2
     mf.undo_last(tmp_path / "state")
     assert bashrc.read_text() == "# mine\n" and not rc.exists()
     rc.write_text("{ mode: 'router' }  // my own\n")
     with pytest.raises(mt.ManagedFileError, match="not written by rosnet-tui"):
-        ros2.previews(member(), bashrc, router_config_path=rc)
+        ros2.previews(member(security="none"), bashrc, router_config_path=rc)
 
 
 def test_steps_text_per_role():

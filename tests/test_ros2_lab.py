@@ -49,6 +49,7 @@ def test_healthy_network_passes_every_ros2_check_from_either_seat(ros2):
         assert all(c["status"] == "pass" for c in results.values()), explain(results)
         assert results["ros2.pubsub_out"]["data"]["peer"] == peer
         assert results["ros2.router"]["data"]["router_version"].startswith("v1.")
+        assert results["ros2.router"]["data"]["endpoint"] == "tls/turtlebot:7447"   # mTLS default
         nodes = {n["name"]: n["component"] for n in results["ros2.graph"]["data"]["nodes"]}
         assert nodes == {"/talker": "turtlebot", "/listener": "sami"}, nodes
     ros2.lab.kill(talker)
@@ -115,6 +116,7 @@ def test_port_not_forwarded_fails_fast_and_names_the_forward(ros2):
 
 
 def test_a_remote_node_in_peer_mode_is_graph_seen_data_dropped(ros2):
+    ros2.set_security("none")   # the trap of a plain lone peer (the stand-in node speaks tcp/)
     ros2.stop_router("laptop")
     ros2.write_bashrc("laptop", ZENOH_ROUTER_CONFIG_URI="",
                       ZENOH_CONFIG_OVERRIDE='mode="peer";connect/endpoints=["tcp/turtlebot:7447"]')
@@ -174,7 +176,7 @@ def test_ros_apply_writes_what_the_lab_router_runs_and_undo_restores(ros2):
                    str(ros2.config_path("laptop")), "--router-config", str(rc),
                    env=ros2.env("laptop"))
     assert r.returncode == 0, r.stderr
-    assert '"tcp/turtlebot:7447"' in rc.read_text()
+    assert '"tls/turtlebot:7447"' in rc.read_text() and '"enable_mtls": true' in rc.read_text()
     assert "export RMW_IMPLEMENTATION=rmw_zenoh_cpp" in lab.bashrc_path("laptop").read_text()
     ros2.start_router("laptop")
     results = ros2.check("laptop")

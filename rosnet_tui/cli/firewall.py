@@ -111,7 +111,7 @@ def run_apply(args: argparse.Namespace) -> int:
             "nothing was changed. Look at the new preview and apply again.")
         return EXIT_FAIL
     if not fw.wanted(settings):
-        print(f"note: [ros] security is \"{fw.security_mode(settings)}\" in the settings; the "
+        print(f"note: [ros] security is \"{settings.ros.security}\" in the settings; the "
               "table is loaded because you asked (the check keeps reporting the setting)")
     print(f"Firewall for {settings.this.name or 'this component'}: table {fw.TABLE}, "
           f"allowed ({profile} profile): {', '.join(pv.addresses)}")
@@ -153,7 +153,7 @@ def run_show(args: argparse.Namespace) -> int:
     if settings is None:
         return EXIT_USAGE
     profile = args.profile or settings.this.profile
-    print(f"[ros] security: {fw.security_mode(settings)}"
+    print(f"[ros] security: {settings.ros.security}"
           + ("" if fw.wanted(settings) else " (no firewall wanted by the settings)"))
     if settings.ros2:
         print("ROS 2: the firewall is not used (mutual TLS guards the Zenoh port).")

@@ -12,6 +12,7 @@ import os
 import sys
 from pathlib import Path
 
+from rosnet_tui.cli import ros_pair
 from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option
 from rosnet_tui.cli.writing import (
     add_writer_options,
@@ -63,6 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--client", action="store_true",
                    help="ROS 2: the lines of a lone node in client mode")
     e.set_defaults(func=run_export)
+    ros_pair.register(rs)
 
 
 def _decide_comment(args: argparse.Namespace, path: Path) -> bool:
@@ -178,6 +180,41 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
         print(f"  {line}")
     if not (args.client and not settings.is_master):
         print("Then start the router: ros2 run rmw_zenoh_cpp rmw_zenohd")
+    rc = _fleet_tls(settings) if ros2.mtls(settings) else EXIT_OK
+    if not ros2.mtls(settings):
+        print("Security is off ([ros] security = \"none\"): anyone who reaches the master's "
+              f"port {settings.ros.zenoh_port} can join the ROS graph.")
     if not args.no_checks:
-        rerun_checks(affected.ROS2_ENV, settings, bashrc_path=path, state_dir=state_dir_of(args))
-    return EXIT_OK
+        rerun_checks(affected.ros2_write(ros2.mtls(settings)), settings, bashrc_path=path,
+                     state_dir=state_dir_of(args))
+    return rc
+
+
+def _fleet_tls(settings) -> int:
+    """Mutual TLS: the fleet CA and the master's certificate on the master; on a member, its
+    certificate signed by the master over SSH (when it has none good for 30 days more)."""
+    import asyncio
+
+    from rosnet_tui.core import fleet_tls, pairing
+
+    paths = fleet_tls.tls_paths(ros2.config_dir())
+    try:
+        if settings.is_master:
+            for what in pairing.prepare_master(settings, paths):
+                print(f"Made {what}.")
+            return EXIT_OK
+        why = pairing.needs_pairing(settings, paths)
+        if why is None:
+            return EXIT_OK
+        print(f"Pairing with the master ({why}):")
+        res = asyncio.run(pairing.pair_over_ssh(settings, paths))
+    except (fleet_tls.TlsError, OSError) as exc:
+        err(f"rosnet-tui: {exc}")
+        return EXIT_FAIL
+    if res.ok:
+        print(f"  {res.detail} ({res.seconds:.1f} s).")
+        return EXIT_OK
+    err(f"rosnet-tui: pairing failed: {res.detail}\n  Without SSH to the master: "
+        "`rosnet-tui ros pair --print-request` here, paste it into `rosnet-tui ros pair --sign` "
+        "on the master, and what that prints into `rosnet-tui ros pair --install` here.")
+    return EXIT_FAIL

@@ -6,8 +6,14 @@ from __future__ import annotations
 HOSTS = ("linux.hosts", "linux.resolve")          # the hosts file's marked block
 ROS_ENV = ("ros.env",)                            # the ROS block of ~/.bashrc
 ROS2_ENV = ("ros2.env",)                          # ROS 2: that block and the router's config
+ROS2_TLS = ("ros2.router",)                       # ROS 2 under mTLS: the fleet certificates
 FORWARD = ("router.upnp", "router.port_open")     # a forward mapped on (or removed from) the modem
 FIREWALL = ("linux.firewall",)                    # our nftables table (ROS 1's peers-only set)
 UNDO = (*HOSTS, *ROS_ENV, *ROS2_ENV, "router.upnp", *FIREWALL)   # an undo in the wizard: any of
                                                                    # the above
 SYNC = (*HOSTS, "linux.ssh", "ros.master")        # the sync service: a peer's new address
+
+
+def ros2_write(mtls: bool) -> tuple[str, ...]:
+    """What `ros apply` (or the wizard's `w`) on a ROS 2 component affects."""
+    return ROS2_ENV + ROS2_TLS if mtls else ROS2_ENV

@@ -61,17 +61,9 @@ class FirewallSettingsError(FirewallError):
 
 
 # --------------------------------------------------------------------------- what is wanted
-def security_mode(settings: Settings) -> str:
-    """``[ros] security``: the ONE place it is read here (S1 adds the setting; until then the
-    ROS 1 default, "firewall", or "mtls" for ROS 2)."""
-    default = "mtls" if settings.ros2 else "firewall"
-    value = getattr(settings.ros, "security", default) or default
-    return value if value in MODES else default
-
-
 def wanted(settings: Settings) -> bool:
     """True when this component should have the peers-only table (ROS 1, security firewall)."""
-    return not settings.ros2 and security_mode(settings) == "firewall"
+    return not settings.ros2 and settings.ros.security == "firewall"
 
 
 def forwarded_ports(settings: Settings) -> list[str]:
@@ -298,7 +290,7 @@ def preview(settings: Settings, profile: str | None = None) -> FirewallPreview:
     ruleset = render_ruleset(settings, addresses)
     notes = []
     if not wanted(settings):
-        notes.append(f"[ros] security is '{security_mode(settings)}'"
+        notes.append(f"[ros] security is '{settings.ros.security}'"
                      + (" (ROS 2: mTLS protects the Zenoh port)" if settings.ros2 else "")
                      + "; the table is written because you asked for it")
     try:

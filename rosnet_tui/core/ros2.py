@@ -18,6 +18,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.fleet_tls import TlsPaths, tls_paths
 from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
 from rosnet_tui.core.settings_model import Settings
 
@@ -31,9 +32,15 @@ UPSTREAM_LISTEN = ("tcp/[::]:7447",)     # rmw_zenohd's own default listen endpo
 
 
 # --------------------------------------------------------------------------- endpoints
+def mtls(s: Settings) -> bool:
+    """Whether the link across the internet is mutual TLS ([ros] security = "mtls")."""
+    return s.ros2 and s.ros.security == "mtls"
+
+
 def master_endpoint(s: Settings) -> str:
-    """``tcp/<master name>:<zenoh_port>``: where every member's router (or lone node) connects."""
-    return f"tcp/{s.master_name or 'MASTER'}:{s.ros.zenoh_port}"
+    """``tls/<master name>:<zenoh_port>`` (``tcp/`` with security "none"): where every member's
+    router (or lone node) connects."""
+    return f"{'tls' if mtls(s) else 'tcp'}/{s.master_name or 'MASTER'}:{s.ros.zenoh_port}"
 
 
 def local_endpoint() -> str:
@@ -44,6 +51,16 @@ def local_endpoint() -> str:
 def listen_endpoints(s: Settings) -> list[str]:
     """What this component's router listens on: IPv4 everywhere, the forwarded port on the master
     (plus 7447 on loopback for its own nodes when the forwarded port is another one)."""
+    if s.is_master and mtls(s):
+        # TLS for the forward, plain TCP on loopback for this machine's nodes. Both on one port
+        # cannot be (a wildcard listener takes loopback too): on rmw_zenoh's port the TLS
+        # listener binds the LAN address the modem forwards to.
+        same = s.ros.zenoh_port == NODE_ROUTER_PORT
+        host = (s.this.local_ip or "0.0.0.0") if same else "0.0.0.0"
+        eps = [f"tls/{host}:{s.ros.zenoh_port}"]
+        if not (same and host == "0.0.0.0"):
+            eps.append(f"tcp/127.0.0.1:{NODE_ROUTER_PORT}")
+        return eps
     if s.is_master:
         eps = [f"tcp/0.0.0.0:{s.ros.zenoh_port}"]
         if s.ros.zenoh_port != NODE_ROUTER_PORT:
@@ -57,9 +74,30 @@ def connect_endpoints(s: Settings) -> list[str]:
     return [] if s.is_master else [master_endpoint(s)]
 
 
-def client_override(s: Settings) -> str:
-    """ZENOH_CONFIG_OVERRIDE of a lone node (no router here): client mode, straight to the master."""
-    return f'mode="client";connect/endpoints={json.dumps([master_endpoint(s)])}'
+def client_override(s: Settings, tls: TlsPaths | None = None) -> str:
+    """ZENOH_CONFIG_OVERRIDE of a lone node (no router here): client mode, straight to the master
+    (with its certificate under mTLS)."""
+    out = f'mode="client";connect/endpoints={json.dumps([master_endpoint(s)])}'
+    for key, value in tls_settings(s, tls, listen=False).items():
+        out += f";transport/link/tls/{key}={json.dumps(value)}"
+    return out
+
+
+def tls_settings(s: Settings, tls: TlsPaths | None = None, *, listen: bool) -> dict[str, Any]:
+    """``transport/link/tls`` of a config under mTLS ({} otherwise): the fleet CA, and this
+    component's key and certificate to listen with (*listen*, the master) or connect with."""
+    if not mtls(s):
+        return {}
+    p = tls or tls_paths(config_dir())
+    out: dict[str, Any] = {"root_ca_certificate": str(p.ca_crt)}
+    if listen:
+        out.update(listen_private_key=str(p.node_key), listen_certificate=str(p.node_crt),
+                   enable_mtls=True)
+    else:
+        out.update(connect_private_key=str(p.node_key), connect_certificate=str(p.node_crt),
+                   enable_mtls=True)   # a connector sends its certificate only with this on
+    out["verify_name_on_connect"] = True
+    return out
 
 
 # --------------------------------------------------------------------------- files and paths
@@ -78,8 +116,12 @@ def default_session_config_path() -> Path:
     return config_dir() / "zenoh-session.json5"
 
 
-def router_config(s: Settings) -> dict[str, Any]:
-    """The router's configuration for this component's role (rmw_zenohd reads it whole)."""
+def router_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
+    """The router's configuration for this component's role (rmw_zenohd reads it whole); under
+    mTLS the TLS files under *tls* (default: this user's ~/.config/rosnet-tui/tls)."""
+    link: dict[str, Any] = {"tx": {"lease": LEASE_MS, "keep_alive": 4}}
+    if mtls(s):
+        link["tls"] = tls_settings(s, tls, listen=s.is_master)
     return {
         "mode": "router",
         "connect": {"endpoints": connect_endpoints(s)},
@@ -91,15 +133,19 @@ def router_config(s: Settings) -> dict[str, Any]:
         "timestamping": {"enabled": {"router": True, "peer": True, "client": True}},
         "queries_default_timeout": 600000,
         "routing": {"router": {"peers_failover_brokering": False}},
-        "transport": {"link": {"tx": {"lease": LEASE_MS, "keep_alive": 4}}},
+        "transport": {"link": link},
         "adminspace": {"enabled": True, "permissions": {"read": True, "write": False}},
     }
 
 
-def session_config(s: Settings) -> dict[str, Any]:
-    """A lone node's session configuration: client mode, connected to the master's router."""
-    return {"mode": "client", "connect": {"endpoints": [master_endpoint(s)]},
-            "scouting": {"multicast": {"enabled": False}}}
+def session_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
+    """A lone node's session configuration: client mode, connected to the master's router (with
+    this component's certificate under mTLS)."""
+    out: dict[str, Any] = {"mode": "client", "connect": {"endpoints": [master_endpoint(s)]},
+                           "scouting": {"multicast": {"enabled": False}}}
+    if mtls(s):
+        out["transport"] = {"link": {"tls": tls_settings(s, tls, listen=False)}}
+    return out
 
 
 def _role_words(s: Settings) -> str:
@@ -117,14 +163,14 @@ def render_json5(data: dict[str, Any], comment: list[str]) -> str:
     return "\n".join(head) + "\n" + json.dumps(data, indent=2) + "\n"
 
 
-def render_router_config(s: Settings) -> str:
-    return render_json5(router_config(s), [
+def render_router_config(s: Settings, tls: TlsPaths | None = None) -> str:
+    return render_json5(router_config(s, tls), [
         f"Zenoh router (rmw_zenohd) of {_role_words(s)}.",
         "Start it with: ros2 run rmw_zenoh_cpp rmw_zenohd (ZENOH_ROUTER_CONFIG_URI names this file)."])
 
 
-def render_session_config(s: Settings) -> str:
-    return render_json5(session_config(s), [
+def render_session_config(s: Settings, tls: TlsPaths | None = None) -> str:
+    return render_json5(session_config(s, tls), [
         f"ROS 2 nodes of {s.this.name} without a router of their own: client mode, straight to "
         f"the master's router {master_endpoint(s)}."])
 

@@ -40,7 +40,8 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
              "public_ip": str, "interface": str, "office_ip": str, "portable_ip": str},
     "peer": {"name": str, "local_ip": str, "public_ip": str, "ssh_user": str, "ssh_port": int,
              "office_ip": str, "portable_ip": str},
-    "ros": {"master": str, "port": int, "version": int, "zenoh_port": int, "domain_id": int},
+    "ros": {"master": str, "port": int, "version": int, "zenoh_port": int, "domain_id": int,
+            "security": str},
     "probe": {"port": int, "public_ip_urls": list, "port_check_url": str},
     "checks": {"timeout_s": (int, float)},
     "sync": {"store": str, "folder": str, "interval_s": (int, float), "dns_server": str,
@@ -325,6 +326,8 @@ def _table_values(s: Settings) -> dict[str, dict[str, Any]]:
                            "port": s.ros.port}
     if s.ros2 or s.ros.zenoh_port != ZENOH_PORT_DEFAULT or s.ros.domain_id:
         ros.update(zenoh_port=s.ros.zenoh_port, domain_id=s.ros.domain_id)
+    if s.ros2 or s.ros.security_chosen():
+        ros["security"] = str(s.ros.security)
     probe = {"port": s.probe.port, "public_ip_urls": list(s.probe.public_ip_urls),
              "port_check_url": s.probe.port_check_url}
     y = s.sync

@@ -197,6 +197,45 @@ def validate_domain_id(value: int | str) -> str | None:
     return None if 0 <= n <= DOMAIN_ID_MAX else f"must be between 0 and {DOMAIN_ID_MAX}"
 
 
+SECURITY_CHOICES = ("mtls", "firewall", "none")
+
+
+def default_security(version: int) -> str:
+    """Who may reach the forwarded ports unless the settings say otherwise: ROS 2, only the
+    fleet's certificates (mutual TLS); ROS 1, only the peers' addresses (firewall)."""
+    return "mtls" if version == 2 else "firewall"
+
+
+def validate_security(value: str, version: int) -> str | None:
+    """Return why *value* is not a [ros] security choice for ROS *version*, or None."""
+    if value not in SECURITY_CHOICES:
+        return "must be \"mtls\" (ROS 2), \"firewall\" (ROS 1) or \"none\""
+    if value == "mtls" and version != 2:
+        return "mutual TLS is for ROS 2 (rmw_zenoh); ROS 1 uses \"firewall\" or \"none\""
+    return None
+
+
+class _DefaultSecurity(str):
+    """The version's default, as read from settings that chose none (``dataclasses.replace``
+    passes it back; it stays "not chosen", so a changed version changes the default too)."""
+
+
+class _SecurityChoice:
+    """``RosSettings.security``: the value set, or (when none was) the default of the ROS version,
+    so readers always see the effective choice and files that do not say follow their version."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.attr = "_" + name + "_set"
+
+    def __get__(self, obj: Any, owner: type | None = None) -> str:
+        if obj is None:
+            return ""        # the dataclass default: not chosen
+        return getattr(obj, self.attr, "") or _DefaultSecurity(default_security(obj.version))
+
+    def __set__(self, obj: Any, value: str) -> None:
+        setattr(obj, self.attr, "" if isinstance(value, _DefaultSecurity) else str(value))
+
+
 @dataclass
 class RosSettings:
     master: str = ""
@@ -204,6 +243,12 @@ class RosSettings:
     version: int = 1                     # 1 or 2 (a file without it: the environment's ROS_VERSION)
     zenoh_port: int = ZENOH_PORT_DEFAULT  # ROS 2: the master's Zenoh router port (TCP)
     domain_id: int = 0                   # ROS 2: ROS_DOMAIN_ID
+    # "mtls" | "firewall" | "none"; unset: default_security(version)
+    security: str = _SecurityChoice()  # type: ignore[assignment]
+
+    def security_chosen(self) -> bool:
+        """Whether security was set explicitly (not just the version's default)."""
+        return bool(getattr(self, "_security_set", ""))
 
 
 @dataclass
@@ -334,6 +379,7 @@ class Settings:
         add("ros.version", validate_ros_version(self.ros.version))
         add("ros.zenoh_port", validate_port(self.ros.zenoh_port))
         add("ros.domain_id", validate_domain_id(self.ros.domain_id))
+        add("ros.security", validate_security(self.ros.security, self.ros.version))
         add("probe.port", validate_port(self.probe.port))
         for url in self.probe.public_ip_urls:
             add("probe.public_ip_urls", validate_url(url))

@@ -7,7 +7,7 @@ block of ~/.bashrc) write files.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,6 +41,9 @@ class WritePlan:
     apply: Callable[[Any], object] | None = None
     # The write offered next on the same step, once this one is closed (None: none).
     then: Callable[[], WritePlan | None] | None = None
+    # Run after a successful write (ROS 2 mutual TLS: make the CA, or pair with the master);
+    # returns a line for the user ("": nothing to say).
+    after_write: Callable[[], Awaitable[str]] | None = None
 
 
 @dataclass(frozen=True)
@@ -123,8 +126,9 @@ def firewall_plan(settings: Settings, paths: WritePaths) -> WritePlan | None:
 
 
 def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:
-    """ROS 2: the ~/.bashrc block and the Zenoh router's config file, in one apply."""
-    from rosnet_tui.core import ros2
+    """ROS 2: the ~/.bashrc block and the Zenoh router's config file, in one apply; under
+    mutual TLS then the fleet CA (master) or pairing with the master over SSH (member)."""
+    from rosnet_tui.core import pairing, ros2
 
     def make(client: bool) -> list[mf.Preview]:
         return ros2.previews(settings, paths.bashrc_path, client=client,
@@ -139,7 +143,8 @@ def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:
         companions=lambda client: make(client)[1:],
         option_label=("no router on this machine: its nodes connect to the master's router in "
                       "client mode") if member else "",
-        after=affected.ROS2_ENV,
+        after=affected.ros2_write(ros2.mtls(settings)),
+        after_write=lambda: pairing.after_apply(settings),
         footnote="Then start the router: ros2 run rmw_zenoh_cpp rmw_zenohd (the master's first). "
                  "For the shell you are in now: " + "; ".join(ros2.shell_lines(settings)))
 

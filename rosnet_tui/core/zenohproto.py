@@ -216,7 +216,8 @@ def _zenoh():
     return zenoh
 
 
-def open_client(endpoint: str, timeout: float, mode: str = "client") -> Any:
+def open_client(endpoint: str, timeout: float, mode: str = "client",
+                tls: dict[str, Any] | None = None) -> Any:
     """A session on *endpoint* within about *timeout* s, or OpenFailed.
 
     ``client`` (the default) talks to the router only. ``peer`` is what rmw_zenoh's nodes are: a
@@ -232,6 +233,8 @@ def open_client(endpoint: str, timeout: float, mode: str = "client") -> Any:
     c.insert_json5("connect/exit_on_failure", "true")
     c.insert_json5("scouting/multicast/enabled", "false")
     c.insert_json5("scouting/gossip/enabled", "false")
+    for key, value in (tls or {}).items():   # a tls/ endpoint: this component's certificate
+        c.insert_json5(f"transport/link/tls/{key}", json.dumps(value))
     if mode == "peer":
         c.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
         c.insert_json5("scouting/delay", "0")
@@ -242,6 +245,11 @@ def open_client(endpoint: str, timeout: float, mode: str = "client") -> Any:
         if text.startswith("Unable to connect"):
             text = (f"no Zenoh router answered at {endpoint} within {timeout:.1f} s (nothing "
                     "listens there, or the port is not reachable)")
+            if endpoint.startswith("tls/"):
+                text = (f"no Zenoh session over TLS at {endpoint} within {timeout:.1f} s "
+                        "(nothing listens there, the port is not reachable, or the TLS handshake "
+                        "failed: a certificate missing, expired or from another CA, or the "
+                        "router's certificate does not name the host dialled)")
         raise OpenFailed(text or type(exc).__name__) from None
 
 
@@ -427,6 +435,17 @@ def peer_endpoint(env: dict[str, str], local: str) -> tuple[str, str]:
     return local, "router"
 
 
+def override_tls(env: dict[str, str]) -> dict[str, Any]:
+    """The ``transport/link/tls/*`` keys of ZENOH_CONFIG_OVERRIDE (a lone node under mutual TLS:
+    its certificate, written by ``ros apply --client``), as a tls dict for open_client."""
+    out: dict[str, Any] = {}
+    for m in re.finditer(r'transport/link/tls/(\w+)\s*=\s*("(?:[^"\\]|\\.)*"|true|false)',
+                         env.get("ZENOH_CONFIG_OVERRIDE", "")):
+        v = m.group(2)
+        out[m.group(1)] = v == "true" if v in ("true", "false") else v[1:-1]
+    return out
+
+
 def session_mode(how: str) -> str:
     """The Zenoh mode of a node that connects *how* (``router`` means: a peer of that router)."""
     return "client" if how == "client" else "peer"
@@ -453,7 +472,8 @@ def run_program(argv: list[str]) -> int:
     domain = int(a.get("domain", env.get("ROS_DOMAIN_ID") or "0") or 0)
     base.update(endpoint=endpoint, how=how, domain=domain)
     try:
-        session = open_client(endpoint, min(2.0, timeout * 0.4), session_mode(how))
+        session = open_client(endpoint, min(2.0, timeout * 0.4), session_mode(how),
+                              override_tls(env) if endpoint.startswith("tls/") else None)
     except OpenFailed as exc:
         _report(error="open", detail=f"{endpoint}: {exc}", **base)
         return 0

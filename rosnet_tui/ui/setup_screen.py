@@ -15,6 +15,7 @@ from textual.widgets import Button, Input, Label, Select, Static
 
 from rosnet_tui.core import settings_model as S
 from rosnet_tui.core.session import WizardSession
+from rosnet_tui.core.settings_model import default_security
 from rosnet_tui.ui.fields import OrderedInput
 from rosnet_tui.ui.messages import SettingsSaved
 from rosnet_tui.ui.theme import cut
@@ -62,11 +63,14 @@ ROLE_OPTIONS = [("ROS master (roscore / the Zenoh hub)", "master"), ("Member", "
 ROS_VERSION_OPTIONS = [("ROS 2 (rmw_zenoh: one forwarded port)", 2), ("ROS 1 (roscore)", 1)]
 PROFILE_OPTIONS = [("Remote (peers by public IP)", "remote"), ("Office LAN", "office"),
                    ("Portable hotspot LAN", "portable")]
+# On: ROS 2, mutual TLS (only fleet certificates); ROS 1, a firewall admitting only the peers.
+SECURITY_OPTIONS = [("On: only the fleet gets in", "on"),
+                    ("Off: open to anyone at the ports", "none")]
 ROSBRIDGE_OPTIONS = [("Off (no web clients)", False),
                      ("On: check browsers' path (rosbridge)", True)]
 SELECT_OPTIONS = {"this-role": ROLE_OPTIONS, "this-connection": CONNECTION_OPTIONS,
                   "this-profile": PROFILE_OPTIONS, "ros-version": ROS_VERSION_OPTIONS,
-                  "rosbridge-enabled": ROSBRIDGE_OPTIONS}
+                  "rosbridge-enabled": ROSBRIDGE_OPTIONS, "ros-security": SECURITY_OPTIONS}
 
 
 def validate_optional_name(value: str) -> str | None:
@@ -206,6 +210,10 @@ class SetupScreen(Screen[bool]):
                                    id="rosbridge-host", compact=True,
                                    validators=[CoreValidator(validate_optional_name)])
             yield Label("", id="rosbridge-host-error", classes="field-error")
+            with Horizontal(classes="field"):
+                yield Label("Security", classes="field-label")
+                yield Select(SECURITY_OPTIONS, value="none" if s.ros.security == "none" else "on",
+                             allow_blank=False, id="ros-security", compact=True)
             yield Static("Peers  (name · local IP · public IP · SSH user, optional)",
                          classes="section")
             with Vertical(id="peer-rows"):
@@ -426,6 +434,10 @@ class SetupScreen(Screen[bool]):
             problems.append(("probe.port", why))
         version = int(self.query_one("#ros-version", Select).value or 1)
         ros = replace(old.ros, master=master, version=version)
+        if self.query_one("#ros-security", Select).value == "none":
+            ros.security = "none"
+        elif ros.security == "none" or ros.security_chosen():
+            ros.security = default_security(version)   # on: what this version does
         if version == 2:
             for key, wid, check in (("zenoh_port", "ros-zenoh-port", S.validate_port),
                                     ("domain_id", "ros-domain-id", S.validate_domain_id)):

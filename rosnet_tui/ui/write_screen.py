@@ -110,7 +110,7 @@ class WriteScreen(ModalScreen[bool]):
         self.dismiss(False)
 
     @on(Button.Pressed, "#write-apply")
-    def action_apply(self) -> None:
+    async def action_apply(self) -> None:
         p = self.preview
         extra = [c for c in getattr(self, "companions", []) if c.changed]
         if p is None or not (p.changed or extra):
@@ -144,6 +144,12 @@ class WriteScreen(ModalScreen[bool]):
             self.notify(f"Not written: {exc}", severity="error", timeout=10)
             return
         self.notify(f"Wrote {p.path}. `rosnet-tui undo` reverts it.", timeout=5)
+        if self.plan.after_write is not None:   # ROS 2 mutual TLS: CA or pairing (<= 5 s)
+            said = await self.plan.after_write()
+            if said:
+                self.notify(said, severity="error" if said.startswith(("Pairing failed",
+                                                                        "Mutual TLS")) else
+                            "information", timeout=10)
         self.dismiss(True)
 
 

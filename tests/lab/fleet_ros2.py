@@ -142,6 +142,7 @@ class FleetRos2(Ros2World):
         self.lab.reset()
         for h in self.lab.COMPUTERS:
             self.router_config_path(h).unlink(missing_ok=True)
+            self.remove_tls(h)
 
 
 __all__ = ["ROS2_IDS", "FleetRos2", "explain"]

@@ -44,12 +44,24 @@ class Ros2World:
         self.routers: dict[str, subprocess.Popen] = {}
         self.nodes: list[subprocess.Popen] = []
         self.bash_extra: dict[str, dict[str, str]] = {h: {} for h in COMPUTERS}
+        self.ros_extra: dict[str, Any] = {}     # [ros] values of every computer's settings
+
 
     # ------------------------------------------------------------------ settings and files
     def settings(self, host: str, **ros: Any):
         s = self.lab.settings(host)
         return replace(s, ros=replace(s.ros, version=2, zenoh_port=topology.ZENOH_PORT,
-                                      domain_id=0, **ros))
+                                      domain_id=0, **{**self.ros_extra, **ros}))
+
+    def set_security(self, value: str) -> None:
+        """[ros] security of every computer; configs rewritten and routers restarted
+        (healthy() puts the default back)."""
+        self.ros_extra["security"] = value
+        for h in self.lab.COMPUTERS:
+            self.config_path(h)
+            self.write_router_config(h)
+        for h in list(self.routers):
+            self.start_router(h)
 
     def config_path(self, host: str, **ros: Any) -> Path:
         from rosnet_tui.core.settings import atomic_write_text, render_settings
@@ -61,12 +73,47 @@ class Ros2World:
     def router_config_path(self, host: str) -> Path:
         return self.lab.home(host) / ".config" / "rosnet-tui" / "zenoh-router.json5"
 
+    def tls_paths(self, host: str):
+        """*host*'s fleet TLS files (~/.config/rosnet-tui/tls in its home)."""
+        from rosnet_tui.core import fleet_tls
+
+        return fleet_tls.tls_paths(self.lab.home(host) / ".config" / "rosnet-tui")
+
+    def master_host(self) -> str:
+        return next(h for h in self.lab.COMPUTERS if self.settings(h).is_master)
+
+    def ensure_tls(self, host: str) -> None:
+        """Mutual TLS (the default): the fleet CA and certificate on the master as `ros apply`
+        makes them there; a member's key made in its home and signed by that CA, as pairing
+        leaves them (tests/test_pairing_lab.py pairs over SSH for real)."""
+        from rosnet_tui.core import fleet_tls, pairing, ros2
+
+        s = self.settings(host)
+        if not ros2.mtls(s):
+            return
+        m = self.master_host()
+        mp = self.tls_paths(m)
+        pairing.prepare_master(self.settings(m), mp)
+        if host != m and pairing.needs_pairing(s, self.tls_paths(host)) is not None:
+            paths = self.tls_paths(host)
+            ca, cert = fleet_tls.sign_request(mp, fleet_tls.make_request(paths, s.this.name),
+                                              master=s.master_name)
+            fleet_tls.install(paths, ca, cert)
+
+    def remove_tls(self, host: str) -> None:
+        import shutil
+
+        shutil.rmtree(self.tls_paths(host).dir, ignore_errors=True)
+
     def write_router_config(self, host: str, text: str | None = None) -> Path:
         from rosnet_tui.core import ros2
 
         path = self.router_config_path(host)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text if text is not None else ros2.render_router_config(self.settings(host)))
+        if text is None:
+            self.ensure_tls(host)
+            text = ros2.render_router_config(self.settings(host), self.tls_paths(host))
+        path.write_text(text)
         return path
 
     def exports(self, host: str) -> dict[str, str]:
@@ -164,6 +211,8 @@ class Ros2World:
             self.lab.kill(p, grace=0.5)
         self.nodes.clear()
         self.bash_extra = {h: {} for h in COMPUTERS}
+        restart = bool(self.ros_extra)
+        self.ros_extra = {}
         self.forward()
         for h in COMPUTERS:
             self.lab.write_hosts(h, topology.hosts_text(h))
@@ -171,7 +220,7 @@ class Ros2World:
             self.write_router_config(h)
             self.write_bashrc(h)
             readme_install.install(self.lab.home(h))    # quick when it is there already
-            if h not in self.routers or self.routers[h].poll() is not None:
+            if restart or h not in self.routers or self.routers[h].poll() is not None:
                 self.start_router(h)
 
     def __exit__(self, *exc: Any) -> None:
@@ -184,6 +233,7 @@ class Ros2World:
         for h in COMPUTERS:
             self.lab.config_path(h)
             self.router_config_path(h).unlink(missing_ok=True)
+            self.remove_tls(h)
 
 
 def explain(results: dict[str, dict]) -> str:

@@ -83,6 +83,10 @@ RULE_ORDER: tuple[str, ...] = (
     "ros2.router.ipv6_only",
     "ros2.peer_mode",
     "ros2.link.missing",
+    "ros2.tls.missing",                     # ROS 2 mutual TLS: this component's certificate
+    "ros2.tls.foreign_ca",
+    "ros2.tls.expired",
+    "ros2.tls.wrong_name",
     # step 4: web clients (rosbridge), both ROS versions: one rule per hop
     "rosbridge.name",
     "rosbridge.forward",

@@ -412,6 +412,8 @@ def _exposed(ev: Evidence) -> list[Hit]:
     p = ev.data("router.port_open")
     if not _on(ev) or p.get("zenoh_port_open") is not True:
         return []
+    if ev.data("ros2.router").get("security") == "mtls":   # only fleet certificates get in
+        return []
     peers = [f"{x.name} {x.public_ip}" for x in ev.s.peers if x.public_ip]
     return [Hit(f"TCP {_port(ev)} of {ev.me} is open to the whole internet: whoever reaches it "
                 "can list, publish to and subscribe from every node of this ROS 2 network "

@@ -73,9 +73,6 @@ class CheckSpec:
     # A settings table whose ``enabled`` must be true for the check to apply ("rosbridge");
     # None: no switch.
     switch: str | None = None
-    # Why the check does not apply to *settings* (None: it does); for a condition no switch
-    # expresses (security.*: the settings must carry [ros] security).
-    gate: Callable[[Settings], str | None] | None = None
 
     def switched_off(self, settings: Settings) -> bool:
         return self.switch is not None and getattr(getattr(settings, self.switch, None),
@@ -84,7 +81,7 @@ class CheckSpec:
     def applies(self, settings: Settings) -> bool:
         """Whether this check belongs to *settings*' ROS version ([ros] version) and its switch,
         if it has one, is on."""
-        if self.switched_off(settings) or (self.gate is not None and self.gate(settings)):
+        if self.switched_off(settings):
             return False
         return self.ros is None or self.ros == settings.ros.version
 
@@ -93,9 +90,6 @@ class CheckSpec:
         if self.switched_off(settings):
             return (f"skipped: [{self.switch}] enabled = false in the settings (set it to true "
                     "to check this)")
-        why = self.gate(settings) if self.gate is not None else None
-        if why:
-            return f"skipped: {why}"
         other = {1: "ROS 1 (roscore)", 2: "ROS 2 over rmw_zenoh"}
         return (f"skipped: this check is for {other.get(self.ros or 0, '?')}, and the settings say "
                 f"{other.get(settings.ros.version, '?')} ([ros] version = {settings.ros.version})")
@@ -105,16 +99,14 @@ REGISTRY: dict[str, CheckSpec] = {}
 
 
 def check(id: str, step: str, title: str, timeout_factor: float = 1.0, ros: int | None = None,
-          switch: str | None = None, gate: Callable[[Settings], str | None] | None = None
-          ) -> Callable[[CheckFunc], CheckFunc]:
+          switch: str | None = None) -> Callable[[CheckFunc], CheckFunc]:
     """Register a check function under *id* for *step* (*ros*: only for that ROS version;
-    *switch*: only when that settings table is enabled; *gate*: only when it gives no reason
-    against)."""
+    *switch*: only when that settings table is enabled)."""
     if step not in STEP_IDS:
         raise ValueError(f"unknown step {step!r}")
 
     def deco(func: CheckFunc) -> CheckFunc:
-        REGISTRY[id] = CheckSpec(id, step, title, func, timeout_factor, ros, switch, gate)
+        REGISTRY[id] = CheckSpec(id, step, title, func, timeout_factor, ros, switch)
         return func
 
     return deco

@@ -332,6 +332,21 @@ class LocalRouter(TypedDict, total=False):
     failure: str | None       # why no session opened
 
 
+TlsProblem = Literal["missing", "unreadable", "foreign_ca", "wrong_name", "expired", "expiring"]
+TlsHandshake = Literal["missing", "wrong_name", "master_foreign_ca", "rejected_expired",
+                       "rejected_foreign", "no_tls", "unreachable"]
+
+
+class FleetTls(TypedDict, total=False):
+    problem: TlsProblem | None  # what is wrong with this component's fleet certificate
+    cn: str                   # its Common Name
+    sans: list[str]           # the names (and addresses) it carries
+    not_after: str            # when it expires (ISO 8601, UTC)
+    days_left: float          # days until then (warned at 30 and fewer)
+    handshake: TlsHandshake | None  # why a TLS handshake with the master failed (asked
+    #                           only when its Zenoh session did)
+
+
 class Ros2RouterData(TypedDict, total=False):
     role: Literal["master", "member"]  # this component's role
     endpoint: str             # tcp/<master>:<zenoh_port>
@@ -347,6 +362,8 @@ class Ros2RouterData(TypedDict, total=False):
     remote_peers: list[str]   # sessions in *peer* mode attached to the master's router from
     #                           another machine (lone nodes that should be clients)
     local_router: LocalRouter  # this machine's own router (every component runs one)
+    security: Literal["mtls", "firewall", "none"]  # [ros] security
+    tls: FleetTls             # under mTLS: this component's fleet certificate
 
 
 class GraphNode(TypedDict, total=False):

@@ -25,7 +25,7 @@ def _read() -> tuple[str | None, list[str] | None]:
        1.0, ros=1)
 async def check_firewall(ctx: CheckContext) -> Outcome:
     s = ctx.settings
-    mode = fw.security_mode(s)
+    mode = s.ros.security
     data: dict[str, Any] = {"security": mode, "wanted": fw.wanted(s), "present": None,
                             "readable": None, "allowed": [], "expected": [], "missing": [],
                             "extra": [], "rules_match": None}

@@ -24,7 +24,7 @@ from typing import Any, TypeVar
 from urllib.parse import urljoin, urlsplit
 
 from rosnet_tui import __version__
-from rosnet_tui.core import ros2, zenohproto
+from rosnet_tui.core import fleet_tls, ros2, zenohproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext
 from rosnet_tui.core.checks.data import view
 from rosnet_tui.core.settings_model import Peer, Settings
@@ -377,13 +377,25 @@ def node_endpoint(ctx: CheckContext) -> tuple[str, str]:
     return zenohproto.peer_endpoint(zenoh_env(ctx), ros2.local_endpoint())
 
 
+def client_tls() -> dict[str, Any]:
+    """How a check dials a ``tls/`` endpoint: with this component's fleet key and certificate,
+    trusting the fleet CA, the name in the locator verified (ROS 2 mutual TLS)."""
+    p = fleet_tls.tls_paths(ros2.config_dir())
+    return {"root_ca_certificate": str(p.ca_crt), "connect_private_key": str(p.node_key),
+            "connect_certificate": str(p.node_crt), "enable_mtls": True,
+            "verify_name_on_connect": True}
+
+
 async def open_zenoh(endpoint: str, t: float, how: str = "client"
                      ) -> tuple[Any | None, str | None]:
     """A Zenoh session on *endpoint* within *t* s: (session, None) or (None, why not). *how* is
-    node_endpoint()'s answer (a node's way in: a peer of a router, or client), or "client"."""
+    node_endpoint()'s answer (a node's way in: a peer of a router, or client), or "client".
+    A ``tls/`` endpoint is dialled with this component's fleet certificate (client_tls)."""
     mode = zenohproto.session_mode(how)
+    tls = client_tls() if endpoint.startswith("tls/") else None
     try:
-        return await run_blocking(zenohproto.open_client, endpoint, t, mode, timeout=t + 0.4), None
+        return await run_blocking(zenohproto.open_client, endpoint, t, mode, tls,
+                                  timeout=t + 0.4), None
     except asyncio.TimeoutError:
         return None, f"no Zenoh session within {t + 0.4:.1f} s"
     except zenohproto.ZenohMissing:

@@ -16,7 +16,7 @@ from typing import Any
 
 import psutil
 
-from rosnet_tui.core import ros2, zenohproto
+from rosnet_tui.core import fleet_tls, ros2, tls_handshake, zenohproto
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
     ZENOH_SOURCE,
@@ -243,7 +243,11 @@ async def check_router(ctx: CheckContext) -> Outcome:
     role = "master" if s.is_master else "member"
     ipv6 = ros2.ipv6_available()
     data: dict[str, Any] = {"role": role, "endpoint": endpoint, "reachable": False,
-                            "address": None, "failure": None, "ipv6": ipv6, "remote_peers": []}
+                            "address": None, "failure": None, "ipv6": ipv6, "remote_peers": [],
+                            "security": str(s.ros.security)}
+    tls_paths = fleet_tls.tls_paths(ros2.config_dir())
+    if ros2.mtls(s):
+        data["tls"] = tls_handshake.local_state(s, tls_paths)
     if not name:
         return Outcome(Status.SKIP, "skipped: no master is named in the settings (ros.master)",
                        [], data)
@@ -323,6 +327,13 @@ async def check_router(ctx: CheckContext) -> Outcome:
                 "timeout": f"is TCP {port} forwarded to {name} on its modem?",
                 "unreachable": "no route to that address",
                 "not_zenoh": "something else answers on that port"}.get(kind or "", "")
+        if kind == "not_zenoh" and ros2.mtls(s):   # TCP answered: name what TLS refused
+            problem, hint = await run_blocking(
+                tls_handshake.handshake, addrs[0], port, name, tls_paths,
+                max(0.2, min(1.0, deadline - time.monotonic())),
+                timeout=max(0.3, min(1.2, deadline - time.monotonic() + 0.2)))
+            data["tls"]["handshake"] = problem
+            ev.append(f"TLS handshake with {name} ({addrs[0]}:{port}): {hint}")
         if s.is_master and data.get("listen_problem") == "ipv6_only":
             hint = (f"the router's config listens on tcp/[::]:{port} and this host has no IPv6, "
                     f"so rmw_zenohd cannot start: listen on tcp/0.0.0.0:{port}")
@@ -349,6 +360,10 @@ async def check_router(ctx: CheckContext) -> Outcome:
                                     "see the graph but get no data; run them in client mode, "
                                     "or give their machine a router", ev, data)
     ver = f" ({data['router_version']})" if data.get("router_version") else ""
+    if (data.get("tls") or {}).get("problem") == "expiring":
+        return Outcome(Status.WARN, f"the master's Zenoh router{ver} answers at {endpoint}, but "
+                                    f"{tls_handshake.PROBLEM_WORDS['expiring']} (it expires "
+                                    f"{data['tls']['not_after'][:10]})", ev, data)
     return Outcome(Status.PASS, f"the master's Zenoh router{ver} answers at {endpoint} "
                                 f"({addrs[0]})", ev, data)
 

@@ -13,7 +13,7 @@ import secrets
 import time
 from typing import Any
 
-from rosnet_tui.core import zenohproto
+from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
     ZENOH_SOURCE,
@@ -69,8 +69,8 @@ async def _unlinked(ctx: CheckContext, session: Any, how: str) -> str | None:
     if router_links(info):
         return None
     return (f"this machine's router has no link to the master's router "
-            f"{ctx.settings.master_name} (it cannot reach tcp/{ctx.settings.master_name}:"
-            f"{ctx.settings.ros.zenoh_port}, or its config does not connect there)")
+            f"{ctx.settings.master_name} (it cannot reach {ros2.master_endpoint(ctx.settings)}"
+            ", or its config does not connect there)")
 
 
 def _member_arg(ctx: CheckContext, peer: Peer) -> list[str]:

@@ -41,21 +41,6 @@ from rosnet_tui.core.ssh.session import ssh_run
 SSH_PORT = 22
 
 
-def no_security_setting(s: Settings) -> str | None:
-    """The checks' gate: settings without ``[ros] security`` (a build before issue 22's settings,
-    S1's part) get no security.* checks, so nothing changes for them; every build with the
-    setting runs them (its default is "mtls" or "firewall", "none" keeps the finding)."""
-    if hasattr(s.ros, "security"):
-        return None
-    return "this build's settings have no [ros] security yet"
-
-
-def security_mode(s: Settings) -> str:
-    """``[ros] security`` ("mtls", "firewall", "none"); settings without it (before issue 22's
-    settings land) behave as "none"."""
-    return str(getattr(s.ros, "security", "none") or "none")
-
-
 def _public_target(s: Settings) -> str:
     """Where the internet reaches this component: its public IP (a LAN profile: its name)."""
     if s.this.profile == "remote" and s.this.public_ip:
@@ -65,7 +50,7 @@ def _public_target(s: Settings) -> str:
 
 # --------------------------------------------------------------------------- security.ssh_auth
 @check("security.ssh_auth", "linux", "SSH offers the internet no password (seen from a peer)",
-       2.0, gate=no_security_setting)
+       2.0)
 async def check_ssh_auth(ctx: CheckContext) -> Outcome:
     s = ctx.settings
     target, user = _public_target(s), getpass.getuser()
@@ -124,11 +109,10 @@ async def check_ssh_auth(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- security.outsider
-@check("security.outsider", "ros", "An outsider is refused; the fleet still gets in", 3.0,
-       gate=no_security_setting)
+@check("security.outsider", "ros", "An outsider is refused; the fleet still gets in", 3.0)
 async def check_outsider(ctx: CheckContext) -> Outcome:
     s = ctx.settings
-    data: dict[str, Any] = {"security": security_mode(s), "ros": s.ros.version}
+    data: dict[str, Any] = {"security": s.ros.security, "ros": s.ros.version}
     if s.ros.version == 2:
         return await _outsider_ros2(ctx, data)
     return await _outsider_ros1(ctx, data)
@@ -211,7 +195,7 @@ def ros2_verdict(s: Settings, rep: dict[str, Any], data: dict[str, Any]) -> Outc
     if facts is not None and master not in facts.names and insider_cause in (None, "refused"):
         insider_cause = "wrong_name"
     if let_in:
-        mode = security_mode(s)
+        mode = s.ros.security
         data["cause"] = ("security_off" if mode == "none" else
                          "plain_open" if "plain" in let_in else "no_mtls")
         words = ", ".join(_ATTEMPT_WORDS[k] for k in let_in)
@@ -310,7 +294,7 @@ async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
         return Outcome(Status.FAIL, f"the port checker ({base}) gave no verdict: the outsider's "
                                     "view is unknown", ev, data)
     if any(outside.values()):
-        data["cause"] = "security_off" if security_mode(s) == "none" else "firewall_missing"
+        data["cause"] = "security_off" if s.ros.security == "none" else "firewall_missing"
         open_ = [p for p, v in outside.items() if v]
         return Outcome(Status.FAIL, f"an outsider ({base}) reaches port "
                                     f"{', '.join(open_)} of {target}", ev, data)

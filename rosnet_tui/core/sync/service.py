@@ -25,6 +25,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from rosnet_tui.core.pairing import CertRenewer
 from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.settings import load_settings
 from rosnet_tui.core.settings_model import Settings, SettingsError
@@ -80,6 +81,7 @@ class SyncService:
             lambda s: lookup_public_ip(s, self.config.state_dir,
                                        max(1.0, float(s.checks.timeout_s))))
         self.forwards = Renewer(self.config.state_dir, log)  # our forwards' leases (router map)
+        self.certs = CertRenewer(log)        # ROS 2 mTLS: the fleet certificate before expiry
         self.applier = Applier(self.state, self.config)
         self.loop = Loop(self.state, self.config, self.applier, self)
 
@@ -210,6 +212,7 @@ class SyncService:
         if self.state.recheck_at is not None and time.monotonic() >= self.state.recheck_at:
             self.applier.recheck()
         self.forwards.tick(self.state.settings, background=self.state.lookups is not None)
+        self.certs.tick(self.state.settings, background=self.state.lookups is not None)
         self.applier.save_status()
         errors = self.state.errors()
         return RoundResult(not errors, applied, errors)

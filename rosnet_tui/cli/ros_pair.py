@@ -1,0 +1,134 @@
+"""`rosnet-tui ros pair`: this component's fleet certificate for ROS 2's mutual TLS.
+
+- ``ros pair`` (a member): the master signs this member's request over SSH; ``--renew`` even when
+  the certificate is still good.
+- Without SSH to the master, by text: ``--print-request`` here, ``--sign`` on the master (reads
+  the request on stdin or pasted), ``--install`` here (reads what ``--sign`` printed).
+- On the master, ``ros pair`` makes the CA and the master's certificate (as ``ros apply`` does);
+  ``--remove NAME`` takes a member out of the fleet: a new CA, and every other member re-paired.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+
+from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option
+from rosnet_tui.cli.writing import err, load_settings_for
+from rosnet_tui.core import fleet_tls, pairing
+from rosnet_tui.core.fleet_tls import TlsError
+from rosnet_tui.core.ros2 import config_dir
+
+
+def register(rs: argparse._SubParsersAction) -> None:
+    p = rs.add_parser("pair", help="ROS 2 mutual TLS: get this component's fleet certificate "
+                                   "from the master (over SSH, or by pasting text)")
+    add_config_option(p)
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--renew", action="store_true",
+                   help="sign a new certificate even when the current one is still good")
+    g.add_argument("--print-request", action="store_true",
+                   help="print this component's certificate request (paste it into "
+                        "`ros pair --sign` on the master)")
+    g.add_argument("--sign", action="store_true",
+                   help="on the master: read a member's request on stdin, print its "
+                        "certificate (paste that into `ros pair --install` on the member)")
+    g.add_argument("--install", action="store_true",
+                   help="read what `ros pair --sign` printed on stdin and install it here")
+    g.add_argument("--remove", metavar="NAME",
+                   help="on the master: take member NAME out of the fleet (a new CA; the other "
+                        "members are re-paired over SSH)")
+    p.add_argument("--timeout", type=float, default=pairing.PAIR_TIMEOUT_S,
+                   help="seconds for pairing over SSH (default: %(default)s)")
+    p.set_defaults(func=run_pair)
+
+
+def _read_stdin(what: str) -> str:
+    if sys.stdin.isatty():
+        print(f"Paste {what}, then press Ctrl-D:", file=sys.stderr)
+    return sys.stdin.read(65536)
+
+
+def run_pair(args: argparse.Namespace) -> int:
+    settings = load_settings_for(args)
+    if settings is None:
+        return EXIT_USAGE
+    if not settings.ros2:
+        err("rosnet-tui: pairing is for ROS 2 ([ros] version = 2); ROS 1 uses the firewall")
+        return EXIT_USAGE
+    paths = fleet_tls.tls_paths(config_dir())
+    try:
+        if args.sign:
+            if not settings.is_master:
+                err("rosnet-tui: --sign runs on the master (it holds the fleet CA)")
+                return EXIT_USAGE
+            pairing.prepare_master(settings, paths)
+            ca, cert = fleet_tls.sign_request(paths, _read_stdin("the member's request"),
+                                              master=settings.this.name)
+            summ = fleet_tls.cert_summary(cert.encode())
+            print(f"# Certificate for {summ['cn']}, valid until {summ['not_after'][:10]}. Paste "
+                  "everything below into `rosnet-tui ros pair --install` on that member.")
+            sys.stdout.write(cert + ca)
+            return EXIT_OK
+        if args.print_request:
+            print(fleet_tls.make_request(paths, settings.this.name), end="")
+            return EXIT_OK
+        if args.install:
+            pems = fleet_tls.split_pems(_read_stdin("what `ros pair --sign` printed"))
+            if len(pems) != 2:
+                err("rosnet-tui: expected two certificates (this component's and the CA's), "
+                    f"found {len(pems)}")
+                return EXIT_USAGE
+            cert, ca = pems
+            summ = fleet_tls.install(paths, ca, cert)
+            print(f"Installed {paths.node_crt} ({summ['cn']}, valid until "
+                  f"{summ['not_after'][:10]}) and {paths.ca_crt}.")
+            return EXIT_OK
+        if args.remove:
+            return _remove(args, settings, paths)
+        if settings.is_master:
+            made = pairing.prepare_master(settings, paths, renew=args.renew)
+            print("Made " + "; ".join(made) + "." if made else
+                  f"The fleet CA and this router's certificate are in place ({paths.dir}).")
+            return EXIT_OK
+        why = pairing.needs_pairing(settings, paths)
+        if why is None and not args.renew:
+            s = fleet_tls.cert_summary(paths.node_crt)
+            print(f"Already paired: {paths.node_crt} names {s['cn']}, valid until "
+                  f"{s['not_after'][:10]} (--renew signs a new one).")
+            return EXIT_OK
+        res = asyncio.run(pairing.pair_over_ssh(settings, paths, timeout=args.timeout))
+    except TlsError as exc:
+        err(f"rosnet-tui: {exc}")
+        return EXIT_USAGE if args.sign or args.install else EXIT_FAIL
+    except OSError as exc:
+        err(f"rosnet-tui: {exc}")
+        return EXIT_FAIL
+    if not res.ok:
+        err(f"rosnet-tui: pairing failed: {res.detail}")
+        return EXIT_FAIL
+    print(f"{res.detail[:1].upper()}{res.detail[1:]} ({res.seconds:.1f} s). Restart the router "
+          "to use it.")
+    return EXIT_OK
+
+
+def _remove(args: argparse.Namespace, settings, paths) -> int:
+    """A new CA: the removed member's certificate stops being trusted; the others re-pair."""
+    if not settings.is_master:
+        err("rosnet-tui: --remove runs on the master (it holds the fleet CA)")
+        return EXIT_USAGE
+    if settings.peer(args.remove) is None:
+        err(f"rosnet-tui: {args.remove} is not a peer in the settings")
+        return EXIT_USAGE
+    fleet_tls.rotate_ca(paths, settings.this.name)
+    pairing.prepare_master(settings, paths)
+    others = [p for p in settings.peers if p.name != args.remove]
+    rc = EXIT_OK
+    results = asyncio.run(pairing.repair_members(settings, paths, others, timeout=args.timeout))
+    for name, ok, detail in results:
+        print(f"  {name}: {'re-paired' if ok else 'NOT re-paired'}: {detail}")
+        rc = rc if ok else EXIT_FAIL
+    print(f"{args.remove} is out of the fleet: a new CA signed this router's certificate; restart "
+          "the router here (and on each re-paired member). Remove it from [[peer]] too.")
+    return rc
