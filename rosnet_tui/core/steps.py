@@ -321,7 +321,8 @@ def configure_ros2(s: Settings) -> str:
     return "\n\n".join(head)
 
 
-ROS2_CHECK_IDS = ("ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in")
+ROS2_CHECK_IDS = ("ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in",
+                  "security.outsider")
 ROS2_EXPECTED = ("Every component's Zenoh router links to the master's router through its one "
                  "forwarded port; every component's nodes are seen, and each can publish and "
                  "subscribe.")
@@ -342,12 +343,13 @@ STEPS: tuple[Step, ...] = (
          "messages over TCP by name, whichever side starts.",
          configure_linux,
          ("linux.hosts", "linux.resolve", "linux.ping", "linux.ssh", "linux.chat_out",
-          "linux.chat_in", "linux.firewall")),
+          "linux.chat_in", "linux.firewall", "security.ssh_auth")),
     Step("ros",
          "Every component registers with the one ROS master, and each can both publish and "
          "subscribe.",
          configure_ros,
-         ("ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in")),
+         ("ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in",
+          "security.outsider")),
 )
 
 STEP_BY_ID = {s.id: s for s in STEPS}
@@ -356,19 +358,12 @@ assert tuple(STEP_BY_ID) == STEP_IDS, "the steps are listed in the procedure's o
 
 def step_for(step_id: str, settings: Settings) -> Step:
     """The step as *settings*' ROS version has it (ROS 2: the ros2.* checks and expectation),
-    with ros.rosbridge on the ROS step when [rosbridge] is enabled, and the security.* checks
-    when the settings carry [ros] security."""
+    with ros.rosbridge on the ROS step when [rosbridge] is enabled."""
     step = _step_for_version(step_id, settings)
     if step_id == "ros" and settings.rosbridge.enabled:
         step = replace(step, check_ids=(*step.check_ids, "ros.rosbridge"))
-    extra = SECURITY_CHECK_IDS.get(step_id)
-    if extra and hasattr(settings.ros, "security"):  # issue 22: with [ros] security (S1)
-        step = replace(step, check_ids=(*step.check_ids, extra))
     return step
 
-
-# What a stranger gets (core/checks/security.py), in the step each belongs to.
-SECURITY_CHECK_IDS = {"linux": "security.ssh_auth", "ros": "security.outsider"}
 
 
 def _step_for_version(step_id: str, settings: Settings) -> Step:
