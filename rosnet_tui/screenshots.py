@@ -13,11 +13,16 @@ import os
 import sys
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rosnet_tui.core.netinfo import LocalNet
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import CheckResult, Status
 from rosnet_tui.core.settings_model import Peer, Settings, ThisComponent
 from rosnet_tui.core.steps import STEPS
+
+if TYPE_CHECKING:
+    from rosnet_tui.core.session import WizardSession
 
 SIZES = ((80, 24), (120, 40))
 DEFAULT_OUT = Path(__file__).resolve().parent.parent / "screenshots"
@@ -60,15 +65,21 @@ DEMO_RESULTS = [
 ]
 
 
+def _session(tmpdir: Path, settings: Settings) -> WizardSession:
+    """A session of the demo component, its files in *tmpdir*."""
+    from rosnet_tui.core.session import WizardSession
+
+    return WizardSession(settings, Paths(config_path=tmpdir / "config.toml",
+                                         state_dir=tmpdir / "state"), detect_net=demo_net)
+
+
 async def _shoot(out: Path, width: int, height: int) -> list[Path]:
-    from rosnet_tui.ui.app import AppDeps, RosnetApp
+    from rosnet_tui.ui.app import RosnetApp
 
     written: list[Path] = []
     with tempfile.TemporaryDirectory() as tmp:
         tmpdir = Path(tmp)
-        deps = AppDeps(config_path=tmpdir / "config.toml", settings=demo_settings(),
-                       state_dir=tmpdir / "state", detect_net=demo_net)
-        app = RosnetApp(deps)
+        app = RosnetApp(_session(tmpdir, demo_settings()))
         async with app.run_test(size=(width, height)) as pilot:
             await pilot.pause()
             for step in STEPS:
@@ -144,14 +155,12 @@ DEMO_RESULTS_ROS2 = [
 async def _shoot_ros2(out: Path, width: int, height: int) -> list[Path]:
     """The ROS 2 path: the router step (one port, the card) and the ROS step, checks passed,
     then the set-up."""
-    from rosnet_tui.ui.app import AppDeps, RosnetApp
+    from rosnet_tui.ui.app import RosnetApp
 
     written: list[Path] = []
     with tempfile.TemporaryDirectory() as tmp:
         tmpdir = Path(tmp)
-        deps = AppDeps(config_path=tmpdir / "config.toml", settings=demo_settings_ros2(),
-                       state_dir=tmpdir / "state", detect_net=demo_net)
-        app = RosnetApp(deps)
+        app = RosnetApp(_session(tmpdir, demo_settings_ros2()))
         async with app.run_test(size=(width, height)) as pilot:
             await pilot.pause()
             for r in DEMO_RESULTS_ROS2:

@@ -22,6 +22,7 @@ from rosnet_tui.core.advisor import advise, first_failure
 from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.checks.data import undeclared
 from rosnet_tui.core.hosts import hosts_entries
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import CheckResult, Status
 from rosnet_tui.core.settings import load_settings, render_settings, save_settings
 from tests.advisor_support import ids, run
@@ -189,7 +190,7 @@ def test_linux_resolve_dates_a_peer_by_the_settings_file_and_the_sync_record(tmp
     loaded = load_settings(path)
     assert loaded is not None and loaded.saved_at == s.saved_at and loaded == s
     state = tmp_path / "state"
-    ctx = CheckContext(settings=loaded, state_dir=state)
+    ctx = CheckContext(settings=loaded, paths=Paths(state_dir=state))
     assert [d["by"] for d in address_dates(ctx, hosts_entries(loaded))["turtlebot"]] == \
         ["settings"]                                          # no sync record yet
     save_applied(state, {"turtlebot": new_record("turtlebot", local_ip="10.10.10.1",
@@ -206,7 +207,7 @@ def test_linux_resolve_dates_a_peer_by_the_settings_file_and_the_sync_record(tmp
     assert not undeclared("linux.resolve", data)
     # a LAN profile: the settings date the LAN address; sync records (public IPs) do not apply
     lan = CheckContext(settings=laptop_settings(profile="office", office_ip="10.0.0.5"),
-                       state_dir=state)
+                       paths=Paths(state_dir=state))
     assert address_dates(lan, hosts_entries(lan.settings))["turtlebot"] == []
 
 
@@ -225,7 +226,7 @@ def test_the_wizard_dates_its_settings_when_it_saves_them_or_finds_them_saved(tm
     from rosnet_tui.core.session import WizardSession
 
     path = tmp_path / "config.toml"
-    session = WizardSession(config_path=path, settings=laptop_settings(), state_dir=tmp_path)
+    session = WizardSession(laptop_settings(), Paths(config_path=path, state_dir=tmp_path))
     fresh = laptop_settings()
     session.save_settings(fresh)
     assert fresh.saved_at == os.stat(path).st_mtime and session.settings.saved_at is not None

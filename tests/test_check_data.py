@@ -23,6 +23,7 @@ from rosnet_tui.core.checks import (
     data,
     run_check,
 )
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings_model import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
@@ -125,8 +126,8 @@ def test_readme_table_lists_exactly_the_declared_top_level_keys():
 def _ctx(tmp_path: Path, settings: Settings, timeout: float = 1.0) -> CheckContext:
     rc = tmp_path / "bashrc"
     rc.write_text("")
-    return CheckContext(settings=settings, timeout_s=timeout, state_dir=tmp_path / "state",
-                        hosts_path=tmp_path / "hosts", bashrc_path=rc, upnp=False,
+    paths = Paths(state_dir=tmp_path / "state", hosts_path=tmp_path / "hosts", bashrc_path=rc)
+    return CheckContext(settings=settings, timeout_s=timeout, paths=paths, upnp=False,
                         ssh_options=SshOptions(ssh_agent=False, ssh_dir=tmp_path / "no-ssh"))
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
 from rosnet_tui.core.checks.isp import Hop, judge_path, judge_wan, ttl_probe
 from rosnet_tui.core.checks.probes import parse_ip
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings_model import ProbeSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
@@ -23,8 +24,8 @@ def make_ctx(tmp_path: Path, urls: list[str], port_check_url: str = "http://127.
     s = Settings(this=ThisComponent(name="turtlebot", local_ip="127.0.0.1", public_ip=public_ip),
                  probe=ProbeSettings(port=free_port(), public_ip_urls=urls,
                                      port_check_url=port_check_url))
-    return CheckContext(settings=s, timeout_s=timeout, state_dir=tmp_path / "state", upnp=False,
-                        ssh_options=SshOptions(ssh_agent=False, ssh_dir=tmp_path / "no-ssh"))
+    return CheckContext(settings=s, timeout_s=timeout, paths=Paths(state_dir=tmp_path / "state"),
+                        upnp=False, ssh_options=SshOptions(ssh_agent=False, ssh_dir=tmp_path / "no-ssh"))
 
 
 async def run(check_id: str, ctx: CheckContext):
@@ -79,7 +80,8 @@ async def test_public_ip_agrees_records_history_and_notices_a_change(web, tmp_pa
     assert r.status is Status.WARN
     assert r.data["changed"] and r.data["previous_ip"] == "203.0.113.9"
     assert r.data["matches_settings"] is False and "203.0.113.9" in r.summary
-    assert [h["ip"] for h in public_ip_history(ctx.state_dir)] == ["203.0.113.9", "203.0.113.77"]
+    history = public_ip_history(ctx.paths.state_dir)
+    assert [h["ip"] for h in history] == ["203.0.113.9", "203.0.113.77"]
 
 
 async def test_public_ip_sources_that_disagree_fail(web, tmp_path):
@@ -162,8 +164,8 @@ def test_judging_the_modem_wan_address():
 async def test_public_ip_still_answers_when_the_state_folder_is_unusable(web, tmp_path):
     web.routes["/a"] = (200, "203.0.113.9")
     ctx = make_ctx(tmp_path, [web.url("/a")])
-    ctx.state_dir = tmp_path / "a-file"
-    ctx.state_dir.write_text("not a folder")
+    ctx.paths = Paths(state_dir=tmp_path / "a-file")
+    ctx.paths.state_dir.write_text("not a folder")
     r = await run("isp.public_ip", ctx)
     assert r.status is Status.PASS and r.data["public_ip"] == "203.0.113.9"
     assert any("could not record" in e for e in r.evidence)

@@ -16,6 +16,7 @@ from rosnet_tui.core.checks import (
     run_check,
 )
 from rosnet_tui.core.hosts import HostsEntry
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings_model import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
@@ -31,7 +32,8 @@ def ctx(s: Settings, tmp_path, client=None, timeout=2.0, **kw) -> CheckContext:
                                                 known_hosts_files=(client.dir / "known_hosts",)))
     kw.setdefault("ssh_options", SshOptions(ssh_agent=False))
     kw.setdefault("upnp", False)
-    return CheckContext(settings=s, timeout_s=timeout, state_dir=tmp_path / "state", **kw)
+    paths = Paths(state_dir=tmp_path / "state", **{k: kw.pop(k) for k in ("hosts_path",) if k in kw})
+    return CheckContext(settings=s, timeout_s=timeout, paths=paths, **kw)
 
 
 async def run(check_id: str, c: CheckContext):

@@ -20,6 +20,7 @@ import pytest
 
 from rosnet_tui.core import rosproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext, checks_for, run_check
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
@@ -90,8 +91,8 @@ def make_ctx(tmp_path: Path, settings: Settings, *, env: dict[str, str] | None =
              bashrc: str = "", timeout: float = 2.0, ssh: Sshd | None = None) -> CheckContext:
     rc = tmp_path / "bashrc"
     rc.write_text(bashrc)
-    return CheckContext(settings=settings, timeout_s=timeout, bashrc_path=rc,
-                        state_dir=tmp_path / "state", env=dict(env or {}),
+    return CheckContext(settings=settings, timeout_s=timeout,
+                        paths=Paths(bashrc_path=rc, state_dir=tmp_path / "state"), env=dict(env or {}),
                         ssh_options=SshOptions(
                             ssh_dir=ssh.client_dir if ssh else tmp_path / "no-ssh",
                             ssh_agent=False))

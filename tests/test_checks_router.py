@@ -25,6 +25,7 @@ from rosnet_tui.core.checks import (
 from rosnet_tui.core.checks.router import port_probe_command
 from rosnet_tui.core.listener import GREETING, ListenerPool
 from rosnet_tui.core.netinfo import detect_local_net
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.settings_model import ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
@@ -43,7 +44,8 @@ def ctx_for(tmp_path, *, port_check_url="http://127.0.0.1:9", peers=(), public_i
                                      port_check_url=port_check_url))
     kw.setdefault("upnp", False)
     kw.setdefault("ssh_options", SshOptions(ssh_agent=False))
-    return CheckContext(settings=s, timeout_s=timeout, state_dir=tmp_path / "state", **kw)
+    return CheckContext(settings=s, timeout_s=timeout, paths=Paths(state_dir=tmp_path / "state"),
+                        **kw)
 
 
 async def run(check_id: str, ctx: CheckContext):

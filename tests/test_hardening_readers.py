@@ -33,6 +33,7 @@ import pytest
 from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core.checks.linux import check_hosts
 from rosnet_tui.core.checks.runner import RunOptions, make_context
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings import load_settings
 from tests.hardening_tally import tally
 
@@ -268,8 +269,8 @@ def test_linux_hosts_completes_a_cut_write_beside_the_file(tmp_path, monkeypatch
     assert torn not in (old, new)
     cfg = tmp_path / "settings.toml"
     cfg.write_text(CONFIG)
-    ctx = make_context(load_settings(cfg), RunOptions(hosts_path=target, state_dir=tmp_path / "sd",
-                                                      upnp=False))
+    paths = Paths(hosts_path=target, state_dir=tmp_path / "sd")
+    ctx = make_context(load_settings(cfg), RunOptions(paths=paths, upnp=False))
     out = asyncio.run(check_hosts(ctx))
     assert out.status.value == "pass", out.summary
     assert target.read_bytes() == new
@@ -306,7 +307,7 @@ def test_the_checks_context_completes_a_cut_write_of_the_bashrc(tmp_path, monkey
     assert _cut(rc, new, monkeypatch) not in (old, new)
     cfg = tmp_path / "settings.toml"
     cfg.write_text(CONFIG)
-    make_context(load_settings(cfg), RunOptions(bashrc_path=rc, state_dir=tmp_path / "sd"))
+    make_context(load_settings(cfg), RunOptions(paths=Paths(bashrc_path=rc, state_dir=tmp_path / "sd")))
     assert rc.read_bytes() == new
 
 

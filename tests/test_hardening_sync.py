@@ -23,6 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings import (
     render_settings,
 )
@@ -225,8 +226,8 @@ class Two:
         self.svc = self.service()
 
     def service(self) -> SyncService:
-        return SyncService(self.config, state_dir=self.state, hosts_path=self.hosts,
-                           bashrc_path=None, run_checks=False, netlink=False,
+        paths = Paths(config_path=self.config, state_dir=self.state, hosts_path=self.hosts)
+        return SyncService(paths, run_checks=False, netlink=False,
                            save_learned=False,
                            local_source=lambda s: LocalAddress("eth0", "192.168.1.10", ""),
                            public_source=lambda s: PublicLookup("198.51.100.2", "test"))

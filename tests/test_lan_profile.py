@@ -9,6 +9,7 @@ import dataclasses
 import pytest
 
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.router_card import build_router_card, render_router_card
 from rosnet_tui.core.ssh.options import SshOptions
@@ -50,7 +51,8 @@ def test_router_card_on_a_lan_profile_has_no_forwarding_and_no_exposure(markdown
 
 @pytest.mark.parametrize("profile", ["office", "portable"])
 def test_port_open_skips_with_the_reason_on_a_lan_profile(tmp_path, profile):
-    ctx = CheckContext(settings=lan(profile), timeout_s=1.0, state_dir=tmp_path, upnp=False,
+    ctx = CheckContext(settings=lan(profile), timeout_s=1.0, paths=Paths(state_dir=tmp_path),
+                       upnp=False,
                        ssh_options=SshOptions(ssh_agent=False))
     r = asyncio.run(run_check(REGISTRY["router.port_open"], ctx))
     assert r.status is Status.SKIP
@@ -97,7 +99,7 @@ def test_router_card_under_ros2_on_a_lan_profile_forwards_nothing(markdown):
 def test_port_open_under_ros2_skips_for_the_lan_first(tmp_path, role):
     """The LAN skip comes before ROS 2's branch: a master on a LAN is not tested from outside,
     and a member on a LAN is skipped for the LAN's reason, not for being a member."""
-    ctx = CheckContext(settings=lan2("office", role), timeout_s=1.0, state_dir=tmp_path,
+    ctx = CheckContext(settings=lan2("office", role), timeout_s=1.0, paths=Paths(state_dir=tmp_path),
                        upnp=False, ssh_options=SshOptions(ssh_agent=False))
     r = asyncio.run(run_check(REGISTRY["router.port_open"], ctx))
     assert r.status is Status.SKIP

@@ -13,6 +13,7 @@ import pytest
 from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks.runner import select
 from rosnet_tui.core.forwarding import ports_to_forward, required_ports
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings import parse_settings, render_settings
 from rosnet_tui.core.settings_model import RosSettings, SettingsError
 from rosnet_tui.core.steps import STEP_BY_ID, step_for
@@ -188,7 +189,8 @@ def test_address_sync_leaves_the_ros2_block_alone(tmp_path):
     mf.apply_previews(ros2.previews(s, bashrc, router_config_path=tmp_path / "r.json5",
                                     distro="jazzy"), state_dir=tmp_path / "st")
     before = bashrc.read_text()
-    svc = SyncService(cfg, state_dir=tmp_path / "state", hosts_path=hosts, bashrc_path=bashrc,
+    svc = SyncService(Paths(config_path=cfg, state_dir=tmp_path / "state", hosts_path=hosts,
+                            bashrc_path=bashrc), write_bashrc=True,
                       local_source=lambda _s: LocalAddress("eth0", "192.168.1.10", "192.168.1.1"),
                       public_source=lambda _s: PublicLookup("198.51.100.2", "test"),
                       netlink=False, run_checks=False)

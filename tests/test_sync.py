@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings import atomic_write_text, load_settings, render_settings
 from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.sync import (
@@ -340,8 +341,9 @@ class World:
 
     def service(self, **kw) -> SyncService:
         kw.setdefault("run_checks", False)
-        return SyncService(self.config, state_dir=self.state, hosts_path=self.hosts,
-                           bashrc_path=self.bashrc, local_source=lambda s: self.local,
+        paths = Paths(config_path=self.config, state_dir=self.state, hosts_path=self.hosts,
+                      bashrc_path=self.bashrc)
+        return SyncService(paths, write_bashrc=True, local_source=lambda s: self.local,
                            public_source=lambda s: PublicLookup(self.public, "test answer"
                                                                 if self.public else
                                                                 "no service answered"),

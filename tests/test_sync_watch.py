@@ -23,6 +23,7 @@ from typing import Any
 
 import pytest
 
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings import atomic_write_text, render_settings
 from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.sync import FolderStore, SyncService, load_status, new_record
@@ -74,7 +75,7 @@ class Member:
         self.seq = 10
         self.rounds: list[float] = []
         self.svc = SyncService(
-            self.config, state_dir=self.state, hosts_path=self.hosts, bashrc_path=None,
+            Paths(config_path=self.config, state_dir=self.state, hosts_path=self.hosts),
             run_checks=False, save_learned=False, netlink=False,
             local_source=lambda s: LocalAddress("eth0", "192.168.1.10", "192.168.1.254"),
             public_source=self._lookup, **kw)

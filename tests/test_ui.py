@@ -11,11 +11,13 @@ from textual.widgets import DataTable, Input
 
 from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.netinfo import LocalNet
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.settings import load_settings
 from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.options import SshOptions
-from rosnet_tui.ui.app import AppDeps, RosnetApp
+from rosnet_tui.ui.app import RosnetApp
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.widgets import CheckList
@@ -25,10 +27,14 @@ NET = LocalNet("wlan0", "10.10.10.1", "10.10.10.254", "02:00:00:00:0a:01", "255.
 
 
 def make_app(tmp_path: Path, settings: Settings | None = None, specs=None, **kw) -> RosnetApp:
-    deps = AppDeps(config_path=tmp_path / "config.toml", settings=settings or Settings(),
-                   state_dir=tmp_path / "state", detect_net=lambda: NET,
-                   specs_for=specs or (lambda step: []), **kw)
-    return RosnetApp(deps)
+    """The app on a session whose files are in *tmp_path*; *kw*: more files (hosts_path,
+    bashrc_path), the session's hooks (context_factory...) or open_setup."""
+    files = {k: kw.pop(k) for k in ("hosts_path", "bashrc_path") if k in kw}
+    open_setup = kw.pop("open_setup", False)
+    paths = Paths(config_path=tmp_path / "config.toml", state_dir=tmp_path / "state", **files)
+    session = WizardSession(settings or Settings(), paths, detect_net=lambda: NET,
+                            specs_for=specs or (lambda step: []), **kw)
+    return RosnetApp(session, open_setup=open_setup)
 
 
 async def test_first_run_opens_setup_prefilled_and_refuses_bad_input(tmp_path):
@@ -167,7 +173,7 @@ async def test_checks_stream_live_and_the_ui_stays_responsive(tmp_path):
                      spec("isp.hangs", "isp", hangs)]}
     ctx_factory = lambda s: CheckContext(settings=s, timeout_s=2.0)  # noqa: E731
     app = make_app(tmp_path, complete_settings(), specs=lambda step: specs.get(step, []),
-                   make_context=ctx_factory)
+                   context_factory=ctx_factory)
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("1", "r")
         await pilot.pause(0.2)
@@ -196,7 +202,7 @@ async def test_cancel_puts_unfinished_checks_back_to_not_run(tmp_path):
 
     specs = {"ros": [spec("ros.hangs", "ros", hangs)]}
     app = make_app(tmp_path, complete_settings(), specs=lambda step: specs.get(step, []),
-                   make_context=lambda s: CheckContext(settings=s, timeout_s=30))
+                   context_factory=lambda s: CheckContext(settings=s, timeout_s=30))
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("4", "r")
         await pilot.pause(0.1)
@@ -373,7 +379,7 @@ async def test_unknown_host_key_is_shown_and_trusted_only_on_request(tmp_path):
 
     specs = {"linux": [spec("linux.ssh", "linux", ssh_check)]}
     app = make_app(tmp_path, complete_settings(), specs=lambda step: specs.get(step, []),
-                   make_context=lambda s: CheckContext(
+                   context_factory=lambda s: CheckContext(
                        settings=s, ssh_options=SshOptions(ssh_dir=ssh_dir)))
     async with app.run_test(size=(80, 24)) as pilot:
         app.session.set_check_state("linux.ssh", "fail", result)

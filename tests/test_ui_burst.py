@@ -20,10 +20,12 @@ from textual.widgets import Input, Select
 
 from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.netinfo import LocalNet
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.settings import load_settings
 from rosnet_tui.core.settings_model import Settings
-from rosnet_tui.ui.app import AppDeps, RosnetApp
+from rosnet_tui.ui.app import RosnetApp
 from tests.builders import complete_settings
 
 NET = LocalNet("wlan0", "10.10.10.1", "10.10.10.254", "02:00:00:00:0a:01", "255.255.255.0")
@@ -44,11 +46,13 @@ def demo_specs(step: str) -> list[CheckSpec]:
 
 
 def make_app(tmp_path: Path, settings: Settings | None, **kw) -> RosnetApp:
-    deps = AppDeps(config_path=tmp_path / "config.toml", settings=settings or Settings(),
-                   state_dir=tmp_path / "state", detect_net=lambda: NET,
-                   specs_for=kw.pop("specs_for", lambda step: []),
-                   make_context=lambda s: CheckContext(settings=s, timeout_s=2.0), **kw)
-    return RosnetApp(deps)
+    open_setup = kw.pop("open_setup", False)
+    paths = Paths(config_path=tmp_path / "config.toml", state_dir=tmp_path / "state")
+    session = WizardSession(settings or Settings(), paths, detect_net=lambda: NET,
+                            specs_for=kw.pop("specs_for", lambda step: []),
+                            context_factory=lambda s: CheckContext(settings=s, timeout_s=2.0),
+                            **kw)
+    return RosnetApp(session, open_setup=open_setup)
 
 
 def key_event(key: str) -> events.Key:

@@ -240,12 +240,13 @@ async def test_results_and_draft_come_back_in_the_next_session(tmp_path):
 
 
 def test_a_damaged_state_file_is_ignored(tmp_path):
+    from rosnet_tui.core.paths import Paths
     from rosnet_tui.core.session import WizardSession
 
     (tmp_path / "state").mkdir()
     (tmp_path / "state" / "ui.json").write_text('{"results": {"x": 5}, "draft": [1], "la')
-    s = WizardSession(config_path=tmp_path / "c.toml", settings=complete_settings(),
-                      state_dir=tmp_path / "state")
+    s = WizardSession(complete_settings(),
+                      Paths(config_path=tmp_path / "c.toml", state_dir=tmp_path / "state"))
     assert s.last_step() == "isp" and s.draft() is None and s.latest_results() == {}
 
 

@@ -17,6 +17,7 @@ from rosnet_tui.cli.writing import (
     confirm,
     err,
     load_settings_for,
+    paths_of,
     report_settings_problems,
     rerun_checks,
     run_as_root,
@@ -144,7 +145,7 @@ def run_apply(args: argparse.Namespace) -> int:
         else:
             print(f"Loaded the table {fw.TABLE} (journal #{entry}). Undo with: rosnet-tui undo")
     if rc == EXIT_OK and not args.no_checks:
-        rerun_checks(FIREWALL_CHECKS, settings, state_dir=state_dir_of(args))
+        rerun_checks(FIREWALL_CHECKS, settings, paths_of(args))
     return rc
 
 
@@ -217,5 +218,5 @@ def run_undo(args: argparse.Namespace) -> int:
         print(f"Removed the table {fw.TABLE}" + (f" (journal #{entry}; `rosnet-tui undo` loads "
                                                  "it again)." if entry else "."))
     if rc == EXIT_OK and not args.no_checks:
-        rerun_checks(FIREWALL_CHECKS, settings, state_dir=state_dir_of(args))
+        rerun_checks(FIREWALL_CHECKS, settings, paths_of(args))
     return rc

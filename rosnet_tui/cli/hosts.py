@@ -14,6 +14,7 @@ from rosnet_tui.cli.writing import (
     err,
     interactive,
     load_settings_for,
+    paths_of,
     print_changes,
     report_settings_problems,
     rerun_checks,
@@ -130,7 +131,7 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
         state_dir=state_dir_of(args), fix_conflicts=bool(fix))
     rc = write_preview(args, preview, sudo_cmd)
     if rc == EXIT_OK and not args.no_checks:
-        rerun_checks(affected.HOSTS, settings, hosts_path=path, state_dir=state_dir_of(args))
+        rerun_checks(affected.HOSTS, settings, paths_of(args, hosts_path=path))
     return rc, settings
 
 

@@ -21,6 +21,7 @@ from rosnet_tui.cli.writing import (
     err,
     interactive,
     load_settings_for,
+    paths_of,
     print_changes,
     report_settings_problems,
     rerun_checks,
@@ -122,7 +123,7 @@ def run_apply(args: argparse.Namespace) -> int:
         for line in lines:
             print(f"  {line}")
         if not args.no_checks:
-            rerun_checks(affected.ROS_ENV, settings, bashrc_path=path, state_dir=state_dir_of(args))
+            rerun_checks(affected.ROS_ENV, settings, paths_of(args, bashrc_path=path))
     return rc
 
 
@@ -185,8 +186,8 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
         print("Security is off ([ros] security = \"none\"): anyone who reaches the master's "
               f"port {settings.ros.zenoh_port} can join the ROS graph.")
     if not args.no_checks:
-        rerun_checks(affected.ros2_write(ros2.mtls(settings)), settings, bashrc_path=path,
-                     state_dir=state_dir_of(args))
+        rerun_checks(affected.ros2_write(ros2.mtls(settings)), settings,
+                     paths_of(args, bashrc_path=path))
     return rc
 
 

@@ -20,7 +20,7 @@ from rosnet_tui.cli.common import (
     add_config_option,
     load_settings_or_say,
 )
-from rosnet_tui.cli.writing import ask, err, interactive, rerun_checks, state_dir_of
+from rosnet_tui.cli.writing import ask, err, interactive, paths_of, rerun_checks, state_dir_of
 from rosnet_tui.core import affected
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp import journal
@@ -237,7 +237,7 @@ def run_map(args: argparse.Namespace) -> int:
         print(f"Recorded as change #{result.entry_id}. Undo with: rosnet-tui undo (or rosnet-tui "
               "router unmap). The sync service renews the lease; so does running this again.")
     if not args.no_checks:
-        rerun_checks(affected.FORWARD, settings, state_dir=sd)
+        rerun_checks(affected.FORWARD, settings, paths_of(args))
     return EXIT_OK
 
 

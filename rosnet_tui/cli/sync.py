@@ -28,6 +28,7 @@ from rosnet_tui.cli.common import (
     state_dir_problem,
 )
 from rosnet_tui.core import privilege
+from rosnet_tui.core.paths import Paths, default_state_dir
 
 UNIT_NAME = "rosnet-tui-sync.service"
 
@@ -108,20 +109,19 @@ def _err(msg: str) -> None:
 
 
 def _state_dir(args: argparse.Namespace) -> Path:
-    from rosnet_tui.core.paths import default_state_dir
-
     sd = getattr(args, "state_dir", None)
     return Path(sd).expanduser().absolute() if sd else default_state_dir()
 
 
-def _bashrc(args: argparse.Namespace) -> Path | None:
-    if getattr(args, "no_bashrc", False):
-        return None
-    if getattr(args, "bashrc", None):
-        return Path(args.bashrc).expanduser().absolute()
-    from rosnet_tui.core.paths import default_bashrc_path
-
-    return default_bashrc_path()
+def _paths(args: argparse.Namespace) -> Paths:
+    """The service's files: --config, --state-dir, --hosts-file, --bashrc (its checks read the
+    everyday ~/.bashrc under --no-bashrc)."""
+    files = {}
+    if args.hosts_file:
+        files["hosts_path"] = Path(args.hosts_file).expanduser().absolute()
+    if getattr(args, "bashrc", None) and not getattr(args, "no_bashrc", False):
+        files["bashrc_path"] = Path(args.bashrc).expanduser().absolute()
+    return Paths(config_path=config_path(args), state_dir=_state_dir(args), **files)
 
 
 def _setup_logging(args: argparse.Namespace) -> None:
@@ -138,7 +138,6 @@ def _setup_logging(args: argparse.Namespace) -> None:
 
 # --------------------------------------------------------------------------- the service
 def run_service(args: argparse.Namespace) -> int:
-    from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
     from rosnet_tui.core.sync.loop import install_signal_handlers
     from rosnet_tui.core.sync.outcome import SyncError
     from rosnet_tui.core.sync.service import SyncService
@@ -148,10 +147,9 @@ def run_service(args: argparse.Namespace) -> int:
     if bad_dir:
         _err(f"rosnet-tui sync: {bad_dir}")
         return EXIT_USAGE
-    hosts = Path(args.hosts_file).expanduser().absolute() if args.hosts_file else DEFAULT_HOSTS_PATH
     try:
-        service = SyncService(config_path(args), state_dir=_state_dir(args), hosts_path=hosts,
-                              bashrc_path=_bashrc(args), run_checks=not args.no_checks,
+        service = SyncService(_paths(args), write_bashrc=not getattr(args, "no_bashrc", False),
+                              run_checks=not args.no_checks,
                               interval_s=args.interval, save_learned=not args.no_save_settings,
                               unmap_on_stop=args.unmap_on_stop)
     except SyncError as exc:

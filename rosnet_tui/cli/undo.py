@@ -13,7 +13,7 @@ from rosnet_tui.cli.common import (
     add_config_option,
     state_dir_problem,
 )
-from rosnet_tui.cli.writing import confirm, err, rerun_checks, run_as_root, state_dir_of
+from rosnet_tui.cli.writing import confirm, err, paths_of, rerun_checks, run_as_root, state_dir_of
 from rosnet_tui.core import affected, firewall, privilege
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
@@ -111,15 +111,15 @@ def run(args: argparse.Namespace) -> int:
         for line in result.forwards:
             print(line)
     if not args.no_checks and any(m.get("kind") == firewall.KIND for m in e.mappings):
-        rerun_checks(affected.FIREWALL, _settings_quietly(args), state_dir=sd)
+        rerun_checks(affected.FIREWALL, _settings_quietly(args), paths_of(args))
     elif not args.no_checks and e.mappings:
-        rerun_checks(affected.FORWARD, _settings_quietly(args), state_dir=sd)
+        rerun_checks(affected.FORWARD, _settings_quietly(args), paths_of(args))
     elif not args.no_checks:
         settings = _settings_quietly(args)
         paths = [Path(f.path) for f in e.files]
         hosts = [p for p in paths if p == DEFAULT_HOSTS_PATH or p.name == "hosts"]
         others = [p for p in paths if p not in hosts]
         ids = (affected.HOSTS if hosts else ()) + (affected.ROS_ENV if others else ())
-        rerun_checks(ids, settings, hosts_path=hosts[0] if hosts else None,
-                     bashrc_path=others[0] if others else None, state_dir=sd)
+        rerun_checks(ids, settings, paths_of(args, hosts_path=hosts[0] if hosts else None,
+                                             bashrc_path=others[0] if others else None))
     return EXIT_OK

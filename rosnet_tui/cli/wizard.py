@@ -40,10 +40,12 @@ def run_wizard(args: argparse.Namespace) -> int:
               "written through sudo.", file=sys.stderr)
     import asyncio
 
-    from rosnet_tui.ui.app import AppDeps, RosnetApp
+    from rosnet_tui.core.paths import Paths
+    from rosnet_tui.core.session import WizardSession
+    from rosnet_tui.ui.app import RosnetApp
 
-    app = RosnetApp(AppDeps(config_path=path, settings=settings or new_settings(),
-                            open_setup=bool(getattr(args, "setup", False))))
+    session = WizardSession(settings or new_settings(), Paths(config_path=path))
+    app = RosnetApp(session, open_setup=bool(getattr(args, "setup", False)))
     # Our own loop: leaving does not wait for threads still blocked on a dead network (a check's
     # connect or SSH handshake); asyncio.run() would, for as long as their timeouts.
     loop = asyncio.new_event_loop()

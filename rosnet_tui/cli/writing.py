@@ -15,13 +15,14 @@ from rosnet_tui.cli.common import (
     EXIT_OK,
     EXIT_USAGE,
     add_config_option,
+    config_path,
     load_settings_or_say,
 )
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import WriterSettingsError
-from rosnet_tui.core.paths import default_state_dir
+from rosnet_tui.core.paths import Paths, default_state_dir
 from rosnet_tui.core.settings_model import Settings
 
 
@@ -75,6 +76,15 @@ def report_settings_problems(exc: WriterSettingsError) -> int:
 def state_dir_of(args: argparse.Namespace) -> Path:
     sd = getattr(args, "state_dir", None)
     return Path(sd).expanduser().absolute() if sd else default_state_dir()
+
+
+def paths_of(args: argparse.Namespace, *, hosts_path: Path | None = None,
+             bashrc_path: Path | None = None) -> Paths:
+    """The files of this command: --config, --state-dir, and the hosts file or rc file it
+    wrote (None: the everyday place)."""
+    files = {k: v for k, v in (("hosts_path", hosts_path), ("bashrc_path", bashrc_path))
+             if v is not None}
+    return Paths(config_path=config_path(args), state_dir=state_dir_of(args), **files)
 
 
 def add_writer_options(p: argparse.ArgumentParser, *, file_help: str) -> None:
@@ -164,8 +174,7 @@ def write_preview(args: argparse.Namespace, preview: mf.Preview, sudo_cmd: list[
     return EXIT_OK
 
 
-def rerun_checks(ids: Iterable[str], settings: Settings | None, *, hosts_path: Path | None = None,
-                 bashrc_path: Path | None = None, state_dir: Path | None = None) -> None:
+def rerun_checks(ids: Iterable[str], settings: Settings | None, paths: Paths) -> None:
     """Re-run the checks a write affects and print them; skipped quietly if not available."""
     ids = list(ids)
     if settings is None or not ids:
@@ -180,8 +189,7 @@ def rerun_checks(ids: Iterable[str], settings: Settings | None, *, hosts_path: P
     if not specs:
         print(f"(checks {', '.join(ids)} are not available in this version)")
         return
-    opts = RunOptions(hosts_path=hosts_path, bashrc_path=bashrc_path, state_dir=state_dir)
-    results = {r.id: r for r in run_now(settings, specs, opts)}
+    results = {r.id: r for r in run_now(settings, specs, RunOptions(paths=paths))}
     print("Checks after the change:")
     for spec in specs:
         r = results.get(spec.id)

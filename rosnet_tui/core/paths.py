@@ -1,11 +1,15 @@
-"""Where rosnet-tui's files are by default: the settings file, the state dir (undo journal,
-backups, status), the hosts file and the shell rc file it writes. Declared here once; the
-session, the writers, the checks and the CLI take these unless told other paths.
+"""Where rosnet-tui's files are: the settings file, the state dir (undo journal, backups,
+status), the hosts file and the shell rc file it writes.
+
+The defaults are declared here once. A :class:`Paths` value carries one set of places; the CLI
+or the app builds one and hands the same value to the session, the write plans and the check
+runner (tests point it into a temporary folder).
 """
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass, field
 from pathlib import Path
 
 DEFAULT_HOSTS_PATH = Path("/etc/hosts")
@@ -23,3 +27,14 @@ def default_state_dir() -> Path:
 
 def default_bashrc_path() -> Path:
     return Path.home() / ".bashrc"
+
+
+@dataclass(frozen=True)
+class Paths:
+    """The files one session, write or round of checks uses; each field defaults to the
+    everyday place (read from the environment when the value is made)."""
+
+    config_path: Path = field(default_factory=default_config_path)
+    state_dir: Path = field(default_factory=default_state_dir)
+    hosts_path: Path = DEFAULT_HOSTS_PATH
+    bashrc_path: Path = field(default_factory=default_bashrc_path)

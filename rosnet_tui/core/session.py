@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path, default_state_dir
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings import save_settings
@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from rosnet_tui.core.advisor import Finding
     from rosnet_tui.core.checks import CheckContext, CheckSpec
     from rosnet_tui.core.netinfo import LocalNet
-    from rosnet_tui.core.write_plans import WritePaths, WritePlan
+    from rosnet_tui.core.write_plans import WritePlan
 
 # A check's state in the wizard: the four result statuses plus two of the wizard's own.
 NOT_RUN, RUNNING = "not run", "running"
@@ -57,11 +57,10 @@ def registry_specs(step: str) -> list[CheckSpec]:
 class WizardSession:
     """The wizard's state and services; the app builds one, the screens are handed it."""
 
-    config_path: Path
     settings: Settings
-    state_dir: Path = field(default_factory=default_state_dir)
-    hosts_path: Path = DEFAULT_HOSTS_PATH
-    bashrc_path: Path = field(default_factory=default_bashrc_path)
+    # Where the settings file, the state dir, the hosts file and the rc file are: the same value
+    # goes to the runner (make_context) and the write plans.
+    paths: Paths = field(default_factory=Paths)
     specs_for: Callable[[str], list[CheckSpec]] = registry_specs
     # Tests hand in their own context factory; None: the runner's everyday context.
     context_factory: Callable[[Settings], CheckContext] | None = None
@@ -78,7 +77,7 @@ class WizardSession:
     _restored: dict[str, str] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self.ui_state = UiState(self.state_dir)
+        self.ui_state = UiState(self.paths.state_dir)
         for cid, (result, at) in self.ui_state.results().items():
             self._states[cid] = (result.status.value, result)
             self._restored[cid] = at
@@ -115,13 +114,14 @@ class WizardSession:
         from rosnet_tui.core.settings_model import SettingsError
 
         try:
-            saved = load_settings(self.config_path) if self.config_path.exists() else None
+            path = self.paths.config_path
+            saved = load_settings(path) if path.exists() else None
         except SettingsError:
             saved = None
         if saved is not None and saved == settings:
             settings.saved_at = saved.saved_at     # the file's time: it already said this
         else:
-            save_settings(settings, self.config_path)
+            save_settings(settings, self.paths.config_path)
         self.settings = settings
 
     # ------------------------------------------------------------------ checks
@@ -152,9 +152,7 @@ class WizardSession:
             return self.context_factory(settings)
         from rosnet_tui.core.checks.runner import RunOptions, make_context
 
-        return make_context(settings, RunOptions(state_dir=self.state_dir,
-                                                 hosts_path=self.hosts_path,
-                                                 bashrc_path=self.bashrc_path))
+        return make_context(settings, RunOptions(paths=self.paths))
 
     def start_run(self, specs: Iterable[CheckSpec]) -> AsyncIterator[CheckResult]:
         """Start a run of *specs*: they show as running at once; iterating the answer runs them
@@ -225,7 +223,7 @@ class WizardSession:
         """The address-sync section of the ROS step: each component's last known addresses."""
         from rosnet_tui.core.sync.status import load_status, render_status
 
-        status = load_status(self.state_dir)
+        status = load_status(self.paths.state_dir)
         head = "**Address sync.** "
         if status is None:
             return (head + "Not running on this machine. Public addresses change when a modem "
@@ -248,17 +246,11 @@ class WizardSession:
         return render_router_card(card, markdown=False, width=max(40, width))
 
     # ------------------------------------------------------------------ writing configuration
-    def write_paths(self) -> WritePaths:
-        from rosnet_tui.core.write_plans import WritePaths
-
-        return WritePaths(config_path=self.config_path, state_dir=self.state_dir,
-                          hosts_path=self.hosts_path, bashrc_path=self.bashrc_path)
-
     def write_plan(self, step_id: str) -> WritePlan | None:
         """What `w` writes on *step_id* (None: the step writes nothing)."""
         from rosnet_tui.core.write_plans import write_plan
 
-        return write_plan(step_id, self.runtime_settings(), self.write_paths())
+        return write_plan(step_id, self.runtime_settings(), self.paths)
 
     def trust_host_key(self, name: str, port: int, host_key: str) -> Path:
         from rosnet_tui.core.ssh.known_hosts import trust_host_key

@@ -1,14 +1,14 @@
 """What the wizard's ``w`` writes on a step: a preview, an option, the sudo path, the checks after.
 
-A :class:`WritePlan` is plain data built from the settings and the file paths; the UI only shows
-its preview and asks. Only the Linux step (the hosts set) and the ROS step (the ROS environment
-block of ~/.bashrc) write files.
+A :class:`WritePlan` is plain data built from the settings and the session's
+:class:`~rosnet_tui.core.paths.Paths`; the UI only shows its preview and asks. Only the Linux
+step (the hosts set) and the ROS step (the ROS environment block of ~/.bashrc) write files.
 """
 
 from __future__ import annotations
 
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +16,7 @@ from rosnet_tui.core import affected
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.managed_write import read_text
-from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings_model import Settings
 
 
@@ -46,16 +46,6 @@ class WritePlan:
     after_write: Callable[[], Awaitable[str]] | None = None
 
 
-@dataclass(frozen=True)
-class WritePaths:
-    """Where the files are (tests point these into a temporary folder)."""
-
-    config_path: Path
-    state_dir: Path
-    hosts_path: Path = DEFAULT_HOSTS_PATH
-    bashrc_path: Path = field(default_factory=default_bashrc_path)
-
-
 def _read(path: Path, state_dir: Path) -> str | None:
     """A file we write, as text (a write of ours cut short is completed first); None when it
     is missing or cannot be read (the preview then says why)."""
@@ -65,7 +55,7 @@ def _read(path: Path, state_dir: Path) -> str | None:
         return None
 
 
-def hosts_plan(settings: Settings, paths: WritePaths) -> WritePlan:
+def hosts_plan(settings: Settings, paths: Paths) -> WritePlan:
     """Write this component's active hosts set (the Linux step)."""
     from rosnet_tui.core import hosts, privilege
 
@@ -90,7 +80,7 @@ def hosts_plan(settings: Settings, paths: WritePaths) -> WritePlan:
         then=lambda: firewall_plan(settings, paths))
 
 
-def firewall_plan(settings: Settings, paths: WritePaths) -> WritePlan | None:
+def firewall_plan(settings: Settings, paths: Paths) -> WritePlan | None:
     """ROS 1 with [ros] security = "firewall": the peers-only nftables table (Linux step, after
     the hosts set). None when the settings do not ask for it."""
     from rosnet_tui.core import firewall as fw
@@ -125,7 +115,7 @@ def firewall_plan(settings: Settings, paths: WritePaths) -> WritePlan | None:
                  "removes the table.")
 
 
-def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:
+def ros2_plan(settings: Settings, paths: Paths) -> WritePlan:
     """ROS 2: the ~/.bashrc block and the Zenoh router's config file, in one apply; under
     mutual TLS then the fleet CA (master) or pairing with the master over SSH (member)."""
     from rosnet_tui.core import pairing, ros2
@@ -149,7 +139,7 @@ def ros2_plan(settings: Settings, paths: WritePaths) -> WritePlan:
                  "For the shell you are in now: " + "; ".join(ros2.shell_lines(settings)))
 
 
-def ros_plan(settings: Settings, paths: WritePaths) -> WritePlan:
+def ros_plan(settings: Settings, paths: Paths) -> WritePlan:
     """Write the ROS environment block of ~/.bashrc (the ROS step)."""
     if settings.ros2:
         return ros2_plan(settings, paths)
@@ -171,12 +161,12 @@ def ros_plan(settings: Settings, paths: WritePaths) -> WritePlan:
         footnote=f"For the shell you are in now: {bashrc.export_line(settings)}")
 
 
-PLANS: dict[str, Callable[[Settings, WritePaths], WritePlan]] = {
+PLANS: dict[str, Callable[[Settings, Paths], WritePlan]] = {
     "linux": hosts_plan,
     "ros": ros_plan,
 }
 
-def write_plan(step_id: str, settings: Settings, paths: WritePaths) -> WritePlan | None:
+def write_plan(step_id: str, settings: Settings, paths: Paths) -> WritePlan | None:
     """The plan of *step_id*, or None when the step writes nothing."""
     build = PLANS.get(step_id)
     return build(settings, paths) if build is not None else None

@@ -8,18 +8,12 @@ run checks, write plans) and reports back with messages.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import TYPE_CHECKING
 
 from textual.app import App
 from textual.binding import Binding
 
-from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path, default_state_dir
 from rosnet_tui.core.procedure import STEP_IDS
-from rosnet_tui.core.session import WizardSession, registry_specs
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.steps import step_for
 from rosnet_tui.ui import textual_compat as tc
 from rosnet_tui.ui.keys import OrderedKeys
@@ -28,37 +22,6 @@ from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.terminal import frugal_driver_class
 from rosnet_tui.ui.theme import THEME, linux_console, use_console_glyphs
 from rosnet_tui.ui.widgets import StepBar
-
-if TYPE_CHECKING:
-    from rosnet_tui.core.checks import CheckContext, CheckSpec
-    from rosnet_tui.core.netinfo import LocalNet
-
-
-def detect_local_net() -> LocalNet:
-    from rosnet_tui.core.netinfo import detect_local_net as detect
-
-    return detect()
-
-
-@dataclass
-class AppDeps:
-    """What the app needs from the outside world; tests hand in their own."""
-
-    config_path: Path
-    settings: Settings
-    state_dir: Path = field(default_factory=default_state_dir)
-    detect_net: Callable[[], LocalNet] = detect_local_net
-    specs_for: Callable[[str], list[CheckSpec]] = registry_specs
-    make_context: Callable[[Settings], CheckContext] | None = None
-    open_setup: bool = False
-    hosts_path: Path = DEFAULT_HOSTS_PATH
-    bashrc_path: Path = field(default_factory=default_bashrc_path)
-
-    def session(self) -> WizardSession:
-        return WizardSession(config_path=self.config_path, settings=self.settings,
-                             state_dir=self.state_dir, hosts_path=self.hosts_path,
-                             bashrc_path=self.bashrc_path, specs_for=self.specs_for,
-                             context_factory=self.make_context, detect_net=self.detect_net)
 
 
 class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
@@ -83,7 +46,9 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
 
     WIDE_AT = 110  # columns from which configuration and verification sit side by side
 
-    def __init__(self, deps: AppDeps) -> None:
+    def __init__(self, session: WizardSession, *, open_setup: bool = False) -> None:
+        """*session*: the settings, the :class:`~rosnet_tui.core.paths.Paths`, and how checks are
+        found and run (tests hand in their own); *open_setup*: start on the set-up screen."""
         super().__init__(driver_class=None if os.environ.get("ROSNET_TUI_FRUGAL") == "0"
                          else frugal_driver_class())
         self._init_ordered_keys()
@@ -105,8 +70,8 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
         if linux_console():
             self.add_class("linux")
             use_console_glyphs()
-        self.deps = deps
-        self.session = deps.session()
+        self.open_setup = open_setup
+        self.session = session
         self.current_step = self.session.last_step()
 
     # ------------------------------------------------------------------ start-up
@@ -117,7 +82,7 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
             screen = StepScreen(step_for(step_id, self.session.settings), self.session)
             self.install_screen(screen, name=f"step-{step_id}")
         self.push_screen(f"step-{self.current_step}")
-        if self.deps.open_setup or not self.session.settings.complete or self.session.draft():
+        if self.open_setup or not self.session.settings.complete or self.session.draft():
             self.action_setup()
 
     def refresh_css(self, animate: bool = True) -> None:
@@ -172,7 +137,7 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
 
         def done(saved: bool | None) -> None:
             if saved:
-                self.notify(f"Settings saved to {self.session.config_path}", timeout=4)
+                self.notify(f"Settings saved to {self.session.paths.config_path}", timeout=4)
 
         self.push_screen(SetupScreen(self.session), done)
 

@@ -268,7 +268,7 @@ class SetupScreen(Screen[bool]):
             return
         fields, peers = self.form_fields()
         settings, _problems = self.read_form()
-        if settings == self.session.settings and self.session.config_path.exists():
+        if settings == self.session.settings and self.session.paths.config_path.exists():
             self.session.clear_draft()
         else:
             self.session.save_draft(fields, peers)

@@ -216,7 +216,7 @@ class StepScreen(Screen):
                 self.run_specs([s for s in self.specs if s.id in affected.FORWARD])
 
         settings = self.session.runtime_settings()
-        self.app.push_screen(MapScreen(settings, self.session.state_dir,
+        self.app.push_screen(MapScreen(settings, self.session.paths.state_dir,
                                        float(settings.checks.timeout_s)), done)
 
     def action_write(self) -> None:
@@ -236,7 +236,7 @@ class StepScreen(Screen):
             if plan.then is not None:
                 self._offer_write(plan.then())
 
-        self.app.push_screen(WriteScreen(plan, self.session.state_dir), done)
+        self.app.push_screen(WriteScreen(plan, self.session.paths.state_dir), done)
 
     def unknown_host_keys(self) -> list[tuple[str, dict]]:
         """Peers whose SSH host key linux.ssh met but nobody has trusted yet."""
@@ -281,7 +281,7 @@ class StepScreen(Screen):
             if undone:
                 self.run_specs([s for s in self.specs if s.id in affected.UNDO])
 
-        self.app.push_screen(UndoScreen(self.session.state_dir), done)
+        self.app.push_screen(UndoScreen(self.session.paths.state_dir), done)
 
     def action_go_finding(self) -> None:
         """Go back to the step that the highlighted check's first finding points to."""

@@ -15,9 +15,11 @@ import time
 from pathlib import Path
 
 from rosnet_tui.core import fleet_tls
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.ros2 import config_dir
+from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.settings import load_settings
-from rosnet_tui.ui.app import AppDeps, RosnetApp
+from rosnet_tui.ui.app import RosnetApp
 from rosnet_tui.ui.widgets import CheckList
 
 LIMIT_S = 15.0
@@ -26,8 +28,8 @@ LIMIT_S = 15.0
 async def drive(config: Path, state_dir: Path, bashrc: Path) -> dict:
     settings = load_settings(config)
     assert settings is not None, f"no settings at {config}"
-    app = RosnetApp(AppDeps(config_path=config, settings=settings, state_dir=state_dir,
-                            bashrc_path=bashrc))
+    paths = Paths(config_path=config, state_dir=state_dir, bashrc_path=bashrc)
+    app = RosnetApp(WizardSession(settings, paths))
     crt = fleet_tls.tls_paths(config_dir()).node_crt
     out: dict = {"paired_s": None}
     async with app.run_test(size=(80, 24)) as pilot:

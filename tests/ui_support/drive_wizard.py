@@ -13,9 +13,11 @@ import sys
 import time
 from pathlib import Path
 
+from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.session import WizardSession
 from rosnet_tui.core.settings import load_settings
 from rosnet_tui.core.steps import STEPS
-from rosnet_tui.ui.app import AppDeps, RosnetApp
+from rosnet_tui.ui.app import RosnetApp
 from rosnet_tui.ui.widgets import CheckList
 
 STEP_LIMIT_S = 45.0
@@ -24,7 +26,7 @@ STEP_LIMIT_S = 45.0
 async def drive(config: Path, state_dir: Path) -> dict:
     settings = load_settings(config)
     assert settings is not None, f"no settings at {config}"
-    app = RosnetApp(AppDeps(config_path=config, settings=settings, state_dir=state_dir))
+    app = RosnetApp(WizardSession(settings, Paths(config_path=config, state_dir=state_dir)))
     out: dict = {"steps": {}, "bar": {}, "findings": []}
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.pause()

@@ -11,12 +11,11 @@ import asyncio
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.checks import data as data_decl
 from rosnet_tui.core.listener import ListenerPool
-from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH, default_bashrc_path, default_state_dir
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult, Outcome, Status
 from rosnet_tui.core.settings_model import Settings
@@ -30,9 +29,8 @@ class CheckContext:
 
     settings: Settings
     timeout_s: float = 3.0
-    hosts_path: Path = DEFAULT_HOSTS_PATH
-    bashrc_path: Path = field(default_factory=default_bashrc_path)
-    state_dir: Path = field(default_factory=default_state_dir)
+    # The hosts file, ~/.bashrc and the state dir the checks read (the session's, in the wizard).
+    paths: Paths = field(default_factory=Paths)
     env: dict[str, str] = field(default_factory=dict)
     # Results of checks that already ran in this round, by id (for checks that build on others).
     results: dict[str, CheckResult] = field(default_factory=dict)

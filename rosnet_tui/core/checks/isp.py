@@ -158,12 +158,12 @@ async def check_public_ip(ctx: CheckContext) -> Outcome:
     public_ip = ips[0]
     errors = len(ips) < len(urls)
     try:
-        rec = record_public_ip(ctx.state_dir, public_ip)
+        rec = record_public_ip(ctx.paths.state_dir, public_ip)
     except OSError as exc:  # an unwritable state folder must not hide the address
         now = now_iso()
         rec = PublicIpRecord(public_ip, None, False, [{"ip": public_ip, "first_seen": now,
                                                        "last_seen": now}])
-        evidence.append(f"could not record the address in {ctx.state_dir}: {exc.strerror or exc}")
+        evidence.append(f"could not record the address in {ctx.paths.state_dir}: {exc.strerror or exc}")
     matches = None if not settings_ip else settings_ip == public_ip
     data.update(public_ip=public_ip, agree=not errors, matches_settings=matches,
                 previous_ip=rec.previous_ip, changed=rec.changed, history=rec.history)

@@ -85,13 +85,13 @@ def audit_hosts(text: str, expected: list[HostsEntry]) -> dict[str, Any]:
 @check("linux.hosts", "linux", "The hosts file maps every name to the right address", 1.0)
 async def check_hosts(ctx: CheckContext) -> Outcome:
     expected = hosts_entries(ctx.settings)
-    path = Path(ctx.hosts_path)
+    path = Path(ctx.paths.hosts_path)
     base: dict[str, Any] = {"missing": [], "wrong": [], "duplicates": [], "loopback": []}
     if not expected:
         return Outcome(Status.SKIP, "no names with known addresses in the settings yet", data=base)
     try:
         # Through the managed-file reader: a write of ours cut short is completed first.
-        text = read_text(path, state_dir=ctx.state_dir, errors="replace",
+        text = read_text(path, state_dir=ctx.paths.state_dir, errors="replace",
                          wait_s=ctx.timeout_s / 2)
         why = f"cannot read {path}: No such file or directory"
     except ManagedFileError as exc:   # its message names the file and why
@@ -139,7 +139,7 @@ def address_dates(ctx: CheckContext, expected: list[HostsEntry]) -> dict[str, li
         try:
             from rosnet_tui.core.sync.applied import load_applied  # lazy: the sync package is big
 
-            records = load_applied(ctx.state_dir)
+            records = load_applied(ctx.paths.state_dir)
         except Exception:   # dating is a bonus: never let it cost the verdict
             records = {}
     out: dict[str, list[dict[str, Any]]] = {}

@@ -363,7 +363,7 @@ ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()   # the peer program, fed 
 
 def zenoh_env(ctx: CheckContext) -> dict[str, str]:
     """The ROS 2 variables nodes started here get (environment, then ~/.bashrc)."""
-    return zenohproto.ros_env(ctx.env, str(ctx.bashrc_path))
+    return zenohproto.ros_env(ctx.env, str(ctx.paths.bashrc_path))
 
 
 def node_domain(ctx: CheckContext) -> int:

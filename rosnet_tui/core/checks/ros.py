@@ -116,7 +116,7 @@ async def check_env(ctx: CheckContext) -> Outcome:
         return Outcome(Status.SKIP, "skipped: no ROS master is configured in the settings "
                                     "(ros.master)", [], {"expected_uri": ""})
     expected, hosts, rule = _expected(s)
-    rc_path = str(ctx.bashrc_path)
+    rc_path = str(ctx.paths.bashrc_path)
     rc = rosproto.read_shell_exports(rc_path, ("ROS_MASTER_URI", "ROS_IP", "ROS_HOSTNAME"))
     env_uri = ctx.env.get("ROS_MASTER_URI")
     rc_uri_entry = rc.get("ROS_MASTER_URI")
@@ -125,7 +125,7 @@ async def check_env(ctx: CheckContext) -> Outcome:
     fails: list[str] = []
     warns: list[str] = []
     oks = 0
-    for label, uri in (("the environment", env_uri), (f"{ctx.bashrc_path}", bashrc_uri)):
+    for label, uri in (("the environment", env_uri), (f"{ctx.paths.bashrc_path}", bashrc_uri)):
         if uri is None:
             evidence.append(f"{label}: ROS_MASTER_URI not set")
             continue
@@ -140,14 +140,14 @@ async def check_env(ctx: CheckContext) -> Outcome:
         else:
             fails.append(f"ROS_MASTER_URI={uri} in {label}: {why}")
     if env_uri is None and bashrc_uri is None:
-        fails.append(f"ROS_MASTER_URI is set neither in the environment nor in {ctx.bashrc_path}; "
+        fails.append(f"ROS_MASTER_URI is set neither in the environment nor in {ctx.paths.bashrc_path}; "
                      f"add: export ROS_MASTER_URI={expected}")
     elif bashrc_uri is None:
-        warns.append(f"ROS_MASTER_URI is not in {ctx.bashrc_path}: new terminals will not have "
+        warns.append(f"ROS_MASTER_URI is not in {ctx.paths.bashrc_path}: new terminals will not have "
                      f"it (add: export ROS_MASTER_URI={expected})")
     elif env_uri is None:
-        warns.append(f"ROS_MASTER_URI is in {ctx.bashrc_path} but not in this environment: "
-                     f"open a new terminal or run: source {ctx.bashrc_path}")
+        warns.append(f"ROS_MASTER_URI is in {ctx.paths.bashrc_path} but not in this environment: "
+                     f"open a new terminal or run: source {ctx.paths.bashrc_path}")
 
     overrides: dict[str, str | None] = {}
     for name in ("ROS_IP", "ROS_HOSTNAME"):
@@ -156,7 +156,7 @@ async def check_env(ctx: CheckContext) -> Outcome:
         if name in ctx.env:
             value, where = ctx.env[name], "the environment"
         elif entry and entry[0] is not None:
-            value, where = entry[0], f"{ctx.bashrc_path} line {entry[1]}"
+            value, where = entry[0], f"{ctx.paths.bashrc_path} line {entry[1]}"
         overrides[name] = value
         if value is None:
             continue
@@ -182,7 +182,7 @@ async def check_env(ctx: CheckContext) -> Outcome:
     if warns:
         return Outcome(Status.WARN, "; ".join(warns), evidence, data)
     return Outcome(Status.PASS, f"ROS_MASTER_URI={expected} in the environment and in "
-                                f"{ctx.bashrc_path}; no ROS_IP or ROS_HOSTNAME", evidence, data)
+                                f"{ctx.paths.bashrc_path}; no ROS_IP or ROS_HOSTNAME", evidence, data)
 
 
 # --------------------------------------------------------------------------- ros.master
@@ -309,7 +309,7 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
     evidence: list[str] = []
     # A probe node of ours, advertised like any node started here: the peers test it too.
     me = rosproto.ProbePublisher(uri, f"{rosproto.PROBE_PREFIX}/{rosproto.new_probe_id()}/uris",
-                                 env=ctx.env, bashrc=str(ctx.bashrc_path), call_timeout=ct)
+                                 env=ctx.env, bashrc=str(ctx.paths.bashrc_path), call_timeout=ct)
     registered = await _start_publisher(me, ct)
     if registered:
         evidence.append(f"probe node {me.caller_id} registered, advertising {me.uri} "
@@ -448,7 +448,7 @@ async def _pubsub_out_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
     deadline = time.monotonic() + budget
     ct = max(0.3, min(2.0, ctx.timeout_s * 0.8))
     topic = f"{rosproto.PROBE_PREFIX}/{rosproto.new_probe_id()}"
-    pub = rosproto.ProbePublisher(uri, topic, env=ctx.env, bashrc=str(ctx.bashrc_path),
+    pub = rosproto.ProbePublisher(uri, topic, env=ctx.env, bashrc=str(ctx.paths.bashrc_path),
                                   call_timeout=ct)
     evidence: list[str] = []
     res: SshResult | None = None
@@ -553,7 +553,7 @@ async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
 
 def _run_sub(uri: str, topic: str, timeout: float, ctx: CheckContext) -> rosproto.ProbeReport:
     ct = max(0.3, min(2.0, ctx.timeout_s * 0.8))
-    return rosproto.run_subscriber(uri, topic, timeout, env=ctx.env, bashrc=str(ctx.bashrc_path),
+    return rosproto.run_subscriber(uri, topic, timeout, env=ctx.env, bashrc=str(ctx.paths.bashrc_path),
                                    call_timeout=ct)
 
 

@@ -79,14 +79,14 @@ async def _peer_infos(ctx: CheckContext, t: float) -> dict[str, dict | str]:
 async def check_env(ctx: CheckContext) -> Outcome:
     s = ctx.settings
     env = zenoh_env(ctx)
-    rc = zenohproto.read_exports(str(ctx.bashrc_path))
+    rc = zenohproto.read_exports(str(ctx.paths.bashrc_path))
     infos_task = asyncio.ensure_future(_peer_infos(ctx, max(0.5, budget(ctx, "ros2.env") * 0.8)))
     fails: list[str] = []
     warns: list[str] = []
     ev: list[str] = []
     codes: list[str] = []
     rmw, rc_rmw = ctx.env.get("RMW_IMPLEMENTATION"), rc.get("RMW_IMPLEMENTATION")
-    ev.append(f"RMW_IMPLEMENTATION: environment {rmw or 'not set'}, {ctx.bashrc_path} "
+    ev.append(f"RMW_IMPLEMENTATION: environment {rmw or 'not set'}, {ctx.paths.bashrc_path} "
               f"{rc_rmw or 'not set'}")
     used = rmw or rc_rmw
     dds = used != ros2.RMW_ZENOH
@@ -97,7 +97,7 @@ async def check_env(ctx: CheckContext) -> Outcome:
         fails.append(f"RMW_IMPLEMENTATION={used} (DDS): its discovery and data do not cross the "
                      "modems; use rmw_zenoh_cpp")
     elif rmw != rc_rmw:
-        where = f"not in {ctx.bashrc_path}" if not rc_rmw else "not in this shell"
+        where = f"not in {ctx.paths.bashrc_path}" if not rc_rmw else "not in this shell"
         warns.append(f"RMW_IMPLEMENTATION=rmw_zenoh_cpp is {where}: new shells (or this one) "
                      "will differ; `rosnet-tui ros apply` writes it, `source ~/.bashrc` loads it")
     dom = env.get("ROS_DOMAIN_ID")

@@ -63,13 +63,13 @@ async def check_local_ip(ctx: CheckContext) -> Outcome:
                             "gateway": gateway, "expected_ip": expected, "differs": differs}
     if up and local_ip:
         try:
-            rec = record_local_ip(ctx.state_dir, local_ip)
+            rec = record_local_ip(ctx.paths.state_dir, local_ip)
             data.update(previous_ip=rec.previous_ip, changed=rec.changed, history=rec.history)
             if rec.changed:
                 evidence.append(f"the local IP was {rec.previous_ip} on the last run: a modem "
                                 f"that forwards to {rec.previous_ip} no longer reaches this machine")
         except OSError as exc:   # an unwritable state folder must not hide the address
-            evidence.append(f"could not record the local IP in {ctx.state_dir}: "
+            evidence.append(f"could not record the local IP in {ctx.paths.state_dir}: "
                             f"{exc.strerror or exc}")
     if not interface:
         return Outcome(Status.FAIL, "no network interface with an IPv4 address: this machine is not "

@@ -127,7 +127,7 @@ async def check_upnp(ctx: CheckContext) -> Outcome:
     evidence += [n for n in notes if "error" in n or "refused" in n]
     deadline = start + total
     try:
-        got = await run_blocking(_inspect, modem, lasting, ctx.state_dir, deadline,
+        got = await run_blocking(_inspect, modem, lasting, ctx.paths.state_dir, deadline,
                                  timeout=max(deadline - time.monotonic(), 0.2))
     except asyncio.TimeoutError:
         return Outcome(Status.FAIL, "the modem answered, but did not finish listing its forwards "

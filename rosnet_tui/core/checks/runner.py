@@ -11,7 +11,6 @@ import asyncio
 import os
 from collections.abc import AsyncIterator, Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 from rosnet_tui.core.checks import (
     REGISTRY,
@@ -22,6 +21,7 @@ from rosnet_tui.core.checks import (
     run_checks,
 )
 from rosnet_tui.core.managed_write import settle
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.ssh.options import SshOptions
@@ -33,9 +33,7 @@ class RunOptions:
     """How to run a round of checks; every field has the everyday default."""
 
     timeout_s: float | None = None          # None: [checks] timeout_s of the settings
-    hosts_path: Path | None = None          # None: /etc/hosts
-    bashrc_path: Path | None = None         # None: ~/.bashrc
-    state_dir: Path | None = None           # None: $XDG_STATE_HOME/rosnet-tui
+    paths: Paths = field(default_factory=Paths)  # the hosts file, ~/.bashrc, the state dir
     env: Mapping[str, str] | None = None    # None: this process's environment
     upnp: bool = True                       # isp.cgnat may ask the modem over UPnP
     ssh: SshOptions = field(default_factory=SshOptions)
@@ -69,17 +67,12 @@ def make_context(settings: Settings, options: RunOptions | None = None) -> Check
     timeout = float(o.timeout_s if o.timeout_s is not None else settings.checks.timeout_s)
     kw: dict = {"settings": settings, "timeout_s": timeout,
                 "env": dict(os.environ if o.env is None else o.env),
-                "upnp": o.upnp, "ssh_options": o.ssh, "ssh_pool": o.ssh_pool or SshPool()}
-    if o.hosts_path is not None:
-        kw["hosts_path"] = o.hosts_path
-    if o.bashrc_path is not None:
-        kw["bashrc_path"] = o.bashrc_path
-    if o.state_dir is not None:
-        kw["state_dir"] = o.state_dir
+                "upnp": o.upnp, "ssh_options": o.ssh, "ssh_pool": o.ssh_pool or SshPool(),
+                "paths": o.paths}
     ctx = CheckContext(**kw)
     # The ROS checks (and the programs they start here) open ~/.bashrc themselves: a write of
     # ours cut short is completed first (linux.hosts reads through read_bytes itself).
-    settle(ctx.bashrc_path, state_dir=ctx.state_dir, wait_s=min(2.0, timeout / 2))
+    settle(ctx.paths.bashrc_path, state_dir=ctx.paths.state_dir, wait_s=min(2.0, timeout / 2))
     return ctx
 
 

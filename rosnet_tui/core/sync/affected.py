@@ -5,18 +5,17 @@ from __future__ import annotations
 import contextlib
 import copy
 import os
-from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core import affected
 from rosnet_tui.core.bashrc import master_uri
 from rosnet_tui.core.hosts import WriterSettingsError
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings_model import Settings
 
 
-def run_affected_checks(settings: Settings, *, hosts_path: Path, bashrc_path: Path | None,
-                        state_dir: Path, ids: tuple[str, ...] = affected.SYNC,
-                        ) -> list[dict[str, Any]]:
+def run_affected_checks(settings: Settings, paths: Paths,
+                        ids: tuple[str, ...] = affected.SYNC) -> list[dict[str, Any]]:
     """Run the checks a hosts/ROS change affects (concurrently, each under its timeout):
     [{"id", "status", "summary"}] in *ids* order."""
     from rosnet_tui.core.checks.runner import RunOptions, run_now, select
@@ -29,7 +28,6 @@ def run_affected_checks(settings: Settings, *, hosts_path: Path, bashrc_path: Pa
         env["ROS_MASTER_URI"] = master_uri(settings)
     for v in ("ROS_IP", "ROS_HOSTNAME"):
         env.pop(v, None)
-    opts = RunOptions(hosts_path=hosts_path, state_dir=state_dir, env=env, upnp=False,
-                      bashrc_path=bashrc_path)
+    opts = RunOptions(paths=paths, env=env, upnp=False)
     got = run_now(copy.deepcopy(settings), specs, opts)
     return [{"id": r.id, "status": r.status.value, "summary": r.summary} for r in got]

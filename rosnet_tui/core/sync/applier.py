@@ -58,13 +58,13 @@ class Applier:
         plan = self._plan()
         self.state.last_plan = plan
         try:
-            old = mw.read_bytes(self.config.hosts_path, state_dir=self.config.state_dir)
+            old = mw.read_bytes(self.config.paths.hosts_path, state_dir=self.config.paths.state_dir)
             text = mt.decode(old) if old is not None else None
             check_complete(plan, text)
             body = plan.body()
             notes = [f"line {c.lineno} '{c.old.strip()}' {c.why}" for c in
                      find_hosts_conflicts(text, plan.settings, plan.profile)]
-            previews = [mf.preview_block(self.config.hosts_path, body, position="top",
+            previews = [mf.preview_block(self.config.paths.hosts_path, body, position="top",
                                          label=f"hosts: {plan.profile} set", notes=notes,
                                          new_mode=0o644, current=old, use_current=True)]
         except (PlanError, WriterSettingsError, mt.ManagedFileError) as exc:
@@ -74,15 +74,15 @@ class Applier:
         for n in notes:
             self.state.once(("conflict", n), logging.WARNING, "%s: %s (rosnet-tui hosts apply "
                             "--comment-conflicts fixes it, with your consent)",
-                            self.config.hosts_path, n)
-        if self.config.bashrc_path is not None and not plan.settings.ros2:
+                            self.config.paths.hosts_path, n)
+        if self.config.write_bashrc and not plan.settings.ros2:
             # (ROS 2: the member's router dials the master by name; the hosts line is all)
             try:
-                previews.append(preview_bashrc(plan.settings, self.config.bashrc_path,
-                                               state_dir=self.config.state_dir))
+                previews.append(preview_bashrc(plan.settings, self.config.paths.bashrc_path,
+                                               state_dir=self.config.paths.state_dir))
             except (WriterSettingsError, mt.ManagedFileError) as exc:
                 self.state.once(("bashrc", str(exc)), logging.WARNING,
-                                "%s is left as it is: %s", self.config.bashrc_path, exc)
+                                "%s is left as it is: %s", self.config.paths.bashrc_path, exc)
         self._update_peer_status(plan)
         follow_for_sync(plan.settings, [c.address for c in plan.choices], log)  # ROS 1 firewall
         changed = [p for p in previews if p.changed]
@@ -95,7 +95,7 @@ class Applier:
         diff = "".join(p.diff() for p in changed)
         log.info("applying: %s\n%s", summary, diff.rstrip("\n"))
         try:
-            result = mf.apply_previews(previews, state_dir=self.config.state_dir,
+            result = mf.apply_previews(previews, state_dir=self.config.paths.state_dir,
                                        label=f"sync: {summary}")
         except mt.StalePreviewError as exc:
             log.info("%s; trying again", exc)
@@ -164,7 +164,7 @@ class Applier:
         if not self.config.save_learned:
             return
         try:
-            fresh = load_settings(self.config.config_path)
+            fresh = load_settings(self.config.paths.config_path)
         except SettingsError as exc:
             self.state.once(("learned", str(exc)), logging.WARNING,
                             "the settings file was not updated: %s", exc)
@@ -190,20 +190,20 @@ class Applier:
         if not changes:
             return
         try:
-            st = os.stat(self.config.config_path)
-            save_settings(fresh, self.config.config_path)
+            st = os.stat(self.config.paths.config_path)
+            save_settings(fresh, self.config.paths.config_path)
             if os.geteuid() == 0 and (st.st_uid, st.st_gid) != (0, 0):
                 with contextlib.suppress(OSError):
-                    os.chown(self.config.config_path, st.st_uid, st.st_gid)
+                    os.chown(self.config.paths.config_path, st.st_uid, st.st_gid)
             with contextlib.suppress(OSError):
-                st2 = os.stat(self.config.config_path)
+                st2 = os.stat(self.config.paths.config_path)
                 self.state.settings_key = (st2.st_mtime_ns, st2.st_size, st2.st_ino)
                 self.state.settings = fresh
         except (SettingsError, OSError) as exc:
             self.state.once(("learned", str(exc)), logging.WARNING,
                             "the settings file was not updated: %s", exc)
             return
-        log.info("settings updated (%s): %s", self.config.config_path, "; ".join(changes))
+        log.info("settings updated (%s): %s", self.config.paths.config_path, "; ".join(changes))
 
     # ------------------------------------------------------------------ checks
     def _run_checks(self, plan: Plan) -> None:
@@ -216,9 +216,7 @@ class Applier:
         self.take_checks(tag, self.affected_checks(plan))
 
     def affected_checks(self, plan: Plan) -> list[dict[str, Any]]:
-        return run_affected_checks(plan.settings, hosts_path=self.config.hosts_path,
-                                   bashrc_path=self.config.bashrc_path,
-                                   state_dir=self.config.state_dir)
+        return run_affected_checks(plan.settings, self.config.paths)
 
     def take_checks(self, tag: Any, results: list[dict[str, Any]] | None) -> None:
         """Keep the verdicts of the checks run for the change *tag* (its journal entry), unless
@@ -263,7 +261,7 @@ class Applier:
             return
         self.state.status["alive_at"] = now
         try:
-            save_status(self.config.state_dir, self.state.status)
+            save_status(self.config.paths.state_dir, self.state.status)
         except OSError as exc:
             self.state.once(("status", str(exc)), logging.WARNING,
                             "cannot save the status: %s", exc)

@@ -86,8 +86,8 @@ class Loop:
         log.info("sync for %s (%s): %s; public IP every %g s, peers read every %g s; hosts file "
                  "%s%s", s.this.name, s.this.role,
                  self.state.store.describe() if self.state.store else "?",
-                 self.state.interval_s, read_period(self.state.interval_s), self.config.hosts_path,
-                 f", ROS block in {self.config.bashrc_path}" if self.config.bashrc_path else "")
+                 self.state.interval_s, read_period(self.state.interval_s),
+                 self.config.paths.hosts_path, f", ROS block in {self.config.paths.bashrc_path}" if self.config.write_bashrc else "")
 
     def _finish(self, lock: ServiceLock) -> None:
         self.state.status["stopped_at"] = time.time()
@@ -96,7 +96,7 @@ class Loop:
 
     def run_once(self) -> RoundResult:
         """One full round (the public IP asked now), for cron and tests."""
-        lock = ServiceLock(self.config.state_dir)
+        lock = ServiceLock(self.config.paths.state_dir)
         self._start(lock)
         try:
             return self.service.round(force_public=True)
@@ -106,7 +106,7 @@ class Loop:
 
     def run(self) -> int:
         """Run until :meth:`stop` (SIGTERM/SIGINT through :func:`install_signal_handlers`)."""
-        lock = ServiceLock(self.config.state_dir)
+        lock = ServiceLock(self.config.paths.state_dir)
         self._start(lock)
         monitor = NetlinkMonitor.open() if self.config.netlink else None
         if self.config.netlink and monitor is None:

@@ -23,10 +23,9 @@ import math
 import os
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 from rosnet_tui.core.pairing import CertRenewer
-from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings import load_settings
 from rosnet_tui.core.settings_model import Settings, SettingsError
 from rosnet_tui.core.upnp.forwards import Renewer
@@ -61,31 +60,27 @@ log = logging.getLogger("rosnet_tui.sync")
 class SyncService:
     """See the module docstring. Build it, then :meth:`run` (a service) or :meth:`run_once`."""
 
-    def __init__(self, config_path: Path, *, state_dir: Path,
-                 hosts_path: Path = DEFAULT_HOSTS_PATH, bashrc_path: Path | None = None,
-                 run_checks: bool = True, interval_s: float | None = None,
-                 store: RecordStore | None = None,
+    def __init__(self, paths: Paths, *, write_bashrc: bool = False, run_checks: bool = True,
+                 interval_s: float | None = None, store: RecordStore | None = None,
                  local_source: Callable[[Settings], LocalAddress] = observe_local,
                  public_source: Callable[[Settings], PublicLookup] | None = None,
                  save_learned: bool = True, netlink: bool = True,
                  watch_folder: bool = True, unmap_on_stop: bool = False) -> None:
         self.config = SyncConfig(
-            config_path=Path(config_path), state_dir=Path(state_dir), hosts_path=Path(hosts_path),
-            bashrc_path=Path(bashrc_path) if bashrc_path is not None else None,
-            run_checks=run_checks, interval_override=interval_s, save_learned=save_learned,
-            netlink=netlink, watch_folder=watch_folder, unmap_on_stop=unmap_on_stop)
+            paths=paths, write_bashrc=write_bashrc, run_checks=run_checks,
+            interval_override=interval_s, save_learned=save_learned, netlink=netlink, watch_folder=watch_folder, unmap_on_stop=unmap_on_stop)
         self.state = SyncState(status=empty_status(), interval_override=interval_s, store=store,
                                store_fixed=store is not None)
         self.local_source = local_source
         self.public_source = public_source or (
-            lambda s: lookup_public_ip(s, self.config.state_dir,
+            lambda s: lookup_public_ip(s, self.config.paths.state_dir,
                                        max(1.0, float(s.checks.timeout_s))))
-        self.forwards = Renewer(self.config.state_dir, log)  # our forwards' leases (router map)
+        self.forwards = Renewer(self.config.paths.state_dir, log)  # our forwards' leases (router map)
         self.certs = CertRenewer(log)        # ROS 2 mTLS: the fleet certificate before expiry
         self.applier = Applier(self.state, self.config)
         self.loop = Loop(self.state, self.config, self.applier, self)
 
-        prev = load_status(self.config.state_dir)
+        prev = load_status(self.config.paths.state_dir)
         if prev:
             self.state.status["last_change"] = prev.get("last_change")
             self.state.status["last_error"] = prev.get("last_error")
@@ -102,7 +97,7 @@ class SyncService:
             raise
         # The record of each peer applied before (this run or an earlier one): a copy that does
         # not follow it (a lower seq) is refused, and it stands until a successor comes.
-        self.state.applied = load_applied(self.config.state_dir)
+        self.state.applied = load_applied(self.config.paths.state_dir)
         for p in self.state.settings.peers if self.state.settings else []:
             prev = self.state.applied.get(p.name.lower())
             if prev is not None:
@@ -111,28 +106,28 @@ class SyncService:
     # ================================================================== settings and store
     def _load_settings(self, initial: bool = False) -> None:
         try:
-            st = os.stat(self.config.config_path)
+            st = os.stat(self.config.paths.config_path)
             key = (st.st_mtime_ns, st.st_size, st.st_ino)
         except OSError as exc:
             if initial:
-                raise SyncError(f"no settings file at {self.config.config_path} ({exc.strerror})") \
+                raise SyncError(f"no settings file at {self.config.paths.config_path} ({exc.strerror})") \
                     from None
-            self.state.error("settings", f"cannot read {self.config.config_path}: {exc.strerror}; "
+            self.state.error("settings", f"cannot read {self.config.paths.config_path}: {exc.strerror}; "
                                     "keeping the settings read before")
             return
         if key == self.state.settings_key:
             return
         try:
-            s = load_settings(self.config.config_path)
+            s = load_settings(self.config.paths.config_path)
             if s is None:
-                raise SettingsError("the file is gone", path=self.config.config_path)
+                raise SettingsError("the file is gone", path=self.config.paths.config_path)
             problems = [(k, why) for k, why in s.problems()
                         if k.startswith(("this.", "peer[", "ros.", "sync."))]
             if not s.this.name:
                 problems.insert(0, ("this.name", "this component needs a name"))
             if problems:
                 raise SettingsError("; ".join(f"{k}: {why}" for k, why in problems),
-                                    path=self.config.config_path)
+                                    path=self.config.paths.config_path)
         except SettingsError as exc:
             if initial:
                 raise SyncError(f"the settings cannot be used for sync: {exc}") from None
@@ -140,7 +135,7 @@ class SyncService:
             self.state.settings_key = key
             return
         if self.state.settings is not None:
-            log.info("settings changed (%s): reading them again", self.config.config_path)
+            log.info("settings changed (%s): reading them again", self.config.paths.config_path)
         self.state.settings_key = key
         self.state.settings = s
         self.state.clear_error("settings")
@@ -350,11 +345,11 @@ class SyncService:
                             "refused the record %s (%s): %s; keeping #%d of %s (if %s really "
                             "started counting again, remove its entry from %s)", cand.source, name,
                             why, prev.seq, format_time(prev.timestamp), name,
-                            applied_path(self.config.state_dir))
+                            applied_path(self.config.paths.state_dir))
             return
         self.state.applied[name.lower()] = rec
         try:
-            save_applied(self.config.state_dir, self.state.applied)
+            save_applied(self.config.paths.state_dir, self.state.applied)
         except OSError as exc:
             self.state.once(("applied", str(exc)), logging.WARNING,
                             "cannot keep the applied records in the state dir: %s", exc)

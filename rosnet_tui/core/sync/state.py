@@ -10,9 +10,9 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings_model import Settings
 
 from .backoff import Backoff, backoff_cap
@@ -31,10 +31,8 @@ BACKOFF_PARTS = ("settings", "public_ip", "store", "apply", "round")
 @dataclass(frozen=True)
 class SyncConfig:
     """The service's files and switches, fixed for its life."""
-    config_path: Path
-    state_dir: Path
-    hosts_path: Path
-    bashrc_path: Path | None = None
+    paths: Paths
+    write_bashrc: bool = False       # keep the ROS block of paths.bashrc_path in step (ROS 1)
     run_checks: bool = True
     interval_override: float | None = None
     save_learned: bool = True

@@ -111,8 +111,10 @@ class PublicLookup:
 async def _lookup(settings: Settings, state_dir: Path, timeout_s: float) -> PublicLookup:
     from rosnet_tui.core.checks import run_check
     from rosnet_tui.core.checks.runner import RunOptions, make_context, select
+    from rosnet_tui.core.paths import Paths
 
-    ctx = make_context(settings, RunOptions(timeout_s=timeout_s, state_dir=state_dir, upnp=False))
+    ctx = make_context(settings, RunOptions(timeout_s=timeout_s, paths=Paths(state_dir=state_dir),
+                                            upnp=False))
     res = await run_check(select(ids=["isp.public_ip"])[0], ctx)
     ip = res.data.get("public_ip") if isinstance(res.data, dict) else None
     return PublicLookup(str(ip) if ip else None, res.summary)
