@@ -92,7 +92,7 @@ def test_mac_is_read_from_the_real_interface():
         if r.returncode:
             pytest.skip(f"no veth interfaces here: {r.stderr.strip()}")
         code = ("from rosnet_tui.core.router_card import build_router_card;"
-                "from rosnet_tui.core.settings import Settings, ThisComponent;"
+                "from rosnet_tui.core.settings_model import Settings, ThisComponent;"
                 "s = Settings(this=ThisComponent(name='turtlebot', interface='dummy7'));"
                 "c = build_router_card(s); print(c.mac, c.local_ip)")
         out = subprocess.run(["ip", "netns", "exec", ns, sys.executable, "-c", code],

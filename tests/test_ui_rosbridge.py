@@ -48,7 +48,7 @@ async def test_ros2_ros_step_shows_the_check_too(tmp_path):
         await pilot.press("4")
         await pilot.pause()
         rows = list(app.screen.query_one(CheckList).rows)
-        assert rows[0] == "ros2.env" and rows[-1] == "ros.rosbridge", rows
+        assert rows[0] == "ros2.env" and rows[-2:] == ["ros.rosbridge", "security.outsider"], rows
         assert "rosbridge_websocket_launch.xml" in app.screen.config_source
 
 
@@ -81,7 +81,7 @@ async def test_setup_asks_and_saving_it_puts_the_check_on_the_ros_step(tmp_path)
         assert saved.rosbridge == RosbridgeSettings(enabled=True, port=9091, host="")
         assert "[rosbridge]" in (tmp_path / "config.toml").read_text()
         rows = list(app.screen.query_one(CheckList).rows)
-        assert rows[-1] == "ros.rosbridge", rows
+        assert rows[-2:] == ["ros.rosbridge", "security.outsider"], rows
 
 
 async def test_an_unsaved_rosbridge_choice_comes_back_with_the_draft(tmp_path):

@@ -22,7 +22,6 @@ from __future__ import annotations
 import difflib
 import hashlib
 import ipaddress
-import json
 import logging
 import os
 import re
@@ -31,6 +30,7 @@ import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rosnet_tui.core import jsonsafe
 from rosnet_tui.core import undo_journal as uj
 from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Settings
 
@@ -219,8 +219,8 @@ def current_allowed() -> list[str] | None:
             return None
         raise FirewallError(f"nft list table {TABLE}: {r.stderr.strip()[:300]}")
     try:
-        items = json.loads(r.stdout).get("nftables") or []
-    except ValueError:
+        items = jsonsafe.loads_bounded(r.stdout, unique_keys=False).get("nftables") or []
+    except (jsonsafe.JsonInputError, AttributeError):
         raise FirewallError("nft printed JSON that does not parse") from None
     out: list[str] = []
     for it in items:
