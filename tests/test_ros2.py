@@ -167,8 +167,13 @@ def test_steps_text_per_role():
     assert "carrier-grade NAT included" in STEP_BY_ID["isp"].configure(member())
     assert "VPS" in STEP_BY_ID["isp"].configure(master())
     ros = STEP_BY_ID["ros"].configure(member())
-    assert "tcp/turtlebot:7447" in ros and "client mode" in ros and "Humble" in ros
-    assert "tcp/0.0.0.0:7447" in STEP_BY_ID["ros"].configure(master())
+    assert "tls/turtlebot:7447" in ros and "client mode" in ros and "Humble" in ros
+    assert "ros pair" in ros                                       # mutual TLS, the default
+    assert "Only the fleet gets in" in STEP_BY_ID["router"].configure(master())
+    open_master = master(security="none")
+    assert "tcp/0.0.0.0:7447" in STEP_BY_ID["ros"].configure(open_master)
+    assert "Exposure" in STEP_BY_ID["router"].configure(open_master)
+    assert "tcp/turtlebot:7447" in STEP_BY_ID["ros"].configure(member(security="none"))
 
 
 # --------------------------------------------------------------------------- address sync

@@ -33,7 +33,7 @@ async def test_switching_to_ros2_in_setup_changes_the_ros_step(tmp_path):
         assert list(step.query_one(CheckList).rows) == [
             "ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in",
             "security.outsider"]
-        assert "rmw_zenoh" in step.config_source and "tcp/0.0.0.0:7447" in step.config_source
+        assert "rmw_zenoh" in step.config_source and "tls/" in step.config_source
         await pilot.press("2")
         await pilot.pause()
         assert "7447" in app.session.router_card_text(76)

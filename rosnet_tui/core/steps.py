@@ -268,6 +268,8 @@ def configure_isp_ros2(s: Settings) -> str:
 
 
 def configure_router_ros2(s: Settings) -> str:
+    from rosnet_tui.core import ros2  # not on the start-up path (ROS 1 never needs it)
+
     port = s.ros.zenoh_port
     if not s.is_master:
         return (f"**Nothing to forward on {_name(s)}'s modem.** Under ROS 2 over rmw_zenoh only "
@@ -281,27 +283,48 @@ def configure_router_ros2(s: Settings) -> str:
         "port-forwarding section. Then:\n\n"
         f"1. Forward **TCP {port}** (one port, no range, no UDP) to **{ip}**.\n"
         f"2. Reserve **{ip}** for this machine in the modem's DHCP settings.\n"
-        f"3. The router (`rmw_zenohd`) must listen on an IPv4 address: `tcp/0.0.0.0:{port}` "
+        f"3. The router (`rmw_zenohd`) must listen on an IPv4 address: "
+        f"`{ros2.listen_endpoints(s)[0] if s.is_master else f'tcp/0.0.0.0:{port}'}` "
         "(the ROS step writes that config).",
-        f"**Exposure.** Whoever reaches TCP {port} joins this ROS 2 network: rmw_zenoh has no "
-        "authentication by default. Allow only your members' addresses if the modem can.",
+        (f"**Only the fleet gets in.** The router takes a session on TCP {port} only with a "
+         "certificate signed by the fleet's CA (mutual TLS, `[ros] security = \"mtls\"`, the "
+         "default): the ROS step makes the CA here and pairs each member. If the modem can "
+         "restrict the forward to your members' addresses, do that too."
+         if ros2.mtls(s) else
+         f"**Exposure.** `[ros] security = \"none\"`: whoever reaches TCP {port} joins this "
+         "ROS 2 network (rmw_zenoh has no authentication of its own). Set it back to "
+         "\"mtls\" (set-up: Security on), or at least allow only your members' addresses on "
+         "the modem."),
         f"**To verify:** TCP {port} tested from outside reaches the router (or our stand-in "
         "listener while the router is not running)."])
 
 
 def configure_ros2(s: Settings) -> str:
-    port, master = s.ros.zenoh_port, _master_word(s)
+    from rosnet_tui.core import ros2  # not on the start-up path (ROS 1 never needs it)
+
+    master = _master_word(s)
     head = ["**ROS 2 over rmw_zenoh**: a Zenoh router on every component, one TCP port on the "
             "master. DDS (ROS 2's default) cannot cross the modems: its discovery is multicast "
             "and its data goes to private addresses."]
     if s.is_master:
-        head.append(f"*{_name(s)}* is the master: its router listens on `tcp/0.0.0.0:{port}` "
-                    "(IPv4: rmw_zenohd's default `tcp/[::]` fails on hosts without IPv6) and "
-                    "every member's router connects to it.")
+        eps = " and ".join(f"`{e}`" for e in ros2.listen_endpoints(s))
+        head.append(f"*{_name(s)}* is the master: its router listens on {eps} (IPv4: "
+                    "rmw_zenohd's default `tcp/[::]` fails on hosts without IPv6) and every "
+                    "member's router connects to it.")
+        if ros2.mtls(s):
+            head.append("**Mutual TLS** (`[ros] security = \"mtls\"`): `rosnet-tui ros apply` "
+                        "makes the fleet's CA here (its key never leaves this machine) and this "
+                        "router's certificate; only routers with a certificate from that CA get "
+                        "in. Its own nodes stay on plain TCP over loopback.")
     else:
-        head.append(f"*{_name(s)}* is a member: its router connects to `tcp/{master}:{port}` "
-                    f"(the hosts file maps *{master}* to the master's public IP; address sync "
-                    "keeps it right) and its nodes stay on it.")
+        head.append(f"*{_name(s)}* is a member: its router connects to "
+                    f"`{ros2.master_endpoint(s)}` (the hosts file maps *{master}* to the "
+                    "master's public IP; address sync keeps it right) and its nodes stay on it.")
+        if ros2.mtls(s):
+            head.append("**Mutual TLS**: `rosnet-tui ros apply` makes this machine's key here and "
+                        "has the master sign its certificate over SSH (`rosnet-tui ros pair`; "
+                        "without SSH to the master, `ros pair --print-request` gives a text to "
+                        "paste there).")
     block = "\n".join(["export RMW_IMPLEMENTATION=rmw_zenoh_cpp",
                        f"export ROS_DOMAIN_ID={s.ros.domain_id}",
                        "export ZENOH_ROUTER_CONFIG_URI=~/.config/rosnet-tui/zenoh-router.json5"])
@@ -311,7 +334,8 @@ def configure_ros2(s: Settings) -> str:
     if not s.is_master:
         head.append(f"**A lone node** (no router here): client mode, straight to the master "
                     f"(`ros apply --client`): `ZENOH_CONFIG_OVERRIDE='mode=\"client\";"
-                    f"connect/endpoints=[\"tcp/{master}:{port}\"]'`. Never peer mode: the "
+                    f"connect/endpoints=[\"{ros2.master_endpoint(s)}\"]'` (with this machine's "
+                    f"certificate under mutual TLS: `ros apply --client` writes it). Never peer mode: the "
                     "router passes no data between two peers (graph seen, no data).")
     head.append("**Same distro everywhere.** Humble next to Jazzy or later discovers but drops "
                 "every message. On Humble, ZENOH_CONFIG_OVERRIDE needs rmw_zenoh 0.1.2: use a "
