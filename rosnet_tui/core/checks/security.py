@@ -138,7 +138,7 @@ async def _outsider_ros2(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
     master, port = s.master_name, s.ros.zenoh_port
     t = budget(ctx, "security.outsider")
     data["target"] = f"{master}:{port}"
-    args = [master, str(port), f"{min(2.0, t * 0.2):.1f}", outsider.FLEET_TLS_DIR]
+    args = [master, str(port), f"{min(2.0, t * 0.2):.1f}"]
     program = outsider.tls_probe_program()
     if s.is_master:
         members = [p for p in ssh_peers(s) if p.name != master]
