@@ -153,6 +153,8 @@ async def _outsider_ros2(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
         rep = outsider.parse_marked(res.stdout, outsider.TLS_MARK)
         problem = None if rep is not None else (peer_program_problem(res, peer) or
                                                 f"no report ({stderr_tail(res) or res.detail})")
+        if rep is None and res.failure:   # no way to look from outside: unknown, not insecure
+            return Outcome(Status.WARN, f"not judged from outside: {problem}", [], data)
     else:
         data["from"] = "here"
         out, err = await _run_here(program, args, t * 0.9)
