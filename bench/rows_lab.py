@@ -29,7 +29,8 @@ TITLES = {2: "Full verification on the lab's healthy network, from a member and 
           6: "Address sync: master address change to member updated"}
 
 
-def rosnet_check(lab: Any, host: str, state: Path, *extra: str) -> dict[str, Any]:
+def rosnet_check(lab: Any, host: str, state: Path, *extra: str, config: Path | None = None,
+                 env: dict[str, str] | None = None) -> dict[str, Any]:
     """`rosnet-tui check --json` on *host* (all steps, both directions): wall time and verdicts.
 
     A verdict's margin is its duration minus the round's timeout_s (the lab's settings, or
@@ -38,8 +39,8 @@ def rosnet_check(lab: Any, host: str, state: Path, *extra: str) -> dict[str, Any
     """
     base = float(extra[extra.index("--timeout") + 1]) if "--timeout" in extra else \
         float(lab.settings(host).checks.timeout_s)
-    config = lab.config_path(host)  # written before the clock starts
-    env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
+    config = config or lab.config_path(host)  # written before the clock starts
+    env = dict(env or lab.ros_env(host), XDG_STATE_HOME=str(state))
     if _COMPILED is not None:       # the byte-compiled copy (bench/compiled.py)
         env = run_compiled(env, _COMPILED)
     t0 = time.monotonic()
@@ -84,17 +85,21 @@ def manual_check(lab: Any, rep: int, cap: float) -> dict[str, Any]:
 
 def row2_full(lab: Any, opts: Options, state: Path) -> RowResult:
     res = RowResult(2, TITLES[2])
+    from tests.lab.firewall import secured
+
     lab.reset()
     lab.start_roscore()
     app_runs, base_runs, master_runs = [], [], []
     for i in range(opts.reps):
         for who in (("app", "base", "master") if i % 2 == 0 else ("master", "base", "app")):
-            if who == "app":
-                app_runs.append(rosnet_check(lab, "laptop", state / "laptop"))
-            elif who == "master":
-                master_runs.append(rosnet_check(lab, "robot", state / "robot"))
-            else:
-                base_runs.append(manual_check(lab, i, 60.0))
+            if who == "base":       # the manual procedure, as before issue 22: no firewall (its
+                base_runs.append(manual_check(lab, i, 60.0))   # port checker is no peer)
+                continue
+            with secured(lab):      # ROS 1 as the product sets it up: the peers-only firewall
+                if who == "app":
+                    app_runs.append(rosnet_check(lab, "laptop", state / "laptop"))
+                else:
+                    master_runs.append(rosnet_check(lab, "robot", state / "robot"))
     ln = Line(2, "Full verification (wall time)", "s",
               [r["wall_s"] for r in app_runs], [r["wall_s"] for r in base_runs],
               baseline="manual tests with standard tools, one after another (script)",
@@ -128,9 +133,47 @@ def row2_full(lab: Any, opts: Options, state: Path) -> RowResult:
         seat.status = "error"
         bad = sorted({k for r in master_runs for k, v in r["statuses"].items() if v != "pass"})
         seat.note += f"; not all good on the master: {bad}"
-    res.lines = [ln, seat]
-    res.details = {"app_runs": app_runs, "base_runs": base_runs, "master_runs": master_runs}
+    tls, tls_details = _row2_tls(lab, opts, state)
+    res.lines = [ln, seat, tls]
+    res.details = {"app_runs": app_runs, "base_runs": base_runs, "master_runs": master_runs,
+                   **tls_details}
     return res
+
+
+def _row2_tls(lab: Any, opts: Options, state: Path) -> tuple[Line, dict[str, Any]]:
+    """ROS 2 from the member's seat: full verification with mutual TLS (the default) against
+    the same with [ros] security = "none" (issue 22: TLS adds at most 0.2 s)."""
+    from tests.lab.ros2 import Ros2World
+
+    lab.stop_roscore()
+    runs: dict[str, list[dict[str, Any]]] = {"mtls": [], "none": []}
+    with Ros2World(lab) as w:
+        for i in range(opts.reps):
+            for mode in (("mtls", "none") if i % 2 == 0 else ("none", "mtls")):
+                w.set_security(mode)       # configs rewritten, routers restarted: not timed
+                runs[mode].append(rosnet_check(lab, "laptop", state / f"ros2-{mode}",
+                                               config=w.config_path("laptop"),
+                                               env=w.env("laptop")))
+    line = Line(2, "Full verification, ROS 2 with mutual TLS (wall time)", "s",
+                [r["wall_s"] for r in runs["mtls"]], [r["wall_s"] for r in runs["none"]],
+                baseline='the same with [ros] security = "none"', goal="<= +0.2 s")
+    a, b = line.app_median, line.base_median
+    line.met = None if a is None or b is None else a - b <= 0.2
+
+    def bad(r: dict[str, Any]) -> list[str]:     # skips: checks that do not apply to a member
+        return [k for k, v in r["statuses"].items() if v not in ("pass", "skip")]
+
+    ok = all(not bad(r) for r in runs["mtls"]) and all(
+        bad(r) == ["security.outsider"] for r in runs["none"])
+    n = len(runs["mtls"][0]["statuses"]) if runs["mtls"] else 0
+    line.note = (f"all steps from the laptop (a member) on ROS 2: {n} checks; TLS adds "
+                 f"{(a or 0) - (b or 0):+.2f} s; all good under mTLS, only security.outsider "
+                 f"failing under none: {'yes' if ok else 'NO'}")
+    if not ok:
+        line.status = "error"
+        line.note += "; " + "; ".join(f"{m}: {sorted({x for r in rs for x in bad(r)})}"
+                                      for m, rs in runs.items())
+    return line, {"ros2_mtls_runs": runs["mtls"], "ros2_none_runs": runs["none"]}
 
 
 # =============================================================================== row 3

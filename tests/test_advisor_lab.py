@@ -11,6 +11,8 @@ import json
 
 import pytest
 
+from tests.lab.firewall import secured
+
 pytestmark = pytest.mark.lab
 
 T1 = "table1.listener_up_closed"
@@ -57,8 +59,10 @@ def test_healthy_network_gives_no_failure_findings(adv_lab, tmp_path):
     lab = adv_lab
     lab.reset()
     exposed = {}
+    with secured(lab):                  # ROS 1 as the product sets it up: the firewall on
+        docs = {h: report(lab, h, tmp_path / h) for h in ("robot", "laptop")}
     for host in ("robot", "laptop"):
-        code, doc = report(lab, host, tmp_path / host)
+        code, doc = docs[host]
         assert code == 0, explain(doc)
         assert doc["summary"]["fail"] == 0, explain(doc)
         assert failures(doc) == [], explain(doc)

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from tests.lab.firewall import apply_firewall, remove_firewall
+from tests.lab.firewall import secured
 
 pytestmark = pytest.mark.lab
 
@@ -38,15 +38,13 @@ def table(checks: dict[str, dict]) -> str:
 @pytest.mark.parametrize("host,peer", [("laptop", "turtlebot"), ("robot", "sami")])
 def test_healthy_network_passes_everything(lab, tmp_path, host, peer):
     lab.reset()
-    apply_firewall(lab, host, lab.config_path(host))   # ROS 1 as the product sets it up
-    try:
+    with secured(lab, [host]):                 # ROS 1 as the product sets it up
         code, checks = check(lab, host, tmp_path)
-    finally:
-        remove_firewall(lab, host)
     assert code == 0, table(checks)
     assert all(c["status"] == "pass" for c in checks.values()), table(checks)
-    assert len(checks) == 14
     d = {k: c["data"] for k, c in checks.items()}
+    assert len(checks) == 15
+    assert d["security.ssh_auth"]["methods"] == ["publickey"]    # no password for strangers
     assert d["isp.public_ip"]["public_ip"] == lab.public_ip(host)
     assert d["isp.cgnat"]["method"] == "traceroute" and not d["isp.cgnat"]["cgnat"]
     assert d["router.port_open"]["test_port_open"] is True

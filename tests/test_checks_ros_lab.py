@@ -8,9 +8,12 @@ import time
 
 import pytest
 
+from tests.lab.firewall import secured
+
 pytestmark = pytest.mark.lab
 
-ROS_IDS = ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in"]
+ROS_IDS = ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in",
+           "security.outsider"]
 
 
 @pytest.fixture(scope="module")
@@ -38,13 +41,18 @@ def explain(results: dict[str, dict]) -> str:
 def test_healthy_lab_passes_both_directions_from_each_seat(ros_lab):
     lab = ros_lab
     lab.reset()
+    with secured(lab):                     # ROS 1 as the product sets it up: the firewall on
+        both = {h: ros_check(lab, h) for h in ("laptop", "robot")}
     for host, peer in (("laptop", "turtlebot"), ("robot", "sami")):
-        results = ros_check(lab, host)
+        results = both[host]
         assert all(c["status"] == "pass" for c in results.values()), explain(results)
         assert results["ros.pubsub_out"]["data"]["peer"] == peer
         assert results["ros.pubsub_in"]["data"]["ok"] is True
         assert results["ros.node_uris"]["data"]["from"] == ["here", peer]
         assert "/rosout" in results["ros.master"]["data"]["nodes"]
+        out = results["security.outsider"]["data"]     # the outsider is shut out, the peer not
+        assert not any(out["outsider_reachable"].values()), explain(results)
+        assert all(out["insider_reachable"].values()), explain(results)
 
 
 def test_ros_ip_on_the_laptop_names_its_node_and_breaks_one_direction(ros_lab):

@@ -143,6 +143,9 @@ def test_security_none_brings_back_plain_tcp_and_the_exposure_finding(ros2):
             "tls/turtlebot:7447" if mode == "mtls" else "tcp/turtlebot:7447")
         for _ in range(3):
             laptop, took = _full(ros2, "laptop")
+            out = laptop.pop("security.outsider")     # the outsider gets in only with "none"
+            assert out["status"] == ("fail" if mode == "none" else "pass"), explain(laptop)
+            assert mode == "mtls" or out["data"]["cause"] == "security_off", out
             assert all(c["status"] in ("pass", "skip") for c in laptop.values()), explain(laptop)
             times[mode].append(took)
     med = {m: sorted(v)[1] for m, v in times.items()}

@@ -9,6 +9,7 @@ laid out as pipx, uv and pip lay them out, with real virtual environments.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -198,3 +199,58 @@ def test_installed_python_command_serves_any_program_with_its_own_mark(tmp_path)
                        capture_output=True, timeout=30, env={"HOME": str(home),
                                                              "PATH": "/usr/bin:/bin"}, cwd=home)
     assert r.returncode == 0 and r.stdout.decode().strip() == f"{v}/bin/python", r
+
+
+def _fake_build(cache: Path, name: str, age_s: float = 0.0) -> Path:
+    """A cached build as built_venv() leaves it (a launcher, pyvenv.cfg, the prefix file), last
+    used *age_s* ago."""
+    from tests.lab import readme_install
+
+    b = cache / f"venv-{name}"
+    (b / "bin").mkdir(parents=True)
+    (b / "bin" / "rosnet-tui").write_text(f"#!{b}/bin/python\nprint('hi')\n")
+    (b / "pyvenv.cfg").write_text(f"home = /usr/bin\ncommand = {b}\n")
+    (b / readme_install.PREFIX_FILE).write_text(str(b))
+    t = time.time() - age_s
+    os.utime(b, (t, t))
+    return b
+
+
+def test_the_labs_install_survives_another_trees_prune_of_its_build(tmp_path, monkeypatch):
+    """Lab install cache race: install() got its build's path outside any lock, and another
+    pytest process (another source tree) pruning the cache (KEEP newest) removed it before the
+    link: FileNotFoundError. Now it links under the shared lock and builds again when the build
+    vanished; and a build installed from recently is never pruned."""
+    from tests.lab import readme_install as ri
+
+    cache = tmp_path / "cache"
+    monkeypatch.setattr(ri, "CACHE", cache)
+    ours = _fake_build(cache, "ours", age_s=7200)
+    others = [_fake_build(cache, f"new{i}") for i in range(ri.KEEP)]
+    calls = []
+
+    def built_venv():                      # another process prunes right after we got the path
+        calls.append(1)
+        if len(calls) == 1:
+            with ri.locked(shared=False):
+                ri.prune(keep=others[0])
+            assert not ours.exists()       # the race: gone under us
+            return ours
+        return _fake_build(cache, f"again{len(calls)}", age_s=7200)   # built again
+
+    monkeypatch.setattr(ri, "built_venv", built_venv)
+    home = tmp_path / "home"
+    launcher = ri.install(home)
+    assert len(calls) == 2 and launcher.resolve().is_file()
+    assert str(home / ri.VENV) in launcher.resolve().read_text().splitlines()[0]
+    used = cache / "venv-again2"
+    assert time.time() - used.stat().st_mtime < 60          # marked in use by the install
+    for i in range(ri.KEEP + 1):                             # newer builds pile up ...
+        _fake_build(cache, f"later{i}")
+    with ri.locked(shared=False):
+        ri.prune(keep=cache / "venv-later0")
+    assert (used / ri.PREFIX_FILE).is_file()                # ... it is still spared
+    stale = _fake_build(cache, "stale", age_s=2 * ri.PRUNE_GRACE_S)
+    with ri.locked(shared=False):
+        ri.prune(keep=cache / "venv-later0")
+    assert not stale.exists()                                # old and unused: pruned

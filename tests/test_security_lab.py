@@ -1,70 +1,87 @@
-"""Issue 22 on the network lab, seen from the outsider (192.0.2.66: on the internet, no peer).
+"""Issue 22's acceptance on the network lab, seen from the outsider (192.0.2.66: on the internet,
+no peer) against a network set up as the product sets it up (rosnet-tui installed on every
+computer the README's way; default [ros] security: "firewall" on ROS 1, "mtls" on ROS 2).
 
-Today's plain setup (no [ros] security yet, or security = "none"): the defect is reproduced (the
-outsider gets a Zenoh session and the graph on ROS 2, and getSystemState on ROS 1), and
-security.outsider fails with its advice. The SSH audit works today: the lab's sshd offers
-publickey only (passes); with PasswordAuthentication on, the finding names the fix.
+- Default settings: nothing the outsider tries gets through. ROS 1: the master's port and a port
+  of the range are closed to it (the peers-only firewall on every computer), and SSH offers it no
+  password. ROS 2: no Zenoh session, plain or TLS, no graph, nothing published. Meanwhile every
+  check of a full verification passes on each seat, security.outsider included.
+- ``security = "none"`` brings the outsider back in, and security.outsider fails with its advice;
+  ROS 1's ``firewall undo`` restores the plain setup (ROS 2's ``ros apply`` + ``undo``:
+  tests/test_ros2_lab.py test_ros_apply_writes_what_the_lab_router_runs_and_undo_restores).
+- The SSH audit names password login with the exact fix.
 
-The tests of the final default behaviour (mTLS from S1, the peers-only firewall from S3) are here
-too; each skips, saying which part is missing, until that part is in this build.
+Elsewhere (not repeated here): pairing within 5 s, an expired member certificate and a foreign CA
+named, removing a member (tests/test_pairing_lab.py); the wizard's one-flow pairing over the pty
+(same file); the firewall following a peer's address change within the sync latency
+(tests/test_firewall_lab.py).
 """
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import sys
 import time
+from dataclasses import replace
 
 import pytest
 
-from tests.lab import outsider
+from tests.lab import outsider, readme_install
+from tests.lab.firewall import secured
 from tests.lab.ros2 import Ros2World, explain
 from tests.lab.topology import ADDR, ZENOH_PORT
 
 pytestmark = pytest.mark.lab
 TIMEOUT = 3.0
+SEATS = ("robot", "laptop")      # the master (turtlebot) and the member (sami)
+ROS2_SKIPS = {"robot": {"router.upnp", "linux.chat_out"},
+              "laptop": {"router.upnp", "router.port_open", "linux.chat_in"}}
 
-# Runs security.* in *host*'s namespace with [ros] security set (S1's setting: set by hand until
-# this build has it), printing {id: result} as JSON.
+# Runs the checks *ids* in a host's namespace with its settings file; {id: result} as JSON.
 _RUN = r"""
 import json, sys
-from dataclasses import replace
+from pathlib import Path
 from rosnet_tui.core.checks import runner
 from rosnet_tui.core.settings import load_settings
-path, security, *ids = sys.argv[1:]
-s = load_settings(__import__("pathlib").Path(path))
-ros = replace(s.ros)
-ros.security = security
-s = replace(s, ros=ros)
+path, *ids = sys.argv[1:]
 out = {}
-for r in runner.run_now(s, runner.select(ids=ids)):
+for r in runner.run_now(load_settings(Path(path)), runner.select(ids=ids)):
     out[r.id] = {"id": r.id, "status": r.status.value, "summary": r.summary,
                  "evidence": r.evidence, "data": r.data, "duration_s": r.duration_s}
 print("RESULTS " + json.dumps(out))
 """
 
 
-def run_security(lab, host: str, config, security: str, *ids: str, env=None) -> dict:
-    r = lab.run(host, [sys.executable, "-c", _RUN, str(config), security, *ids],
+def run_checks(lab, host: str, config, *ids: str, env=None) -> dict:
+    r = lab.run(host, [sys.executable, "-c", _RUN, str(config), *ids],
                 env=env or lab.env(host), timeout=60)
     line = next((x for x in r.stdout.splitlines() if x.startswith("RESULTS ")), None)
     assert line, r.stderr[-3000:]
     return json.loads(line[len("RESULTS "):])
 
 
-def has_mtls() -> bool:
-    return any(importlib.util.find_spec(m) is not None
-               for m in ("rosnet_tui.core.fleet_tls", "rosnet_tui.core.tls"))
+def full_check(lab, host: str, config, env, state, *steps: str) -> dict[str, dict]:
+    """`rosnet-tui check --json` (every step, or *steps*) on *host*: {id: entry}, with the
+    advisor's findings under "advice"."""
+    r = lab.rosnet(host, "check", "--json", "-q", *(a for st in steps for a in ("--step", st)),
+                   "--config", str(config), env=dict(env, XDG_STATE_HOME=str(state)),
+                   timeout=90)
+    assert r.stdout.strip(), r.stderr
+    return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
 
 
-def has_firewall() -> bool:
-    return importlib.util.find_spec("rosnet_tui.core.firewall") is not None
+def ros1_config(lab, host: str, **ros) -> str:
+    """*host*'s settings file with [ros] *ros* changed (beside the default one)."""
+    from rosnet_tui.core.settings import atomic_write_text, render_settings
+
+    s = lab.settings(host)
+    path = lab.home(host) / ".config" / "rosnet-tui" / "config-variant.toml"
+    atomic_write_text(path, render_settings(replace(s, ros=replace(s.ros, **ros))), mode=0o644)
+    return str(path)
 
 
-def needs(present: bool, what: str) -> None:
-    if not present:
-        pytest.skip(f"{what} is not in this build yet (issue 22); this test is its acceptance")
+def rules(entry: dict) -> list[str]:
+    return [a["rule"] if isinstance(a, dict) else a for a in entry.get("advice") or []]
 
 
 # --------------------------------------------------------------------------- the outsider host
@@ -74,45 +91,85 @@ def test_the_outsider_is_on_the_internet_and_no_peer(lab):
     assert code == 200 and text.strip() == ADDR.OUTSIDER_IP
     settings = lab.settings("robot")
     assert ADDR.OUTSIDER_IP not in {p.public_ip for p in settings.peers}
-    # the robot's modem forwards 22 to the robot: the outsider reaches its sshd
-    got = outsider.ssh_auth_none(lab, ADDR.ROBOT_PUBLIC)
-    assert got.get("methods") == ["publickey"], got
+
+
+# --------------------------------------------------------------------------- ROS 1
+@pytest.fixture(scope="module")
+def ros1(lab):
+    lab.reset()
+    lab.start_roscore()
+    yield lab
+    lab.stop_roscore()
+
+
+def test_ros1_default_shuts_the_outsider_out_while_every_check_passes(ros1, tmp_path):
+    lab = ros1
+    lab.reset()
+    assert lab.settings("robot").ros.security == "firewall"      # the ROS 1 default
+    assert outsider.get_system_state(lab, ADDR.ROBOT_PUBLIC)["ok"]   # open before: the defect
+    for ip in (ADDR.ROBOT_PUBLIC, ADDR.LAPTOP_PUBLIC):     # sshd offers keys only, even then
+        assert outsider.ssh_auth_none(lab, ip).get("methods") == ["publickey"], ip
+    with secured(lab):
+        got = outsider.get_system_state(lab, ADDR.ROBOT_PUBLIC, timeout=2)
+        assert not got["ok"], got                                  # the master's port: closed
+        for ip in (ADDR.ROBOT_PUBLIC, ADDR.LAPTOP_PUBLIC):   # SSH (a forwarded port): closed
+            got = outsider.ssh_auth_none(lab, ip, timeout=1.5)   # too, so no password offered
+            assert "methods" not in got and "timed out" in got.get("error", ""), (ip, got)
+        for host in SEATS:
+            t0 = time.monotonic()
+            checks = full_check(lab, host, lab.config_path(host), lab.ros_env(host),
+                                tmp_path / host)
+            took = time.monotonic() - t0
+            print(f"ROS 1 full verification on {host}: {len(checks)} checks in {took:.2f} s")
+            assert all(c["status"] == "pass" for c in checks.values()), explain(checks)
+            out = checks["security.outsider"]
+            reach = out["data"]["outsider_reachable"]   # the master's port (master), a range port
+            assert len(reach) == (2 if host == "robot" else 1), explain(checks)
+            assert host != "robot" or "11311" in reach
+            assert not any(reach.values()) and all(out["data"]["insider_reachable"].values())
+            assert out["duration_s"] < 3 * TIMEOUT + 0.5
+            assert checks["security.ssh_auth"]["data"]["methods"] == ["publickey"]
+            assert checks["linux.firewall"]["status"] == "pass"
+
+
+def test_ros1_security_none_and_firewall_undo_let_the_outsider_back_in(ros1, tmp_path):
+    lab = ros1
+    lab.reset()
+    state = str(tmp_path / "fw")
+    cfg = str(lab.config_path("robot"))
+    r = lab.rosnet("robot", "firewall", "apply", "--yes", "--no-checks", "--config", cfg,
+                   "--state-dir", state, timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+    try:
+        assert not outsider.get_system_state(lab, ADDR.ROBOT_PUBLIC, timeout=2)["ok"]
+        r = lab.rosnet("robot", "firewall", "undo", "--yes", "--no-checks", "--config", cfg,
+                       "--state-dir", state, timeout=60)
+        assert r.returncode == 0, r.stdout + r.stderr
+        got = outsider.get_system_state(lab, ADDR.ROBOT_PUBLIC)
+        assert got["ok"], got                         # undo: the plain setup, anyone reads it
+        for host, security, cause in (("robot", "firewall", "firewall_missing"),
+                                      ("robot", "none", "security_off"),
+                                      ("laptop", "none", "security_off")):
+            c = full_check(lab, host, ros1_config(lab, host, security=security),
+                           lab.ros_env(host), tmp_path / host, "ros")["security.outsider"]
+            print(f"security.outsider (ROS 1, {security}) on {host}: {c['status']} in "
+                  f"{c['duration_s']:.2f} s")
+            assert c["status"] == "fail" and c["data"]["cause"] == cause, c
+            assert any(c["data"]["outsider_reachable"].values()), c
+            assert rules(c), c                        # what to do about it
+            assert c["duration_s"] < 3 * TIMEOUT + 0.5
+    finally:
+        lab.rosnet("robot", "firewall", "undo", "--yes", "--no-checks", "--config", cfg,
+                   "--state-dir", state, timeout=60)
 
 
 # --------------------------------------------------------------------------- SSH audit
-def _install_on_peers(lab) -> None:
-    from tests.lab import readme_install
-
-    for h in lab.COMPUTERS:
-        readme_install.install(lab.home(h))
-
-
-def test_ssh_audit_passes_when_sshd_offers_keys_only(lab):
-    lab.reset()
-    _install_on_peers(lab)
-    t0 = time.monotonic()
-    res = run_security(lab, "robot", lab.config_path("robot"), "firewall", "security.ssh_auth")
-    took = time.monotonic() - t0
-    c = res["security.ssh_auth"]
-    print(f"security.ssh_auth on robot: {c['status']} in {c['duration_s']:.2f} s")
-    assert c["status"] == "pass", c
-    d = c["data"]
-    assert d["from"] == ADDR.LAPTOP_NAME and d["target"] == ADDR.ROBOT_PUBLIC
-    assert d["methods"] == ["publickey"] and d["root_methods"] == ["publickey"]
-    assert not d["password"] and not d["root_password"]
-    assert c["duration_s"] < 2 * TIMEOUT + 0.5, took
-
-
 def test_ssh_audit_without_rosnet_tui_on_the_peer_says_so_and_never_uses_its_python3(lab):
-    from tests.lab import readme_install
-
     lab.reset()
-    _install_on_peers(lab)
     readme_install.uninstall(lab.home("laptop"))
     try:
-        res = run_security(lab, "robot", lab.config_path("robot"), "firewall",
-                           "security.ssh_auth")
-        c = res["security.ssh_auth"]
+        c = run_checks(lab, "robot", lab.config_path("robot"), "security.ssh_auth")[
+            "security.ssh_auth"]
         assert c["status"] == "warn", c
         assert "rosnet-tui is not installed on sami" in c["summary"], c
         assert c["duration_s"] < 2 * TIMEOUT + 0.5, c
@@ -122,7 +179,6 @@ def test_ssh_audit_without_rosnet_tui_on_the_peer_says_so_and_never_uses_its_pyt
 
 def test_ssh_audit_names_password_login_with_the_fix(lab):
     lab.reset()
-    _install_on_peers(lab)
     conf = lab._hostdir("robot") / "etc" / "sshd_config"
     before = conf.read_text()
     try:
@@ -130,11 +186,11 @@ def test_ssh_audit_names_password_login_with_the_fix(lab):
         lab._restart_sshd("robot", 22)
         assert outsider.ssh_auth_none(lab, ADDR.ROBOT_PUBLIC)["methods"] == ["publickey",
                                                                              "password"]
-        res = run_security(lab, "robot", lab.config_path("robot"), "firewall",
-                           "security.ssh_auth")
-        c = res["security.ssh_auth"]
+        c = run_checks(lab, "robot", lab.config_path("robot"), "security.ssh_auth")[
+            "security.ssh_auth"]
         assert c["status"] == "fail", c
         assert c["data"]["password"] and c["data"]["root_password"], c
+        assert c["data"]["from"] == ADDR.LAPTOP_NAME and c["data"]["target"] == ADDR.ROBOT_PUBLIC
         text = "\n".join(c["evidence"])
         for fix in ("ssh-copy-id", "PasswordAuthentication no", "KbdInteractiveAuthentication no",
                     "systemctl reload ssh"):
@@ -144,49 +200,6 @@ def test_ssh_audit_names_password_login_with_the_fix(lab):
         lab._restart_sshd("robot", 22)
 
 
-# --------------------------------------------------------------------------- ROS 1
-def test_ros1_today_the_outsider_gets_the_graph_and_the_check_says_so(lab):
-    lab.reset()
-    _install_on_peers(lab)
-    lab.start_roscore()
-    try:
-        got = outsider.get_system_state(lab, ADDR.ROBOT_PUBLIC)
-        assert got["ok"], got                      # the defect: anyone reads the master
-        for host in ("robot", "laptop"):            # every seat judges its own ports
-            res = run_security(lab, host, lab.config_path(host), "none", "security.outsider")
-            c = res["security.outsider"]
-            print(f"security.outsider (ROS 1) on {host}: {c['status']} in "
-                  f"{c['duration_s']:.2f} s")
-            assert c["status"] == "fail", c
-            assert c["data"]["cause"] == "security_off", c
-            reach = c["data"]["outsider_reachable"]  # the master's port (master), a range port
-            assert len(reach) == (2 if host == "robot" else 1) and all(reach.values()), c
-            assert host != "robot" or reach["11311"] is True
-            assert all(c["data"]["insider_reachable"].values()), c
-            assert c["duration_s"] < 3 * TIMEOUT + 0.5
-    finally:
-        lab.stop_roscore()
-
-
-def test_ros1_default_refuses_the_outsider_and_lets_the_peer_in(lab):
-    needs(has_firewall(), "the peers-only firewall (S3: rosnet_tui.core.firewall)")
-    lab.reset()
-    _install_on_peers(lab)
-    lab.start_roscore()
-    try:
-        r = lab.rosnet("robot", "firewall", "apply", "--yes", "--config",
-                       str(lab.config_path("robot")), timeout=60)
-        assert r.returncode == 0, r.stderr
-        assert not outsider.get_system_state(lab, ADDR.ROBOT_PUBLIC, timeout=2)["ok"]
-        res = run_security(lab, "robot", lab.config_path("robot"), "firewall",
-                           "security.outsider")
-        assert res["security.outsider"]["status"] == "pass", res
-    finally:
-        lab.rosnet("robot", "firewall", "undo", "--yes", "--config",
-                   str(lab.config_path("robot")), timeout=60)
-        lab.stop_roscore()
-
-
 # --------------------------------------------------------------------------- ROS 2
 @pytest.fixture(scope="module")
 def world(lab):
@@ -194,39 +207,57 @@ def world(lab):
         yield w
 
 
-def test_ros2_today_the_outsider_gets_a_session_and_the_check_says_so(world):
+def test_ros2_default_mtls_shuts_the_outsider_out_while_every_check_passes(world, tmp_path):
     lab = world.lab
+    world.healthy()
+    assert world.settings("robot").ros.security == "mtls"        # the ROS 2 default
     world.node("robot", "talker", name="talker")
-    got = outsider.zenoh_session(lab, ADDR.ROBOT_PUBLIC, ZENOH_PORT)
-    assert got["session"] and got["tokens"], got   # the defect: a stranger reads the graph
-    assert got["published"] == 3
-    for host in ("robot", "laptop"):                   # the master over SSH; a member itself
-        res = run_security(lab, host, world.config_path(host), "none", "security.outsider",
-                           env=world.env(host))
-        c = res["security.outsider"]
-        print(f"security.outsider (ROS 2) on {host}: {c['status']} in {c['duration_s']:.2f} s")
-        assert c["status"] == "fail", explain(res)
-        assert c["data"]["cause"] == "security_off", explain(res)
-        assert c["data"]["attempts"]["plain"]["result"] == "accepted", explain(res)
-        assert c["duration_s"] < 3 * TIMEOUT + 0.5, explain(res)
-
-
-def test_ros2_default_mtls_refuses_the_outsider(world):
-    needs(has_mtls(), "mutual TLS for ROS 2 (S1: rosnet_tui.core.fleet_tls)")
-    lab = world.lab
-    for host in ("robot", "laptop"):
-        r = lab.rosnet(host, "ros", "apply", "--yes", "--config", str(world.config_path(host)),
-                       env=world.env(host), timeout=60)
-        assert r.returncode == 0, r.stderr
-    world.start_router("robot")
-    world.start_router("laptop")
-    for tls in (False, True):
+    for tls in (False, True):                  # plain, and TLS with a certificate of its own
         got = outsider.zenoh_session(lab, ADDR.ROBOT_PUBLIC, ZENOH_PORT, tls=tls)
-        assert not got["session"], got
-    for host in ("robot", "laptop"):
-        res = run_security(lab, host, world.config_path(host), "mtls", "security.outsider",
-                           env=world.env(host))
-        assert res["security.outsider"]["status"] == "pass", explain(res)
+        assert not got["session"] and not got.get("tokens") and not got.get("published"), got
+    for ip in (ADDR.ROBOT_PUBLIC, ADDR.LAPTOP_PUBLIC):
+        assert outsider.ssh_auth_none(lab, ip).get("methods") == ["publickey"], ip
+    for host in SEATS:
+        t0 = time.monotonic()
+        checks = full_check(lab, host, world.config_path(host), world.env(host),
+                            tmp_path / host)
+        took = time.monotonic() - t0
+        print(f"ROS 2 (mtls) full verification on {host}: {len(checks)} checks in {took:.2f} s")
+        # pass, or skip where a check does not apply to ROS 2 on this seat (router.upnp: no UPnP
+        # modem here; the member's modem forwards nothing; the master never dials the members)
+        assert all(c["status"] in ("pass", "skip") for c in checks.values()), explain(checks)
+        skipped = {cid for cid, c in checks.items() if c["status"] == "skip"}
+        assert skipped <= ROS2_SKIPS[host], explain(checks)
+        assert checks["security.outsider"]["status"] == "pass", explain(checks)
+        assert checks["security.ssh_auth"]["status"] == "pass", explain(checks)
+        d = checks["security.outsider"]["data"]
+        assert d["cause"] is None and d["attempts"]["insider"]["result"] == "accepted", d
+        assert all(d["attempts"][k]["result"] != "accepted"
+                   for k in ("no_cert", "foreign", "plain")), d
+        assert checks["security.outsider"]["duration_s"] < 3 * TIMEOUT + 0.5
+
+
+def test_ros2_security_none_lets_the_outsider_in_and_the_check_says_so(world, tmp_path):
+    lab = world.lab
+    world.set_security("none")
+    try:
+        world.node("robot", "talker", name="talker")
+        got = outsider.zenoh_session(lab, ADDR.ROBOT_PUBLIC, ZENOH_PORT)
+        assert got["session"] and got["tokens"], got   # a stranger reads the graph ...
+        assert got["published"] == 3                  # ... and publishes
+        for host in SEATS:                            # the master over SSH; a member itself
+            res = full_check(lab, host, world.config_path(host), world.env(host),
+                             tmp_path / host, "ros")
+            c = res["security.outsider"]
+            print(f"security.outsider (ROS 2, none) on {host}: {c['status']} in "
+                  f"{c['duration_s']:.2f} s")
+            assert c["status"] == "fail", explain(res)
+            assert c["data"]["cause"] == "security_off", explain(res)
+            assert c["data"]["attempts"]["plain"]["result"] == "accepted", explain(res)
+            assert rules(c), c                        # what to do about it
+            assert c["duration_s"] < 3 * TIMEOUT + 0.5, explain(res)
+    finally:
+        world.healthy()
 
 
 def test_the_fleet_has_the_outsider_too(fleet):

@@ -24,9 +24,6 @@ from typing import Any
 
 SSH_MARK = "ROSNET_SSHAUDIT "
 TLS_MARK = "ROSNET_OUTSIDER "
-# Where a component's fleet certificate lives, relative to its home (the TLS material's home is
-# S1's fleet TLS module; this is the same default folder, as the peer's HOME sees it).
-FLEET_TLS_DIR = "~/.config/rosnet-tui/tls"
 PASSWORD_METHODS = ("password", "keyboard-interactive")
 
 SSH_AUDIT_PROGRAM = r"""
@@ -68,7 +65,7 @@ print(MARK + json.dumps(out))
 _TLS_PROGRAM = r"""
 import base64, json, os, shutil, socket, ssl, sys, tempfile
 MARK = "ROSNET_OUTSIDER "
-host, port, t, fleet = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
+host, port, t = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 wait = min(1.0, t)
 
 def attempt(cert=None, key=None, ca=None):
@@ -138,11 +135,16 @@ try:
         fd = os.open(os.path.join(tmp, name), os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         with os.fdopen(fd, "w") as f:
             f.write(text)
-    d = os.path.expanduser(fleet)
-    files = [os.path.join(d, n) for n in ("node.crt", "node.key", "ca.crt")]
-    missing = [f for f in files if not os.path.isfile(f)]
+    try:   # where the rosnet-tui installed on this seat keeps its fleet certificate
+        from rosnet_tui.core.fleet_tls import tls_paths
+        p = tls_paths()
+        files = [str(p.node_crt), str(p.node_key), str(p.ca_crt)]
+        missing = [f for f in files if not os.path.isfile(f)]
+        why = "missing: " + ", ".join(missing)
+    except ImportError:   # the peer's python3 (no rosnet-tui there, so no fleet certificate)
+        files, missing, why = [], ["rosnet-tui"], "rosnet-tui is not installed on this seat"
     if missing:
-        rep["insider"] = {"result": "no_fleet_cert", "detail": "missing: " + ", ".join(missing)}
+        rep["insider"] = {"result": "no_fleet_cert", "detail": why}
     jobs = [("no_cert",), ("foreign", os.path.join(tmp, "crt"), os.path.join(tmp, "key"))]
     if not missing:
         jobs.append(("insider", *files))

@@ -3,6 +3,8 @@ for ROS 1: load it before a test that wants every check to pass, remove it after
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 
 
@@ -16,3 +18,19 @@ def apply_firewall(lab, host: str, config: Path) -> None:
 def remove_firewall(lab, host: str) -> None:
     """Delete our table on *host*, if any (nothing else is touched)."""
     lab.run(host, ["nft", "delete", "table", "inet", "rosnet_tui"], timeout=10)
+
+
+@contextlib.contextmanager
+def secured(lab, hosts=None, config=None) -> Iterator[None]:
+    """ROS 1's default security on *hosts* (default: every computer of *lab*): the peers-only
+    firewall loaded (config(host) gives a host's settings file; default lab.config_path), removed
+    afterwards. rosnet-tui is installed already (Lab.reset, Fleet, Ros2World)."""
+    hosts = list(lab.COMPUTERS if hosts is None else hosts)
+    config = config or lab.config_path
+    try:
+        for h in hosts:
+            apply_firewall(lab, h, config(h))
+        yield
+    finally:
+        for h in hosts:
+            remove_firewall(lab, h)

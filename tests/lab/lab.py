@@ -27,7 +27,7 @@ from typing import Any
 from cryptography.hazmat.primitives import serialization as ser
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
-from . import cleanup, procs, topology
+from . import cleanup, procs, readme_install, topology
 from .topology import ADDR, COMPUTERS, HOSTNAMES, HOSTS, MODEM, PEER, VARIANTS
 
 REPO = Path(__file__).resolve().parents[2]
@@ -665,9 +665,15 @@ class Lab:
             self._restart_sshd("robot", int(ADDR.ROBOT_SSHD_PORT))
 
     def reset(self) -> None:
-        """Back to the healthy network: forwarding, addresses, links, files, ROS variables."""
+        """Back to the healthy network: forwarding, addresses, links, files, ROS variables, and
+        rosnet-tui installed on every computer the README's way (readme_install: quick when it
+        is there). Not the peers-only firewall of ROS 1's default security: the variants start
+        from here and change addresses and NAT, which it would block; a test that wants every
+        check to pass loads it first (tests/lab/firewall.py secured)."""
         if not self.built or self.destroyed:
             return
+        for h in COMPUTERS:
+            readme_install.install(self.home(h))
         st = self._state
         for s in ("robot", "laptop"):
             if st["forward"][s] != "healthy":

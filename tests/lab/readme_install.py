@@ -28,6 +28,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
@@ -36,7 +37,8 @@ CACHE = Path(os.environ.get("ROSNET_LAB_INSTALL_CACHE", "/var/cache/rosnet-tui-l
 VENV = Path(".local/share/pipx/venvs/rosnet-tui")   # pipx's default PIPX_HOME, under a home
 LAUNCHER = Path(".local/bin/rosnet-tui")            # pipx's default PIPX_BIN_DIR, under a home
 KEEP = 3                  # cached builds kept (the newest), so old trees do not pile up
-_PREFIX_FILE = ".rosnet-lab-prefix"   # in a cached build: the path it was built at
+PRUNE_GRACE_S = 3600.0    # a build used (installed from) more recently is never pruned
+PREFIX_FILE = ".rosnet-lab-prefix"   # in a cached build: the path it was built at
 _SHEBANG_MAX = 127        # longer interpreter lines: pip writes the /bin/sh form
 
 
@@ -55,7 +57,7 @@ def source_key() -> str:
 
 
 @contextlib.contextmanager
-def _locked(shared: bool):
+def locked(shared: bool):
     CACHE.mkdir(parents=True, exist_ok=True)
     with open(CACHE / ".lock", "a+") as f:
         fcntl.flock(f, fcntl.LOCK_SH if shared else fcntl.LOCK_EX)
@@ -69,10 +71,10 @@ def built_venv(timeout: float = 600) -> Path:
     """The cached virtual environment for this source tree, built (pip install .) if missing."""
     key = source_key()
     done = CACHE / f"venv-{key}"
-    if (done / _PREFIX_FILE).is_file():
+    if (done / PREFIX_FILE).is_file():
         return done
-    with _locked(shared=False):
-        if (done / _PREFIX_FILE).is_file():
+    with locked(shared=False):
+        if (done / PREFIX_FILE).is_file():
             return done
         work = CACHE / f"build-{key}-{os.getpid()}"
         shutil.rmtree(work, ignore_errors=True)
@@ -92,21 +94,24 @@ def built_venv(timeout: float = 600) -> Path:
                                env=env, capture_output=True, text=True, timeout=60)
             if r.returncode != 0:
                 raise RuntimeError(f"the built environment does not import: {r.stderr[-2000:]}")
-            (work / _PREFIX_FILE).write_text(str(work))
+            (work / PREFIX_FILE).write_text(str(work))
             shutil.rmtree(done, ignore_errors=True)
             work.rename(done)
         finally:
             shutil.rmtree(work, ignore_errors=True)
-        _prune(keep=done)
+        prune(keep=done)
     return done
 
 
-def _prune(keep: Path) -> None:
-    """Remove all but the newest KEEP cached builds (called under the exclusive lock)."""
+def prune(keep: Path) -> None:
+    """Remove all but the newest KEEP cached builds (called under the exclusive lock), except
+    any used within PRUNE_GRACE_S: another source tree's pytest may be installing from it (its
+    install() marks it used under the shared lock, see there)."""
     builds = sorted((p for p in CACHE.glob("venv-*") if p != keep),
                     key=lambda p: p.stat().st_mtime, reverse=True)
     for old in builds[KEEP - 1:]:
-        shutil.rmtree(old, ignore_errors=True)
+        if time.time() - old.stat().st_mtime >= PRUNE_GRACE_S:
+            shutil.rmtree(old, ignore_errors=True)
     for stale in CACHE.glob("build-*"):   # a build killed half-way (its process is gone)
         pid = stale.name.rsplit("-", 1)[-1]
         if pid.isdigit() and not Path(f"/proc/{pid}").exists():
@@ -179,20 +184,32 @@ def install(home: Path) -> Path:
     (``<home>/.local/bin/rosnet-tui``). Replaces an earlier install there."""
     built = built_venv()
     venv = home / VENV
-    if (venv / _PREFIX_FILE).is_file() and (venv / _PREFIX_FILE).read_text() == built.name \
+    if (venv / PREFIX_FILE).is_file() and (venv / PREFIX_FILE).read_text() == built.name \
             and (home / LAUNCHER).exists():
         return home / LAUNCHER                           # this very build is installed there
     uninstall(home)
     venv.parent.mkdir(parents=True, exist_ok=True)
-    with _locked(shared=True):
-        work = Path(tempfile.mkdtemp(prefix=".rosnet-tui-", dir=venv.parent))
-        try:
-            _link_tree(built, work / "v")
-            _replace(work / "v" / _PREFIX_FILE, built.name.encode())   # which build it is
-            (work / "v").rename(venv)
-        finally:
-            shutil.rmtree(work, ignore_errors=True)
-    _relocate(venv, (built / _PREFIX_FILE).read_text())
+    # The build is linked under the shared lock, so no prune (exclusive lock) runs meanwhile;
+    # a prune between built_venv() and here may have removed it: then it is built again.
+    for _ in range(3):
+        with locked(shared=True):
+            if not (built / PREFIX_FILE).is_file():
+                built = None
+            else:
+                os.utime(built)                 # in use: pruned no sooner than PRUNE_GRACE_S
+                old = (built / PREFIX_FILE).read_text()
+                work = Path(tempfile.mkdtemp(prefix=".rosnet-tui-", dir=venv.parent))
+                try:
+                    _link_tree(built, work / "v")
+                    _replace(work / "v" / PREFIX_FILE, built.name.encode())   # which build
+                    (work / "v").rename(venv)
+                finally:
+                    shutil.rmtree(work, ignore_errors=True)
+                break
+        built = built_venv()
+    else:
+        raise RuntimeError(f"the cached build under {CACHE} kept vanishing")
+    _relocate(venv, old)
     launcher = home / LAUNCHER
     launcher.parent.mkdir(parents=True, exist_ok=True)
     launcher.symlink_to(venv / "bin" / "rosnet-tui")     # pipx links it, as here
@@ -209,4 +226,5 @@ def installed(home: Path) -> bool:
     return (home / LAUNCHER).exists()
 
 
-__all__ = ["LAUNCHER", "VENV", "built_venv", "install", "installed", "uninstall"]
+__all__ = ["KEEP", "LAUNCHER", "PREFIX_FILE", "PRUNE_GRACE_S", "VENV", "built_venv", "install",
+           "installed", "locked", "prune", "uninstall"]

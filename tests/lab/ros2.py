@@ -34,7 +34,9 @@ from .topology import ADDR, COMPUTERS
 SCRIPTS = Path(__file__).resolve().parent / "ros2_scripts"
 ZROUTER = SCRIPTS / "zrouter.py"
 NODE = SCRIPTS / "node.py"
-ROS2_IDS = ["ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in"]
+# The ROS step's checks under ROS 2 (security.outsider: the outsider is refused, issue 22)
+ROS2_IDS = ["ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in",
+            "security.outsider"]
 
 
 class Ros2World:
