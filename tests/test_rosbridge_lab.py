@@ -11,6 +11,7 @@ import json
 import pytest
 
 from tests.lab import rosbridge as lab_bridge
+from tests.lab.firewall import secured
 
 pytestmark = pytest.mark.lab
 
@@ -84,16 +85,17 @@ def test_in_the_ros_step_from_the_laptop_and_skipped_on_the_robot(bridge_lab):
     lab = bridge_lab
     lab.reset()
     proc = lab_bridge.start_bridge(lab)
+    got = {}
     try:
-        got = {}
-        for host in ("laptop", "robot"):
-            r = lab.rosnet(host, "check", "--json", "--step", "ros", "--config",
-                           str(lab_bridge.config_path(lab, host)), timeout=60)
-            got[host] = {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+        with secured(lab, config=lambda h: lab_bridge.config_path(lab, h)):  # the firewall on
+            for host in ("laptop", "robot"):
+                r = lab.rosnet(host, "check", "--json", "--step", "ros", "--config",
+                               str(lab_bridge.config_path(lab, host)), timeout=60)
+                got[host] = {c["id"]: c for c in json.loads(r.stdout)["checks"]}
     finally:
         lab.kill(proc)
     laptop, robot = got["laptop"], got["robot"]
-    assert list(laptop)[-1] == "ros.rosbridge"
+    assert list(laptop)[-2:] == ["ros.rosbridge", "security.outsider"]
     assert all(c["status"] == "pass" for c in laptop.values()), \
         {k: c["summary"] for k, c in laptop.items()}
     assert robot["ros.rosbridge"]["status"] == "skip"

@@ -9,6 +9,7 @@ import json
 import pytest
 
 from tests.lab import ADDR
+from tests.lab.firewall import secured
 
 pytestmark = pytest.mark.lab
 
@@ -77,17 +78,10 @@ def test_apply_on_both_sides_makes_names_work_and_undo_restores_every_byte(lab, 
 
     lab.start_roscore()  # the master on the robot, named as its own hosts file says
     try:
-        for h in COMPUTERS:  # the whole check, every step, from each side
-            r = rosnet(lab, h, "check", "--json", "--config", str(lab.config_path(h)))
-            results = {c["id"]: c for c in json.loads(r.stdout)["checks"]}
-            bad = {cid: (c["status"], c["summary"]) for cid, c in results.items()
-                   if c["status"] not in ("pass", "warn")}
-            assert r.returncode == 0 and not bad, (h, bad, r.stderr[-2000:])
-            for cid in ("linux.hosts", "linux.resolve", "ros.env", "ros.master"):
-                assert results[cid]["status"] == "pass", (h, cid, results[cid])
+        with secured(lab):   # ROS 1 as the product sets it up: the peers-only firewall on
+            _check_everything_from_both_sides(lab)
     finally:
         lab.stop_roscore()
-
     for h in COMPUTERS:
         for _ in range(2):  # ros apply, then hosts apply: one per call
             r = rosnet(lab, h, "undo", "--yes")
@@ -97,6 +91,18 @@ def test_apply_on_both_sides_makes_names_work_and_undo_restores_every_byte(lab, 
         r = rosnet(lab, h, "undo", "--yes")
         assert r.returncode == 1 and "nothing to undo" in r.stdout
         assert resolve(lab, h, NAME[OTHER[h]]) == ""
+
+
+def _check_everything_from_both_sides(lab) -> None:
+    """The whole check, every step, from each side: nothing fails."""
+    for h in COMPUTERS:  # the whole check, every step, from each side
+        r = rosnet(lab, h, "check", "--json", "--config", str(lab.config_path(h)))
+        results = {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+        bad = {cid: (c["status"], c["summary"]) for cid, c in results.items()
+               if c["status"] not in ("pass", "warn")}
+        assert r.returncode == 0 and not bad, (h, bad, r.stderr[-2000:])
+        for cid in ("linux.hosts", "linux.resolve", "ros.env", "ros.master"):
+            assert results[cid]["status"] == "pass", (h, cid, results[cid])
 
 
 def test_stale_entry_outside_the_block_is_fixed_on_request(lab):
