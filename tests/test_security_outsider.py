@@ -250,15 +250,16 @@ def test_the_probe_leaves_no_foreign_key_behind(world, tmp_path, monkeypatch):
     assert list((tmp_path / "t").iterdir()) == []
 
 
-def test_settings_without_security_get_no_security_checks():
+def test_every_settings_file_gets_the_security_checks_and_refusals_are_read_right():
+    """[ros] security always exists (its default follows the version), so the security checks
+    are in every component's Linux and ROS steps."""
     from rosnet_tui.core.checks import checks_for
     from rosnet_tui.core.steps import step_for
 
     s = Settings(this=ThisComponent(name="sami", role="member"), ros=RosSettings(master="x"))
-    if hasattr(s.ros, "security"):
-        pytest.skip("this build has [ros] security: the gate is open")
-    assert "security.outsider" not in [c.id for c in checks_for(["ros"], s)]
-    assert "security.ssh_auth" not in step_for("linux", s).check_ids
+    assert s.ros.security == "firewall"
+    assert "security.outsider" in [c.id for c in checks_for(["ros"], s)]
+    assert "security.ssh_auth" in step_for("linux", s).check_ids
     assert outsider.refused({"result": "alert"}) and not outsider.refused({"result": "not_tls"})
 
 
