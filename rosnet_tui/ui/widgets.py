@@ -15,7 +15,7 @@ from textual.widget import Widget
 from textual.widgets import DataTable, Static
 
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.session import NOT_RUN, RUNNING, aggregate  # noqa: F401 (re-exported)
+from rosnet_tui.core.session import NOT_RUN, RUNNING
 from rosnet_tui.core.steps import STEPS
 from rosnet_tui.ui.theme import cut
 
