@@ -168,3 +168,37 @@ async def test_per_peer_work_runs_concurrently_bounded_and_in_order(ssh_client, 
     finally:
         pool.close()
     assert [r.stdout for r in res] == ["hi\n"] * 3
+
+
+async def test_a_command_killed_by_a_signal_is_not_reported_as_exit_status_minus_one(ssh_client):
+    # sshd sends exit-signal, not exit-status, for a command a signal ended: paramiko then
+    # leaves its placeholder -1, which used to read as "ran, exit status -1".
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "echo started; kill -9 $$",
+                        timeout=10)
+    assert res.exit_status is None and not res.ok and res.failure == "sshd"
+    assert "without an exit status" in res.detail, res.detail
+    assert res.stdout == "started\n"
+
+
+async def test_a_round_connection_that_breaks_midway_is_made_again_for_a_probe(ssh_client, sshd):
+    # The pooled connection dies while a command runs (a mobile link dropping, sshd's process
+    # for it killed): the probe runs once more on a new connection within its time.
+    pool = SshPool()
+    opts = pooled(ssh_client, pool)
+    peer = ssh_client.peer()
+    try:
+        first = await ssh_run(opts, peer, "echo warm", timeout=10)
+        assert first.ok
+        conn = pool.start(opts, peer).result(5)
+
+        async def break_it() -> None:
+            await asyncio.sleep(0.3)
+            conn.transport.sock.shutdown(socket.SHUT_RDWR)   # the link dies under paramiko
+
+        breaker = asyncio.ensure_future(break_it())
+        res = await ssh_run(opts, peer, "sleep 0.6; echo done", timeout=6)
+        await breaker
+    finally:
+        pool.close()
+    assert res.ok and res.exit_status == 0 and res.stdout == "done\n", res
+    assert "again" in res.detail, res.detail

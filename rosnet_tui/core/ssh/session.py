@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import time
 from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING
@@ -32,6 +33,8 @@ if TYPE_CHECKING:
     import paramiko
 
 _POLL_S = 0.02
+RETRY_MIN_S = 1.0
+"""A command whose shared connection broke under it runs again only with this much time left."""
 EOF_GRACE_S = 1.0
 """How long after the exit status the output's end is waited for: sshd may send the status before
 the last output (a process the command left behind may also hold the output open)."""
@@ -154,14 +157,26 @@ class SshSession:
                                  self.result.fingerprint, self.result.host_key, self.result.address,
                                  self.result.tcp)
             await asyncio.sleep(_POLL_S)
-        status = self._chan.recv_exit_status() if self._chan.exit_status_ready() else None
-        detail = (f"ran on {self.peer.name} as {self.peer.ssh_user}, exit status {status}"
-                  if status is not None else f"the session with {self.peer.name} closed")
+        # paramiko keeps -1 until an exit-status arrives (real ones are unsigned): a command a
+        # signal ended, or a channel the broken connection closed, has none.
+        status = self._chan.exit_status if self._chan.exit_status >= 0 else None
+        if status is not None:
+            detail = f"ran on {self.peer.name} as {self.peer.ssh_user}, exit status {status}"
+        elif self.connection_broke:
+            detail = f"the SSH connection to {self.peer.name} broke while the command ran"
+        else:
+            detail = (f"the command on {self.peer.name} ended without an exit status "
+                      "(a signal ended it, or sshd closed the session)")
         detail += self._said
         return SshResult(status is not None, status, self.stdout, self.stderr,
                          None if status is not None else "sshd", detail,
                          self.result.fingerprint, self.result.host_key, self.result.address,
                          self.result.tcp)
+
+    @property
+    def connection_broke(self) -> bool:
+        """True when the connection under this session is gone (it was made, then died)."""
+        return self._transport is not None and not self._transport.is_active()
 
     def close(self) -> None:
         if self._chan is not None:
@@ -252,10 +267,21 @@ async def ssh_run(opts: SshOptions | None, peer: Peer, command: str, *,
     t = float(timeout if timeout is not None else (getattr(opts, "timeout_s", 3.0) or 3.0))
     deadline = time.monotonic() + t
     ct = min(float(connect_timeout), t) if connect_timeout is not None else t
-    async with ssh_session(opts, peer, command, timeout=ct, tcp_timeout=tcp_timeout) as s:
-        if not s.ok:
-            return s.result
-        if stdin:
-            await s.write(stdin)
-        await s.close_stdin()
-        return await s.wait(max(deadline - time.monotonic(), 0.05))
+    for attempt in (1, 2):
+        async with ssh_session(opts, peer, command, timeout=min(ct, deadline - time.monotonic()),
+                               tcp_timeout=tcp_timeout) as s:
+            if not s.ok:
+                return s.result
+            if stdin:
+                await s.write(stdin)
+            await s.close_stdin()
+            res = await s.wait(max(deadline - time.monotonic(), 0.05))
+            broke = s._shared and res.exit_status is None and s.connection_broke
+        if attempt == 2:
+            return dataclasses.replace(res, detail=res.detail + " (ran again: the round's "
+                                                                "connection broke under the first run)")
+        # The round's shared connection died under the command (a dropped mobile link, sshd's
+        # process for it gone): the pool makes a new one, and the command runs once more.
+        if not broke or deadline - time.monotonic() < RETRY_MIN_S:
+            return res
+    raise AssertionError("unreachable")
