@@ -134,19 +134,20 @@ def row2_full(lab: Any, opts: Options, state: Path) -> RowResult:
         bad = sorted({k for r in master_runs for k, v in r["statuses"].items() if v != "pass"})
         seat.note += f"; not all good on the master: {bad}"
     tls, tls_details = _row2_tls(lab, opts, state)
-    res.lines = [ln, seat, tls]
+    res.lines = [ln, seat, *tls]
     res.details = {"app_runs": app_runs, "base_runs": base_runs, "master_runs": master_runs,
                    **tls_details}
     return res
 
 
-def _row2_tls(lab: Any, opts: Options, state: Path) -> tuple[Line, dict[str, Any]]:
+def _row2_tls(lab: Any, opts: Options, state: Path) -> tuple[list[Line], dict[str, Any]]:
     """ROS 2 from the member's seat: full verification with mutual TLS (the default) against
-    the same with [ros] security = "none" (issue 22: TLS adds at most 0.2 s)."""
+    the same with [ros] security = "none" (issue 22: TLS adds at most 0.2 s); and with mutual
+    TLS from the master's seat against the member's (issue 25: at most 1.2x)."""
     from tests.lab.ros2 import Ros2World
 
     lab.stop_roscore()
-    runs: dict[str, list[dict[str, Any]]] = {"mtls": [], "none": []}
+    runs: dict[str, list[dict[str, Any]]] = {"mtls": [], "none": [], "master": []}
     with Ros2World(lab) as w:
         for i in range(opts.reps):
             for mode in (("mtls", "none") if i % 2 == 0 else ("none", "mtls")):
@@ -154,6 +155,10 @@ def _row2_tls(lab: Any, opts: Options, state: Path) -> tuple[Line, dict[str, Any
                 runs[mode].append(rosnet_check(lab, "laptop", state / f"ros2-{mode}",
                                                config=w.config_path("laptop"),
                                                env=w.env("laptop")))
+                if mode == "mtls":         # and from the master's seat, the robot
+                    runs["master"].append(rosnet_check(lab, "robot", state / "ros2-master",
+                                                       config=w.config_path("robot"),
+                                                       env=w.env("robot")))
     line = Line(2, "Full verification, ROS 2 with mutual TLS (wall time)", "s",
                 [r["wall_s"] for r in runs["mtls"]], [r["wall_s"] for r in runs["none"]],
                 baseline='the same with [ros] security = "none"', goal="<= +0.2 s")
@@ -173,7 +178,21 @@ def _row2_tls(lab: Any, opts: Options, state: Path) -> tuple[Line, dict[str, Any
         line.status = "error"
         line.note += "; " + "; ".join(f"{m}: {sorted({x for r in rs for x in bad(r)})}"
                                       for m, rs in runs.items())
-    return line, {"ros2_mtls_runs": runs["mtls"], "ros2_none_runs": runs["none"]}
+    seat = Line(2, "Full verification from the master's seat, ROS 2 (wall time)", "s",
+                [r["wall_s"] for r in runs["master"]], [r["wall_s"] for r in runs["mtls"]],
+                baseline="the same from a member's seat (the laptop)", goal="<= 1.2x")
+    goal_ratio(seat, 1.2)
+    master_ok = all(not bad(r) for r in runs["master"])
+    seat.note = (f"all steps from the robot (the master, its Zenoh router) on ROS 2 with mutual "
+                 f"TLS: {len(runs['master'][0]['statuses']) if runs['master'] else 0} checks; all "
+                 f"good: {'yes' if master_ok else 'NO'}; slowest check "
+                 f"{median([r['slowest_check_s'] for r in runs['master']]):.2f} s on the master, "
+                 f"{median([r['slowest_check_s'] for r in runs['mtls']]):.2f} s on the member")
+    if not master_ok:
+        seat.status = "error"
+        seat.note += f"; not all good: {sorted({x for r in runs['master'] for x in bad(r)})}"
+    return [line, seat], {"ros2_mtls_runs": runs["mtls"], "ros2_none_runs": runs["none"],
+                          "ros2_master_runs": runs["master"]}
 
 
 # =============================================================================== row 3
