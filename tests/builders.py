@@ -7,6 +7,7 @@ Result builders follow the checks contract (check ids and their ``data`` keys).
 
 from __future__ import annotations
 
+import random
 import socket
 from dataclasses import replace
 from pathlib import Path
@@ -21,6 +22,42 @@ from rosnet_tui.core.settings_model import (
     SyncSettings,
     ThisComponent,
 )
+
+# The robot's settings file as a person writes it (the CLI tests hand it to --config).
+ROBOT_CONFIG = """\
+# my robot
+[this]
+name = "turtlebot"
+role = "master"
+connection = "telecom"
+profile = "remote"
+local_ip = "10.10.10.1"
+public_ip = "203.0.113.2"
+office_ip = "172.16.0.5"
+
+[[peer]]
+name = "sami"
+local_ip = "192.168.1.10"
+public_ip = "198.51.100.2"
+office_ip = "172.16.0.6"
+
+[ros]
+master = "turtlebot"
+port = 11311
+"""
+
+
+def random_hosts(n_bytes: int, seed: int) -> bytes:
+    """Hosts lines (10/8 addresses, names) of at least *n_bytes*: the same for a seed, other
+    lines for another seed (a big hosts file to write, cut and restore)."""
+    rng = random.Random(seed)
+    lines, size = [], 0
+    while size < n_bytes:
+        line = f"10.{rng.randrange(256)}.{rng.randrange(256)}.{rng.randrange(1, 255)}\t" \
+               f"host-{seed}-{len(lines)}.example\thost-{len(lines)}\n"
+        lines.append(line)
+        size += len(line)
+    return "".join(lines).encode()
 
 
 def free_port(host: str = "127.0.0.1") -> int:
