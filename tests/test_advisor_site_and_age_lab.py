@@ -62,23 +62,17 @@ def rules(lab, ns: str, add: list[str]):
 
 
 # --------------------------------------------------------------------------- 1. ROS 2
-@pytest.fixture(scope="module")
-def world(lab):
-    with Ros2World(lab) as w:
-        yield w
-
-
 def addr_of(how: str) -> str:
     return ADDR.ROBOT_PUBLIC if how == "modem_resets" else ADDR.CARRIER_PUBLIC
 
 
-def laptop_config(world: Ros2World, tmp_path, robot_public: str):
+def laptop_config(ros2_world: Ros2World, tmp_path, robot_public: str):
     """sami's ROS 2 settings, turtlebot at *robot_public* (its hosts line says the same)."""
     from dataclasses import replace
 
     from rosnet_tui.core.settings import atomic_write_text, render_settings
 
-    s = world.settings("laptop")
+    s = ros2_world.settings("laptop")
     s = replace(s, peers=[replace(p, public_ip=robot_public) for p in s.peers])
     path = tmp_path / "config.toml"
     atomic_write_text(path, render_settings(s), mode=0o644)
@@ -86,14 +80,14 @@ def laptop_config(world: Ros2World, tmp_path, robot_public: str):
 
 
 @pytest.mark.parametrize("how", ["modem_resets", "carrier_nat"])
-def test_zenoh_port_refused_and_ssh_shut_out_leads_with_the_masters_modem_or_isp(world, how,
+def test_zenoh_port_refused_and_ssh_shut_out_leads_with_the_masters_modem_or_isp(ros2_world, how,
                                                                                tmp_path):
-    lab = world.lab
-    world.healthy()
+    lab = ros2_world.lab
+    ros2_world.healthy()
     undo = None
     try:
         if how == "modem_resets":
-            world.forward(robot="refuse")
+            ros2_world.forward(robot="refuse")
             said = "refused too"
         else:
             lab._set_cgnat(True)
@@ -102,14 +96,14 @@ def test_zenoh_port_refused_and_ssh_shut_out_leads_with_the_masters_modem_or_isp
             undo = rules(lab, "carrier", ["-I INPUT -p tcp --dport 7447 -j REJECT "
                                           "--reject-with tcp-reset"])
             said = "did not answer either"
-        env = dict(world.env("laptop"), XDG_STATE_HOME=str(tmp_path))
-        doc = report(lab, "laptop", laptop_config(world, tmp_path, addr_of(how)), env)
+        env = dict(ros2_world.env("laptop"), XDG_STATE_HOME=str(tmp_path))
+        doc = report(lab, "laptop", laptop_config(ros2_world, tmp_path, addr_of(how)), env)
     finally:
         if undo:
             undo()
         if how == "carrier_nat":
             lab._set_cgnat(False)
-        world.healthy()
+        ros2_world.healthy()
     checks = {c["id"]: c for c in doc["checks"]}
     assert checks["ros2.router"]["data"]["failure"] == "refused", explain(doc)
     first = first_failure(doc)

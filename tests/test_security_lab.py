@@ -28,7 +28,7 @@ import pytest
 
 from tests.lab import outsider, readme_install
 from tests.lab.firewall import secured
-from tests.lab.ros2 import Ros2World, explain
+from tests.lab.ros2 import explain
 from tests.lab.topology import ADDR, ZENOH_PORT
 
 pytestmark = pytest.mark.lab
@@ -201,17 +201,11 @@ def test_ssh_audit_names_password_login_with_the_fix(lab):
 
 
 # --------------------------------------------------------------------------- ROS 2
-@pytest.fixture(scope="module")
-def world(lab):
-    with Ros2World(lab) as w:
-        yield w
-
-
-def test_ros2_default_mtls_shuts_the_outsider_out_while_every_check_passes(world, tmp_path):
-    lab = world.lab
-    world.healthy()
-    assert world.settings("robot").ros.security == "mtls"        # the ROS 2 default
-    world.node("robot", "talker", name="talker")
+def test_ros2_default_mtls_shuts_the_outsider_out_while_every_check_passes(ros2_world, tmp_path):
+    lab = ros2_world.lab
+    ros2_world.healthy()
+    assert ros2_world.settings("robot").ros.security == "mtls"        # the ROS 2 default
+    ros2_world.node("robot", "talker", name="talker")
     for tls in (False, True):                  # plain, and TLS with a certificate of its own
         got = outsider.zenoh_session(lab, ADDR.ROBOT_PUBLIC, ZENOH_PORT, tls=tls)
         assert not got["session"] and not got.get("tokens") and not got.get("published"), got
@@ -219,7 +213,7 @@ def test_ros2_default_mtls_shuts_the_outsider_out_while_every_check_passes(world
         assert outsider.ssh_auth_none(lab, ip).get("methods") == ["publickey"], ip
     for host in SEATS:
         t0 = time.monotonic()
-        checks = full_check(lab, host, world.config_path(host), world.env(host),
+        checks = full_check(lab, host, ros2_world.config_path(host), ros2_world.env(host),
                             tmp_path / host)
         took = time.monotonic() - t0
         print(f"ROS 2 (mtls) full verification on {host}: {len(checks)} checks in {took:.2f} s")
@@ -237,16 +231,16 @@ def test_ros2_default_mtls_shuts_the_outsider_out_while_every_check_passes(world
         assert checks["security.outsider"]["duration_s"] < 3 * TIMEOUT + 0.5
 
 
-def test_ros2_security_none_lets_the_outsider_in_and_the_check_says_so(world, tmp_path):
-    lab = world.lab
-    world.set_security("none")
+def test_ros2_security_none_lets_the_outsider_in_and_the_check_says_so(ros2_world, tmp_path):
+    lab = ros2_world.lab
+    ros2_world.set_security("none")
     try:
-        world.node("robot", "talker", name="talker")
+        ros2_world.node("robot", "talker", name="talker")
         got = outsider.zenoh_session(lab, ADDR.ROBOT_PUBLIC, ZENOH_PORT)
         assert got["session"] and got["tokens"], got   # a stranger reads the graph ...
         assert got["published"] == 3                  # ... and publishes
         for host in SEATS:                            # the master over SSH; a member itself
-            res = full_check(lab, host, world.config_path(host), world.env(host),
+            res = full_check(lab, host, ros2_world.config_path(host), ros2_world.env(host),
                              tmp_path / host, "ros")
             c = res["security.outsider"]
             print(f"security.outsider (ROS 2, none) on {host}: {c['status']} in "
@@ -257,7 +251,7 @@ def test_ros2_security_none_lets_the_outsider_in_and_the_check_says_so(world, tm
             assert rules(c), c                        # what to do about it
             assert c["duration_s"] < 3 * TIMEOUT + 0.5, explain(res)
     finally:
-        world.healthy()
+        ros2_world.healthy()
 
 
 def test_the_fleet_has_the_outsider_too(fleet):
