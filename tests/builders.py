@@ -15,6 +15,7 @@ from pathlib import Path
 from rosnet_tui.core.netinfo import LocalNet
 from rosnet_tui.core.results import CheckResult, Status
 from rosnet_tui.core.settings_model import (
+    CheckSettings,
     Peer,
     ProbeSettings,
     RosSettings,
@@ -65,6 +66,19 @@ def free_port(host: str = "127.0.0.1") -> int:
     with socket.socket() as s:
         s.bind((host, 0))
         return s.getsockname()[1]
+
+
+# --------------------------------------------------------------------------- whole settings
+def checked_settings(this: ThisComponent, peers: list[Peer], master: str, *, probe_port: int,
+                     public_ip_url: str, port_check_url: str, timeout_s: float = 3.0
+                     ) -> Settings:
+    """Settings every check can run with: ROS 1 with *master* on 11311, the probe (its test
+    port, what-is-my-IP and port-check URLs) and the checks' timeout (the lab's and the
+    bench's)."""
+    return Settings(this=this, peers=peers, ros=RosSettings(master=master, port=11311),
+                    probe=ProbeSettings(port=probe_port, public_ip_urls=[public_ip_url],
+                                        port_check_url=port_check_url),
+                    checks=CheckSettings(timeout_s=timeout_s))
 
 
 # --------------------------------------------------------------------------- results

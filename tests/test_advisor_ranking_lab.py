@@ -17,6 +17,7 @@ import json
 import pytest
 
 from rosnet_tui.core.settings import atomic_write_text, render_settings
+from tests.advisor_support import explain_report, first_failure_in, lab_report
 
 pytestmark = pytest.mark.lab
 
@@ -43,11 +44,8 @@ def config(lab, host: str, path, **this) -> str:
 
 
 def report(lab, host: str, state, *args: str, cfg: str | None = None) -> dict:
-    r = lab.rosnet(host, "report", "--format", "json", "--config",
-                   cfg or str(lab.config_path(host)), *args, env=_env(lab, host, state),
-                   timeout=120)
-    assert r.stdout.strip(), r.stderr
-    return json.loads(r.stdout)
+    return lab_report(lab, host, cfg or lab.config_path(host), _env(lab, host, state), *args,
+                      timeout=120)
 
 
 def check(lab, host: str, state, *args: str, cfg: str | None = None) -> dict[str, dict]:
@@ -55,19 +53,6 @@ def check(lab, host: str, state, *args: str, cfg: str | None = None) -> dict[str
                    *args, env=_env(lab, host, state), timeout=120)
     assert r.stdout.strip(), r.stderr
     return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
-
-
-def first_failure(doc: dict) -> dict:
-    fails = [f for f in doc["findings"] if f["severity"] == "fail"]
-    assert fails, explain(doc)
-    return fails[0]
-
-
-def explain(doc: dict) -> str:
-    lines = [f"{c['status']:4} {c['id']}: {c['summary']}" for c in doc["checks"]]
-    lines += [f"[{f['severity']}] {f['rule']} -> {f['goto_step']}: {f['meaning']}"
-              for f in doc["findings"]]
-    return "\n".join(lines)
 
 
 # --------------------------------------------------------------------------- no forwarding
@@ -88,8 +73,8 @@ def test_refusing_modem_seen_from_the_robot_router_step(rlab, tmp_path):
 def test_refusing_modem_seen_from_the_laptop(rlab, tmp_path):
     with rlab.variant("no_forwarding", refuse=True):
         doc = report(rlab, "laptop", tmp_path)
-    first = first_failure(doc)
-    assert first["rule"] == "linux.ssh.refused" and first["goto_step"] == "router", explain(doc)
+    first = first_failure_in(doc)
+    assert first["rule"] == "linux.ssh.refused" and first["goto_step"] == "router", explain_report(doc)
     assert "refuses the ROS master's port 11311 as well" in first["meaning"]
     assert first["actions"][0].startswith("Check that turtlebot's modem forwards TCP 22")
 
@@ -98,12 +83,12 @@ def test_dropping_modem_seen_from_both_seats(rlab, tmp_path):
     with rlab.variant("no_forwarding"):
         robot = report(rlab, "robot", tmp_path / "robot")
         laptop = report(rlab, "laptop", tmp_path / "laptop")
-    first = first_failure(robot)
-    assert first["rule"] == f"{T1}.forwarding" and first["goto_step"] == "router", explain(robot)
+    first = first_failure_in(robot)
+    assert first["rule"] == f"{T1}.forwarding" and first["goto_step"] == "router", explain_report(robot)
     assert "answers ping: the modem is online and drops it" in first["meaning"]
-    first = first_failure(laptop)
+    first = first_failure_in(laptop)
     assert first["rule"] == "linux.peer.unreachable" and first["goto_step"] == "router", \
-        explain(laptop)
+        explain_report(laptop)
     assert "modem is online" in first["meaning"]
 
 
@@ -113,9 +98,9 @@ def test_new_dhcp_lease_with_local_ip_in_the_settings(rlab, tmp_path):
         doc = report(rlab, "robot", tmp_path)
     checks = {c["id"]: c for c in doc["checks"]}
     # our listener is up on the address the robot has now: Table 1 reads "up, Closed"
-    assert checks["router.listener"]["status"] == "pass", explain(doc)
-    first = first_failure(doc)
-    assert first["rule"] == f"{T1}.forwarding" and first["goto_step"] == "router", explain(doc)
+    assert checks["router.listener"]["status"] == "pass", explain_report(doc)
+    first = first_failure_in(doc)
+    assert first["rule"] == f"{T1}.forwarding" and first["goto_step"] == "router", explain_report(doc)
     assert "from 10.10.10.1 to 10.10.10.5" in " ".join(first["actions"])
 
 
@@ -128,17 +113,17 @@ def test_new_dhcp_lease_with_the_documented_settings_is_told_by_the_history(rlab
     checks = {c["id"]: c for c in doc["checks"]}
     li = checks["router.local_ip"]["data"]
     assert li["local_ip"] == "10.10.10.5" and li["previous_ip"] == "10.10.10.1" and li["changed"]
-    first = first_failure(doc)
-    assert first["rule"] == f"{T1}.forwarding" and first["goto_step"] == "router", explain(doc)
+    first = first_failure_in(doc)
+    assert first["rule"] == f"{T1}.forwarding" and first["goto_step"] == "router", explain_report(doc)
     assert "from 10.10.10.1 to 10.10.10.5" in " ".join(first["actions"])
 
 
 def test_new_dhcp_lease_seen_from_the_laptop(rlab, tmp_path):
     with rlab.variant("stale_dhcp"):
         doc = report(rlab, "laptop", tmp_path)
-    first = first_failure(doc)
+    first = first_failure_in(doc)
     assert first["rule"] == "linux.peer.unreachable" and first["goto_step"] == "router", \
-        explain(doc)
+        explain_report(doc)
 
 
 # --------------------------------------------------------------------------- private double NAT
@@ -146,9 +131,9 @@ def test_travel_router_behind_the_modem_names_the_inner_router_first(rlab, tmp_p
     with rlab.variant("double_nat"):
         doc = report(rlab, "robot", tmp_path)
     checks = {c["id"]: c for c in doc["checks"]}
-    assert checks["isp.cgnat"]["data"]["double_nat"] is True, explain(doc)
-    first = first_failure(doc)
-    assert first["rule"] == f"{T1}.forwarding" and first["goto_step"] == "router", explain(doc)
+    assert checks["isp.cgnat"]["data"]["double_nat"] is True, explain_report(doc)
+    first = first_failure_in(doc)
+    assert first["rule"] == f"{T1}.forwarding" and first["goto_step"] == "router", explain_report(doc)
     assert first["actions"][0].startswith("On the inner router (10.10.10.254, turtlebot's "
                                           "gateway)"), first
     assert "to 10.10.10.1" in first["actions"][0] and "bridge" in first["actions"][0]
@@ -181,7 +166,7 @@ def test_sshd_on_another_port_says_so_and_names_ssh_port(rlab, tmp_path):
     ssh = checks["linux.ssh"]
     assert ssh["data"]["peers"]["turtlebot"]["tcp"] == "refused"
     assert "it may listen on another port" in ssh["summary"] and "ssh_port" in ssh["summary"]
-    first = first_failure(doc)
-    assert first["rule"] == "linux.ssh.refused" and first["goto_step"] == "linux", explain(doc)
+    first = first_failure_in(doc)
+    assert first["rule"] == "linux.ssh.refused" and first["goto_step"] == "linux", explain_report(doc)
     assert "ROS master answers at the same address" in first["meaning"]
     assert "ssh_port = N under the [[peer]] named turtlebot" in first["actions"][0]

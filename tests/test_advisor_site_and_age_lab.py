@@ -16,38 +16,18 @@ finally); tests/lab/*.py is not touched.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import time
 
 import pytest
 
+from tests.advisor_support import explain_report, first_failure_in, lab_report
 from tests.lab.ros2 import Ros2World
 from tests.lab.topology import ADDR
 
 pytestmark = pytest.mark.lab
 DAY = 86400.0
-
-
-def first_failure(doc: dict) -> dict:
-    fails = [f for f in doc["findings"] if f["severity"] == "fail"]
-    assert fails, explain(doc)
-    return fails[0]
-
-
-def explain(doc: dict) -> str:
-    lines = [f"{c['status']:4} {c['id']}: {c['summary']}" for c in doc["checks"]]
-    lines += [f"[{f['severity']}] {f['rule']} -> {f['goto_step']}: {f['meaning']}"
-              for f in doc["findings"]]
-    return "\n".join(lines)
-
-
-def report(lab, host: str, cfg, env: dict) -> dict:
-    r = lab.rosnet(host, "report", "--format", "json", "--config", str(cfg), env=env,
-                   timeout=150)
-    assert r.stdout.strip(), r.stderr
-    return json.loads(r.stdout)
 
 
 def rules(lab, ns: str, add: list[str]):
@@ -97,7 +77,7 @@ def test_zenoh_port_refused_and_ssh_shut_out_leads_with_the_masters_modem_or_isp
                                           "--reject-with tcp-reset"])
             said = "did not answer either"
         env = dict(ros2_world.env("laptop"), XDG_STATE_HOME=str(tmp_path))
-        doc = report(lab, "laptop", laptop_config(ros2_world, tmp_path, addr_of(how)), env)
+        doc = lab_report(lab, "laptop", laptop_config(ros2_world, tmp_path, addr_of(how)), env)
     finally:
         if undo:
             undo()
@@ -105,14 +85,14 @@ def test_zenoh_port_refused_and_ssh_shut_out_leads_with_the_masters_modem_or_isp
             lab._set_cgnat(False)
         ros2_world.healthy()
     checks = {c["id"]: c for c in doc["checks"]}
-    assert checks["ros2.router"]["data"]["failure"] == "refused", explain(doc)
-    first = first_failure(doc)
+    assert checks["ros2.router"]["data"]["failure"] == "refused", explain_report(doc)
+    first = first_failure_in(doc)
     assert first["rule"] == "ros2.port.not_forwarded" and first["goto_step"] == "router", \
-        explain(doc)
+        explain_report(doc)
     addr = addr_of(how)
     assert first["meaning"].startswith(
         f"turtlebot's Zenoh port ({addr}:7447) refused sami's connection and its SSH port 22 "
-        f"{said}: "), explain(doc)
+        f"{said}: "), explain_report(doc)
     assert "modem or its provider" in first["meaning"] and "carrier-grade NAT" in first["meaning"]
     assert "isp.cgnat" in first["actions"][0]
     everything = " ".join(f["meaning"] for f in doc["findings"])
@@ -147,21 +127,21 @@ def silent_robot_seen_from_the_laptop(lab, tmp_path, *, settings_age_s: float = 
             now=time.time() - sync_age_s)})
     undo = rules(lab, "robot_modem", SILENT_MODEM)
     try:
-        doc = report(lab, "laptop", cfg, dict(lab.ros_env("laptop"), XDG_STATE_HOME=str(state)))
+        doc = lab_report(lab, "laptop", cfg, dict(lab.ros_env("laptop"), XDG_STATE_HOME=str(state)))
     finally:
         undo()
         lab.reset()
     checks = {c["id"]: c for c in doc["checks"]}
     ping = checks["linux.ping"]["data"]["peers"]["turtlebot"]
-    assert ping["icmp"] is False and ping["tcp"] == "timeout", explain(doc)
+    assert ping["icmp"] is False and ping["tcp"] == "timeout", explain_report(doc)
     return doc
 
 
 def test_silent_modem_with_an_address_saved_minutes_ago_leads_with_forwarding(rlab, tmp_path):
     doc = silent_robot_seen_from_the_laptop(rlab, tmp_path, settings_age_s=180)
-    first = first_failure(doc)
+    first = first_failure_in(doc)
     assert first["rule"] == "linux.peer.unreachable" and first["goto_step"] == "router", \
-        explain(doc)
+        explain_report(doc)
     assert ("most likely turtlebot's modem does not forward port 22 to turtlebot (or its "
             "firewall drops it)") in first["meaning"], first
     assert re.search(r"203\.0\.113\.2 was confirmed [34] min ago \(settings saved\)",
@@ -172,16 +152,16 @@ def test_silent_modem_with_an_address_saved_minutes_ago_leads_with_forwarding(rl
 def test_silent_modem_with_a_fresh_sync_record_leads_with_forwarding(rlab, tmp_path):
     doc = silent_robot_seen_from_the_laptop(rlab, tmp_path, settings_age_s=40 * DAY,
                                             sync_age_s=180)
-    first = first_failure(doc)
-    assert first["goto_step"] == "router", explain(doc)
+    first = first_failure_in(doc)
+    assert first["goto_step"] == "router", explain_report(doc)
     assert re.search(r"203\.0\.113\.2 was confirmed [34] min ago \(turtlebot's own sync "
                      r"record\)", first["meaning"]), first
 
 
 def test_silent_modem_with_an_old_address_leads_with_the_address(rlab, tmp_path):
     doc = silent_robot_seen_from_the_laptop(rlab, tmp_path, settings_age_s=40 * DAY)
-    first = first_failure(doc)
+    first = first_failure_in(doc)
     assert first["rule"] == "linux.peer.unreachable" and first["goto_step"] == "linux", \
-        explain(doc)
+        explain_report(doc)
     assert "most likely 203.0.113.2 is not turtlebot's address any more" in first["meaning"]
     assert "203.0.113.2 was last confirmed 40 days ago (settings saved)" in first["meaning"]
