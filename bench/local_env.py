@@ -122,14 +122,10 @@ class LocalWorld:
         (self.root / "state").mkdir()
 
     def close(self) -> None:
+        from tests.lab import procs
+
         self.tarpit.close()
-        if self.probe.poll() is None:
-            self.probe.terminate()
-            try:
-                self.probe.wait(3)
-            except subprocess.TimeoutExpired:
-                self.probe.kill()
-                self.probe.wait(3)
+        procs.stop(self.probe, 3)
         shutil.rmtree(self.root, ignore_errors=True)
 
 

@@ -221,8 +221,9 @@ def ros2_member(**ros) -> Settings:
                     ros=RosSettings(master="turtlebot", version=2, **ros))
 
 
-def ros2_master(**ros) -> Settings:
-    return Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1"),
+def ros2_master(*, public_ip: str = "", **ros) -> Settings:
+    return Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1",
+                                       public_ip=public_ip),
                     peers=[Peer(name="sami", public_ip="198.51.100.2", ssh_user="me")],
                     ros=RosSettings(master="turtlebot", version=2, **ros))
 

@@ -24,13 +24,6 @@ pytestmark = pytest.mark.lab
 T1 = "table1.listener_up_closed"
 
 
-@pytest.fixture(scope="module")
-def rlab(lab):
-    lab.start_roscore()
-    yield lab
-    lab.stop_roscore()
-
-
 def _env(lab, host: str, state) -> dict:
     return dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
 
@@ -56,11 +49,11 @@ def check(lab, host: str, state, *args: str, cfg: str | None = None) -> dict[str
 
 
 # --------------------------------------------------------------------------- no forwarding
-def test_refusing_modem_seen_from_the_robot_router_step(rlab, tmp_path):
+def test_refusing_modem_seen_from_the_robot_router_step(ros1_lab, tmp_path):
     """The wizard's Router step on the robot (telecom): only router.* ran. Refused at the public
     address: the forwarding comes first, not the carrier."""
-    with rlab.variant("no_forwarding", refuse=True):
-        checks = check(rlab, "robot", tmp_path, "--step", "router")
+    with ros1_lab.variant("no_forwarding", refuse=True):
+        checks = check(ros1_lab, "robot", tmp_path, "--step", "router")
     po = checks["router.port_open"]
     assert po["status"] == "fail"
     assert po["data"]["ports"][0]["answer"] == "refused"
@@ -70,19 +63,19 @@ def test_refusing_modem_seen_from_the_robot_router_step(rlab, tmp_path):
     assert "was refused" in first["meaning"] and "the modem is online" in first["meaning"]
 
 
-def test_refusing_modem_seen_from_the_laptop(rlab, tmp_path):
-    with rlab.variant("no_forwarding", refuse=True):
-        doc = report(rlab, "laptop", tmp_path)
+def test_refusing_modem_seen_from_the_laptop(ros1_lab, tmp_path):
+    with ros1_lab.variant("no_forwarding", refuse=True):
+        doc = report(ros1_lab, "laptop", tmp_path)
     first = first_failure_in(doc)
     assert first["rule"] == "linux.ssh.refused" and first["goto_step"] == "router", explain_report(doc)
     assert "refuses the ROS master's port 11311 as well" in first["meaning"]
     assert first["actions"][0].startswith("Check that turtlebot's modem forwards TCP 22")
 
 
-def test_dropping_modem_seen_from_both_seats(rlab, tmp_path):
-    with rlab.variant("no_forwarding"):
-        robot = report(rlab, "robot", tmp_path / "robot")
-        laptop = report(rlab, "laptop", tmp_path / "laptop")
+def test_dropping_modem_seen_from_both_seats(ros1_lab, tmp_path):
+    with ros1_lab.variant("no_forwarding"):
+        robot = report(ros1_lab, "robot", tmp_path / "robot")
+        laptop = report(ros1_lab, "laptop", tmp_path / "laptop")
     first = first_failure_in(robot)
     assert first["rule"] == f"{T1}.forwarding" and first["goto_step"] == "router", explain_report(robot)
     assert "answers ping: the modem is online and drops it" in first["meaning"]
@@ -93,9 +86,9 @@ def test_dropping_modem_seen_from_both_seats(rlab, tmp_path):
 
 
 # --------------------------------------------------------------------------- stale DHCP address
-def test_new_dhcp_lease_with_local_ip_in_the_settings(rlab, tmp_path):
-    with rlab.variant("stale_dhcp"):
-        doc = report(rlab, "robot", tmp_path)
+def test_new_dhcp_lease_with_local_ip_in_the_settings(ros1_lab, tmp_path):
+    with ros1_lab.variant("stale_dhcp"):
+        doc = report(ros1_lab, "robot", tmp_path)
     checks = {c["id"]: c for c in doc["checks"]}
     # our listener is up on the address the robot has now: Table 1 reads "up, Closed"
     assert checks["router.listener"]["status"] == "pass", explain_report(doc)
@@ -104,12 +97,12 @@ def test_new_dhcp_lease_with_local_ip_in_the_settings(rlab, tmp_path):
     assert "from 10.10.10.1 to 10.10.10.5" in " ".join(first["actions"])
 
 
-def test_new_dhcp_lease_with_the_documented_settings_is_told_by_the_history(rlab, tmp_path):
-    cfg = config(rlab, "robot", tmp_path / "config.toml", local_ip="", interface="")
+def test_new_dhcp_lease_with_the_documented_settings_is_told_by_the_history(ros1_lab, tmp_path):
+    cfg = config(ros1_lab, "robot", tmp_path / "config.toml", local_ip="", interface="")
     state = tmp_path / "state"
-    check(rlab, "robot", state, "--step", "router", cfg=cfg)     # a healthy run: 10.10.10.1
-    with rlab.variant("stale_dhcp"):
-        doc = report(rlab, "robot", state, cfg=cfg)
+    check(ros1_lab, "robot", state, "--step", "router", cfg=cfg)     # a healthy run: 10.10.10.1
+    with ros1_lab.variant("stale_dhcp"):
+        doc = report(ros1_lab, "robot", state, cfg=cfg)
     checks = {c["id"]: c for c in doc["checks"]}
     li = checks["router.local_ip"]["data"]
     assert li["local_ip"] == "10.10.10.5" and li["previous_ip"] == "10.10.10.1" and li["changed"]
@@ -118,18 +111,18 @@ def test_new_dhcp_lease_with_the_documented_settings_is_told_by_the_history(rlab
     assert "from 10.10.10.1 to 10.10.10.5" in " ".join(first["actions"])
 
 
-def test_new_dhcp_lease_seen_from_the_laptop(rlab, tmp_path):
-    with rlab.variant("stale_dhcp"):
-        doc = report(rlab, "laptop", tmp_path)
+def test_new_dhcp_lease_seen_from_the_laptop(ros1_lab, tmp_path):
+    with ros1_lab.variant("stale_dhcp"):
+        doc = report(ros1_lab, "laptop", tmp_path)
     first = first_failure_in(doc)
     assert first["rule"] == "linux.peer.unreachable" and first["goto_step"] == "router", \
         explain_report(doc)
 
 
 # --------------------------------------------------------------------------- private double NAT
-def test_travel_router_behind_the_modem_names_the_inner_router_first(rlab, tmp_path):
-    with rlab.variant("double_nat"):
-        doc = report(rlab, "robot", tmp_path)
+def test_travel_router_behind_the_modem_names_the_inner_router_first(ros1_lab, tmp_path):
+    with ros1_lab.variant("double_nat"):
+        doc = report(ros1_lab, "robot", tmp_path)
     checks = {c["id"]: c for c in doc["checks"]}
     assert checks["isp.cgnat"]["data"]["double_nat"] is True, explain_report(doc)
     first = first_failure_in(doc)
@@ -143,25 +136,25 @@ def test_travel_router_behind_the_modem_names_the_inner_router_first(rlab, tmp_p
 
 
 # --------------------------------------------------------------------------- LAN profile
-def test_lan_profile_skips_the_port_test_with_the_reason(rlab, tmp_path):
-    cfg = config(rlab, "robot", tmp_path / "config.toml", profile="office",
+def test_lan_profile_skips_the_port_test_with_the_reason(ros1_lab, tmp_path):
+    cfg = config(ros1_lab, "robot", tmp_path / "config.toml", profile="office",
                  office_ip="10.10.10.1")
-    checks = check(rlab, "robot", tmp_path, "--step", "router", cfg=cfg)
+    checks = check(ros1_lab, "robot", tmp_path, "--step", "router", cfg=cfg)
     po = checks["router.port_open"]
     assert po["status"] == "skip", po
     assert "on the office LAN profile every component is on the same LAN" in po["summary"]
     assert "hotspot cannot forward at all" in po["summary"]
     assert all(not c["advice"] for c in checks.values()), checks
-    r = rlab.rosnet("robot", "report", "--config", cfg, "--from-json", "-",
+    r = ros1_lab.rosnet("robot", "report", "--config", cfg, "--from-json", "-",
                     input=json.dumps({"checks": list(checks.values())}),
-                    env=_env(rlab, "robot", tmp_path))
+                    env=_env(ros1_lab, "robot", tmp_path))
     assert "1024-65000" not in r.stdout.split("## Settings")[0]
 
 
 # --------------------------------------------------------------------------- sshd elsewhere
-def test_sshd_on_another_port_says_so_and_names_ssh_port(rlab, tmp_path):
-    with rlab.variant("sshd_port"):
-        doc = report(rlab, "laptop", tmp_path)
+def test_sshd_on_another_port_says_so_and_names_ssh_port(ros1_lab, tmp_path):
+    with ros1_lab.variant("sshd_port"):
+        doc = report(ros1_lab, "laptop", tmp_path)
     checks = {c["id"]: c for c in doc["checks"]}
     ssh = checks["linux.ssh"]
     assert ssh["data"]["peers"]["turtlebot"]["tcp"] == "refused"

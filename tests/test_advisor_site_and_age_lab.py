@@ -100,13 +100,6 @@ def test_zenoh_port_refused_and_ssh_shut_out_leads_with_the_masters_modem_or_isp
 
 
 # --------------------------------------------------------------------------- 2. ROS 1
-@pytest.fixture(scope="module")
-def rlab(lab):
-    lab.start_roscore()
-    yield lab
-    lab.stop_roscore()
-
-
 SILENT_MODEM = ["-I INPUT -i wan0 -m conntrack --ctstate NEW -j DROP",
                 "-I FORWARD -i wan0 -m conntrack --ctstate NEW -j DROP"]
 
@@ -137,8 +130,8 @@ def silent_robot_seen_from_the_laptop(lab, tmp_path, *, settings_age_s: float = 
     return doc
 
 
-def test_silent_modem_with_an_address_saved_minutes_ago_leads_with_forwarding(rlab, tmp_path):
-    doc = silent_robot_seen_from_the_laptop(rlab, tmp_path, settings_age_s=180)
+def test_silent_modem_with_an_address_saved_minutes_ago_leads_with_forwarding(ros1_lab, tmp_path):
+    doc = silent_robot_seen_from_the_laptop(ros1_lab, tmp_path, settings_age_s=180)
     first = first_failure_in(doc)
     assert first["rule"] == "linux.peer.unreachable" and first["goto_step"] == "router", \
         explain_report(doc)
@@ -149,8 +142,8 @@ def test_silent_modem_with_an_address_saved_minutes_ago_leads_with_forwarding(rl
     assert first["actions"][0].startswith("Check that turtlebot's modem forwards TCP 22")
 
 
-def test_silent_modem_with_a_fresh_sync_record_leads_with_forwarding(rlab, tmp_path):
-    doc = silent_robot_seen_from_the_laptop(rlab, tmp_path, settings_age_s=40 * DAY,
+def test_silent_modem_with_a_fresh_sync_record_leads_with_forwarding(ros1_lab, tmp_path):
+    doc = silent_robot_seen_from_the_laptop(ros1_lab, tmp_path, settings_age_s=40 * DAY,
                                             sync_age_s=180)
     first = first_failure_in(doc)
     assert first["goto_step"] == "router", explain_report(doc)
@@ -158,8 +151,8 @@ def test_silent_modem_with_a_fresh_sync_record_leads_with_forwarding(rlab, tmp_p
                      r"record\)", first["meaning"]), first
 
 
-def test_silent_modem_with_an_old_address_leads_with_the_address(rlab, tmp_path):
-    doc = silent_robot_seen_from_the_laptop(rlab, tmp_path, settings_age_s=40 * DAY)
+def test_silent_modem_with_an_old_address_leads_with_the_address(ros1_lab, tmp_path):
+    doc = silent_robot_seen_from_the_laptop(ros1_lab, tmp_path, settings_age_s=40 * DAY)
     first = first_failure_in(doc)
     assert first["rule"] == "linux.peer.unreachable" and first["goto_step"] == "linux", \
         explain_report(doc)

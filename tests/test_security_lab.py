@@ -94,16 +94,8 @@ def test_the_outsider_is_on_the_internet_and_no_peer(lab):
 
 
 # --------------------------------------------------------------------------- ROS 1
-@pytest.fixture(scope="module")
-def ros1(lab):
-    lab.reset()
-    lab.start_roscore()
-    yield lab
-    lab.stop_roscore()
-
-
-def test_ros1_default_shuts_the_outsider_out_while_every_check_passes(ros1, tmp_path):
-    lab = ros1
+def test_ros1_default_shuts_the_outsider_out_while_every_check_passes(ros1_lab, tmp_path):
+    lab = ros1_lab
     lab.reset()
     assert lab.settings("robot").ros.security == "firewall"      # the ROS 1 default
     assert outsider.get_system_state(lab, ADDR.ROBOT_PUBLIC)["ok"]   # open before: the defect
@@ -132,8 +124,8 @@ def test_ros1_default_shuts_the_outsider_out_while_every_check_passes(ros1, tmp_
             assert checks["linux.firewall"]["status"] == "pass"
 
 
-def test_ros1_security_none_and_firewall_undo_let_the_outsider_back_in(ros1, tmp_path):
-    lab = ros1
+def test_ros1_security_none_and_firewall_undo_let_the_outsider_back_in(ros1_lab, tmp_path):
+    lab = ros1_lab
     lab.reset()
     state = str(tmp_path / "fw")
     cfg = str(lab.config_path("robot"))

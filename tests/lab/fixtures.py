@@ -2,6 +2,7 @@
 
 - ``lab`` (module scope): a built lab, destroyed after the module; skips with the reason when this
   machine cannot run it (not root, no namespaces, a tool missing).
+- ``ros1_lab`` (module scope): the module's lab, healthy, with roscore running on the master.
 - ``healthy_lab`` (function scope): the module's lab, reset to the healthy network before and
   after the test.
 - ``fleet`` (module scope): a built N-site lab (tests/lab/fleet.py: a master and N-1 members, each
@@ -54,6 +55,15 @@ def _built(make: Callable[[], Lab]) -> Iterator[Lab]:
 @pytest.fixture(scope="module")
 def lab(lab_session):
     yield from _built(Lab)
+
+
+@pytest.fixture(scope="module")
+def ros1_lab(lab):
+    """The module's lab, healthy, with roscore on the master (stopped after the module)."""
+    lab.reset()
+    lab.start_roscore()
+    yield lab
+    lab.stop_roscore()
 
 
 @pytest.fixture
