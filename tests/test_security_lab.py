@@ -60,14 +60,20 @@ def run_checks(lab, host: str, config, *ids: str, env=None) -> dict:
     return json.loads(line[len("RESULTS "):])
 
 
-def full_check(lab, host: str, config, env, state, *steps: str) -> dict[str, dict]:
+def full_check(lab, host: str, config, env, state, *steps: str,
+               timed: str | None = None) -> dict[str, dict]:
     """`rosnet-tui check --json` (every step, or *steps*) on *host*: {id: entry}, with the
-    advisor's findings under "advice"."""
+    advisor's findings under "advice". With *timed* (what ran), the time it took is printed."""
+    t0 = time.monotonic()
     r = lab.rosnet(host, "check", "--json", "-q", *(a for st in steps for a in ("--step", st)),
                    "--config", str(config), env=dict(env, XDG_STATE_HOME=str(state)),
                    timeout=90)
     assert r.stdout.strip(), r.stderr
-    return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+    checks = {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+    if timed:
+        print(f"{timed} full verification on {host}: {len(checks)} checks in "
+              f"{time.monotonic() - t0:.2f} s")
+    return checks
 
 
 def ros1_config(lab, host: str, **ros) -> str:
@@ -108,11 +114,8 @@ def test_ros1_default_shuts_the_outsider_out_while_every_check_passes(ros1_lab, 
             got = outsider.ssh_auth_none(lab, ip, timeout=1.5)   # too, so no password offered
             assert "methods" not in got and "timed out" in got.get("error", ""), (ip, got)
         for host in SEATS:
-            t0 = time.monotonic()
             checks = full_check(lab, host, lab.config_path(host), lab.ros_env(host),
-                                tmp_path / host)
-            took = time.monotonic() - t0
-            print(f"ROS 1 full verification on {host}: {len(checks)} checks in {took:.2f} s")
+                                tmp_path / host, timed="ROS 1")
             assert all(c["status"] == "pass" for c in checks.values()), explain(checks)
             out = checks["security.outsider"]
             reach = out["data"]["outsider_reachable"]   # the master's port (master), a range port
@@ -204,11 +207,8 @@ def test_ros2_default_mtls_shuts_the_outsider_out_while_every_check_passes(ros2_
     for ip in (ADDR.ROBOT_PUBLIC, ADDR.LAPTOP_PUBLIC):
         assert outsider.ssh_auth_none(lab, ip).get("methods") == ["publickey"], ip
     for host in SEATS:
-        t0 = time.monotonic()
         checks = full_check(lab, host, ros2_world.config_path(host), ros2_world.env(host),
-                            tmp_path / host)
-        took = time.monotonic() - t0
-        print(f"ROS 2 (mtls) full verification on {host}: {len(checks)} checks in {took:.2f} s")
+                            tmp_path / host, timed="ROS 2 (mtls)")
         # pass, or skip where a check does not apply to ROS 2 on this seat (router.upnp: no UPnP
         # modem here; the member's modem forwards nothing; the master never dials the members)
         assert all(c["status"] in ("pass", "skip") for c in checks.values()), explain(checks)

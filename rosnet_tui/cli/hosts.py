@@ -20,6 +20,7 @@ from rosnet_tui.cli.writing import (
     add_writer_options,
     ask,
     confirm,
+    file_of,
     load_settings_for,
     paths_of,
     print_changes,
@@ -108,7 +109,7 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
     if settings is None:
         return EXIT_USAGE, None
     profile = profile or settings.this.profile
-    path = Path(args.file).expanduser().absolute() if args.file else DEFAULT_HOSTS_PATH
+    path = file_of(args, DEFAULT_HOSTS_PATH)
     fix = _decide_conflicts(args, settings, profile, path)
     try:
         preview = preview_hosts(settings, profile, path, fix_conflicts=bool(fix),
@@ -169,7 +170,7 @@ def run_show(args: argparse.Namespace) -> int:
     if settings is None:
         return EXIT_USAGE
     profile = args.profile or settings.this.profile
-    path = Path(args.file).expanduser().absolute() if args.file else DEFAULT_HOSTS_PATH
+    path = file_of(args, DEFAULT_HOSTS_PATH)
     try:
         block = render_hosts_text(settings, profile)
     except WriterSettingsError as exc:

@@ -26,6 +26,7 @@ from rosnet_tui.cli.writing import (
     add_writer_options,
     ask,
     confirm,
+    file_of,
     load_settings_for,
     paths_of,
     print_changes,
@@ -97,7 +98,7 @@ def run_apply(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     if settings.ros2:
         return _apply_ros2(args, settings)
-    path = Path(args.file).expanduser().absolute() if args.file else default_bashrc_path()
+    path = file_of(args, default_bashrc_path())
     comment = _decide_comment(args, path)
     try:
         preview = preview_bashrc(settings, path, comment_ros_ip=comment,
@@ -145,7 +146,7 @@ def run_export(args: argparse.Namespace) -> int:
 
 def _apply_ros2(args: argparse.Namespace, settings) -> int:
     """ROS 2: the ~/.bashrc block and the router's config, previewed, written as one apply."""
-    path = Path(args.file).expanduser().absolute() if args.file else default_bashrc_path()
+    path = file_of(args, default_bashrc_path())
     rc = Path(args.router_config).expanduser().absolute() if args.router_config else None
     try:
         previews = ros2.previews(settings, path, client=args.client, router_config_path=rc,

@@ -65,6 +65,11 @@ def report_settings_problems(exc: WriterSettingsError) -> int:
     return EXIT_USAGE
 
 
+def file_of(args: argparse.Namespace, default: Path) -> Path:
+    """The file named by --file, absolute; *default* without it."""
+    return Path(args.file).expanduser().absolute() if args.file else default
+
+
 def paths_of(args: argparse.Namespace, *, hosts_path: Path | None = None,
              bashrc_path: Path | None = None) -> Paths:
     """The files of this command: --config, --state-dir, and the hosts file or rc file it
