@@ -221,28 +221,25 @@ def icmp_filtered():
     return r, laptop_settings()
 
 
-def unreachable():
-    r = healthy_laptop()
-    put(r, "linux.ping", "fail", peers={"turtlebot": {"icmp": False, "tcp22": False}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {"ok": False, "failure": "network",
-                                                     "fingerprint": None}})
-    no_ssh(r, "network")
-    return r, laptop_settings()
-
-
-def ssh_shut_out(r: dict[str, CheckResult], tcp: str, *, icmp: bool = True,
+def ssh_shut_out(r: dict[str, CheckResult], tcp: str | None, *, icmp: bool = True,
                  address: str | None = None) -> dict[str, CheckResult]:
     """sami's round *r* where turtlebot's port 22 answers *tcp* ("refused", "timeout",
-    "unreachable") and ping answers *icmp*: SSH fails on the network, and so do the checks that
-    run over it (linux.ssh's data with the *address* it dialled, when given)."""
+    "unreachable"; None: data without the TCP answer) and ping answers *icmp*: SSH fails on the
+    network, and so do the checks that run over it (linux.ssh's data with the *address* it
+    dialled, when given)."""
+    how = {} if tcp is None else {"tcp": tcp, "port": 22}
     put(r, "linux.ping", "pass" if icmp else "fail",
-        peers={"turtlebot": {"icmp": icmp, "tcp22": False, "tcp": tcp, "port": 22}})
-    peer = {"ok": False, "failure": "network", "fingerprint": None, "tcp": tcp, "port": 22}
+        peers={"turtlebot": {"icmp": icmp, "tcp22": False, **how}})
+    peer = {"ok": False, "failure": "network", "fingerprint": None, **how}
     if address is not None:
         peer["address"] = address
     put(r, "linux.ssh", "fail", peers={"turtlebot": peer})
     no_ssh(r, "network")
     return r
+
+
+def unreachable():
+    return ssh_shut_out(healthy_laptop(), None, icmp=False), laptop_settings()
 
 
 def ssh_refused():
