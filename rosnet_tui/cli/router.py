@@ -204,7 +204,7 @@ def run_map(args: argparse.Namespace) -> int:
     for w in plan.warnings:
         print(f"warning: {w}")
     stop = confirm(args, "Ask the modem for these forwards?", dry_run=NOTHING_ASKED,
-                   cancelled=NOTHING_ASKED, no_terminal=NOT_ASKING)
+                   cancelled=f"Cancelled: {NOTHING_ASKED}.", no_terminal=NOT_ASKING)
     if stop is not None:
         return stop
     try:
@@ -247,7 +247,7 @@ def run_unmap(args: argparse.Namespace) -> int:
     print("Forwards rosnet-tui made (only these are removed):")
     for _e, m in live:
         print(f"  {journal.describe(m)}")
-    stop = confirm(args, "Remove them from the modem?", cancelled=NOTHING_ASKED,
+    stop = confirm(args, "Remove them from the modem?", cancelled=f"Cancelled: {NOTHING_ASKED}.",
                    no_terminal=NOT_ASKING)
     if stop is not None:
         return stop

@@ -25,12 +25,12 @@ from rosnet_tui.cli.common import (
     add_config_option,
     add_state_dir_option,
     config_path,
-    interactive,
     number_in,
     say,
     state_dir_of,
     state_dir_problem,
 )
+from rosnet_tui.cli.writing import confirm
 from rosnet_tui.core import privilege
 from rosnet_tui.core.paths import Paths
 
@@ -327,21 +327,12 @@ def run_install(args: argparse.Namespace) -> int:
     if old == text:
         print(then)
         return EXIT_OK
-    if args.dry_run:
-        print("Dry run: nothing was written.")
-        return EXIT_OK
-    if not args.yes:
-        if not interactive():
-            say("rosnet-tui: not writing without a terminal to ask on; read the unit above, "
-                 "then run the same command with --yes")
-            return EXIT_USAGE
-        try:
-            answer = input(f"Write {path}? [y/N] ")
-        except EOFError:
-            answer = ""
-        if answer.strip().lower() not in ("y", "yes"):
-            print("Nothing was written.")
-            return EXIT_FAIL
+    stop = confirm(args, f"Write {path}?", dry_run="nothing was written",
+                   cancelled="Nothing was written.",
+                   no_terminal="rosnet-tui: not writing without a terminal to ask on; read the "
+                               "unit above, then run the same command with --yes")
+    if stop is not None:
+        return stop
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, text, mode=0o644)

@@ -115,11 +115,11 @@ NOT_WRITING = ("rosnet-tui: not writing without a confirmation, and there is no 
 
 
 def confirm(args: argparse.Namespace, question: str, *, dry_run: str | None = None,
-            cancelled: str = "nothing was written", no_terminal: str = NOT_WRITING
+            cancelled: str = "Cancelled: nothing was written.", no_terminal: str = NOT_WRITING
             ) -> int | None:
-    """None to go on; an exit code to stop with: a dry run (when the command has --dry-run, its
-    *dry_run* words: "Dry run: <dry_run>."), declined ("Cancelled: <cancelled>."), or no
-    terminal to ask on (*no_terminal* on stderr)."""
+    """None to go on (--yes, or the person said yes); an exit code to stop with: a dry run
+    (when the command has --dry-run, its *dry_run* words: "Dry run: <dry_run>."), declined
+    (*cancelled* said), or no terminal to ask on (*no_terminal* on stderr)."""
     if dry_run is not None and args.dry_run:
         print(f"Dry run: {dry_run}.")
         return EXIT_OK
@@ -128,7 +128,7 @@ def confirm(args: argparse.Namespace, question: str, *, dry_run: str | None = No
     if interactive():
         if ask(question):
             return None
-        print(f"Cancelled: {cancelled}.")
+        print(cancelled)
         return EXIT_FAIL
     say(no_terminal)
     return EXIT_USAGE
