@@ -91,25 +91,30 @@ def result(cid: str, status: str = "pass", summary: str = "", data: dict | None 
 
 
 # --------------------------------------------------------------------------- the advisor's cast
-def laptop_settings(**this) -> Settings:
-    """sami, a member behind its home modem; the robot turtlebot runs the master."""
-    t = dict(name="sami", role="member", connection="home", profile="remote",
-             local_ip="192.168.1.10", public_ip="198.51.100.2")
+CAST = {"turtlebot": dict(role="master", connection="telecom", local_ip="10.10.10.1",
+                         public_ip="203.0.113.2"),
+        "sami": dict(role="member", connection="home", local_ip="192.168.1.10",
+                     public_ip="198.51.100.2")}
+
+
+def _seat(who: str, peer: str, /, **this) -> Settings:
+    """*who*'s settings (CAST, *this* over it), *peer* reached over SSH as root."""
+    t = dict(name=who, profile="remote", **CAST[who])
     t.update(this)
     return Settings(this=ThisComponent(**t),
-                    peers=[Peer("turtlebot", local_ip="10.10.10.1", public_ip="203.0.113.2",
-                                ssh_user="root")],
+                    peers=[Peer(peer, local_ip=CAST[peer]["local_ip"],
+                                public_ip=CAST[peer]["public_ip"], ssh_user="root")],
                     ros=RosSettings(master="turtlebot"))
+
+
+def laptop_settings(**this) -> Settings:
+    """sami, a member behind its home modem; the robot turtlebot runs the master."""
+    return _seat("sami", "turtlebot", **this)
 
 
 def robot_settings(**this) -> Settings:
-    t = dict(name="turtlebot", role="master", connection="telecom", profile="remote",
-             local_ip="10.10.10.1", public_ip="203.0.113.2")
-    t.update(this)
-    return Settings(this=ThisComponent(**t),
-                    peers=[Peer("sami", local_ip="192.168.1.10", public_ip="198.51.100.2",
-                                ssh_user="root")],
-                    ros=RosSettings(master="turtlebot"))
+    """turtlebot, the master behind its telecom router; sami a member."""
+    return _seat("turtlebot", "sami", **this)
 
 
 def res(cid: str, status: str = "pass", summary: str = "", **data) -> CheckResult:
