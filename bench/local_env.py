@@ -48,23 +48,15 @@ def write_settings(path: Path, *, probe_url: str, public_ip_url: str, test_port:
                    timeout_s: float = 3.0) -> None:
     """A complete settings file pointing only at loopback addresses."""
     from rosnet_tui.core.settings import atomic_write_text, render_settings
-    from rosnet_tui.core.settings_model import (
-        CheckSettings,
-        Peer,
-        ProbeSettings,
-        RosSettings,
-        Settings,
-        ThisComponent,
-    )
+    from rosnet_tui.core.settings_model import Peer, ThisComponent
+    from tests.builders import checked_settings
 
-    s = Settings(
-        this=ThisComponent(name="benchbox", role="master", connection="home", profile="remote",
-                           local_ip="127.0.0.1", public_ip="127.0.0.1", interface="lo"),
-        peers=[Peer(name="benchpeer", local_ip="127.0.0.2", public_ip="127.0.0.3", ssh_user="")],
-        ros=RosSettings(master="benchbox", port=11311),
-        probe=ProbeSettings(port=test_port, public_ip_urls=[public_ip_url],
-                            port_check_url=probe_url),
-        checks=CheckSettings(timeout_s=timeout_s))
+    s = checked_settings(
+        ThisComponent(name="benchbox", role="master", connection="home", profile="remote",
+                      local_ip="127.0.0.1", public_ip="127.0.0.1", interface="lo"),
+        [Peer(name="benchpeer", local_ip="127.0.0.2", public_ip="127.0.0.3", ssh_user="")],
+        "benchbox", probe_port=test_port, public_ip_url=public_ip_url, port_check_url=probe_url,
+        timeout_s=timeout_s)
     problems = s.problems()
     if problems:
         raise RuntimeError(f"bench settings are not complete: {problems}")
@@ -130,14 +122,10 @@ class LocalWorld:
         (self.root / "state").mkdir()
 
     def close(self) -> None:
+        from tests.lab import procs
+
         self.tarpit.close()
-        if self.probe.poll() is None:
-            self.probe.terminate()
-            try:
-                self.probe.wait(3)
-            except subprocess.TimeoutExpired:
-                self.probe.kill()
-                self.probe.wait(3)
+        procs.stop(self.probe, 3)
         shutil.rmtree(self.root, ignore_errors=True)
 
 

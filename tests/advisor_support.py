@@ -6,6 +6,7 @@ The builders of settings and results are in tests/builders.py.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 
 from rosnet_tui.core import advisor
@@ -23,6 +24,31 @@ from tests.builders import (
 )
 
 
+# --------------------------------------------------------------------------- the report's JSON
+def lab_report(lab, host: str, cfg, env: dict, *args: str, timeout: float = 150) -> dict:
+    """`rosnet-tui report --format json` run on the lab's *host*, read (the lab tests)."""
+    r = lab.rosnet(host, "report", "--format", "json", "--config", str(cfg), *args, env=env,
+                   timeout=timeout)
+    assert r.stdout.strip(), r.stderr
+    return json.loads(r.stdout)
+
+
+def first_failure_in(doc: dict) -> dict:
+    """The report's first finding of severity fail (there must be one)."""
+    fails = [f for f in doc["findings"] if f["severity"] == "fail"]
+    assert fails, explain_report(doc)
+    return fails[0]
+
+
+def explain_report(doc: dict) -> str:
+    """The report's checks and findings, a line each (an assertion's message)."""
+    lines = [f"{c['status']:4} {c['id']}: {c['summary']}" for c in doc["checks"]]
+    lines += [f"[{f['severity']}] {f['rule']} -> {f['goto_step']}: {f['meaning']}"
+              for f in doc["findings"]]
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- running the advisor
 def run(results, settings=None) -> list[Finding]:
     return advise(results, settings or laptop_settings(), strict=True)
 
@@ -195,24 +221,29 @@ def icmp_filtered():
     return r, laptop_settings()
 
 
-def unreachable():
-    r = healthy_laptop()
-    put(r, "linux.ping", "fail", peers={"turtlebot": {"icmp": False, "tcp22": False}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {"ok": False, "failure": "network",
-                                                     "fingerprint": None}})
+def ssh_shut_out(r: dict[str, CheckResult], tcp: str | None, *, icmp: bool = True,
+                 address: str | None = None) -> dict[str, CheckResult]:
+    """sami's round *r* where turtlebot's port 22 answers *tcp* ("refused", "timeout",
+    "unreachable"; None: data without the TCP answer) and ping answers *icmp*: SSH fails on the
+    network, and so do the checks that run over it (linux.ssh's data with the *address* it
+    dialled, when given)."""
+    how = {} if tcp is None else {"tcp": tcp, "port": 22}
+    put(r, "linux.ping", "pass" if icmp else "fail",
+        peers={"turtlebot": {"icmp": icmp, "tcp22": False, **how}})
+    peer = {"ok": False, "failure": "network", "fingerprint": None, **how}
+    if address is not None:
+        peer["address"] = address
+    put(r, "linux.ssh", "fail", peers={"turtlebot": peer})
     no_ssh(r, "network")
-    return r, laptop_settings()
+    return r
+
+
+def unreachable():
+    return ssh_shut_out(healthy_laptop(), None, icmp=False), laptop_settings()
 
 
 def ssh_refused():
-    r = healthy_laptop()
-    put(r, "linux.ping", "pass", peers={"turtlebot": {"icmp": True, "tcp22": False,
-                                                      "tcp": "refused", "port": 22}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {"ok": False, "failure": "network",
-                                                     "fingerprint": None, "tcp": "refused",
-                                                     "port": 22}})
-    no_ssh(r, "network")
-    return r, laptop_settings()
+    return ssh_shut_out(healthy_laptop(), "refused"), laptop_settings()
 
 
 def ssh(failure: str, status: str = "fail"):

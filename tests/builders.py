@@ -7,6 +7,7 @@ Result builders follow the checks contract (check ids and their ``data`` keys).
 
 from __future__ import annotations
 
+import random
 import socket
 from dataclasses import replace
 from pathlib import Path
@@ -14,6 +15,7 @@ from pathlib import Path
 from rosnet_tui.core.netinfo import LocalNet
 from rosnet_tui.core.results import CheckResult, Status
 from rosnet_tui.core.settings_model import (
+    CheckSettings,
     Peer,
     ProbeSettings,
     RosSettings,
@@ -22,12 +24,61 @@ from rosnet_tui.core.settings_model import (
     ThisComponent,
 )
 
+# The robot's settings file as a person writes it (the CLI tests hand it to --config).
+ROBOT_CONFIG = """\
+# my robot
+[this]
+name = "turtlebot"
+role = "master"
+connection = "telecom"
+profile = "remote"
+local_ip = "10.10.10.1"
+public_ip = "203.0.113.2"
+office_ip = "172.16.0.5"
+
+[[peer]]
+name = "sami"
+local_ip = "192.168.1.10"
+public_ip = "198.51.100.2"
+office_ip = "172.16.0.6"
+
+[ros]
+master = "turtlebot"
+port = 11311
+"""
+
+
+def random_hosts(n_bytes: int, seed: int) -> bytes:
+    """Hosts lines (10/8 addresses, names) of at least *n_bytes*: the same for a seed, other
+    lines for another seed (a big hosts file to write, cut and restore)."""
+    rng = random.Random(seed)
+    lines, size = [], 0
+    while size < n_bytes:
+        line = f"10.{rng.randrange(256)}.{rng.randrange(256)}.{rng.randrange(1, 255)}\t" \
+               f"host-{seed}-{len(lines)}.example\thost-{len(lines)}\n"
+        lines.append(line)
+        size += len(line)
+    return "".join(lines).encode()
+
 
 def free_port(host: str = "127.0.0.1") -> int:
     """A TCP port free on *host* right now (the kernel's pick)."""
     with socket.socket() as s:
         s.bind((host, 0))
         return s.getsockname()[1]
+
+
+# --------------------------------------------------------------------------- whole settings
+def checked_settings(this: ThisComponent, peers: list[Peer], master: str, *, probe_port: int,
+                     public_ip_url: str, port_check_url: str, timeout_s: float = 3.0
+                     ) -> Settings:
+    """Settings every check can run with: ROS 1 with *master* on 11311, the probe (its test
+    port, what-is-my-IP and port-check URLs) and the checks' timeout (the lab's and the
+    bench's)."""
+    return Settings(this=this, peers=peers, ros=RosSettings(master=master, port=11311),
+                    probe=ProbeSettings(port=probe_port, public_ip_urls=[public_ip_url],
+                                        port_check_url=port_check_url),
+                    checks=CheckSettings(timeout_s=timeout_s))
 
 
 # --------------------------------------------------------------------------- results
@@ -40,25 +91,30 @@ def result(cid: str, status: str = "pass", summary: str = "", data: dict | None 
 
 
 # --------------------------------------------------------------------------- the advisor's cast
-def laptop_settings(**this) -> Settings:
-    """sami, a member behind its home modem; the robot turtlebot runs the master."""
-    t = dict(name="sami", role="member", connection="home", profile="remote",
-             local_ip="192.168.1.10", public_ip="198.51.100.2")
+CAST = {"turtlebot": dict(role="master", connection="telecom", local_ip="10.10.10.1",
+                         public_ip="203.0.113.2"),
+        "sami": dict(role="member", connection="home", local_ip="192.168.1.10",
+                     public_ip="198.51.100.2")}
+
+
+def _seat(who: str, peer: str, /, **this) -> Settings:
+    """*who*'s settings (CAST, *this* over it), *peer* reached over SSH as root."""
+    t = dict(name=who, profile="remote", **CAST[who])
     t.update(this)
     return Settings(this=ThisComponent(**t),
-                    peers=[Peer("turtlebot", local_ip="10.10.10.1", public_ip="203.0.113.2",
-                                ssh_user="root")],
+                    peers=[Peer(peer, local_ip=CAST[peer]["local_ip"],
+                                public_ip=CAST[peer]["public_ip"], ssh_user="root")],
                     ros=RosSettings(master="turtlebot"))
+
+
+def laptop_settings(**this) -> Settings:
+    """sami, a member behind its home modem; the robot turtlebot runs the master."""
+    return _seat("sami", "turtlebot", **this)
 
 
 def robot_settings(**this) -> Settings:
-    t = dict(name="turtlebot", role="master", connection="telecom", profile="remote",
-             local_ip="10.10.10.1", public_ip="203.0.113.2")
-    t.update(this)
-    return Settings(this=ThisComponent(**t),
-                    peers=[Peer("sami", local_ip="192.168.1.10", public_ip="198.51.100.2",
-                                ssh_user="root")],
-                    ros=RosSettings(master="turtlebot"))
+    """turtlebot, the master behind its telecom router; sami a member."""
+    return _seat("turtlebot", "sami", **this)
 
 
 def res(cid: str, status: str = "pass", summary: str = "", **data) -> CheckResult:
@@ -170,8 +226,9 @@ def ros2_member(**ros) -> Settings:
                     ros=RosSettings(master="turtlebot", version=2, **ros))
 
 
-def ros2_master(**ros) -> Settings:
-    return Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1"),
+def ros2_master(*, public_ip: str = "", **ros) -> Settings:
+    return Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1",
+                                       public_ip=public_ip),
                     peers=[Peer(name="sami", public_ip="198.51.100.2", ssh_user="me")],
                     ros=RosSettings(master="turtlebot", version=2, **ros))
 

@@ -18,13 +18,6 @@ pytestmark = pytest.mark.lab
 T1 = "table1.listener_up_closed"
 
 
-@pytest.fixture(scope="module")
-def adv_lab(lab):
-    lab.start_roscore()
-    yield lab
-    lab.stop_roscore()
-
-
 def _env(lab, host: str, state) -> dict:
     # A fresh state folder per test: the public-IP history of other tests stays out of it.
     return dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
@@ -55,8 +48,8 @@ def explain(doc: dict) -> str:
     return "\n".join(lines)
 
 
-def test_healthy_network_gives_no_failure_findings(adv_lab, tmp_path):
-    lab = adv_lab
+def test_healthy_network_gives_no_failure_findings(ros1_lab, tmp_path):
+    lab = ros1_lab
     lab.reset()
     exposed = {}
     with secured(lab):                  # ROS 1 as the product sets it up: the firewall on
@@ -76,8 +69,8 @@ def test_healthy_network_gives_no_failure_findings(adv_lab, tmp_path):
     assert "ROS 1 has no authentication" in exposed["robot"]["meaning"]
 
 
-def test_no_forwarding_names_the_modem_forwarding_first(adv_lab, tmp_path):
-    lab = adv_lab
+def test_no_forwarding_names_the_modem_forwarding_first(ros1_lab, tmp_path):
+    lab = ros1_lab
     with lab.variant("no_forwarding", side="robot"):
         code, out = check_json(lab, "robot", tmp_path)
         assert code == 1
@@ -97,8 +90,8 @@ def test_no_forwarding_names_the_modem_forwarding_first(adv_lab, tmp_path):
     assert "router.port_open" in first["check_ids"]
 
 
-def test_cgnat_names_the_carrier_nat_first(adv_lab, tmp_path):
-    lab = adv_lab
+def test_cgnat_names_the_carrier_nat_first(ros1_lab, tmp_path):
+    lab = ros1_lab
     with lab.variant("cgnat"):
         code, doc = report(lab, "robot", tmp_path)
     assert code == 1
@@ -110,8 +103,8 @@ def test_cgnat_names_the_carrier_nat_first(adv_lab, tmp_path):
     assert any("public IP" in a for a in first["actions"])
 
 
-def test_ros_ip_on_the_laptop_says_unset_it_on_sami(adv_lab, tmp_path):
-    lab = adv_lab
+def test_ros_ip_on_the_laptop_says_unset_it_on_sami(ros1_lab, tmp_path):
+    lab = ros1_lab
     with lab.variant("ros_ip_laptop"):
         code_l, on_laptop = report(lab, "laptop", tmp_path / "laptop")
         code_r, on_robot = report(lab, "robot", tmp_path / "robot")
@@ -125,8 +118,8 @@ def test_ros_ip_on_the_laptop_says_unset_it_on_sami(adv_lab, tmp_path):
     assert first["actions"][0].startswith("Unset ROS_IP on sami"), first
 
 
-def test_markdown_report_on_a_broken_network_reads_well(adv_lab, tmp_path):
-    lab = adv_lab
+def test_markdown_report_on_a_broken_network_reads_well(ros1_lab, tmp_path):
+    lab = ros1_lab
     with lab.variant("stale_hosts"):
         r = lab.rosnet("laptop", "report", "--config", str(lab.config_path("laptop")),
                        env=_env(lab, "laptop", tmp_path), timeout=120)
@@ -145,8 +138,8 @@ def test_markdown_report_on_a_broken_network_reads_well(adv_lab, tmp_path):
     ("unplugged", "laptop", "router.local_ip.no_link", "no IPv4 address on eth0"),
     ("unplugged", "robot", "linux.peer.unreachable", "sami's modem is online"),
 ])
-def test_more_variants_name_their_cause_first(adv_lab, tmp_path, variant, host, rule, needle):
-    lab = adv_lab
+def test_more_variants_name_their_cause_first(ros1_lab, tmp_path, variant, host, rule, needle):
+    lab = ros1_lab
     with lab.variant(variant):
         code, doc = report(lab, host, tmp_path)
     assert code == 1

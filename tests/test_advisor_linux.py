@@ -10,11 +10,12 @@ from tests.advisor_support import (
     only,
     run,
     ssh,
+    ssh_shut_out,
     text,
     unreachable,
     wrong,
 )
-from tests.builders import healthy_laptop, laptop_settings, no_ssh, put
+from tests.builders import healthy_laptop, laptop_settings, put
 
 
 def test_name_wrong_names_the_hosts_line():
@@ -101,20 +102,13 @@ def test_chats_that_failed_for_lack_of_ssh_belong_to_the_ssh_finding():
 
 
 def test_peer_unreachable_tells_ping_answering_modem_from_silence():
-    r = healthy_laptop()
-    put(r, "linux.ping", "pass", peers={"turtlebot": {"icmp": True, "tcp22": False}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {"ok": False, "failure": "network",
-                                                     "fingerprint": None}})
-    no_ssh(r, "network")
+    r = ssh_shut_out(healthy_laptop(), None)
     f = only(run(r), "linux.peer.unreachable")
     assert "answers ping" in f.meaning and "modem is online" in f.meaning
     assert f.actions[0].startswith("Check that turtlebot's modem forwards TCP 22")
     # silence at a stale address: the hosts line first
     r, s = wrong()
-    put(r, "linux.ping", "fail", peers={"turtlebot": {"icmp": False, "tcp22": False}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {"ok": False, "failure": "network",
-                                                     "fingerprint": None}})
-    no_ssh(r, "network")
+    ssh_shut_out(r, None, icmp=False)
     fs = run(r, s)
     f = only(fs, "linux.peer.unreachable")
     assert "Nothing answers at 203.0.113.99" in f.meaning

@@ -9,12 +9,11 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor import T1, first_failure
 from rosnet_tui.core.results import CheckResult, Status
-from tests.advisor_support import ids, run, text
+from tests.advisor_support import ids, run, ssh_shut_out, text
 from tests.builders import (
     healthy_laptop,
     healthy_robot,
     laptop_settings,
-    no_ssh,
     put,
     robot_settings,
 )
@@ -70,12 +69,7 @@ def test_silence_and_no_ping_on_telecom_puts_the_carrier_first():
 def test_no_forwarding_seen_from_the_laptop_modem_refusing_everything():
     """The other seat: SSH and the master's port both refused at the robot's public IP."""
     r = healthy_laptop()
-    put(r, "linux.ping", "pass", peers={"turtlebot": {"icmp": True, "tcp22": False,
-                                                      "tcp": "refused", "port": 22}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {
-        "ok": False, "failure": "network", "fingerprint": None, "tcp": "refused", "port": 22,
-        "address": "203.0.113.2"}})
-    no_ssh(r, "network")
+    ssh_shut_out(r, "refused", address="203.0.113.2")
     put(r, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp="refused")
     fs = run(r)
     first = first_failure(fs)
@@ -90,11 +84,7 @@ def test_no_forwarding_seen_from_the_laptop_modem_refusing_everything():
 
 def test_no_forwarding_seen_from_the_laptop_modem_dropping():
     r = healthy_laptop()
-    put(r, "linux.ping", "pass", peers={"turtlebot": {"icmp": True, "tcp22": False,
-                                                      "tcp": "timeout", "port": 22}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {
-        "ok": False, "failure": "network", "fingerprint": None, "tcp": "timeout", "port": 22}})
-    no_ssh(r, "network")
+    ssh_shut_out(r, "timeout")
     put(r, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp="timeout")
     first = first_failure(run(r))
     assert first.rule == "linux.peer.unreachable" and first.goto_step == "router"
@@ -129,12 +119,7 @@ def test_new_dhcp_lease_without_local_ip_in_the_settings_puts_forwarding_first()
 def test_new_dhcp_lease_seen_from_the_laptop_names_the_forwarding_target():
     """The robot's modem forwards to a local address where nobody is: an ICMP error comes back."""
     r = healthy_laptop()
-    put(r, "linux.ping", "pass", peers={"turtlebot": {"icmp": True, "tcp22": False,
-                                                      "tcp": "unreachable", "port": 22}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {
-        "ok": False, "failure": "network", "fingerprint": None, "tcp": "unreachable",
-        "port": 22}})
-    no_ssh(r, "network")
+    ssh_shut_out(r, "unreachable")
     first = first_failure(run(r))
     assert first.rule == "linux.peer.unreachable" and first.goto_step == "router"
     assert "local address where no machine answers" in first.meaning
@@ -190,12 +175,7 @@ def test_sshd_on_another_port_is_not_blamed_on_forwarding():
     """Port 22 refused, the address answers ping and the robot's master answers through the
     same modem: sshd listens elsewhere (or not at all); ssh_port exists."""
     r = healthy_laptop()
-    put(r, "linux.ping", "pass", peers={"turtlebot": {"icmp": True, "tcp22": False,
-                                                      "tcp": "refused", "port": 22}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {
-        "ok": False, "failure": "network", "fingerprint": None, "tcp": "refused", "port": 22,
-        "address": "203.0.113.2"}})
-    no_ssh(r, "network")
+    ssh_shut_out(r, "refused", address="203.0.113.2")
     fs = run(r)
     first = first_failure(fs)
     assert first.rule == "linux.ssh.refused" and first.goto_step == "linux"
@@ -209,11 +189,7 @@ def test_sshd_on_another_port_is_not_blamed_on_forwarding():
 
 def test_ssh_port_dropped_while_the_master_answers_is_port_22_not_forwarded():
     r = healthy_laptop()
-    put(r, "linux.ping", "pass", peers={"turtlebot": {"icmp": True, "tcp22": False,
-                                                      "tcp": "timeout", "port": 22}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {
-        "ok": False, "failure": "network", "fingerprint": None, "tcp": "timeout", "port": 22}})
-    no_ssh(r, "network")
+    ssh_shut_out(r, "timeout")
     first = first_failure(run(r))
     assert first.rule == "linux.peer.unreachable" and first.goto_step == "router"
     assert "outside the forwarded range" in first.meaning

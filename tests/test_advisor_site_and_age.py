@@ -25,8 +25,8 @@ from rosnet_tui.core.hosts import hosts_entries
 from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.results import CheckResult, Status
 from rosnet_tui.core.settings import load_settings, render_settings, save_settings
-from tests.advisor_support import ids, run
-from tests.builders import healthy_laptop, laptop_settings, no_ssh, put
+from tests.advisor_support import ids, run, ssh_shut_out
+from tests.builders import healthy_laptop, laptop_settings, put
 from tests.builders import ros2_member as member
 
 MIN, DAY = 60.0, 86400.0
@@ -109,12 +109,7 @@ def silent_peer(*dated: dict) -> dict[str, CheckResult]:
     """sami's round: turtlebot's modem drops everything (no ping, no TCP); *dated* rows."""
     r = healthy_laptop()
     r["linux.resolve"].data["names"]["turtlebot"]["dated"] = list(dated)
-    put(r, "linux.ping", "fail", peers={"turtlebot": {"icmp": False, "tcp22": False,
-                                                      "tcp": "timeout", "port": 22}})
-    put(r, "linux.ssh", "fail", peers={"turtlebot": {
-        "ok": False, "failure": "network", "fingerprint": None, "tcp": "timeout", "port": 22,
-        "address": "203.0.113.2"}})
-    no_ssh(r, "network")
+    ssh_shut_out(r, "timeout", icmp=False, address="203.0.113.2")
     put(r, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp="timeout")
     return r
 

@@ -16,38 +16,18 @@ finally); tests/lab/*.py is not touched.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import time
 
 import pytest
 
+from tests.advisor_support import explain_report, first_failure_in, lab_report
 from tests.lab.ros2 import Ros2World
 from tests.lab.topology import ADDR
 
 pytestmark = pytest.mark.lab
 DAY = 86400.0
-
-
-def first_failure(doc: dict) -> dict:
-    fails = [f for f in doc["findings"] if f["severity"] == "fail"]
-    assert fails, explain(doc)
-    return fails[0]
-
-
-def explain(doc: dict) -> str:
-    lines = [f"{c['status']:4} {c['id']}: {c['summary']}" for c in doc["checks"]]
-    lines += [f"[{f['severity']}] {f['rule']} -> {f['goto_step']}: {f['meaning']}"
-              for f in doc["findings"]]
-    return "\n".join(lines)
-
-
-def report(lab, host: str, cfg, env: dict) -> dict:
-    r = lab.rosnet(host, "report", "--format", "json", "--config", str(cfg), env=env,
-                   timeout=150)
-    assert r.stdout.strip(), r.stderr
-    return json.loads(r.stdout)
 
 
 def rules(lab, ns: str, add: list[str]):
@@ -62,23 +42,17 @@ def rules(lab, ns: str, add: list[str]):
 
 
 # --------------------------------------------------------------------------- 1. ROS 2
-@pytest.fixture(scope="module")
-def world(lab):
-    with Ros2World(lab) as w:
-        yield w
-
-
 def addr_of(how: str) -> str:
     return ADDR.ROBOT_PUBLIC if how == "modem_resets" else ADDR.CARRIER_PUBLIC
 
 
-def laptop_config(world: Ros2World, tmp_path, robot_public: str):
+def laptop_config(ros2_world: Ros2World, tmp_path, robot_public: str):
     """sami's ROS 2 settings, turtlebot at *robot_public* (its hosts line says the same)."""
     from dataclasses import replace
 
     from rosnet_tui.core.settings import atomic_write_text, render_settings
 
-    s = world.settings("laptop")
+    s = ros2_world.settings("laptop")
     s = replace(s, peers=[replace(p, public_ip=robot_public) for p in s.peers])
     path = tmp_path / "config.toml"
     atomic_write_text(path, render_settings(s), mode=0o644)
@@ -86,14 +60,14 @@ def laptop_config(world: Ros2World, tmp_path, robot_public: str):
 
 
 @pytest.mark.parametrize("how", ["modem_resets", "carrier_nat"])
-def test_zenoh_port_refused_and_ssh_shut_out_leads_with_the_masters_modem_or_isp(world, how,
+def test_zenoh_port_refused_and_ssh_shut_out_leads_with_the_masters_modem_or_isp(ros2_world, how,
                                                                                tmp_path):
-    lab = world.lab
-    world.healthy()
+    lab = ros2_world.lab
+    ros2_world.healthy()
     undo = None
     try:
         if how == "modem_resets":
-            world.forward(robot="refuse")
+            ros2_world.forward(robot="refuse")
             said = "refused too"
         else:
             lab._set_cgnat(True)
@@ -102,23 +76,23 @@ def test_zenoh_port_refused_and_ssh_shut_out_leads_with_the_masters_modem_or_isp
             undo = rules(lab, "carrier", ["-I INPUT -p tcp --dport 7447 -j REJECT "
                                           "--reject-with tcp-reset"])
             said = "did not answer either"
-        env = dict(world.env("laptop"), XDG_STATE_HOME=str(tmp_path))
-        doc = report(lab, "laptop", laptop_config(world, tmp_path, addr_of(how)), env)
+        env = dict(ros2_world.env("laptop"), XDG_STATE_HOME=str(tmp_path))
+        doc = lab_report(lab, "laptop", laptop_config(ros2_world, tmp_path, addr_of(how)), env)
     finally:
         if undo:
             undo()
         if how == "carrier_nat":
             lab._set_cgnat(False)
-        world.healthy()
+        ros2_world.healthy()
     checks = {c["id"]: c for c in doc["checks"]}
-    assert checks["ros2.router"]["data"]["failure"] == "refused", explain(doc)
-    first = first_failure(doc)
+    assert checks["ros2.router"]["data"]["failure"] == "refused", explain_report(doc)
+    first = first_failure_in(doc)
     assert first["rule"] == "ros2.port.not_forwarded" and first["goto_step"] == "router", \
-        explain(doc)
+        explain_report(doc)
     addr = addr_of(how)
     assert first["meaning"].startswith(
         f"turtlebot's Zenoh port ({addr}:7447) refused sami's connection and its SSH port 22 "
-        f"{said}: "), explain(doc)
+        f"{said}: "), explain_report(doc)
     assert "modem or its provider" in first["meaning"] and "carrier-grade NAT" in first["meaning"]
     assert "isp.cgnat" in first["actions"][0]
     everything = " ".join(f["meaning"] for f in doc["findings"])
@@ -126,13 +100,6 @@ def test_zenoh_port_refused_and_ssh_shut_out_leads_with_the_masters_modem_or_isp
 
 
 # --------------------------------------------------------------------------- 2. ROS 1
-@pytest.fixture(scope="module")
-def rlab(lab):
-    lab.start_roscore()
-    yield lab
-    lab.stop_roscore()
-
-
 SILENT_MODEM = ["-I INPUT -i wan0 -m conntrack --ctstate NEW -j DROP",
                 "-I FORWARD -i wan0 -m conntrack --ctstate NEW -j DROP"]
 
@@ -153,21 +120,21 @@ def silent_robot_seen_from_the_laptop(lab, tmp_path, *, settings_age_s: float = 
             now=time.time() - sync_age_s)})
     undo = rules(lab, "robot_modem", SILENT_MODEM)
     try:
-        doc = report(lab, "laptop", cfg, dict(lab.ros_env("laptop"), XDG_STATE_HOME=str(state)))
+        doc = lab_report(lab, "laptop", cfg, dict(lab.ros_env("laptop"), XDG_STATE_HOME=str(state)))
     finally:
         undo()
         lab.reset()
     checks = {c["id"]: c for c in doc["checks"]}
     ping = checks["linux.ping"]["data"]["peers"]["turtlebot"]
-    assert ping["icmp"] is False and ping["tcp"] == "timeout", explain(doc)
+    assert ping["icmp"] is False and ping["tcp"] == "timeout", explain_report(doc)
     return doc
 
 
-def test_silent_modem_with_an_address_saved_minutes_ago_leads_with_forwarding(rlab, tmp_path):
-    doc = silent_robot_seen_from_the_laptop(rlab, tmp_path, settings_age_s=180)
-    first = first_failure(doc)
+def test_silent_modem_with_an_address_saved_minutes_ago_leads_with_forwarding(ros1_lab, tmp_path):
+    doc = silent_robot_seen_from_the_laptop(ros1_lab, tmp_path, settings_age_s=180)
+    first = first_failure_in(doc)
     assert first["rule"] == "linux.peer.unreachable" and first["goto_step"] == "router", \
-        explain(doc)
+        explain_report(doc)
     assert ("most likely turtlebot's modem does not forward port 22 to turtlebot (or its "
             "firewall drops it)") in first["meaning"], first
     assert re.search(r"203\.0\.113\.2 was confirmed [34] min ago \(settings saved\)",
@@ -175,19 +142,19 @@ def test_silent_modem_with_an_address_saved_minutes_ago_leads_with_forwarding(rl
     assert first["actions"][0].startswith("Check that turtlebot's modem forwards TCP 22")
 
 
-def test_silent_modem_with_a_fresh_sync_record_leads_with_forwarding(rlab, tmp_path):
-    doc = silent_robot_seen_from_the_laptop(rlab, tmp_path, settings_age_s=40 * DAY,
+def test_silent_modem_with_a_fresh_sync_record_leads_with_forwarding(ros1_lab, tmp_path):
+    doc = silent_robot_seen_from_the_laptop(ros1_lab, tmp_path, settings_age_s=40 * DAY,
                                             sync_age_s=180)
-    first = first_failure(doc)
-    assert first["goto_step"] == "router", explain(doc)
+    first = first_failure_in(doc)
+    assert first["goto_step"] == "router", explain_report(doc)
     assert re.search(r"203\.0\.113\.2 was confirmed [34] min ago \(turtlebot's own sync "
                      r"record\)", first["meaning"]), first
 
 
-def test_silent_modem_with_an_old_address_leads_with_the_address(rlab, tmp_path):
-    doc = silent_robot_seen_from_the_laptop(rlab, tmp_path, settings_age_s=40 * DAY)
-    first = first_failure(doc)
+def test_silent_modem_with_an_old_address_leads_with_the_address(ros1_lab, tmp_path):
+    doc = silent_robot_seen_from_the_laptop(ros1_lab, tmp_path, settings_age_s=40 * DAY)
+    first = first_failure_in(doc)
     assert first["rule"] == "linux.peer.unreachable" and first["goto_step"] == "linux", \
-        explain(doc)
+        explain_report(doc)
     assert "most likely 203.0.113.2 is not turtlebot's address any more" in first["meaning"]
     assert "203.0.113.2 was last confirmed 40 days ago (settings saved)" in first["meaning"]

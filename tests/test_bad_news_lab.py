@@ -18,13 +18,6 @@ TIMEOUT_S = 3.0       # the lab's [checks] timeout_s
 SLACK_S = 0.5
 
 
-@pytest.fixture(scope="module")
-def blab(lab):
-    lab.start_roscore()
-    yield lab
-    lab.stop_roscore()
-
-
 def durations(lab, host: str, state) -> dict[str, tuple[float, str, str]]:
     env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
     r = lab.rosnet(host, "check", "--json", "-q", "--config", str(lab.config_path(host)),
@@ -39,9 +32,9 @@ def durations(lab, host: str, state) -> dict[str, tuple[float, str, str]]:
     ("unplugged", {}, "robot"),
     ("no_forwarding", {}, "laptop"),
 ], ids=["robot-unplugged-silent", "laptop-unplugged", "robot-modem-drops"])
-def test_every_verdict_within_the_timeout(blab, tmp_path, variant, options, host):
-    with blab.variant(variant, **options):
-        got = durations(blab, host, tmp_path)
+def test_every_verdict_within_the_timeout(ros1_lab, tmp_path, variant, options, host):
+    with ros1_lab.variant(variant, **options):
+        got = durations(ros1_lab, host, tmp_path)
     assert len(got) == 21            # security.ssh_auth and security.outsider too
     late = {cid: d for cid, d in got.items() if d[0] > TIMEOUT_S + SLACK_S}
     assert not late, late

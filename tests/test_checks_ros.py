@@ -9,11 +9,8 @@ from __future__ import annotations
 
 import getpass
 import os
-import signal
 import socket
-import subprocess
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -26,81 +23,37 @@ from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComp
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 from tests.plugins.roscore import RosCore
+from tests.plugins.ssh import Client, Sshd
 
-SSHD = Path("/usr/sbin/sshd")
 ROS_IDS = ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in"]
 
 
-@dataclass
-class Sshd:
-    port: int
-    client_dir: Path
-
-
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def sshd(tmp_path_factory: pytest.TempPathFactory):
-    """An sshd on 127.0.0.1 that lets the current user in with a test key; sessions get
+    """The ssh plugin's loopback sshd (its ``ssh_client`` gets in), sessions with
     ROS_IP=127.0.0.1 so the peer-side probe advertises loopback only."""
-    if not SSHD.exists():
-        pytest.skip("sshd is not installed (Debian package openssh-server)")
     if os.geteuid() != 0:
         pytest.skip("the loopback sshd needs root (privilege separation)")
-    d = tmp_path_factory.mktemp("sshd")
-    client = d / "client"
-    client.mkdir(mode=0o700)
-    for name in ("host_key", "client/id_ed25519"):
-        subprocess.run(["ssh-keygen", "-q", "-t", "ed25519", "-N", "", "-f", str(d / name)],
-                       check=True, timeout=20)
-    (d / "authorized_keys").write_text((client / "id_ed25519.pub").read_text())
-    port = free_port()
-    host_pub = (d / "host_key.pub").read_text().split()
-    (client / "known_hosts").write_text(f"[localhost]:{port} {host_pub[0]} {host_pub[1]}\n")
-    (d / "sshd_config").write_text(
-        f"Port {port}\nListenAddress 127.0.0.1\nHostKey {d / 'host_key'}\n"
-        f"AuthorizedKeysFile {d / 'authorized_keys'}\nPasswordAuthentication no\n"
-        "KbdInteractiveAuthentication no\nUsePAM no\nStrictModes no\nPidFile none\n"
-        "PermitRootLogin prohibit-password\nSetEnv ROS_IP=127.0.0.1\n")
-    Path("/run/sshd").mkdir(mode=0o755, exist_ok=True)
-    log = open(d / "sshd.log", "wb")
-    proc = subprocess.Popen([str(SSHD), "-D", "-e", "-f", str(d / "sshd_config")], stdout=log,
-                            stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                            start_new_session=True)
-    try:
-        deadline = time.monotonic() + 10
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
-                break
-            except OSError:
-                if proc.poll() is not None or time.monotonic() > deadline:
-                    pytest.fail("sshd did not start: " + (d / "sshd.log").read_text()[-1500:])
-                time.sleep(0.05)
-        yield Sshd(port, client)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGTERM)
-            try:
-                proc.wait(5)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait(5)
-        log.close()
+    d = Sshd(tmp_path_factory.mktemp("sshd"), extra_config="SetEnv ROS_IP=127.0.0.1\n")
+    d.start()
+    yield d
+    d.stop()
 
 
 def make_ctx(tmp_path: Path, settings: Settings, *, env: dict[str, str] | None = None,
-             bashrc: str = "", timeout: float = 2.0, ssh: Sshd | None = None) -> CheckContext:
+             bashrc: str = "", timeout: float = 2.0, ssh: Client | None = None) -> CheckContext:
     rc = tmp_path / "bashrc"
     rc.write_text(bashrc)
     return CheckContext(settings=settings, timeout_s=timeout,
                         paths=Paths(bashrc_path=rc, state_dir=tmp_path / "state"), env=dict(env or {}),
                         ssh_options=SshOptions(
-                            ssh_dir=ssh.client_dir if ssh else tmp_path / "no-ssh",
+                            ssh_dir=ssh.dir if ssh else tmp_path / "no-ssh",
                             ssh_agent=False))
 
 
-def loopback_settings(core_port: int, ssh: Sshd | None = None) -> Settings:
+def loopback_settings(core_port: int, ssh: Client | None = None) -> Settings:
     peers = [Peer(name="localhost", local_ip="127.0.0.1", ssh_user=getpass.getuser(),
-                  ssh_port=ssh.port)] if ssh else []
+                  ssh_port=ssh.sshd.port)] if ssh else []
     return Settings(this=ThisComponent(name="127.0.0.1", role="master", local_ip="127.0.0.1"),
                     peers=peers, ros=RosSettings(master="127.0.0.1", port=core_port))
 
@@ -265,9 +218,9 @@ async def test_node_with_unreachable_uri_is_named(tmp_path: Path, roscore: RosCo
 
 # --------------------------------------------------------------------------- with the peer over SSH
 async def test_healthy_loopback_passes_in_both_directions(tmp_path: Path, roscore: RosCore,
-                                                          sshd: Sshd):
-    ctx = make_ctx(tmp_path, loopback_settings(roscore.port, sshd), env=loopback_env(roscore),
-                   ssh=sshd)
+                                                          ssh_client: Client):
+    ctx = make_ctx(tmp_path, loopback_settings(roscore.port, ssh_client),
+                   env=loopback_env(roscore), ssh=ssh_client)
     for cid in ("ros.node_uris", "ros.pubsub_out", "ros.pubsub_in"):
         r = await run(ctx, cid)
         assert r.status == Status.PASS, (cid, r.summary, r.evidence)
@@ -297,9 +250,10 @@ async def test_pubsub_skips_without_ssh_peer_or_trusted_key(tmp_path: Path,
     assert r.status == Status.SKIP and "SSH to localhost failed" in r.summary
 
 
-async def test_pubsub_with_dead_master_fails_at_registration(tmp_path: Path, sshd: Sshd):
+async def test_pubsub_with_dead_master_fails_at_registration(tmp_path: Path,
+                                                              ssh_client: Client):
     port = free_port()
-    ctx = make_ctx(tmp_path, loopback_settings(port, sshd), ssh=sshd, timeout=1.0,
+    ctx = make_ctx(tmp_path, loopback_settings(port, ssh_client), ssh=ssh_client, timeout=1.0,
                    env={"ROS_IP": "127.0.0.1"})
     r = await run(ctx, "ros.pubsub_out")
     assert r.status == Status.FAIL and r.data["failed_hop"] == "registration"

@@ -16,13 +16,6 @@ ROS_IDS = ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubs
            "security.outsider"]
 
 
-@pytest.fixture(scope="module")
-def ros_lab(lab):
-    lab.start_roscore()
-    yield lab
-    lab.stop_roscore()
-
-
 def ros_check(lab, host: str) -> dict[str, dict]:
     """`rosnet-tui check --json --step ros` on *host*, in its ROS environment."""
     r = lab.rosnet(host, "check", "--json", "--step", "ros", "--config",
@@ -38,8 +31,8 @@ def explain(results: dict[str, dict]) -> str:
                      for c in results.values())
 
 
-def test_healthy_lab_passes_both_directions_from_each_seat(ros_lab):
-    lab = ros_lab
+def test_healthy_lab_passes_both_directions_from_each_seat(ros1_lab):
+    lab = ros1_lab
     lab.reset()
     with secured(lab):                     # ROS 1 as the product sets it up: the firewall on
         both = {h: ros_check(lab, h) for h in ("laptop", "robot")}
@@ -55,8 +48,8 @@ def test_healthy_lab_passes_both_directions_from_each_seat(ros_lab):
         assert all(out["insider_reachable"].values()), explain(results)
 
 
-def test_ros_ip_on_the_laptop_names_its_node_and_breaks_one_direction(ros_lab):
-    lab = ros_lab
+def test_ros_ip_on_the_laptop_names_its_node_and_breaks_one_direction(ros1_lab):
+    lab = ros1_lab
     with lab.variant("ros_ip_laptop"):
         talker = lab.talker("laptop", "/rnl_chatter_ros_ip")
         try:
@@ -87,8 +80,8 @@ def test_ros_ip_on_the_laptop_names_its_node_and_breaks_one_direction(ros_lab):
     assert back["status"] == "pass", text  # the laptop can still subscribe to the robot
 
 
-def test_master_down_fails_within_its_timeout(ros_lab):
-    lab = ros_lab
+def test_master_down_fails_within_its_timeout(ros1_lab):
+    lab = ros1_lab
     lab.reset()
     lab.stop_roscore()
     try:

@@ -18,30 +18,10 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import undo_journal as uj
 from rosnet_tui.core.settings import load_settings
+from tests.builders import ROBOT_CONFIG
 
 REPO = Path(__file__).resolve().parent.parent
 
-CONFIG = """\
-# my robot
-[this]
-name = "turtlebot"
-role = "master"
-connection = "telecom"
-profile = "remote"
-local_ip = "10.10.10.1"
-public_ip = "203.0.113.2"
-office_ip = "172.16.0.5"
-
-[[peer]]
-name = "sami"
-local_ip = "192.168.1.10"
-public_ip = "198.51.100.2"
-office_ip = "172.16.0.6"
-
-[ros]
-master = "turtlebot"
-port = 11311
-"""
 HOSTS = b"127.0.0.1\tlocalhost\r\n::1 localhost ip6-localhost\n# end"
 BASHRC = b"# bashrc\nexport ROS_IP=10.10.10.1\n"
 
@@ -53,7 +33,7 @@ def box(tmp_path):
     home.mkdir()
     cfg = home / ".config" / "rosnet-tui" / "config.toml"
     cfg.parent.mkdir(parents=True)
-    cfg.write_text(CONFIG)
+    cfg.write_text(ROBOT_CONFIG)
     (tmp_path / "hosts").write_bytes(HOSTS)
     (home / ".bashrc").write_bytes(BASHRC)
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "XDG_"))}
@@ -159,7 +139,7 @@ def test_dry_run_of_use_saves_nothing(box):
 
 
 def test_bad_settings_exit_2_and_write_nothing(box):
-    box.cfg.write_text(CONFIG.replace('local_ip = "10.10.10.1"', 'local_ip = "10.10.10.256"'))
+    box.cfg.write_text(ROBOT_CONFIG.replace('local_ip = "10.10.10.1"', 'local_ip = "10.10.10.256"'))
     out = run(box, *hosts_args(box, "--yes"))
     assert out.returncode == 2 and "this.local_ip" in out.stderr
     assert box.hosts.read_bytes() == HOSTS
@@ -168,7 +148,7 @@ def test_bad_settings_exit_2_and_write_nothing(box):
 def test_incomplete_settings_exit_2_and_say_what_is_missing(box):
     # (a blank local_ip is filled in from this machine, as `check` does: tests/
     # test_cli_example_settings.py; a missing name cannot be)
-    box.cfg.write_text(CONFIG.replace('name = "turtlebot"\n', "")
+    box.cfg.write_text(ROBOT_CONFIG.replace('name = "turtlebot"\n', "")
                        .replace('master = "turtlebot"\n', ""))
     out = run(box, *hosts_args(box, "--yes"))
     assert out.returncode == 2 and "this.name" in out.stderr and "nothing was written" \
@@ -238,7 +218,7 @@ def test_ros_export_prints_the_line_for_this_shell(box):
 
 
 def test_ros_bad_settings_exit_2(box):
-    box.cfg.write_text(CONFIG.replace('role = "master"', 'role = "member"')
+    box.cfg.write_text(ROBOT_CONFIG.replace('role = "master"', 'role = "member"')
                        .replace('master = "turtlebot"', 'master = "nobody"'))
     out = run(box, "ros", "apply", "--yes")
     assert out.returncode == 2 and box.bashrc.read_bytes() == BASHRC

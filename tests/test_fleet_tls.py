@@ -18,22 +18,15 @@ import pytest
 from rosnet_tui.core import fleet_tls, ros2
 from rosnet_tui.core.fleet_tls import TlsError
 from rosnet_tui.core.settings import parse_settings, render_settings
-from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.settings_model import RosSettings, Settings
+from tests.builders import ros2_master
+from tests.builders import ros2_member as member
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 def master(**ros) -> Settings:
-    return Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1",
-                                       public_ip="203.0.113.2"),
-                    peers=[Peer(name="sami", public_ip="198.51.100.2", ssh_user="me")],
-                    ros=RosSettings(master="turtlebot", version=2, **ros))
-
-
-def member(**ros) -> Settings:
-    return Settings(this=ThisComponent(name="sami", role="member", local_ip="192.168.1.10"),
-                    peers=[Peer(name="turtlebot", public_ip="203.0.113.2", ssh_user="robot")],
-                    ros=RosSettings(master="turtlebot", version=2, **ros))
+    return ros2_master(public_ip="203.0.113.2", **ros)
 
 
 # --------------------------------------------------------------------------- the setting

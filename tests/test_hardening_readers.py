@@ -35,43 +35,15 @@ from rosnet_tui.core.checks.linux import check_hosts
 from rosnet_tui.core.checks.runner import RunOptions, make_context
 from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings import load_settings
+from tests.builders import ROBOT_CONFIG, random_hosts
 from tests.hardening_tally import tally
 
 REPO = Path(__file__).resolve().parents[1]
 AREA = "readers after SIGKILL"
-CONFIG = """\
-[this]
-name = "turtlebot"
-role = "master"
-connection = "telecom"
-profile = "remote"
-local_ip = "10.10.10.1"
-public_ip = "203.0.113.2"
-
-[[peer]]
-name = "sami"
-local_ip = "192.168.1.10"
-public_ip = "198.51.100.2"
-
-[ros]
-master = "turtlebot"
-port = 11311
-"""
 NS_TOOLS = pytest.mark.skipif(
     os.geteuid() != 0 or not all(shutil.which(t) for t in ("unshare", "nsenter", "mount")),
     reason="needs root (bind mounts in a private mount namespace), unshare(1), nsenter(1) and "
            "mount(8)")
-
-
-def hosts_text(n_bytes: int, seed: int) -> bytes:
-    rng = random.Random(seed)
-    lines, size = ["127.0.0.1\tlocalhost\n"], 0
-    while size < n_bytes:
-        line = f"10.{rng.randrange(256)}.{rng.randrange(256)}.{rng.randrange(1, 255)}\t" \
-               f"host-{len(lines)}.example\thost-{len(lines)}\n"
-        lines.append(line)
-        size += len(line)
-    return "".join(lines).encode()
 
 
 class Container:
@@ -82,7 +54,7 @@ class Container:
         self.tmp, self.etc = tmp, etc
         self.src, self.cfg, self.xdg = tmp / "netns-hosts", tmp / "settings.toml", tmp / "xdg"
         self.src.write_bytes(original)
-        self.cfg.write_text(CONFIG)
+        self.cfg.write_text(ROBOT_CONFIG)
         if etc == "ro":
             prep = "mount --bind /etc /etc && mount -o remount,bind,ro /etc"
             self.journal_dir = self.xdg / "rosnet-tui" / mw.INPLACE_DIR
@@ -175,7 +147,7 @@ def _kill_undo(box: Container, rng: random.Random, head_b: bytes) -> str:
 
 def run_kills(tmp_path: Path, etc: str, kills: int, budget_s: float, seed: int) -> dict:
     rng = random.Random(seed)
-    a = hosts_text(1_500_000, seed)
+    a = b"127.0.0.1\tlocalhost\n" + random_hosts(1_500_000, seed)
     box = Container(tmp_path, etc, a)
     stats = {"kills": 0, "torn": 0, "old": 0, "new": 0, "torn_before_show": 0,
              "torn_before_check": 0, "torn_before_apply": 0, "completed": 0}
@@ -260,6 +232,30 @@ def _cut(target: Path, new: bytes, monkeypatch, journal_dir: Path | None = None)
     return target.read_bytes()
 
 
+def _unwritable_folder(tmp_path: Path, monkeypatch) -> Path:
+    """A folder the writer may not write (os.access says no): its journal goes elsewhere."""
+    folder = tmp_path / "etc"
+    folder.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(mw.os, "access", lambda p, m, **kw: False if Path(p) == folder
+                        else real_access(p, m, **kw))
+    return folder
+
+
+def _cut_journaled_in(sd: Path, tmp_path: Path, monkeypatch) -> tuple[Path, bytes, Path]:
+    """A hosts file in an unwritable folder whose rewrite was cut, journaled in state dir *sd*
+    (not the default one): (the file, the bytes it should end with, a settings file)."""
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "elsewhere"))
+    target = _unwritable_folder(tmp_path, monkeypatch) / "hosts"
+    old = b"127.0.0.1\tlocalhost\n" + b"10.9.9.9\tother\n" * 300
+    target.write_bytes(old)
+    new = b"127.0.0.1\tlocalhost\n# new\n"
+    assert _cut(target, new, monkeypatch, journal_dir=sd / mw.INPLACE_DIR) not in (old, new)
+    cfg = tmp_path / "settings.toml"
+    cfg.write_text(ROBOT_CONFIG)
+    return target, new, cfg
+
+
 def test_linux_hosts_completes_a_cut_write_beside_the_file(tmp_path, monkeypatch):
     target = tmp_path / "hosts"
     old = b"127.0.0.1\tlocalhost\n" + b"10.1.2.3\tturtlebot\n" * 50
@@ -268,7 +264,7 @@ def test_linux_hosts_completes_a_cut_write_beside_the_file(tmp_path, monkeypatch
     torn = _cut(target, new, monkeypatch)
     assert torn not in (old, new)
     cfg = tmp_path / "settings.toml"
-    cfg.write_text(CONFIG)
+    cfg.write_text(ROBOT_CONFIG)
     paths = Paths(hosts_path=target, state_dir=tmp_path / "sd")
     ctx = make_context(load_settings(cfg), RunOptions(paths=paths, upnp=False))
     out = asyncio.run(check_hosts(ctx))
@@ -283,14 +279,9 @@ def test_a_journal_in_the_default_state_dir_is_found_by_a_reader_not_told_it(tmp
     given no state dir (``hosts show``, ``check``) looks in the default one."""
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
     jdir = tmp_path / "xdg" / "rosnet-tui" / mw.INPLACE_DIR
-    folder = tmp_path / "etc"
-    folder.mkdir()
-    target = folder / "hosts"
+    target = _unwritable_folder(tmp_path, monkeypatch) / "hosts"
     old = b"# old\n" * 400
     target.write_bytes(old)
-    real_access = os.access
-    monkeypatch.setattr(mw.os, "access", lambda p, m, **kw: False if Path(p) == folder
-                        else real_access(p, m, **kw))          # the folder may not be written
     torn = _cut(target, b"# new\n", monkeypatch, journal_dir=jdir)
     assert torn not in (old, b"# new\n") and list(jdir.iterdir())
     assert mw.read_text(target) == "# new\n"
@@ -306,7 +297,7 @@ def test_the_checks_context_completes_a_cut_write_of_the_bashrc(tmp_path, monkey
     new = b"# mine\nexport ROS_MASTER_URI=http://turtlebot:11311\n"
     assert _cut(rc, new, monkeypatch) not in (old, new)
     cfg = tmp_path / "settings.toml"
-    cfg.write_text(CONFIG)
+    cfg.write_text(ROBOT_CONFIG)
     make_context(load_settings(cfg), RunOptions(paths=Paths(bashrc_path=rc, state_dir=tmp_path / "sd")))
     assert rc.read_bytes() == new
 
@@ -316,20 +307,8 @@ def test_the_hosts_preview_and_apply_complete_a_cut_write_in_their_state_dir(tmp
     """``hosts apply --state-dir X`` previews from the completed file, not from the torn one."""
     from rosnet_tui.core.hosts import preview_hosts
 
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "elsewhere"))
     sd = tmp_path / "sd"
-    folder = tmp_path / "etc"
-    folder.mkdir()
-    target = folder / "hosts"
-    old = b"127.0.0.1\tlocalhost\n" + b"10.9.9.9\tother\n" * 300
-    target.write_bytes(old)
-    real_access = os.access
-    monkeypatch.setattr(mw.os, "access", lambda p, m, **kw: False if Path(p) == folder
-                        else real_access(p, m, **kw))
-    new = b"127.0.0.1\tlocalhost\n# new\n"
-    assert _cut(target, new, monkeypatch, journal_dir=sd / mw.INPLACE_DIR) not in (old, new)
-    cfg = tmp_path / "settings.toml"
-    cfg.write_text(CONFIG)
+    target, new, cfg = _cut_journaled_in(sd, tmp_path, monkeypatch)
     preview = preview_hosts(load_settings(cfg), "remote", target, state_dir=sd)
     assert preview.old == new
     assert mw.read_bytes(target) == new
@@ -341,20 +320,8 @@ def test_hosts_show_finds_the_journal_in_the_state_dir_it_is_given(tmp_path, mon
     ``hosts show --state-dir X`` completes it, though X is not the default state dir."""
     from rosnet_tui.cli import main
 
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "elsewhere"))
     sd = tmp_path / "sd"
-    folder = tmp_path / "etc"
-    folder.mkdir()
-    target = folder / "hosts"
-    old = b"127.0.0.1\tlocalhost\n" + b"10.9.9.9\tother\n" * 300
-    target.write_bytes(old)
-    real_access = os.access
-    monkeypatch.setattr(mw.os, "access", lambda p, m, **kw: False if Path(p) == folder
-                        else real_access(p, m, **kw))
-    new = b"127.0.0.1\tlocalhost\n# new\n"
-    assert _cut(target, new, monkeypatch, journal_dir=sd / mw.INPLACE_DIR) not in (old, new)
-    cfg = tmp_path / "settings.toml"
-    cfg.write_text(CONFIG)
+    target, new, cfg = _cut_journaled_in(sd, tmp_path, monkeypatch)
     assert main(["hosts", "show", "--config", str(cfg), "--file", str(target),
                  "--state-dir", str(sd)]) == 0
     assert "has no rosnet-tui block yet" in capsys.readouterr().out

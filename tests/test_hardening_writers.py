@@ -29,6 +29,7 @@ import pytest
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
+from tests.builders import ROBOT_CONFIG, random_hosts
 from tests.hardening_tally import tally
 
 REPO = Path(__file__).resolve().parents[1]
@@ -37,17 +38,6 @@ ROOT_AND_MOUNT = pytest.mark.skipif(
     os.geteuid() != 0 or not shutil.which("unshare") or not shutil.which("mount"),
     reason="needs root, unshare(1) and mount(8)")
 BODY = [f"203.0.113.{i % 250 + 1}  peer-{i}  # a peer of the test" for i in range(3000)]
-
-
-def hosts_text(n_bytes: int, seed: int) -> bytes:
-    rng = random.Random(seed)
-    lines, size = [], 0
-    while size < n_bytes:
-        line = f"10.{rng.randrange(256)}.{rng.randrange(256)}.{rng.randrange(1, 255)}\t" \
-               f"host-{seed}-{len(lines)}.example\thost-{len(lines)}\n"
-        lines.append(line)
-        size += len(line)
-    return "".join(lines).encode()
 
 
 _CHILD = textwrap.dedent("""
@@ -192,7 +182,7 @@ def run_kills(bench: KillBench, mode: str, kills: int, budget_s: float, seed: in
 def test_hundreds_of_sigkills_during_in_place_writes_of_a_large_bind_mounted_file(tmp_path):
     """Raw writes, large file (2 MB and 2.5 MB versions): 200 kills, each at a random moment of
     a large write (the journal's or the file's)."""
-    bench = KillBench(tmp_path, hosts_text(2_000_000, 1), hosts_text(2_500_000, 2))
+    bench = KillBench(tmp_path, random_hosts(2_000_000, 1), random_hosts(2_500_000, 2))
     stats = run_kills(bench, "raw", kills=200, budget_s=40, seed=15)
     print(stats)
     assert stats["kills"] >= 150, stats
@@ -208,7 +198,7 @@ def test_hundreds_of_sigkills_during_in_place_writes_of_a_large_bind_mounted_fil
 def test_hundreds_of_sigkills_during_apply_and_undo_in_place(tmp_path):
     """hosts apply / undo of a 3,000-line block on top of a 1 MB bind-mounted file: 100 kills;
     after each, the next run reads the old or the new file and undo never finds a conflict."""
-    a = hosts_text(1_000_000, 3)
+    a = random_hosts(1_000_000, 3)
     b = mt.encode(mt.compose_block(mt.decode(a), BODY, position="top"))
     bench = KillBench(tmp_path, a, b)
     stats = run_kills(bench, "apply", kills=100, budget_s=25, seed=16)
@@ -245,7 +235,7 @@ def _crash() -> None:
 def test_an_undo_cut_short_is_completed_by_the_next_undo_without_force(tmp_path, monkeypatch,
                                                                        hook):
     src, dst, sd = tmp_path / "netns-hosts", tmp_path / "hosts", tmp_path / "state"
-    original = b"127.0.0.1\tlocalhost\n" + hosts_text(300_000, 4)
+    original = b"127.0.0.1\tlocalhost\n" + random_hosts(300_000, 4)
     src.write_bytes(original)
     dst.write_bytes(b"underneath\n")
     _bind(src, dst)
@@ -305,7 +295,7 @@ def test_an_apply_cut_short_is_completed_by_the_next_read(tmp_path, monkeypatch)
 def test_after_a_foreign_change_the_journal_is_dropped_and_the_file_left_alone(tmp_path,
                                                                                monkeypatch):
     src, dst = tmp_path / "netns-hosts", tmp_path / "hosts"
-    src.write_bytes(hosts_text(50_000, 5))
+    src.write_bytes(random_hosts(50_000, 5))
     dst.write_bytes(b"underneath\n")
     _bind(src, dst)
     try:
@@ -337,7 +327,7 @@ def test_a_user_reading_roots_cut_write_sees_what_it_will_be_and_changes_nothing
     try:
         os.chmod(folder, 0o755)
         target = folder / "hosts"
-        old, new = hosts_text(40_000, 6), b"# new\n" + hosts_text(20_000, 7)
+        old, new = random_hosts(40_000, 6), b"# new\n" + random_hosts(20_000, 7)
         target.write_bytes(old)
         os.chmod(target, 0o644)
         _cut_in_place(target, new, monkeypatch)
@@ -361,7 +351,7 @@ def test_a_user_reading_roots_cut_write_sees_what_it_will_be_and_changes_nothing
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root (to make another user's file)")
 def test_a_journal_that_someone_else_could_have_written_is_not_trusted(tmp_path, monkeypatch):
     target = tmp_path / "hosts"
-    old = hosts_text(20_000, 8)
+    old = random_hosts(20_000, 8)
     target.write_bytes(old)
     _cut_in_place(target, b"short\n", monkeypatch)
     torn = target.read_bytes()
@@ -409,7 +399,7 @@ def test_temp_files_of_killed_writers_are_removed_by_the_next_run(tmp_path):
     home, state = tmp_path / "home", tmp_path / "state"
     home.mkdir()
     target = home / ".bashrc"
-    target.write_bytes(hosts_text(1_500_000, 9))
+    target.write_bytes(random_hosts(1_500_000, 9))
     big = tmp_path / "big.txt"
     big.write_text("x" * 1_500_000)
     status = state / "sync" / "status.json"
@@ -465,7 +455,7 @@ def test_in_a_folder_the_writer_may_not_write_the_journal_goes_to_the_state_dir(
         sd.mkdir(mode=0o700)
         os.chown(sd, 65534, 65534)
         target = folder / "hosts"
-        original = hosts_text(30_000, 10)
+        original = random_hosts(30_000, 10)
         target.write_bytes(original)
         os.chown(target, 65534, 65534)
         new = b"# new first line\n" + original[:10_000]
@@ -500,7 +490,7 @@ def test_an_apply_interrupted_in_a_live_process_is_rolled_back_whole(tmp_path, m
     """Ctrl-C (not a kill) in the middle of a write: the apply is rolled back, and the file being
     written when it came is put back too (its entry says rolled back: it must not end up new)."""
     target, sd = tmp_path / "hosts", tmp_path / "state"
-    original = hosts_text(200_000, 11)
+    original = random_hosts(200_000, 11)
     target.write_bytes(original)
     if place == "in place":
         monkeypatch.setattr(mw, "is_mount_point", lambda p: True)
@@ -537,10 +527,8 @@ def _half_then_crash(real, data: bytes):
 def test_a_target_that_is_not_a_regular_file_is_refused_without_reading_it(tmp_path):
     """``hosts apply --file FIFO`` hung and ``--file`` on a link to /dev/zero read until memory
     ran out (siblings of the settings loader's): refused at once, exit 1, no traceback."""
-    from tests.test_cli_writers import CONFIG
-
     cfg = tmp_path / "config.toml"
-    cfg.write_text(CONFIG)
+    cfg.write_text(ROBOT_CONFIG)
     fifo, zero = tmp_path / "fifo", tmp_path / "zero"
     os.mkfifo(fifo)
     zero.symlink_to("/dev/zero")

@@ -36,6 +36,7 @@ import rosnet_tui
 from rosnet_tui.cli import build_parser
 from rosnet_tui.cli import sync as sync_cli
 from rosnet_tui.core import privilege
+from tests.builders import ROBOT_CONFIG
 
 REPO = Path(__file__).resolve().parent.parent
 SYSTEM_PYTHON = Path("/usr/bin/python3")
@@ -43,24 +44,6 @@ SECURE_PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"  # 
 USER_PATH = "/usr/local/bin:/usr/bin:/bin"         # what a new login shell has before ~/.local/bin
 VERSION_LINE = f"rosnet-tui {rosnet_tui.__version__}"
 
-CONFIG = """\
-[this]
-name = "turtlebot"
-role = "master"
-connection = "telecom"
-profile = "remote"
-local_ip = "10.10.10.1"
-public_ip = "203.0.113.2"
-
-[[peer]]
-name = "sami"
-local_ip = "192.168.1.10"
-public_ip = "198.51.100.2"
-
-[ros]
-master = "turtlebot"
-port = 11311
-"""
 HOSTS = b"127.0.0.1\tlocalhost\n::1 localhost ip6-localhost\n"
 
 
@@ -113,7 +96,7 @@ def test_the_sudo_command_runs_without_the_users_path(tmp_path):
 def _unit_for(tmp_path: Path) -> tuple[list[str], dict[str, str]]:
     """(ExecStart's words, the Environment= variables) of the system unit for a settings file."""
     cfg = tmp_path / "config.toml"
-    cfg.write_text(CONFIG)
+    cfg.write_text(ROBOT_CONFIG)
     args = build_parser(["sync"]).parse_args(["sync", "install-service", "--config", str(cfg)])
     text, _ = sync_cli.unit_text(args, user=False)
     (exec_line,) = [x for x in text.splitlines() if x.startswith("ExecStart=")]
@@ -139,7 +122,7 @@ def test_the_sudo_line_for_the_unit_names_the_users_settings(tmp_path, monkeypat
     home = tmp_path / "home"
     cfg = home / ".config" / "rosnet-tui" / "config.toml"
     cfg.parent.mkdir(parents=True)
-    cfg.write_text(CONFIG)
+    cfg.write_text(ROBOT_CONFIG)
     units = tmp_path / "units"
     monkeypatch.setenv("HOME", str(home))
     monkeypatch.setenv("XDG_CONFIG_HOME", str(home / ".config"))
@@ -338,7 +321,7 @@ def test_the_readme_install_line_as_a_new_user_on_the_system_python():
         user.allow(python)
         settings = user.home / ".config" / "rosnet-tui" / "config.toml"
         settings.parent.mkdir(parents=True, exist_ok=True)
-        settings.write_text(CONFIG)
+        settings.write_text(ROBOT_CONFIG)
         user.chown_tree(user.home / ".config")
         hosts = scratch / "hosts"
         hosts.write_bytes(HOSTS)

@@ -32,13 +32,6 @@ def port_check(lab: Lab, host: str, port: int) -> dict:
     return json.loads(body)
 
 
-@pytest.fixture(scope="module")
-def roscore(lab):
-    lab.start_roscore()
-    yield lab
-    lab.stop_roscore()
-
-
 # ---------------------------------------------------------------------------- healthy network
 @pytest.mark.parametrize("host", ["laptop", "robot"])
 def test_ping_by_name(healthy_lab, host):
@@ -92,8 +85,8 @@ def test_tcp_chat_by_name(healthy_lab, server):
 
 
 @pytest.mark.parametrize("talker_host", ["laptop", "robot"])
-def test_a_talker_is_heard_on_the_other_side(roscore, talker_host):
-    lab, topic = roscore, f"/rnl_chat_{next(_topics)}"
+def test_a_talker_is_heard_on_the_other_side(ros1_lab, talker_host):
+    lab, topic = ros1_lab, f"/rnl_chat_{next(_topics)}"
     listener = lab.listener(OTHER[talker_host], topic)
     talker = lab.talker(talker_host, topic)
     try:
@@ -122,8 +115,8 @@ def test_port_checker_sees_the_forwarded_listener(healthy_lab):
 
 
 # ---------------------------------------------------------------------------- variants
-def test_ros_ip_on_the_laptop_silences_its_talker(roscore):
-    lab, topic = roscore, f"/rnl_chat_{next(_topics)}"
+def test_ros_ip_on_the_laptop_silences_its_talker(ros1_lab):
+    lab, topic = ros1_lab, f"/rnl_chat_{next(_topics)}"
     with lab.variant("ros_ip_laptop"):
         assert lab.ros_env("laptop")["ROS_IP"] == ADDR.LAPTOP_LOCAL
         assert f"ROS_IP={ADDR.LAPTOP_LOCAL}" in lab.bashrc_path("laptop").read_text()

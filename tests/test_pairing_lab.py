@@ -16,27 +16,21 @@ import time
 import pytest
 
 from rosnet_tui.core import fleet_tls
-from tests.lab.ros2 import ROS2_IDS, Ros2World, explain
+from tests.lab.ros2 import ROS2_IDS, explain
 
 pytestmark = pytest.mark.lab
 
 
-@pytest.fixture(scope="module")
-def world(lab):
-    with Ros2World(lab) as w:
-        yield w
-
-
 @pytest.fixture
-def ros2(world):
-    world.healthy()
-    yield world
-    world.remove_tls("laptop")
+def ros2(ros2):
+    """The lab plugin's healthy ROS 2 world; after the test, the laptop without a certificate
+    and the master with its own again (the plugin then makes it healthy)."""
+    yield ros2
+    ros2.remove_tls("laptop")
     from rosnet_tui.core import pairing  # the master's own certificate back to its name
-    pairing.prepare_master(world.settings("robot"), world.tls_paths("robot"), renew=True)
+    pairing.prepare_master(ros2.settings("robot"), ros2.tls_paths("robot"), renew=True)
     for h in ("robot", "laptop"):     # certificates may have changed: routers read them at start
-        world.stop_router(h)
-    world.healthy()
+        ros2.stop_router(h)
 
 
 def test_a_member_pairs_over_ssh_within_5_s_and_then_every_check_passes(ros2):

@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from tests.lab.fleet_ros2 import ROS2_IDS, FleetRos2, explain
+from tests.lab.fleet_ros2 import ROS2_IDS, explain
 
 pytestmark = pytest.mark.lab
 FLEET_SITES = 3
@@ -24,16 +24,9 @@ RUNS = 20
 
 
 @pytest.fixture(scope="module")
-def world(fleet):
-    with FleetRos2(fleet) as w:
-        yield w
-
-
-@pytest.fixture
-def ros2(world):
-    world.healthy()
-    yield world
-    world.healthy()
+def ros2_world(fleet_ros2_world):
+    """This module's ROS 2 world is the fleet's (the lab plugin's ``ros2`` keeps it healthy)."""
+    return fleet_ros2_world
 
 
 def test_every_members_router_is_linked_to_the_masters(ros2):

@@ -14,24 +14,11 @@ import time
 import pytest
 
 from tests.lab.lab import REPO
-from tests.lab.ros2 import ROS2_IDS, Ros2World, explain
+from tests.lab.ros2 import ROS2_IDS, explain
 from tests.lab.topology import ADDR
 
 pytestmark = pytest.mark.lab
 TIMEOUT = 3.0  # [checks] timeout_s of the lab's settings
-
-
-@pytest.fixture(scope="module")
-def world(lab):
-    with Ros2World(lab) as w:
-        yield w
-
-
-@pytest.fixture
-def ros2(world):
-    world.healthy()
-    yield world
-    world.healthy()
 
 
 def rules(entry: dict) -> list[str]:

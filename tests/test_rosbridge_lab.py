@@ -30,18 +30,26 @@ print(json.dumps({"status": r.status.value, "summary": r.summary, "evidence": r.
 """
 
 
-@pytest.fixture(scope="module")
-def bridge_lab(lab):
-    lab.start_roscore()
-    yield lab
-    lab.stop_roscore()
-
-
 def rosbridge_check(lab, host: str = "laptop", version: int = 1) -> dict:
     path = lab_bridge.config_path(lab, host, version)
     r = lab.run(host, [__import__("sys").executable, "-c", _ONE, str(path)], timeout=30)
     assert r.stdout.strip(), r.stderr
     return json.loads(r.stdout)
+
+
+def check_through(lab, forwarding: str, bridge: dict | None, version: int = 1) -> dict:
+    """ros.rosbridge from the laptop, the robot's modem forwarding as *forwarding* ("bridge": TCP
+    22 and 9090; "ssh": 22 only) to the lab's bridge started with the options *bridge* (None: no
+    bridge); the lab healthy again after."""
+    lab.reset()
+    lab._set_forwarding("robot", forwarding)
+    proc = None if bridge is None else lab_bridge.start_bridge(lab, **bridge)
+    try:
+        return rosbridge_check(lab, "laptop", version)
+    finally:
+        if proc is not None:
+            lab.kill(proc)
+        lab.reset()
 
 
 def explain(res: dict) -> str:
@@ -57,17 +65,10 @@ def assert_fails_at(res: dict, hop: str, rule: str) -> None:
 
 
 @pytest.mark.parametrize("version", [1, 2])
-def test_passes_from_the_laptop_through_the_robots_modem(bridge_lab, version):
+def test_passes_from_the_laptop_through_the_robots_modem(ros1_lab, version):
     """Only TCP 22 and 9090 are forwarded to the robot: the browser's path needs nothing else."""
-    lab = bridge_lab
-    lab.reset()
-    lab._set_forwarding("robot", "bridge")
-    proc = lab_bridge.start_bridge(lab)
-    try:
-        res = rosbridge_check(lab, "laptop", version)
-    finally:
-        lab.kill(proc)
-        lab.reset()
+    lab = ros1_lab
+    res = check_through(lab, "bridge", {}, version)
     d = res["data"]
     assert res["status"] == "pass", explain(res)
     assert d["url"] == "ws://turtlebot:9090/" and d["address"] == lab.addr.ROBOT_PUBLIC
@@ -79,10 +80,10 @@ def test_passes_from_the_laptop_through_the_robots_modem(bridge_lab, version):
     assert any(kind in e for e in res["evidence"]), explain(res)
 
 
-def test_in_the_ros_step_from_the_laptop_and_skipped_on_the_robot(bridge_lab):
+def test_in_the_ros_step_from_the_laptop_and_skipped_on_the_robot(ros1_lab):
     """`rosnet-tui check --step ros` on the healthy lab: the laptop's ros.rosbridge passes with
     the ROS 1 checks; on the robot, which runs the bridge, it is skipped, saying why."""
-    lab = bridge_lab
+    lab = ros1_lab
     lab.reset()
     proc = lab_bridge.start_bridge(lab)
     got = {}
@@ -103,54 +104,32 @@ def test_in_the_ros_step_from_the_laptop_and_skipped_on_the_robot(bridge_lab):
     assert "sami" in robot["ros.rosbridge"]["summary"]
 
 
-def test_bridge_stopped_fails_at_the_bridge_hop(bridge_lab):
-    lab = bridge_lab
-    lab.reset()
-    lab._set_forwarding("robot", "bridge")
-    try:
-        res = rosbridge_check(lab)
-    finally:
-        lab.reset()
+def test_bridge_stopped_fails_at_the_bridge_hop(ros1_lab):
+    res = check_through(ros1_lab, "bridge", None)
     assert_fails_at(res, "bridge", "rosbridge.not_running")
     assert res["data"]["tcp"] == "refused"
     assert "rosbridge_websocket.launch" in res["summary"]
 
 
-def test_port_not_forwarded_fails_at_the_forward_hop_within_the_timeout(bridge_lab):
+def test_port_not_forwarded_fails_at_the_forward_hop_within_the_timeout(ros1_lab):
     """The robot's modem forwards SSH only: 9090 is dropped, bad news within timeout_s + 0.5."""
-    lab = bridge_lab
-    lab.reset()
-    lab._set_forwarding("robot", "ssh")
-    proc = lab_bridge.start_bridge(lab)
-    try:
-        res = rosbridge_check(lab)
-    finally:
-        lab.kill(proc)
-        lab.reset()
+    res = check_through(ros1_lab, "ssh", {})
     assert_fails_at(res, "forward", "rosbridge.forward")
     assert res["data"]["tcp"] == "timeout"
     assert "forwarded to turtlebot" in res["summary"]
 
 
-def test_rosapi_missing_fails_at_the_rosapi_hop(bridge_lab):
-    lab = bridge_lab
-    lab.reset()
-    lab._set_forwarding("robot", "bridge")
-    proc = lab_bridge.start_bridge(lab, rosapi=False)
-    try:
-        res = rosbridge_check(lab)
-    finally:
-        lab.kill(proc)
-        lab.reset()
+def test_rosapi_missing_fails_at_the_rosapi_hop(ros1_lab):
+    res = check_through(ros1_lab, "bridge", {"rosapi": False})
     assert_fails_at(res, "rosapi", "rosbridge.rosapi")
     d = res["data"]
     assert d["upgraded"] is True and d["rosapi"] is False
     assert "/rosapi/topics does not exist" in d["detail"]
 
 
-def test_a_name_the_laptop_cannot_resolve_fails_at_the_name_hop(bridge_lab):
+def test_a_name_the_laptop_cannot_resolve_fails_at_the_name_hop(ros1_lab):
     """turtlebot missing from the laptop's hosts file (the lab's DNS does not know it either)."""
-    lab = bridge_lab
+    lab = ros1_lab
     lab.reset()
     lab.write_hosts("laptop", "127.0.0.1\tlocalhost\n192.168.1.10\tsami\n")
     try:

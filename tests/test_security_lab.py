@@ -28,7 +28,7 @@ import pytest
 
 from tests.lab import outsider, readme_install
 from tests.lab.firewall import secured
-from tests.lab.ros2 import Ros2World, explain
+from tests.lab.ros2 import explain
 from tests.lab.topology import ADDR, ZENOH_PORT
 
 pytestmark = pytest.mark.lab
@@ -60,14 +60,20 @@ def run_checks(lab, host: str, config, *ids: str, env=None) -> dict:
     return json.loads(line[len("RESULTS "):])
 
 
-def full_check(lab, host: str, config, env, state, *steps: str) -> dict[str, dict]:
+def full_check(lab, host: str, config, env, state, *steps: str,
+               timed: str | None = None) -> dict[str, dict]:
     """`rosnet-tui check --json` (every step, or *steps*) on *host*: {id: entry}, with the
-    advisor's findings under "advice"."""
+    advisor's findings under "advice". With *timed* (what ran), the time it took is printed."""
+    t0 = time.monotonic()
     r = lab.rosnet(host, "check", "--json", "-q", *(a for st in steps for a in ("--step", st)),
                    "--config", str(config), env=dict(env, XDG_STATE_HOME=str(state)),
                    timeout=90)
     assert r.stdout.strip(), r.stderr
-    return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+    checks = {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+    if timed:
+        print(f"{timed} full verification on {host}: {len(checks)} checks in "
+              f"{time.monotonic() - t0:.2f} s")
+    return checks
 
 
 def ros1_config(lab, host: str, **ros) -> str:
@@ -94,16 +100,8 @@ def test_the_outsider_is_on_the_internet_and_no_peer(lab):
 
 
 # --------------------------------------------------------------------------- ROS 1
-@pytest.fixture(scope="module")
-def ros1(lab):
-    lab.reset()
-    lab.start_roscore()
-    yield lab
-    lab.stop_roscore()
-
-
-def test_ros1_default_shuts_the_outsider_out_while_every_check_passes(ros1, tmp_path):
-    lab = ros1
+def test_ros1_default_shuts_the_outsider_out_while_every_check_passes(ros1_lab, tmp_path):
+    lab = ros1_lab
     lab.reset()
     assert lab.settings("robot").ros.security == "firewall"      # the ROS 1 default
     assert outsider.get_system_state(lab, ADDR.ROBOT_PUBLIC)["ok"]   # open before: the defect
@@ -116,11 +114,8 @@ def test_ros1_default_shuts_the_outsider_out_while_every_check_passes(ros1, tmp_
             got = outsider.ssh_auth_none(lab, ip, timeout=1.5)   # too, so no password offered
             assert "methods" not in got and "timed out" in got.get("error", ""), (ip, got)
         for host in SEATS:
-            t0 = time.monotonic()
             checks = full_check(lab, host, lab.config_path(host), lab.ros_env(host),
-                                tmp_path / host)
-            took = time.monotonic() - t0
-            print(f"ROS 1 full verification on {host}: {len(checks)} checks in {took:.2f} s")
+                                tmp_path / host, timed="ROS 1")
             assert all(c["status"] == "pass" for c in checks.values()), explain(checks)
             out = checks["security.outsider"]
             reach = out["data"]["outsider_reachable"]   # the master's port (master), a range port
@@ -132,8 +127,8 @@ def test_ros1_default_shuts_the_outsider_out_while_every_check_passes(ros1, tmp_
             assert checks["linux.firewall"]["status"] == "pass"
 
 
-def test_ros1_security_none_and_firewall_undo_let_the_outsider_back_in(ros1, tmp_path):
-    lab = ros1
+def test_ros1_security_none_and_firewall_undo_let_the_outsider_back_in(ros1_lab, tmp_path):
+    lab = ros1_lab
     lab.reset()
     state = str(tmp_path / "fw")
     cfg = str(lab.config_path("robot"))
@@ -201,28 +196,19 @@ def test_ssh_audit_names_password_login_with_the_fix(lab):
 
 
 # --------------------------------------------------------------------------- ROS 2
-@pytest.fixture(scope="module")
-def world(lab):
-    with Ros2World(lab) as w:
-        yield w
-
-
-def test_ros2_default_mtls_shuts_the_outsider_out_while_every_check_passes(world, tmp_path):
-    lab = world.lab
-    world.healthy()
-    assert world.settings("robot").ros.security == "mtls"        # the ROS 2 default
-    world.node("robot", "talker", name="talker")
+def test_ros2_default_mtls_shuts_the_outsider_out_while_every_check_passes(ros2_world, tmp_path):
+    lab = ros2_world.lab
+    ros2_world.healthy()
+    assert ros2_world.settings("robot").ros.security == "mtls"        # the ROS 2 default
+    ros2_world.node("robot", "talker", name="talker")
     for tls in (False, True):                  # plain, and TLS with a certificate of its own
         got = outsider.zenoh_session(lab, ADDR.ROBOT_PUBLIC, ZENOH_PORT, tls=tls)
         assert not got["session"] and not got.get("tokens") and not got.get("published"), got
     for ip in (ADDR.ROBOT_PUBLIC, ADDR.LAPTOP_PUBLIC):
         assert outsider.ssh_auth_none(lab, ip).get("methods") == ["publickey"], ip
     for host in SEATS:
-        t0 = time.monotonic()
-        checks = full_check(lab, host, world.config_path(host), world.env(host),
-                            tmp_path / host)
-        took = time.monotonic() - t0
-        print(f"ROS 2 (mtls) full verification on {host}: {len(checks)} checks in {took:.2f} s")
+        checks = full_check(lab, host, ros2_world.config_path(host), ros2_world.env(host),
+                            tmp_path / host, timed="ROS 2 (mtls)")
         # pass, or skip where a check does not apply to ROS 2 on this seat (router.upnp: no UPnP
         # modem here; the member's modem forwards nothing; the master never dials the members)
         assert all(c["status"] in ("pass", "skip") for c in checks.values()), explain(checks)
@@ -237,16 +223,16 @@ def test_ros2_default_mtls_shuts_the_outsider_out_while_every_check_passes(world
         assert checks["security.outsider"]["duration_s"] < 3 * TIMEOUT + 0.5
 
 
-def test_ros2_security_none_lets_the_outsider_in_and_the_check_says_so(world, tmp_path):
-    lab = world.lab
-    world.set_security("none")
+def test_ros2_security_none_lets_the_outsider_in_and_the_check_says_so(ros2_world, tmp_path):
+    lab = ros2_world.lab
+    ros2_world.set_security("none")
     try:
-        world.node("robot", "talker", name="talker")
+        ros2_world.node("robot", "talker", name="talker")
         got = outsider.zenoh_session(lab, ADDR.ROBOT_PUBLIC, ZENOH_PORT)
         assert got["session"] and got["tokens"], got   # a stranger reads the graph ...
         assert got["published"] == 3                  # ... and publishes
         for host in SEATS:                            # the master over SSH; a member itself
-            res = full_check(lab, host, world.config_path(host), world.env(host),
+            res = full_check(lab, host, ros2_world.config_path(host), ros2_world.env(host),
                              tmp_path / host, "ros")
             c = res["security.outsider"]
             print(f"security.outsider (ROS 2, none) on {host}: {c['status']} in "
@@ -257,7 +243,7 @@ def test_ros2_security_none_lets_the_outsider_in_and_the_check_says_so(world, tm
             assert rules(c), c                        # what to do about it
             assert c["duration_s"] < 3 * TIMEOUT + 0.5, explain(res)
     finally:
-        world.healthy()
+        ros2_world.healthy()
 
 
 def test_the_fleet_has_the_outsider_too(fleet):

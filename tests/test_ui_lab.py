@@ -23,16 +23,8 @@ def run_wizard(lab, host: str, tmp_path) -> dict:
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
-@pytest.fixture
-def roscore_lab(lab):
-    lab.reset()
-    lab.start_roscore()
-    yield lab
-    lab.reset()
-
-
-def test_healthy_lab_every_check_passes_in_the_wizard(roscore_lab, tmp_path):
-    lab = roscore_lab
+def test_healthy_lab_every_check_passes_in_the_wizard(ros1_lab, healthy_lab, tmp_path):
+    lab = healthy_lab
     with secured(lab, ["laptop"]):              # ROS 1 as the product sets it up
         seen = run_wizard(lab, "laptop", tmp_path)
     states = {cid: row["state"] for step in seen["steps"].values() for cid, row in step.items()}
@@ -45,9 +37,9 @@ def test_healthy_lab_every_check_passes_in_the_wizard(roscore_lab, tmp_path):
     assert not [f for f in seen["findings"] if f["severity"] == "fail"]
 
 
-def test_no_forwarding_shows_table_1_in_the_wizard(roscore_lab, tmp_path):
-    with roscore_lab.variant("no_forwarding"):
-        seen = run_wizard(roscore_lab, "robot", tmp_path)
+def test_no_forwarding_shows_table_1_in_the_wizard(ros1_lab, healthy_lab, tmp_path):
+    with healthy_lab.variant("no_forwarding"):
+        seen = run_wizard(healthy_lab, "robot", tmp_path)
     router = seen["steps"]["router"]
     assert router["router.listener"]["state"] == "pass"
     assert router["router.port_open"]["state"] == "fail"

@@ -55,6 +55,20 @@ def state_dir_problem(path: Path) -> str | None:
     return None
 
 
+def add_state_dir_option(parser: argparse.ArgumentParser, what: str) -> None:
+    """--state-dir DIR; *what*: what lives there (the help says the default)."""
+    parser.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
+                        help=f"{what} (default: $XDG_STATE_HOME/rosnet-tui)")
+
+
+def state_dir_of(args: argparse.Namespace) -> Path:
+    """The state dir named by --state-dir, absolute; the everyday one without it."""
+    from rosnet_tui.core.paths import default_state_dir
+
+    sd = getattr(args, "state_dir", None)
+    return Path(sd).expanduser().absolute() if sd else default_state_dir()
+
+
 def add_config_option(parser: argparse.ArgumentParser, *, top: bool = False) -> None:
     parser.add_argument(
         "--config", metavar="FILE", type=Path,
@@ -69,7 +83,16 @@ def config_path(args: argparse.Namespace) -> Path:
 
 
 def say(msg: str) -> None:
+    """A message on stderr (refusals, errors, what a command could not do)."""
     print(msg, file=sys.stderr, flush=True)
+
+
+def interactive() -> bool:
+    """A person at a terminal who can answer a question."""
+    try:
+        return sys.stdin.isatty() and sys.stdout.isatty()
+    except (AttributeError, ValueError):
+        return False
 
 
 def load_settings_or_say(args: argparse.Namespace, *, complete: bool = False):

@@ -12,16 +12,23 @@ import argparse
 import sys
 from pathlib import Path
 
-from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, config_path
+from rosnet_tui.cli.common import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    add_state_dir_option,
+    config_path,
+    say,
+    state_dir_of,
+)
 from rosnet_tui.cli.writing import (
     confirm,
-    err,
     load_settings_for,
     paths_of,
     report_settings_problems,
     rerun_checks,
     run_as_root,
-    state_dir_of,
 )
 from rosnet_tui.core import firewall as fw
 from rosnet_tui.core import privilege
@@ -32,8 +39,7 @@ FIREWALL_CHECKS = ("linux.firewall",)
 
 def _common(p: argparse.ArgumentParser) -> None:
     add_config_option(p)
-    p.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
-                   help="where the undo journal lives (default: $XDG_STATE_HOME/rosnet-tui)")
+    add_state_dir_option(p, "where the undo journal lives")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -79,7 +85,7 @@ def _settings(args: argparse.Namespace) -> Settings | None:
     if settings is None:
         return None
     if settings.ros2:
-        err("rosnet-tui: the firewall is for ROS 1 (the ROS range forwarded); with ROS 2 only "
+        say("rosnet-tui: the firewall is for ROS 1 (the ROS range forwarded); with ROS 2 only "
             "the Zenoh port is forwarded and mutual TLS guards it ([ros] security = \"mtls\")")
         return None
     return settings
@@ -105,10 +111,10 @@ def run_apply(args: argparse.Namespace) -> int:
     except fw.FirewallSettingsError as exc:
         return report_settings_problems(exc)
     except fw.FirewallError as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     if args.expect_digest and pv.digest != args.expect_digest:
-        err("rosnet-tui: the ruleset is not the one previewed any more (the settings changed); "
+        say("rosnet-tui: the ruleset is not the one previewed any more (the settings changed); "
             "nothing was changed. Look at the new preview and apply again.")
         return EXIT_FAIL
     if not fw.wanted(settings):
@@ -123,10 +129,7 @@ def run_apply(args: argparse.Namespace) -> int:
         return EXIT_OK
     sys.stdout.write(pv.diff() if pv.readable else pv.ruleset)
     sys.stdout.flush()
-    if args.dry_run:
-        print("Dry run: nothing was changed.")
-        return EXIT_OK
-    stop = confirm(args, "Load this table (one nft transaction)?")
+    stop = confirm(args, "Load this table (one nft transaction)?", dry_run="nothing was changed")
     if stop is not None:
         return stop
     if not privilege.is_root():
@@ -137,7 +140,7 @@ def run_apply(args: argparse.Namespace) -> int:
         try:
             entry = fw.apply(pv, state_dir=state_dir_of(args))
         except fw.FirewallError as exc:
-            err(f"rosnet-tui: {exc}")
+            say(f"rosnet-tui: {exc}")
             return EXIT_FAIL
         rc = EXIT_OK
         if entry is None:
@@ -212,7 +215,7 @@ def run_undo(args: argparse.Namespace) -> int:
         try:
             entry = fw.remove(state_dir=state_dir_of(args))
         except fw.FirewallError as exc:
-            err(f"rosnet-tui: {exc}")
+            say(f"rosnet-tui: {exc}")
             return EXIT_FAIL
         rc = EXIT_OK
         print(f"Removed the table {fw.TABLE}" + (f" (journal #{entry}; `rosnet-tui undo` loads "

@@ -6,20 +6,27 @@ import argparse
 import sys
 from pathlib import Path
 
-from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, config_path
+from rosnet_tui.cli.common import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    config_path,
+    interactive,
+    say,
+    state_dir_of,
+)
 from rosnet_tui.cli.writing import (
     add_writer_options,
     ask,
     confirm,
-    err,
-    interactive,
+    file_of,
     load_settings_for,
     paths_of,
     print_changes,
     report_settings_problems,
     rerun_checks,
     show_preview,
-    state_dir_of,
     write_preview,
     yes_to_all,
 )
@@ -102,7 +109,7 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
     if settings is None:
         return EXIT_USAGE, None
     profile = profile or settings.this.profile
-    path = Path(args.file).expanduser().absolute() if args.file else DEFAULT_HOSTS_PATH
+    path = file_of(args, DEFAULT_HOSTS_PATH)
     fix = _decide_conflicts(args, settings, profile, path)
     try:
         preview = preview_hosts(settings, profile, path, fix_conflicts=bool(fix),
@@ -110,20 +117,17 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
     except WriterSettingsError as exc:
         return report_settings_problems(exc), settings
     except mt.ManagedFileError as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL, settings
     if args.expect_digest and preview.digest != args.expect_digest:
-        err(f"rosnet-tui: {path} changed since the preview was made; nothing was written. "
+        say(f"rosnet-tui: {path} changed since the preview was made; nothing was written. "
             "Look at the new preview and apply again.")
         return EXIT_FAIL, settings
     print(f"Hosts set '{profile}' for {settings.this.name} in {path}:")
     show_preview(preview)
     if not preview.changed:
         return EXIT_OK, settings
-    if args.dry_run:
-        print("Dry run: nothing was written.")
-        return EXIT_OK, settings
-    stop = confirm(args, f"Write these changes to {path}?")
+    stop = confirm(args, f"Write these changes to {path}?", dry_run="nothing was written")
     if stop is not None:
         return stop, settings
     sudo_cmd = privilege.hosts_apply_command(
@@ -155,7 +159,7 @@ def run_use(args: argparse.Namespace) -> int:
             saved.this.profile = args.profile
             save_settings(saved, config_path(args))
         except (SettingsError, OSError) as exc:
-            err(f"rosnet-tui: the hosts file was written, but the settings were not saved: {exc}")
+            say(f"rosnet-tui: the hosts file was written, but the settings were not saved: {exc}")
             return EXIT_FAIL
         print(f"Active profile saved: {args.profile} ({config_path(args)})")
     return EXIT_OK
@@ -166,13 +170,13 @@ def run_show(args: argparse.Namespace) -> int:
     if settings is None:
         return EXIT_USAGE
     profile = args.profile or settings.this.profile
-    path = Path(args.file).expanduser().absolute() if args.file else DEFAULT_HOSTS_PATH
+    path = file_of(args, DEFAULT_HOSTS_PATH)
     try:
         block = render_hosts_text(settings, profile)
     except WriterSettingsError as exc:
-        err("rosnet-tui: the settings do not give a usable hosts set:")
+        say("rosnet-tui: the settings do not give a usable hosts set:")
         for key, why in exc.problems:
-            err(f"  {key}: {why}")
+            say(f"  {key}: {why}")
         return EXIT_USAGE
     print(f"Profile: {PROFILE_TITLES[profile]}"
           f"{' (active in the settings)' if profile == settings.this.profile else ''}")

@@ -13,20 +13,26 @@ import sys
 from pathlib import Path
 
 from rosnet_tui.cli import ros_pair
-from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option
+from rosnet_tui.cli.common import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    interactive,
+    say,
+    state_dir_of,
+)
 from rosnet_tui.cli.writing import (
     add_writer_options,
     ask,
     confirm,
-    err,
-    interactive,
+    file_of,
     load_settings_for,
     paths_of,
     print_changes,
     report_settings_problems,
     rerun_checks,
     show_preview,
-    state_dir_of,
     write_preview,
     yes_to_all,
 )
@@ -92,7 +98,7 @@ def run_apply(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     if settings.ros2:
         return _apply_ros2(args, settings)
-    path = Path(args.file).expanduser().absolute() if args.file else default_bashrc_path()
+    path = file_of(args, default_bashrc_path())
     comment = _decide_comment(args, path)
     try:
         preview = preview_bashrc(settings, path, comment_ros_ip=comment,
@@ -101,20 +107,17 @@ def run_apply(args: argparse.Namespace) -> int:
     except WriterSettingsError as exc:
         return report_settings_problems(exc)
     except mt.ManagedFileError as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     if args.expect_digest and preview.digest != args.expect_digest:
-        err(f"rosnet-tui: {path} changed since the preview was made; nothing was written")
+        say(f"rosnet-tui: {path} changed since the preview was made; nothing was written")
         return EXIT_FAIL
     role = "the ROS master" if settings.is_master else f"a member (master: {settings.master_name})"
     print(f"ROS settings for {settings.this.name}, {role}, in {path}:")
     show_preview(preview)
     rc = EXIT_OK
     if preview.changed:
-        if args.dry_run:
-            print("Dry run: nothing was written.")
-            return EXIT_OK
-        stop = confirm(args, f"Write these changes to {path}?")
+        stop = confirm(args, f"Write these changes to {path}?", dry_run="nothing was written")
         if stop is not None:
             return stop
         rc = write_preview(args, preview, None)
@@ -143,7 +146,7 @@ def run_export(args: argparse.Namespace) -> int:
 
 def _apply_ros2(args: argparse.Namespace, settings) -> int:
     """ROS 2: the ~/.bashrc block and the router's config, previewed, written as one apply."""
-    path = Path(args.file).expanduser().absolute() if args.file else default_bashrc_path()
+    path = file_of(args, default_bashrc_path())
     rc = Path(args.router_config).expanduser().absolute() if args.router_config else None
     try:
         previews = ros2.previews(settings, path, client=args.client, router_config_path=rc,
@@ -152,7 +155,7 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
     except WriterSettingsError as exc:
         return report_settings_problems(exc)
     except mt.ManagedFileError as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     role = ("the master (its router is the hub)" if settings.is_master else
             f"a member (master: {settings.master_name})")
@@ -161,17 +164,14 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
         show_preview(p)
     changed = [p for p in previews if p.changed]
     if changed:
-        if args.dry_run:
-            print("Dry run: nothing was written.")
-            return EXIT_OK
-        stop = confirm(args, "Write these changes?")
+        stop = confirm(args, "Write these changes?", dry_run="nothing was written")
         if stop is not None:
             return stop
         try:
             result = mf.apply_previews(previews, state_dir=state_dir_of(args),
                                        label="ROS 2 environment and Zenoh config")
         except mt.ManagedFileError as exc:
-            err(f"rosnet-tui: {exc}")
+            say(f"rosnet-tui: {exc}")
             return EXIT_FAIL
         print(f"Wrote {', '.join(str(p.path) for p in changed)}. Backups: "
               f"{', '.join(str(b) for b in result.backups) or 'none (new files)'}. "
@@ -210,12 +210,12 @@ def _fleet_tls(settings) -> int:
         print(f"Pairing with the master ({why}):")
         res = asyncio.run(pairing.pair_over_ssh(settings, paths))
     except (fleet_tls.TlsError, OSError) as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     if res.ok:
         print(f"  {res.detail} ({res.seconds:.1f} s).")
         return EXIT_OK
-    err(f"rosnet-tui: pairing failed: {res.detail}\n  Without SSH to the master: "
+    say(f"rosnet-tui: pairing failed: {res.detail}\n  Without SSH to the master: "
         "`rosnet-tui ros pair --print-request` here, paste it into `rosnet-tui ros pair --sign` "
         "on the master, and what that prints into `rosnet-tui ros pair --install` here.")
     return EXIT_FAIL

@@ -14,8 +14,8 @@ import argparse
 import asyncio
 import sys
 
-from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option
-from rosnet_tui.cli.writing import err, load_settings_for
+from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, say
+from rosnet_tui.cli.writing import load_settings_for
 from rosnet_tui.core import fleet_tls, pairing
 from rosnet_tui.core.fleet_tls import TlsError
 from rosnet_tui.core.ros2 import config_dir
@@ -55,13 +55,13 @@ def run_pair(args: argparse.Namespace) -> int:
     if settings is None:
         return EXIT_USAGE
     if not settings.ros2:
-        err("rosnet-tui: pairing is for ROS 2 ([ros] version = 2); ROS 1 uses the firewall")
+        say("rosnet-tui: pairing is for ROS 2 ([ros] version = 2); ROS 1 uses the firewall")
         return EXIT_USAGE
     paths = fleet_tls.tls_paths(config_dir())
     try:
         if args.sign:
             if not settings.is_master:
-                err("rosnet-tui: --sign runs on the master (it holds the fleet CA)")
+                say("rosnet-tui: --sign runs on the master (it holds the fleet CA)")
                 return EXIT_USAGE
             pairing.prepare_master(settings, paths)
             ca, cert = fleet_tls.sign_request(paths, _read_stdin("the member's request"),
@@ -77,7 +77,7 @@ def run_pair(args: argparse.Namespace) -> int:
         if args.install:
             pems = fleet_tls.split_pems(_read_stdin("what `ros pair --sign` printed"))
             if len(pems) != 2:
-                err("rosnet-tui: expected two certificates (this component's and the CA's), "
+                say("rosnet-tui: expected two certificates (this component's and the CA's), "
                     f"found {len(pems)}")
                 return EXIT_USAGE
             cert, ca = pems
@@ -100,13 +100,13 @@ def run_pair(args: argparse.Namespace) -> int:
             return EXIT_OK
         res = asyncio.run(pairing.pair_over_ssh(settings, paths, timeout=args.timeout))
     except TlsError as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_USAGE if args.sign or args.install else EXIT_FAIL
     except OSError as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     if not res.ok:
-        err(f"rosnet-tui: pairing failed: {res.detail}")
+        say(f"rosnet-tui: pairing failed: {res.detail}")
         return EXIT_FAIL
     print(f"{res.detail[:1].upper()}{res.detail[1:]} ({res.seconds:.1f} s). Restart the router "
           "to use it.")
@@ -116,10 +116,10 @@ def run_pair(args: argparse.Namespace) -> int:
 def _remove(args: argparse.Namespace, settings, paths) -> int:
     """A new CA: the removed member's certificate stops being trusted; the others re-pair."""
     if not settings.is_master:
-        err("rosnet-tui: --remove runs on the master (it holds the fleet CA)")
+        say("rosnet-tui: --remove runs on the master (it holds the fleet CA)")
         return EXIT_USAGE
     if settings.peer(args.remove) is None:
-        err(f"rosnet-tui: {args.remove} is not a peer in the settings")
+        say(f"rosnet-tui: {args.remove} is not a peer in the settings")
         return EXIT_USAGE
     fleet_tls.rotate_ca(paths, settings.this.name)
     pairing.prepare_master(settings, paths)

@@ -11,16 +11,18 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
 from rosnet_tui.cli.common import (
     EXIT_FAIL,
     EXIT_OK,
     EXIT_USAGE,
     add_config_option,
+    add_state_dir_option,
     load_settings_or_say,
+    say,
+    state_dir_of,
 )
-from rosnet_tui.cli.writing import ask, err, interactive, paths_of, rerun_checks, state_dir_of
+from rosnet_tui.cli.writing import confirm, paths_of, rerun_checks
 from rosnet_tui.core import affected
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp import journal
@@ -79,14 +81,13 @@ def _common(p: argparse.ArgumentParser) -> None:
     add_config_option(p)
     p.add_argument("--timeout", type=float, metavar="S", default=None,
                    help="seconds to find the modem (default: checks.timeout_s, 3)")
-    p.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
-                   help="where the undo journal lives (default: $XDG_STATE_HOME/rosnet-tui)")
+    add_state_dir_option(p, "where the undo journal lives")
 
 
 def _timeout(args: argparse.Namespace, settings) -> float | None:
     t = args.timeout if args.timeout is not None else float(settings.checks.timeout_s)
     if not 0.5 <= t <= 60:
-        err("rosnet-tui router: --timeout must be between 0.5 and 60 seconds")
+        say("rosnet-tui router: --timeout must be between 0.5 and 60 seconds")
         return None
     return t
 
@@ -98,25 +99,16 @@ def _find(timeout: float) -> tuple[Modem | None, list[str]]:
 
 
 def _no_modem(notes: list[str]) -> None:
-    err("rosnet-tui: no modem answered UPnP IGD, PCP or NAT-PMP (tried the default gateway):")
+    say("rosnet-tui: no modem answered UPnP IGD, PCP or NAT-PMP (tried the default gateway):")
     for n in notes:
-        err(f"  {n}")
-    err("Forward the port by hand in the modem's web page (see the Router step), or switch "
+        say(f"  {n}")
+    say("Forward the port by hand in the modem's web page (see the Router step), or switch "
         "UPnP / NAT-PMP on there if it has them.")
 
 
-def _consent(args: argparse.Namespace, question: str) -> int | None:
-    """None to go on; an exit code to stop with (declined, or no terminal to ask on)."""
-    if args.yes:
-        return None
-    if interactive():
-        if ask(question):
-            return None
-        print("Cancelled: nothing was asked of the modem.")
-        return EXIT_FAIL
-    err("rosnet-tui: the modem is not asked without your consent, and there is no terminal to "
-        "ask on: read the forwards above, then run the same command with --yes")
-    return EXIT_USAGE
+NOT_ASKING = ("rosnet-tui: the modem is not asked without your consent, and there is no terminal "
+              "to ask on: read the forwards above, then run the same command with --yes")
+NOTHING_ASKED = "nothing was asked of the modem"
 
 
 def _say_modem(modem: Modem) -> None:
@@ -187,7 +179,7 @@ def run_map(args: argparse.Namespace) -> int:
     if settings is None:
         return EXIT_USAGE
     if not LEASE_MIN_S <= args.lease <= LEASE_MAX_S:
-        err(f"rosnet-tui router map: --lease must be between {LEASE_MIN_S} and {LEASE_MAX_S} "
+        say(f"rosnet-tui router map: --lease must be between {LEASE_MIN_S} and {LEASE_MAX_S} "
             "seconds (forwards are never made for ever)")
         return EXIT_USAGE
     timeout = _timeout(args, settings)
@@ -205,26 +197,24 @@ def run_map(args: argparse.Namespace) -> int:
         if not plan.need.forwards and not plan.need.refusal:
             print(plan.blocked)
             return EXIT_OK
-        err(f"rosnet-tui: nothing was asked of the modem. {plan.blocked}")
+        say(f"rosnet-tui: nothing was asked of the modem. {plan.blocked}")
         return EXIT_FAIL
     modem, via = plan.modem, plan.via
     assert modem is not None
     for w in plan.warnings:
         print(f"warning: {w}")
-    if args.dry_run:
-        print("Dry run: nothing was asked of the modem.")
-        return EXIT_OK
-    stop = _consent(args, "Ask the modem for these forwards?")
+    stop = confirm(args, "Ask the modem for these forwards?", dry_run=NOTHING_ASKED,
+                   cancelled=f"Cancelled: {NOTHING_ASKED}.", no_terminal=NOT_ASKING)
     if stop is not None:
         return stop
     try:
         result = fw.map_forwards(settings, modem, plan.need.forwards, state_dir=sd, via=via,
                                  timeout=max(timeout * 2, 5.0))
     except fw.MapRefused as exc:
-        err(f"rosnet-tui: refused, nothing was changed: {exc.words}")
+        say(f"rosnet-tui: refused, nothing was changed: {exc.words}")
         return EXIT_FAIL
     except ModemError as exc:
-        err(f"rosnet-tui: the modem did not give a usable answer, nothing was changed: {exc}")
+        say(f"rosnet-tui: the modem did not give a usable answer, nothing was changed: {exc}")
         return EXIT_FAIL
     for w in result.warnings:
         print(f"warning: {w}")
@@ -257,13 +247,14 @@ def run_unmap(args: argparse.Namespace) -> int:
     print("Forwards rosnet-tui made (only these are removed):")
     for _e, m in live:
         print(f"  {journal.describe(m)}")
-    stop = _consent(args, "Remove them from the modem?")
+    stop = confirm(args, "Remove them from the modem?", cancelled=f"Cancelled: {NOTHING_ASKED}.",
+                   no_terminal=NOT_ASKING)
     if stop is not None:
         return stop
     try:
         said = fw.unmap_ours(state_dir=sd, force=args.force, timeout=max(timeout * 2, 5.0))
     except journal.ForwardUndoError as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     for line in said:
         print(line)

@@ -23,12 +23,16 @@ from rosnet_tui.cli.common import (
     EXIT_OK,
     EXIT_USAGE,
     add_config_option,
+    add_state_dir_option,
     config_path,
     number_in,
+    say,
+    state_dir_of,
     state_dir_problem,
 )
+from rosnet_tui.cli.writing import confirm
 from rosnet_tui.core import privilege
-from rosnet_tui.core.paths import Paths, default_state_dir
+from rosnet_tui.core.paths import Paths
 
 UNIT_NAME = "rosnet-tui-sync.service"
 
@@ -66,8 +70,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="What the sync service of this component last saw and did "
                                    "(read from its state dir; the service need not run).")
     st.add_argument("--json", action="store_true", help="print the status as JSON")
-    st.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
-                    help="state dir of the service (default: $XDG_STATE_HOME/rosnet-tui)")
+    add_state_dir_option(st, "state dir of the service")
     st.set_defaults(func=run_status)
 
     ins = ss.add_parser("install-service", help="write a systemd unit that runs the sync service",
@@ -89,9 +92,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _service_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
-                   help="where status, journal and backups go (default: "
-                        "$XDG_STATE_HOME/rosnet-tui)")
+    add_state_dir_option(p, "where status, journal and backups go")
     p.add_argument("--hosts-file", metavar="PATH", type=Path, default=None,
                    help="hosts file to keep right (default: /etc/hosts)")
     g = p.add_mutually_exclusive_group()
@@ -104,15 +105,6 @@ def _service_options(p: argparse.ArgumentParser) -> None:
                    help="do not keep the learned addresses in the settings file")
 
 
-def _err(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
-def _state_dir(args: argparse.Namespace) -> Path:
-    sd = getattr(args, "state_dir", None)
-    return Path(sd).expanduser().absolute() if sd else default_state_dir()
-
-
 def _paths(args: argparse.Namespace) -> Paths:
     """The service's files: --config, --state-dir, --hosts-file, --bashrc (its checks read the
     everyday ~/.bashrc under --no-bashrc)."""
@@ -121,7 +113,7 @@ def _paths(args: argparse.Namespace) -> Paths:
         files["hosts_path"] = Path(args.hosts_file).expanduser().absolute()
     if getattr(args, "bashrc", None) and not getattr(args, "no_bashrc", False):
         files["bashrc_path"] = Path(args.bashrc).expanduser().absolute()
-    return Paths(config_path=config_path(args), state_dir=_state_dir(args), **files)
+    return Paths(config_path=config_path(args), state_dir=state_dir_of(args), **files)
 
 
 def _setup_logging(args: argparse.Namespace) -> None:
@@ -143,9 +135,9 @@ def run_service(args: argparse.Namespace) -> int:
     from rosnet_tui.core.sync.service import SyncService
 
     _setup_logging(args)
-    bad_dir = state_dir_problem(_state_dir(args))
+    bad_dir = state_dir_problem(state_dir_of(args))
     if bad_dir:
-        _err(f"rosnet-tui sync: {bad_dir}")
+        say(f"rosnet-tui sync: {bad_dir}")
         return EXIT_USAGE
     try:
         service = SyncService(_paths(args), write_bashrc=not getattr(args, "no_bashrc", False),
@@ -153,19 +145,19 @@ def run_service(args: argparse.Namespace) -> int:
                               interval_s=args.interval, save_learned=not args.no_save_settings,
                               unmap_on_stop=args.unmap_on_stop)
     except SyncError as exc:
-        _err(f"rosnet-tui sync: {exc}")
+        say(f"rosnet-tui sync: {exc}")
         return EXIT_USAGE
     try:
         if args.once:
             result = service.run_once()
             if not result.ok:
                 for part, msg in result.errors.items():
-                    _err(f"rosnet-tui sync: {part}: {msg}")
+                    say(f"rosnet-tui sync: {part}: {msg}")
             return EXIT_OK if result.ok else EXIT_FAIL
         install_signal_handlers(service)
         return service.run()
     except SyncError as exc:
-        _err(f"rosnet-tui sync: {exc}")
+        say(f"rosnet-tui sync: {exc}")
         return EXIT_FAIL
 
 
@@ -173,7 +165,7 @@ def run_service(args: argparse.Namespace) -> int:
 def run_status(args: argparse.Namespace) -> int:
     from rosnet_tui.core.sync.status import load_status, render_status, status_path, with_ages
 
-    sd = _state_dir(args)
+    sd = state_dir_of(args)
     status = load_status(sd)
     if status is None:
         msg = (f"sync has not run on this component yet (no {status_path(sd)}); start it with "
@@ -193,13 +185,6 @@ def run_status(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------- install-service
-def _interactive() -> bool:
-    try:
-        return sys.stdin.isatty() and sys.stdout.isatty()
-    except (AttributeError, ValueError):
-        return False
-
-
 def _systemd_quote(arg: str) -> str:
     """One ExecStart word: as is when plain, else in double quotes with \\ and " escaped."""
     if arg and all(c.isalnum() or c in "/._-=:+@,%" for c in arg):
@@ -226,7 +211,7 @@ def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
     # This very install by its absolute path: systemd starts it with a clean environment.
     argv = privilege.self_argv(["--config", str(cfg), "sync"])
     if args.state_dir:
-        argv += ["--state-dir", str(_state_dir(args))]
+        argv += ["--state-dir", str(state_dir_of(args))]
     elif not user:
         # The settings owner's state dir (root hands what it writes there back to that user), so
         # 'rosnet-tui sync status' and 'rosnet-tui undo' as that user find it.
@@ -288,7 +273,7 @@ def sudo_install_argv(args: argparse.Namespace) -> list[str]:
     if args.unit_dir:
         a += ["--unit-dir", str(_unit_dir(args))]
     if args.state_dir:
-        a += ["--state-dir", str(_state_dir(args))]
+        a += ["--state-dir", str(state_dir_of(args))]
     if args.hosts_file:
         a += ["--hosts-file", str(Path(args.hosts_file).expanduser().absolute())]
     if args.no_bashrc:
@@ -321,10 +306,10 @@ def run_install(args: argparse.Namespace) -> int:
     except FileNotFoundError:
         old = None
     except FileRefusedError as exc:
-        _err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     except OSError as exc:
-        _err(f"rosnet-tui: cannot read {path}: {exc.strerror}")
+        say(f"rosnet-tui: cannot read {path}: {exc.strerror}")
         return EXIT_FAIL
     print(f"The systemd unit {path}:")
     if old is None:
@@ -342,33 +327,24 @@ def run_install(args: argparse.Namespace) -> int:
     if old == text:
         print(then)
         return EXIT_OK
-    if args.dry_run:
-        print("Dry run: nothing was written.")
-        return EXIT_OK
-    if not args.yes:
-        if not _interactive():
-            _err("rosnet-tui: not writing without a terminal to ask on; read the unit above, "
-                 "then run the same command with --yes")
-            return EXIT_USAGE
-        try:
-            answer = input(f"Write {path}? [y/N] ")
-        except EOFError:
-            answer = ""
-        if answer.strip().lower() not in ("y", "yes"):
-            print("Nothing was written.")
-            return EXIT_FAIL
+    stop = confirm(args, f"Write {path}?", dry_run="nothing was written",
+                   cancelled="Nothing was written.",
+                   no_terminal="rosnet-tui: not writing without a terminal to ask on; read the "
+                               "unit above, then run the same command with --yes")
+    if stop is not None:
+        return stop
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, text, mode=0o644)
     except PermissionError:
         if args.user:
-            _err(f"rosnet-tui: this user may not write {path}")
+            say(f"rosnet-tui: this user may not write {path}")
         else:
-            _err(f"rosnet-tui: this user may not write {path}; run it with sudo: "
+            say(f"rosnet-tui: this user may not write {path}; run it with sudo: "
                  f"{privilege.format_command(sudo_install_argv(args))}")
         return EXIT_FAIL
     except OSError as exc:
-        _err(f"rosnet-tui: cannot write {path}: {exc.strerror}")
+        say(f"rosnet-tui: cannot write {path}: {exc.strerror}")
         return EXIT_FAIL
     print(f"Wrote {path}.")
     print(then)

@@ -11,9 +11,12 @@ from rosnet_tui.cli.common import (
     EXIT_OK,
     EXIT_USAGE,
     add_config_option,
+    add_state_dir_option,
+    say,
+    state_dir_of,
     state_dir_problem,
 )
-from rosnet_tui.cli.writing import confirm, err, paths_of, rerun_checks, run_as_root, state_dir_of
+from rosnet_tui.cli.writing import confirm, paths_of, rerun_checks, run_as_root
 from rosnet_tui.core import affected, firewall, privilege
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
@@ -34,9 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dry-run", action="store_true", help="show what would be restored")
     p.add_argument("--force", action="store_true",
                    help="restore even a file someone changed after rosnet-tui wrote it")
-    p.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
-                   help="where backups and the undo journal live "
-                        "(default: $XDG_STATE_HOME/rosnet-tui)")
+    add_state_dir_option(p, "where backups and the undo journal live")
     p.add_argument("--expect-entry", metavar="ID", default=None,
                    help="refuse unless the last change is still this one (used with sudo)")
     p.add_argument("--no-checks", action="store_true",
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     sd = state_dir_of(args)
     bad_dir = state_dir_problem(sd)
     if bad_dir:
-        err(f"rosnet-tui undo: {bad_dir}")
+        say(f"rosnet-tui undo: {bad_dir}")
         return EXIT_USAGE
     try:
         plan = mf.plan_undo(sd, entry_id=args.expect_entry)
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     except mt.ManagedFileError as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     e = plan.entry
     print(f"Undo change #{e.id} ({e.label or 'no label'}, made {e.created}):")
@@ -82,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     elif e.files:
         print("The files are already as they were before that change.")
     if plan.conflicts and not args.force:
-        err("rosnet-tui: changed by someone else since rosnet-tui wrote it: "
+        say("rosnet-tui: changed by someone else since rosnet-tui wrote it: "
             + ", ".join(plan.conflicts) + ". Undoing would lose that change; nothing was "
             "restored. Pass --force to restore anyway.")
         return EXIT_FAIL
@@ -104,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             result = mf.apply_undo(plan, force=args.force)
         except mt.ManagedFileError as exc:
-            err(f"rosnet-tui: {exc}")
+            say(f"rosnet-tui: {exc}")
             return EXIT_FAIL
         if result.files:
             print(f"Restored: {', '.join(str(p) for p in result.files)}")

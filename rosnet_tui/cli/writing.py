@@ -15,27 +15,19 @@ from rosnet_tui.cli.common import (
     EXIT_OK,
     EXIT_USAGE,
     add_config_option,
+    add_state_dir_option,
     config_path,
+    interactive,
     load_settings_or_say,
+    say,
+    state_dir_of,
 )
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import privilege
 from rosnet_tui.core.hosts import WriterSettingsError
-from rosnet_tui.core.paths import Paths, default_state_dir
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings_model import Settings
-
-
-def err(msg: str) -> None:
-    print(msg, file=sys.stderr)
-
-
-def interactive() -> bool:
-    """A person at a terminal who can answer a question."""
-    try:
-        return sys.stdin.isatty() and sys.stdout.isatty()
-    except (AttributeError, ValueError):
-        return False
 
 
 def ask(question: str) -> bool:
@@ -67,15 +59,15 @@ def yes_to_all(args: argparse.Namespace) -> bool:
 
 
 def report_settings_problems(exc: WriterSettingsError) -> int:
-    err("rosnet-tui: nothing was written; the settings are not usable for this:")
+    say("rosnet-tui: nothing was written; the settings are not usable for this:")
     for key, why in exc.problems:
-        err(f"  {key}: {why}")
+        say(f"  {key}: {why}")
     return EXIT_USAGE
 
 
-def state_dir_of(args: argparse.Namespace) -> Path:
-    sd = getattr(args, "state_dir", None)
-    return Path(sd).expanduser().absolute() if sd else default_state_dir()
+def file_of(args: argparse.Namespace, default: Path) -> Path:
+    """The file named by --file, absolute; *default* without it."""
+    return Path(args.file).expanduser().absolute() if args.file else default
 
 
 def paths_of(args: argparse.Namespace, *, hosts_path: Path | None = None,
@@ -94,9 +86,7 @@ def add_writer_options(p: argparse.ArgumentParser, *, file_help: str) -> None:
                    help="answer yes to every question the command would ask: write, and fix "
                         "what it would offer to fix (needed where there is no terminal)")
     p.add_argument("--file", metavar="PATH", type=Path, default=None, help=file_help)
-    p.add_argument("--state-dir", metavar="DIR", type=Path, default=None,
-                   help="where backups and the undo journal live "
-                        "(default: $XDG_STATE_HOME/rosnet-tui)")
+    add_state_dir_option(p, "where backups and the undo journal live")
     p.add_argument("--expect-digest", metavar="SHA256", default=None,
                    help="refuse unless the file is still the one previewed (used with sudo)")
     p.add_argument("--no-checks", action="store_true",
@@ -120,17 +110,27 @@ def show_preview(preview: mf.Preview) -> None:
     sys.stdout.flush()
 
 
-def confirm(args: argparse.Namespace, question: str) -> int | None:
-    """None to go on; an exit code to stop with (declined, or no terminal to ask on)."""
+NOT_WRITING = ("rosnet-tui: not writing without a confirmation, and there is no terminal to ask "
+               "on: read the diff above, then run the same command with --yes")
+
+
+def confirm(args: argparse.Namespace, question: str, *, dry_run: str | None = None,
+            cancelled: str = "Cancelled: nothing was written.", no_terminal: str = NOT_WRITING
+            ) -> int | None:
+    """None to go on (--yes, or the person said yes); an exit code to stop with: a dry run
+    (when the command has --dry-run, its *dry_run* words: "Dry run: <dry_run>."), declined
+    (*cancelled* said), or no terminal to ask on (*no_terminal* on stderr)."""
+    if dry_run is not None and args.dry_run:
+        print(f"Dry run: {dry_run}.")
+        return EXIT_OK
     if args.yes:
         return None
     if interactive():
         if ask(question):
             return None
-        print("Cancelled: nothing was written.")
+        print(cancelled)
         return EXIT_FAIL
-    err("rosnet-tui: not writing without a confirmation, and there is no terminal to ask on: "
-        "read the diff above, then run the same command with --yes")
+    say(no_terminal)
     return EXIT_USAGE
 
 
@@ -138,14 +138,14 @@ def run_as_root(cmd: list[str], doing: str, what: str) -> int:
     """Run our own sudo command *cmd* in this terminal, saying so first; an exit code."""
     line = privilege.format_command(cmd)
     if not privilege.sudo_available():
-        err(f"rosnet-tui: {doing} needs root, and sudo is not installed; run this as root:\n"
+        say(f"rosnet-tui: {doing} needs root, and sudo is not installed; run this as root:\n"
             f"  {line}")
         return EXIT_FAIL
     print(f"{doing[0].upper()}{doing[1:]} needs root; running:\n  {line}")
     sys.stdout.flush()
     rc = privilege.run_privileged(cmd, interactive=interactive())
     if rc != 0:
-        err(f"rosnet-tui: the privileged {what} did not succeed (exit {rc})")
+        say(f"rosnet-tui: the privileged {what} did not succeed (exit {rc})")
         return EXIT_FAIL
     return EXIT_OK
 
@@ -155,16 +155,16 @@ def write_preview(args: argparse.Namespace, preview: mf.Preview, sudo_cmd: list[
     """Write *preview* here, or through *sudo_cmd* when this user may not; say what happened."""
     if preview.needs_privilege:
         if sudo_cmd is None:
-            err(f"rosnet-tui: this user may not write {preview.path}; nothing was written")
+            say(f"rosnet-tui: this user may not write {preview.path}; nothing was written")
             return EXIT_FAIL
         return run_as_root(sudo_cmd, f"writing {preview.path}", "write")
     try:
         result = mf.apply_preview(preview, state_dir=state_dir_of(args))
     except mt.StalePreviewError as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     except mt.ManagedFileError as exc:
-        err(f"rosnet-tui: {exc}")
+        say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
     if result.changed:
         how = " in place (the file is a mount point)" if result.in_place else ""

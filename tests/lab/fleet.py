@@ -28,17 +28,14 @@ sets ``ros1`` everywhere; tests/lab/fleet_ros2.py switches to ROS 2.
 
 from __future__ import annotations
 
-import contextlib
-import os
 import subprocess
 import time
-import xmlrpc.client
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from . import procs, readme_install, topology
-from .lab import Lab, LabUnavailable, keypair
+from . import readme_install, topology
+from .lab import Lab
 from .topology import ADDR, ZENOH_PORT
 
 MAX_SITES = 9
@@ -139,6 +136,14 @@ class Fleet(Lab):
         self._computer(host)
         return self.by_name[host].local_ip
 
+    def settings_public_ip(self, host: str) -> str:
+        return self.public_ip(host)
+
+    def peers_of(self, host: str) -> list[str]:
+        """Every other computer of the fleet."""
+        self._computer(host)
+        return [o for o in self.COMPUTERS if o != host]
+
     # ------------------------------------------------------------------ configuration text
     def ip_batch(self, host: str) -> list[str]:
         """`ip -batch` lines that address and route *host* (its links already exist)."""
@@ -194,14 +199,7 @@ class Fleet(Lab):
         a, ia, b, ib = topology.OUTSIDER_LINK   # a stranger on the internet (issue 22)
         lines.append(f"link add name {ia} netns {self.ns(a)} type veth peer name {ib} "
                      f"netns {self.ns(b)}")
-        r = subprocess.run(["ip", "-batch", "-"], input="\n".join(lines) + "\n", text=True,
-                           capture_output=True, timeout=30)
-        self._netns_inodes = [i for i in (procs.netns_inode(self.netns_path(h))
-                                          for h in self.HOSTS) if i]
-        if r.returncode != 0:
-            if not self._netns_inodes:
-                raise LabUnavailable(f"cannot create network namespaces: {r.stderr.strip()}")
-            raise RuntimeError(f"fleet links failed: {r.stderr.strip()}")
+        self._create_links(lines)
         t1 = time.monotonic()
         self._write_files()
         t2 = time.monotonic()
@@ -221,66 +219,15 @@ class Fleet(Lab):
         runs with it, as on a real fleet."""
         readme_install.install(self.home(host))
 
-    def _configure_namespaces(self) -> None:
-        """Sysctls, addresses, routes and firewalls of every namespace, all at once."""
-        running = []
-        for h in self.HOSTS:
-            hdir = self._hostdir(h)
-            hdir.mkdir(exist_ok=True)
-            (hdir / "ip.batch").write_text("\n".join(self.ip_batch(h)) + "\n")
-            fwd = "1" if h in self.ROUTERS else "0"
-            sysctl = [f"echo {fwd} > /proc/sys/net/ipv4/ip_forward",
-                      *topology.sysctl_script(h).splitlines()[1:]]
-            script = [*sysctl, f"ip -batch {hdir / 'ip.batch'}", *sysctl]
-            if h.endswith("-modem"):
-                (hdir / "rules.v4").write_text(self.modem_ruleset(h[:-len("-modem")]))
-                script.append(f"iptables-restore {hdir / 'rules.v4'}")
-            running.append((h, subprocess.Popen(
-                ["ip", "netns", "exec", self.ns(h), "sh", "-ec", "\n".join(script)],
-                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)))
-        for h, p in running:
-            out, _ = p.communicate(timeout=30)
-            if p.returncode != 0:
-                raise RuntimeError(f"setting up {h} failed: {out.strip()}")
-
-    def _write_files(self) -> None:
-        assert self.dir is not None
-        root_ssh = Path("/root/.ssh")
-        if not root_ssh.exists():  # the mount point for each computer's ~/.ssh
-            root_ssh.mkdir(mode=0o700)
-            self._created_root_ssh = True
-        Path("/run/sshd").mkdir(mode=0o755, exist_ok=True)
-        for h in self.HOSTS:
-            etc = Path("/etc/netns") / self.ns(h)
-            etc.mkdir(parents=True, exist_ok=True)
-            (etc / "hosts").write_text(self.hosts_text(h))
-            (etc / "resolv.conf").write_text(topology.resolv_text())
-        keys = {h: {"host": keypair(f"host key of {h}"), "user": keypair(f"root@{h}")}
-                for h in self.COMPUTERS}
-        for h in self.COMPUTERS:
-            hdir = self._hostdir(h)
-            ssh = hdir / "home" / ".ssh"
-            ssh.mkdir(parents=True, mode=0o700)
-            os.chmod(hdir / "home", 0o755)
-            (hdir / "etc").mkdir(mode=0o700)
-            others = [o for o in self.COMPUTERS if o != h]
-            host_key = hdir / "etc" / "ssh_host_ed25519_key"
-            host_key.write_bytes(keys[h]["host"][0])
-            os.chmod(host_key, 0o600)
-            host_key.with_suffix(".pub").write_bytes(keys[h]["host"][1] + b"\n")
-            (ssh / "id_ed25519").write_bytes(keys[h]["user"][0])
-            os.chmod(ssh / "id_ed25519", 0o600)
-            (ssh / "id_ed25519.pub").write_bytes(keys[h]["user"][1] + b"\n")
-            (ssh / "authorized_keys").write_bytes(b"".join(keys[o]["user"][1] + b"\n"
-                                                           for o in others))
-            os.chmod(ssh / "authorized_keys", 0o600)
-            (ssh / "known_hosts").write_bytes(b"".join(
-                o.encode() + b" " + b" ".join(keys[o]["host"][1].split()[:2]) + b"\n"
-                for o in others))
-            (hdir / "etc" / "sshd_config").write_text(topology.sshd_config(
-                str(host_key), str(hdir / "home"), topology.SSH_SESSION_PATH, ""))
-            (hdir / "home" / ".bashrc").write_text(self.bashrc_text(h))
-            self.config_path(h)
+    def _namespace_script(self, host: str, hdir: Path) -> list[str]:
+        fwd = "1" if host in self.ROUTERS else "0"
+        sysctl = [f"echo {fwd} > /proc/sys/net/ipv4/ip_forward",
+                  *topology.sysctl_script(host).splitlines()[1:]]
+        script = [*sysctl, f"ip -batch {hdir / 'ip.batch'}", *sysctl]
+        if host.endswith("-modem"):
+            (hdir / "rules.v4").write_text(self.modem_ruleset(host[:-len("-modem")]))
+            script.append(f"iptables-restore {hdir / 'rules.v4'}")
+        return script
 
     # ------------------------------------------------------------------ the network
     def set_forwarding(self, host: str, mode: str) -> None:
@@ -347,73 +294,7 @@ class Fleet(Lab):
     def variant(self, name: str, **options: Any):
         raise NotImplementedError("the fleet has no variants (see tests/lab/lab.py for them)")
 
-    # ------------------------------------------------------------------ settings
-    def settings(self, host: str):
-        """rosnet-tui Settings of *host*: the master turtlebot, every other computer a peer
-        reached over SSH as root."""
-        from rosnet_tui.core.settings_model import (
-            CheckSettings,
-            Peer,
-            ProbeSettings,
-            RosSettings,
-            Settings,
-            ThisComponent,
-        )
-
-        self._computer(host)
-        me = self.by_name[host]
-        return Settings(
-            this=ThisComponent(name=host, role="master" if me.is_master else "member",
-                               connection="telecom" if me.is_master else "home",
-                               profile="remote", local_ip=me.local_ip, public_ip=me.public_ip,
-                               interface="eth0"),
-            peers=[Peer(name=s.name, local_ip=s.local_ip, public_ip=s.public_ip, ssh_user="root")
-                   for s in self.sites if s.name != host],
-            ros=RosSettings(master=self.master, port=11311),
-            probe=ProbeSettings(port=12345, public_ip_urls=[ADDR.PUBLIC_IP_URL],
-                                port_check_url=ADDR.PROBE_URL),
-            checks=CheckSettings(timeout_s=3.0))
-
     # ------------------------------------------------------------------ ROS 1
-    def start_roscore(self, timeout: float = 30.0) -> subprocess.Popen:
-        """roscore on the master (its modem forwards 1024-65000 in the ros1 mode)."""
-        self._require_built()
-        if self._roscore is not None and self._roscore.poll() is None:
-            return self._roscore
-        import shutil
-
-        if shutil.which("roscore") is None:
-            import pytest
-            pytest.skip("roscore is not installed (Debian package ros-core)")
-        with open(self.log_path("roscore"), "w") as log:
-            self._roscore = self.spawn(self.master, ["roscore", "-p", "11311"],
-                                       env=self.ros_env(self.master), stdout=log,
-                                       stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and self._roscore.poll() is None:
-            if self.master_answers():
-                return self._roscore
-            time.sleep(0.1)
-        tail = self.log_path("roscore").read_text(errors="replace")[-3000:]
-        self.stop_roscore()
-        raise RuntimeError(f"roscore did not answer within {timeout} s:\n{tail}")
-
-    def master_answers(self, timeout: float = 2.0) -> bool:
-        local = self.sites[0].local_ip
-
-        def ask() -> bool:
-            class T(xmlrpc.client.Transport):
-                def make_connection(self, host):
-                    conn = super().make_connection(host)
-                    conn.timeout = timeout
-                    return conn
-            with contextlib.suppress(OSError, xmlrpc.client.Error):
-                code, _, _ = xmlrpc.client.ServerProxy(
-                    f"http://{local}:11311/", transport=T()).getSystemState("/rnl")
-                return code == 1
-            return False
-        return self.call_in(self.master, ask, timeout=timeout + 5)
-
     def ros_env(self, host: str) -> dict[str, str]:
         self._computer(host)
         env = self.env(host)

@@ -22,7 +22,6 @@ import json
 import subprocess
 import sys
 import time
-from typing import Any
 
 from .fleet import Fleet
 from .ros2 import ROS2_IDS, SCRIPTS, ZROUTER, Ros2World, explain
@@ -132,17 +131,6 @@ class FleetRos2(Ros2World):
         if down:
             self.start_routers(down)
             self.wait_linked()
-
-    def __exit__(self, *exc: Any) -> None:
-        for p in self.nodes:
-            self.lab.kill(p, grace=0.5)
-        self.nodes.clear()
-        for h in list(self.routers):
-            self.stop_router(h)
-        self.lab.reset()
-        for h in self.lab.COMPUTERS:
-            self.router_config_path(h).unlink(missing_ok=True)
-            self.remove_tls(h)
 
 
 __all__ = ["ROS2_IDS", "FleetRos2", "explain"]

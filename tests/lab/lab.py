@@ -187,6 +187,51 @@ class Lab:
         if host not in COMPUTERS:
             raise ValueError(f"{host!r} is not a computer of the lab (robot or laptop)")
 
+    @property
+    def master(self) -> str:
+        """The computer that runs the ROS master (roscore; ROS 2: the hub router)."""
+        return "robot"
+
+    def local_ip(self, host: str) -> str:
+        self._computer(host)
+        return topology.LOCAL_IP[host]
+
+    def settings_public_ip(self, host: str) -> str:
+        """The public address the settings give *host* (its modem's, whatever a variant does)."""
+        self._computer(host)
+        return topology.PUBLIC_IP[host]
+
+    def peers_of(self, host: str) -> list[str]:
+        """The computers *host* knows: it trusts their user keys, knows their host keys by name,
+        and has them as its settings' peers."""
+        self._computer(host)
+        return [PEER[host]]
+
+    # ================================================================== configuration text
+    def hosts_text(self, host: str) -> str:
+        """*host*'s /etc/hosts as the lab builds it."""
+        return topology.hosts_text(host)
+
+    def bashrc_text(self, host: str) -> str:
+        return topology.bashrc_text(host)
+
+    def ip_batch(self, host: str) -> list[str]:
+        """`ip -batch` lines that address and route *host* (its links already exist)."""
+        return topology.ip_batch(host)
+
+    def _namespace_script(self, host: str, hdir: Path) -> list[str]:
+        """The shell lines that set *host*'s namespace up: sysctls, addresses and routes (from
+        hdir/ip.batch), firewall."""
+        script = [topology.sysctl_script(host), f"ip -batch {hdir / 'ip.batch'}",
+                  topology.sysctl_script(host)]  # again: rp_filter of the new interfaces
+        if host in ("robot_modem", "laptop_modem", "carrier", "travel_router"):
+            rules = (topology.carrier_ruleset() if host == "carrier"
+                     else topology.modem_ruleset(None) if host == "travel_router"
+                     else topology.modem_ruleset("robot" if host == "robot_modem" else "laptop"))
+            (hdir / "rules.v4").write_text(rules)
+            script.append(f"iptables-restore {hdir / 'rules.v4'}")
+        return script
+
     # ================================================================== running things
     def wrap(self, host: str) -> list[str]:
         """argv prefix running a command on *host*: its netns, hostname, HOME, ~/.ssh, /etc/hosts."""
@@ -384,68 +429,67 @@ class Lab:
         lines = [f"netns add {self.ns(h)}" for h in HOSTS]
         lines += [f"link add name {ia} netns {self.ns(a)} type veth peer name {ib} netns {self.ns(b)}"
                   for a, ia, b, ib in topology.LINKS]
-        r = subprocess.run(["ip", "-batch", "-"], input="\n".join(lines) + "\n", text=True,
-                           capture_output=True, timeout=20)
-        self._netns_inodes = [i for i in (procs.netns_inode(self.netns_path(h)) for h in HOSTS)
-                              if i]
-        if r.returncode != 0:
-            if not self._netns_inodes:
-                raise LabUnavailable(f"cannot create network namespaces: {r.stderr.strip()}")
-            raise RuntimeError(f"lab links failed: {r.stderr.strip()}")
+        self._create_links(lines)
         _check_kernel(self.ns("internet"))
 
         # 2. files: /etc/netns, homes, keys (before anything starts)
         self._write_files()
 
         # 3. per namespace: sysctls, addresses, routes, firewall (all namespaces at once)
-        running = []
-        for h in HOSTS:
-            hdir = self._hostdir(h)
-            hdir.mkdir(exist_ok=True)
-            (hdir / "ip.batch").write_text("\n".join(topology.ip_batch(h)) + "\n")
-            script = [topology.sysctl_script(h), f"ip -batch {hdir / 'ip.batch'}",
-                      topology.sysctl_script(h)]  # again: rp_filter of the new interfaces
-            if h in ("robot_modem", "laptop_modem", "carrier", "travel_router"):
-                rules = (topology.carrier_ruleset() if h == "carrier"
-                         else topology.modem_ruleset(None) if h == "travel_router"
-                         else topology.modem_ruleset("robot" if h == "robot_modem" else "laptop"))
-                (hdir / "rules.v4").write_text(rules)
-                script.append(f"iptables-restore {hdir / 'rules.v4'}")
-            running.append((h, subprocess.Popen(
-                ["ip", "netns", "exec", self.ns(h), "sh", "-ec", "\n".join(script)],
-                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)))
-        for h, p in running:
-            out, _ = p.communicate(timeout=20)
-            if p.returncode != 0:
-                raise RuntimeError(f"setting up {h} failed: {out.strip()}")
+        self._configure_namespaces()
 
         # 4. services, started together, then waited for together
         self._start_services()
 
+    def _create_links(self, lines: list[str]) -> None:
+        """Run the `ip -batch` *lines* that add the namespaces and their links."""
+        r = subprocess.run(["ip", "-batch", "-"], input="\n".join(lines) + "\n", text=True,
+                           capture_output=True, timeout=30)
+        self._netns_inodes = [i for i in (procs.netns_inode(self.netns_path(h))
+                                          for h in self.HOSTS) if i]
+        if r.returncode != 0:
+            if not self._netns_inodes:
+                raise LabUnavailable(f"cannot create network namespaces: {r.stderr.strip()}")
+            raise RuntimeError(f"lab links failed: {r.stderr.strip()}")
+
+    def _configure_namespaces(self) -> None:
+        """Every namespace's _namespace_script, all at once."""
+        running = []
+        for h in self.HOSTS:
+            hdir = self._hostdir(h)
+            hdir.mkdir(exist_ok=True)
+            (hdir / "ip.batch").write_text("\n".join(self.ip_batch(h)) + "\n")
+            running.append((h, subprocess.Popen(
+                ["ip", "netns", "exec", self.ns(h), "sh", "-ec",
+                 "\n".join(self._namespace_script(h, hdir))],
+                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)))
+        for h, p in running:
+            out, _ = p.communicate(timeout=30)
+            if p.returncode != 0:
+                raise RuntimeError(f"setting up {h} failed: {out.strip()}")
+
     def _write_files(self) -> None:
+        """/etc/netns of every namespace; each computer's keys, sshd config, HOME (.ssh trusting
+        its peers_of, .bashrc) and settings file."""
         assert self.dir is not None
         root_ssh = Path("/root/.ssh")
         if not root_ssh.exists():  # the mount point for each computer's ~/.ssh
             root_ssh.mkdir(mode=0o700)
             self._created_root_ssh = True
         Path("/run/sshd").mkdir(mode=0o755, exist_ok=True)  # sshd's privilege separation dir
-        for h in HOSTS:
+        for h in self.HOSTS:
             etc = Path("/etc/netns") / self.ns(h)
             etc.mkdir(parents=True, exist_ok=True)
-            _write_in_place(etc / "hosts", topology.hosts_text(h), 0o644)
+            _write_in_place(etc / "hosts", self.hosts_text(h), 0o644)
             _write_in_place(etc / "resolv.conf", topology.resolv_text(), 0o644)
-        keys = {}
-        for h in COMPUTERS:
-            hdir = self._hostdir(h)
+        keys = {h: {"host": keypair(f"host key of {self.hostname(h)}"),
+                    "user": keypair(f"root@{self.hostname(h)}")} for h in self.COMPUTERS}
+        for h in self.COMPUTERS:
+            hdir, peers = self._hostdir(h), self.peers_of(h)
             ssh = hdir / "home" / ".ssh"
             ssh.mkdir(parents=True, mode=0o700)
             os.chmod(hdir / "home", 0o755)
             (hdir / "etc").mkdir(mode=0o700)
-            keys[h] = {"host": keypair(f"host key of {HOSTNAMES[h]}"),
-                       "user": keypair(f"root@{HOSTNAMES[h]}")}
-        for h in COMPUTERS:
-            hdir, peer = self._hostdir(h), PEER[h]
-            ssh = hdir / "home" / ".ssh"
             host_key = hdir / "etc" / "ssh_host_ed25519_key"
             host_key.write_bytes(keys[h]["host"][0])
             os.chmod(host_key, 0o600)
@@ -453,13 +497,15 @@ class Lab:
             (ssh / "id_ed25519").write_bytes(keys[h]["user"][0])
             os.chmod(ssh / "id_ed25519", 0o600)
             (ssh / "id_ed25519.pub").write_bytes(keys[h]["user"][1] + b"\n")
-            (ssh / "authorized_keys").write_bytes(keys[peer]["user"][1] + b"\n")
+            (ssh / "authorized_keys").write_bytes(b"".join(keys[o]["user"][1] + b"\n"
+                                                           for o in peers))
             os.chmod(ssh / "authorized_keys", 0o600)
-            peer_host_key = b" ".join(keys[peer]["host"][1].split()[:2])
-            (ssh / "known_hosts").write_bytes(HOSTNAMES[peer].encode() + b" " + peer_host_key + b"\n")
+            (ssh / "known_hosts").write_bytes(b"".join(
+                self.hostname(o).encode() + b" " + b" ".join(keys[o]["host"][1].split()[:2])
+                + b"\n" for o in peers))
             (hdir / "etc" / "sshd_config").write_text(topology.sshd_config(
                 str(host_key), str(hdir / "home"), topology.SSH_SESSION_PATH, ""))
-            _write_in_place(hdir / "home" / ".bashrc", topology.bashrc_text(h))
+            _write_in_place(hdir / "home" / ".bashrc", self.bashrc_text(h))
             self.config_path(h)
 
     def _start_services(self) -> None:
@@ -493,30 +539,23 @@ class Lab:
 
     # ================================================================== settings for the product
     def settings(self, host: str):
-        """The rosnet-tui Settings of *host* (robot: master turtlebot; laptop: member sami)."""
-        from rosnet_tui.core.settings_model import (
-            CheckSettings,
-            Peer,
-            ProbeSettings,
-            RosSettings,
-            Settings,
-            ThisComponent,
-        )
+        """The rosnet-tui Settings of *host*: the master behind a telecom router, every other
+        computer a member at home; its peers_of reached over SSH as root (the two-site lab:
+        robot is the master turtlebot, laptop the member sami)."""
+        from rosnet_tui.core.settings_model import Peer, ThisComponent
+        from tests.builders import checked_settings
 
         self._computer(host)
-        peer = PEER[host]
-        role = "master" if host == "robot" else "member"
-        connection = "telecom" if host == "robot" else "home"
-        return Settings(
-            this=ThisComponent(name=HOSTNAMES[host], role=role, connection=connection,
-                               profile="remote", local_ip=topology.LOCAL_IP[host],
-                               public_ip=topology.PUBLIC_IP[host], interface="eth0"),
-            peers=[Peer(name=HOSTNAMES[peer], local_ip=topology.LOCAL_IP[peer],
-                        public_ip=topology.PUBLIC_IP[peer], ssh_user="root")],
-            ros=RosSettings(master=ADDR.ROBOT_NAME, port=11311),
-            probe=ProbeSettings(port=12345, public_ip_urls=[ADDR.PUBLIC_IP_URL],
-                                port_check_url=ADDR.PROBE_URL),
-            checks=CheckSettings(timeout_s=3.0))
+        is_master = host == self.master
+        this = ThisComponent(name=self.hostname(host), role="master" if is_master else "member",
+                             connection="telecom" if is_master else "home", profile="remote",
+                             local_ip=self.local_ip(host),
+                             public_ip=self.settings_public_ip(host), interface="eth0")
+        peers = [Peer(name=self.hostname(p), local_ip=self.local_ip(p),
+                      public_ip=self.settings_public_ip(p), ssh_user="root")
+                 for p in self.peers_of(host)]
+        return checked_settings(this, peers, self.hostname(self.master), probe_port=12345,
+                                public_ip_url=ADDR.PUBLIC_IP_URL, port_check_url=ADDR.PROBE_URL)
 
     def config_path(self, host: str) -> Path:
         """(Re)write *host*'s settings file at its default place (HOME/.config/rosnet-tui/
@@ -529,15 +568,15 @@ class Lab:
 
     # ================================================================== ROS
     def start_roscore(self, timeout: float = 30.0) -> subprocess.Popen:
-        """Start roscore on the robot and wait (bounded) until the master answers."""
+        """Start roscore on the master and wait (bounded) until it answers."""
         self._require_built()
         if self._roscore is not None and self._roscore.poll() is None:
             return self._roscore
         if shutil.which("roscore") is None:
             _unavailable("roscore is not installed (Debian package ros-core)")
         with open(self.log_path("roscore"), "w") as log:
-            self._roscore = self.spawn("robot", ["roscore", "-p", "11311"],
-                                       env=self.ros_env("robot"), stdout=log,
+            self._roscore = self.spawn(self.master, ["roscore", "-p", "11311"],
+                                       env=self.ros_env(self.master), stdout=log,
                                        stderr=subprocess.STDOUT)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -551,7 +590,9 @@ class Lab:
         raise RuntimeError(f"roscore did not answer within {timeout} s:\n{tail}")
 
     def master_answers(self, timeout: float = 2.0) -> bool:
-        """Whether the master on the robot answers getSystemState (asked inside the robot)."""
+        """Whether the ROS master answers getSystemState (asked on the master's computer)."""
+        local = self.local_ip(self.master)
+
         def ask() -> bool:
             class T(xmlrpc.client.Transport):
                 def make_connection(self, host):
@@ -560,11 +601,11 @@ class Lab:
                     return conn
             try:
                 code, _, _ = xmlrpc.client.ServerProxy(
-                    f"http://{ADDR.ROBOT_LOCAL}:11311/", transport=T()).getSystemState("/rnl")
+                    f"http://{local}:11311/", transport=T()).getSystemState("/rnl")
                 return code == 1
             except (OSError, xmlrpc.client.Error):
                 return False
-        return self.call_in("robot", ask, timeout=timeout + 5)
+        return self.call_in(self.master, ask, timeout=timeout + 5)
 
     def stop_roscore(self) -> None:
         if self._roscore is not None:

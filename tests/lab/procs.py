@@ -9,6 +9,7 @@ from __future__ import annotations
 import ctypes
 import os
 import signal
+import subprocess
 import threading
 import time
 from collections.abc import Callable, Iterable
@@ -115,6 +116,18 @@ def wait_dead(pids: Iterable[int], timeout: float) -> list[int]:
         if not left or time.monotonic() >= deadline:
             return left
         time.sleep(0.02)
+
+
+def stop(proc: subprocess.Popen, grace: float) -> None:
+    """Stop a child: SIGTERM, up to *grace* s to exit, then SIGKILL; reaped either way."""
+    if proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(grace)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(5)
 
 
 def kill_tree(pid: int, *, grace: float = 1.0) -> None:

@@ -232,7 +232,7 @@ class Ros2World:
         for h in list(self.routers):
             self.stop_router(h)
         self.lab.reset()
-        for h in COMPUTERS:
+        for h in self.lab.COMPUTERS:
             self.lab.config_path(h)
             self.router_config_path(h).unlink(missing_ok=True)
             self.remove_tls(h)

@@ -23,6 +23,7 @@ from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.known_hosts import host_key_name
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
+from tests.lab import procs
 
 SSHD = shutil.which("sshd") or "/usr/sbin/sshd"
 def keygen(path: Path, kind: str = "ed25519") -> str:
@@ -41,7 +42,7 @@ def fingerprint(pub: Path) -> str:
 class Sshd:
     """A real sshd on 127.0.0.1:PORT with its own host key and authorized_keys (nothing else)."""
 
-    def __init__(self, root: Path) -> None:
+    def __init__(self, root: Path, extra_config: str = "") -> None:
         self.root = root
         root.mkdir(parents=True, exist_ok=True)
         self.port = free_port()
@@ -56,7 +57,7 @@ class Sshd:
             f"PidFile {root / 'sshd.pid'}\nAuthorizedKeysFile {self.authorized}\n"
             "StrictModes no\nUsePAM no\nPasswordAuthentication no\n"
             "KbdInteractiveAuthentication no\nPubkeyAuthentication yes\n"
-            "PermitRootLogin prohibit-password\nLogLevel VERBOSE\nMaxStartups 50\n")
+            "PermitRootLogin prohibit-password\nLogLevel VERBOSE\nMaxStartups 50\n" + extra_config)
         self.proc: subprocess.Popen | None = None
 
     @property
@@ -82,13 +83,8 @@ class Sshd:
         raise RuntimeError("sshd did not start within 10 s")
 
     def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(5)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
+        if self.proc is not None:
+            procs.stop(self.proc, 5)
         self.proc = None
 
 
