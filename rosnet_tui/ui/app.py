@@ -7,6 +7,7 @@ run checks, write plans) and reports back with messages.
 
 from __future__ import annotations
 
+import gc
 import os
 
 from textual.app import App
@@ -84,6 +85,14 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
         self.push_screen(f"step-{self.current_step}")
         if self.open_setup or not self.session.settings.complete or self.session.draft():
             self.action_setup()
+
+    def on_ready(self) -> None:
+        """The first frame is out: garbage collection back on (the CLI paused it for the
+        start-up, cli/wizard.py), the objects start-up made frozen first, so that no collection
+        scans them again."""
+        if not gc.isenabled():
+            gc.freeze()
+            gc.enable()
 
     def refresh_css(self, animate: bool = True) -> None:
         first, self._theme_variables = self._theme_variables, None
