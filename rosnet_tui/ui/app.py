@@ -76,13 +76,18 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
         self.current_step = self.session.last_step()
 
     # ------------------------------------------------------------------ start-up
-    def on_mount(self) -> None:
-        self._catch_signals()
+    def get_default_screen(self) -> StepScreen:
+        """The first screen is the step to show. (Pushed over Textual's blank default screen, it
+        would be drawn twice more at start-up: every layout of a screen beneath repaints the
+        one on top.)"""
         self.set_class(self.size.width >= self.WIDE_AT, "wide")
         for step_id in STEP_IDS:
             screen = StepScreen(step_for(step_id, self.session.settings), self.session)
             self.install_screen(screen, name=f"step-{step_id}")
-        self.push_screen(f"step-{self.current_step}")
+        return tc.first_screen(self.get_screen(f"step-{self.current_step}"))
+
+    def on_mount(self) -> None:
+        self._catch_signals()
         if self.open_setup or not self.session.settings.complete or self.session.draft():
             self.action_setup()
 
