@@ -88,6 +88,9 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
 
     def on_mount(self) -> None:
         self._catch_signals()
+        # Back from Ctrl+Z: the terminal shows the shell's screen, so the step is drawn whole
+        # (Textual would redraw only what changed meanwhile: nothing).
+        self.app_resume_signal.subscribe(self, lambda _app: self.screen.refresh(repaint=True))
         if self.open_setup or not self.session.settings.complete or self.session.draft():
             self.action_setup()
 
