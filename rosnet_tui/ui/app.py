@@ -97,10 +97,13 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
     def on_ready(self) -> None:
         """The first frame is out: garbage collection back on (the CLI paused it for the
         start-up, cli/wizard.py), the objects start-up made frozen first, so that no collection
-        scans them again."""
+        scans them again; the terminal left on plain attributes, as the first change expects."""
         if not gc.isenabled():
             gc.freeze()
             gc.enable()
+        plain = getattr(tc.app_driver(self), "plain_attributes", None)
+        if plain is not None:
+            plain()
 
     def refresh_css(self, animate: bool = True) -> None:
         first, self._theme_variables = self._theme_variables, None
