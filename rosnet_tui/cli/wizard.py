@@ -39,10 +39,10 @@ def run_wizard(args: argparse.Namespace) -> int:
     if os.geteuid() == 0 and not os.environ.get("ROSNET_TUI_ALLOW_ROOT"):
         print("rosnet-tui: note: running as root is not needed; files that need root are "
               "written through sudo.", file=sys.stderr)
-    # No cyclic garbage collection until the first frame: start-up makes hundreds of thousands
-    # of objects that all live on (classes, styles, widgets), and the collector would scan them
-    # over and over (a fifth of the start-up). The app turns it back on once its first frame is
-    # out (RosnetApp.on_ready), with what start-up made set aside (gc.freeze).
+    # No cyclic garbage collection until the first frame: start-up makes tens of thousands of
+    # objects that all live on (classes, styles, widgets), and the collector would scan them
+    # over and over (about 30 ms, a full collection included). The app turns it back on once
+    # its first frame is out (RosnetApp.on_ready), with what start-up made set aside (gc.freeze).
     gc.disable()
     try:
         import asyncio
