@@ -57,6 +57,7 @@ SIGNATURES = {
     ("textual.widgets:Input", "_on_key"): ["self", "event"],
     ("textual.app:App", "_handle_exception"): ["self", "error"],
     ("textual.keys", "_character_to_key"): ["character"],
+    ("textual.screen:Screen", "_push_result_callback"): ["self", "requester", "callback", "future"],
 }
 
 

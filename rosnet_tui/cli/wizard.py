@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 import threading
@@ -38,19 +39,27 @@ def run_wizard(args: argparse.Namespace) -> int:
     if os.geteuid() == 0 and not os.environ.get("ROSNET_TUI_ALLOW_ROOT"):
         print("rosnet-tui: note: running as root is not needed; files that need root are "
               "written through sudo.", file=sys.stderr)
-    import asyncio
+    # No cyclic garbage collection until the first frame: start-up makes tens of thousands of
+    # objects that all live on (classes, styles, widgets), and the collector would scan them
+    # over and over (about 30 ms, a full collection included). The app turns it back on once
+    # its first frame is out (RosnetApp.on_ready), with what start-up made set aside (gc.freeze).
+    gc.disable()
+    try:
+        import asyncio
 
-    from rosnet_tui.core.paths import Paths
-    from rosnet_tui.core.session import WizardSession
-    from rosnet_tui.ui.app import RosnetApp
+        from rosnet_tui.core.paths import Paths
+        from rosnet_tui.core.session import WizardSession
+        from rosnet_tui.ui.app import RosnetApp
 
-    session = WizardSession(settings or new_settings(), Paths(config_path=path))
-    app = RosnetApp(session, open_setup=bool(getattr(args, "setup", False)))
-    # Our own loop: leaving does not wait for threads still blocked on a dead network (a check's
-    # connect or SSH handshake); asyncio.run() would, for as long as their timeouts.
-    loop = asyncio.new_event_loop()
-    asyncio.set_event_loop(loop)
-    result = app.run(loop=loop)
+        session = WizardSession(settings or new_settings(), Paths(config_path=path))
+        app = RosnetApp(session, open_setup=bool(getattr(args, "setup", False)))
+        # Our own loop: leaving does not wait for threads still blocked on a dead network (a
+        # check's connect or SSH handshake); asyncio.run() would, for as long as their timeouts.
+        loop = asyncio.new_event_loop()
+        asyncio.set_event_loop(loop)
+        result = app.run(loop=loop)
+    finally:
+        gc.enable()  # already on, unless the app stopped before its first frame
     code = app.return_code or 0
     if code == 1:  # Textual has printed the error; a crash never exits 0
         print("rosnet-tui: the wizard stopped on an error (above). Results and an unsaved "

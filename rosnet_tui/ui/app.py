@@ -7,6 +7,7 @@ run checks, write plans) and reports back with messages.
 
 from __future__ import annotations
 
+import gc
 import os
 
 from textual.app import App
@@ -75,15 +76,34 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
         self.current_step = self.session.last_step()
 
     # ------------------------------------------------------------------ start-up
-    def on_mount(self) -> None:
-        self._catch_signals()
+    def get_default_screen(self) -> StepScreen:
+        """The first screen is the step to show. (Pushed over Textual's blank default screen, it
+        would be drawn twice more at start-up: every layout of a screen beneath repaints the
+        one on top.)"""
         self.set_class(self.size.width >= self.WIDE_AT, "wide")
         for step_id in STEP_IDS:
             screen = StepScreen(step_for(step_id, self.session.settings), self.session)
             self.install_screen(screen, name=f"step-{step_id}")
-        self.push_screen(f"step-{self.current_step}")
+        return tc.first_screen(self.get_screen(f"step-{self.current_step}"))
+
+    def on_mount(self) -> None:
+        self._catch_signals()
+        # Back from Ctrl+Z: the terminal shows the shell's screen, so the step is drawn whole
+        # (Textual would redraw only what changed meanwhile: nothing).
+        self.app_resume_signal.subscribe(self, lambda _app: self.screen.refresh(repaint=True))
         if self.open_setup or not self.session.settings.complete or self.session.draft():
             self.action_setup()
+
+    def on_ready(self) -> None:
+        """The first frame is out: garbage collection back on (the CLI paused it for the
+        start-up, cli/wizard.py), the objects start-up made frozen first, so that no collection
+        scans them again; the terminal left on plain attributes, as the first change expects."""
+        if not gc.isenabled():
+            gc.freeze()
+            gc.enable()
+        plain = getattr(tc.app_driver(self), "plain_attributes", None)
+        if plain is not None:
+            plain()
 
     def refresh_css(self, animate: bool = True) -> None:
         first, self._theme_variables = self._theme_variables, None

@@ -193,6 +193,14 @@ class FrugalScreen:
         self.cursor_shown = False
         self._sync_held = False
 
+    def plain_attributes(self) -> str:
+        """What takes the terminal back to plain attributes ("" when it has them already)."""
+        out: list[str] = []
+        self._sgr(out, DEFAULT)
+        text = "".join(out)
+        self.sent += len(text)
+        return text
+
     # ------------------------------------------------------------------ feeding
     def feed(self, data: str) -> str:
         """Textual's output in, what the terminal needs out."""
@@ -431,6 +439,14 @@ def frugal_driver_class():
 
         def forget_screen(self) -> None:
             self._forget = True
+
+        def plain_attributes(self) -> None:
+            """Leave the terminal on plain attributes (after the first frame, whose last cells
+            may be a coloured scrollbar: the next screen then starts from plain text)."""
+            data = self.frugal.plain_attributes()
+            if data:
+                super().write(data)
+                self.flush()
 
         def write(self, data: str) -> None:
             if getattr(self, "_forget", False):

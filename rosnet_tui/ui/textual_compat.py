@@ -43,6 +43,7 @@ RELIED_ON: tuple[Reliance, ...] = (
     Reliance("textual.message_pump:MessagePump", "_closing", "attribute", True),
     Reliance("textual.screen:Screen", "_callbacks", "attribute", True),
     Reliance("textual.screen:Screen", "_binding_chain", "attribute"),
+    Reliance("textual.screen:Screen", "_push_result_callback", "method"),
     Reliance("textual.dom:DOMNode", "_merged_bindings", "attribute", True),
     Reliance("textual.widgets:Input", "_on_key", "override"),
     Reliance("textual.app:App", "_exit", "attribute", True),
@@ -104,6 +105,14 @@ def app_leaving(app) -> bool:
 def installed_screens(app) -> list:
     """The screens installed by name in *app* (instances, and factories not called yet)."""
     return list(getattr(app, "_installed_screens", {}).values())
+
+
+def first_screen(screen):
+    """*screen*, made ready to be the app's first screen (App.get_default_screen): switching away
+    from a screen drops the result callback that pushing it gave it, and a first screen was never
+    pushed, so it gets one that does nothing."""
+    screen._push_result_callback(screen, None)
+    return screen
 
 
 # ---------------------------------------------------------------------- the app
