@@ -143,6 +143,7 @@ def run_fleet_row(opts: Options, log: Callable[[str], None]) -> list[RowResult]:
     res = RowResult(8, TITLE)
     try:
         from tests.lab import LabUnavailable, lab_available
+        from tests.lab.firewall import secured
         from tests.lab.fleet import Fleet
         from tests.lab.fleet_ros2 import FleetRos2
     except Exception as exc:  # e.g. the lab's own dependencies are missing
@@ -172,8 +173,11 @@ def run_fleet_row(opts: Options, log: Callable[[str], None]) -> list[RowResult]:
         fleet.reset()
         fleet.start_roscore()
         try:
-            ros1 = measure_sizes(fleet, fleet.settings(fleet.master), fleet.ros_env(fleet.master),
-                                 opts, state, package, "ros1")
+            # ROS 1 as the product sets it up: the master's peers-only firewall loaded (its
+            # settings name all 8 members), so linux.firewall and security.outsider pass too.
+            with secured(fleet, hosts=[fleet.master]):
+                ros1 = measure_sizes(fleet, fleet.settings(fleet.master),
+                                     fleet.ros_env(fleet.master), opts, state, package, "ros1")
         finally:
             fleet.stop_roscore()
             fleet.reset()
