@@ -7,7 +7,10 @@ with its length, then the source), then speaks JSON lines on the same channel:
 
 - master -> agent: ``{"load": NAME, "src": SOURCE, "entry": FUNCTION or null}`` (a probe
   program, compiled and run once here as a module: its imports are then warm), ``{"run": NAME,
-  "id": N, "argv": [...]}`` (start it), ``{"kill": N}`` (stop it);
+  "id": N, "argv": [...], "ni": [TEXT, STATUS] (optional)}`` (start it; with "ni", when the agent
+  was started as the fallback for a peer without rosnet-tui installed (``no-install`` after its
+  life bound), the run needs the install: TEXT is its output and STATUS its exit status, as the
+  install finder's own report), ``{"kill": N}`` (stop it);
 - agent -> master: ``{"ready": 1}`` once, then per run ``{"id": N, "o": TEXT}`` (its stdout),
   ``{"id": N, "e": TEXT}`` (its stderr), ``{"id": N, "x": STATUS}`` (it ended). Every line ends
   with ``#<its number>`` so the master can wait for the next whole line.
@@ -40,8 +43,9 @@ MAX_S = 600.0     # the hard maximum when none is given
 
 
 class Agent:
-    def __init__(self, out, max_s: float) -> None:
+    def __init__(self, out, max_s: float, no_install: bool = False) -> None:
         self.out = out
+        self.no_install = no_install
         self.lock = threading.Lock()
         self.seq = 0
         self.programs = {}   # name -> (code, namespace, entry)
@@ -65,7 +69,11 @@ class Agent:
             exec(code, ns)   # the module's imports and definitions, once for every run
         self.programs[name] = (code, ns, entry)
 
-    def run(self, rid, name: str, argv) -> None:
+    def run(self, rid, name: str, argv, needs_install=None) -> None:
+        if self.no_install and needs_install:
+            self.send({"id": rid, "o": str(needs_install[0])})
+            self.send({"id": rid, "x": int(needs_install[1])})
+            return
         if name not in self.programs:
             self.send({"id": rid, "e": f"no program {name!r} loaded\n"})
             self.send({"id": rid, "x": 2})
@@ -164,7 +172,7 @@ class Agent:
                 if "load" in msg:
                     self.load(msg["load"], msg["src"], msg.get("entry"))
                 elif "run" in msg:
-                    self.run(msg.get("id"), msg["run"], msg.get("argv") or [])
+                    self.run(msg.get("id"), msg["run"], msg.get("argv") or [], msg.get("ni"))
                 elif "kill" in msg:
                     self.kill(msg["kill"])
             except Exception as exc:  # noqa: BLE001 - a bad request is said, the agent goes on
@@ -181,7 +189,8 @@ def main() -> None:
         max_s = float(sys.argv[1]) if len(sys.argv) > 1 else MAX_S
     except ValueError:
         max_s = MAX_S
-    Agent(sys.stdout.buffer, max(1.0, min(max_s, 3600.0))).serve(sys.stdin.buffer)
+    no_install = sys.argv[2:3] == ["no-install"]
+    Agent(sys.stdout.buffer, max(1.0, min(max_s, 3600.0)), no_install).serve(sys.stdin.buffer)
 
 
 if __name__ == "__main__":

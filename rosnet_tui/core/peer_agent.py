@@ -45,6 +45,9 @@ class AgentKind:
     name: str
     command: Callable[[float], str]
     programs: Sequence[tuple[str, bytes, str | None]]
+    # What a run that needs the peer's rosnet-tui answers when the agent runs without one (the
+    # install finder's fallback): (output, exit status), the finder's own report.
+    no_install: tuple[str, int] | None = None
 
 
 class AgentCall:
@@ -236,7 +239,8 @@ class PeerAgent:
         async with self.send_lock:
             return await self.session.write(json.dumps(msg) + "\n")
 
-    async def call(self, program: str, argv: Sequence[str], timeout: float) -> AgentCall:
+    async def call(self, program: str, argv: Sequence[str], timeout: float,
+                   needs_install: bool = False) -> AgentCall:
         assert self.session is not None
         rid = next(self.ids)
         call = AgentCall(self.peer, self.session.result, timeout, self, rid)
@@ -247,7 +251,10 @@ class PeerAgent:
             call.end()
             return call
         self.calls[rid] = call
-        if not await self.send({"run": program, "id": rid, "argv": list(argv)}):
+        msg: dict[str, Any] = {"run": program, "id": rid, "argv": list(argv)}
+        if needs_install and self.kind.no_install is not None:
+            msg["ni"] = list(self.kind.no_install)
+        if not await self.send(msg):
             self.calls.pop(rid, None)
             call.end()
         return call
@@ -298,10 +305,12 @@ def _failed(peer: Peer, result: SshResult, timeout: float) -> AgentCall:
 
 async def agent_call(agents: PeerAgents, opts: SshOptions | None, peer: Peer, kind: AgentKind,
                      program: str, argv: Sequence[str], *, timeout: float,
-                     tcp_timeout: float | None = None, max_s: float = 120.0) -> AgentCall:
+                     tcp_timeout: float | None = None, max_s: float = 120.0,
+                     needs_install: bool = False) -> AgentCall:
     """Start *program* with *argv* on *peer*'s agent of *kind*; never raises. *timeout* bounds
     reaching the peer (and is the default for reads and waits), *tcp_timeout* its TCP part, as
-    for an SSH session; *max_s* bounds the agent's life if this call starts it."""
+    for an SSH session; *max_s* bounds the agent's life if this call starts it; *needs_install*:
+    the run needs the peer's rosnet-tui (see AgentKind.no_install)."""
     pool = getattr(opts, "pool", None)
     if pool is not None:       # the peer's connection first: its failures, within our bounds
         conn, _shared = await pool.connect(opts, peer, timeout, tcp_timeout)
@@ -324,17 +333,17 @@ async def agent_call(agents: PeerAgents, opts: SshOptions | None, peer: Peer, ki
         raise
     if started.failure is not None:
         return _failed(peer, started, timeout)
-    return await agent.call(program, argv, timeout)
+    return await agent.call(program, argv, timeout, needs_install)
 
 
 @contextlib.asynccontextmanager
 async def agent_session(agents: PeerAgents, opts: SshOptions | None, peer: Peer,
                         kind: AgentKind, program: str, argv: Sequence[str], *, timeout: float,
-                        tcp_timeout: float | None = None, max_s: float = 120.0
-                        ) -> AsyncIterator[AgentCall]:
+                        tcp_timeout: float | None = None, max_s: float = 120.0,
+                        needs_install: bool = False) -> AsyncIterator[AgentCall]:
     """:func:`agent_call` for an ``async with`` block; the run is stopped on leaving it."""
     call = await agent_call(agents, opts, peer, kind, program, argv, timeout=timeout,
-                            tcp_timeout=tcp_timeout, max_s=max_s)
+                            tcp_timeout=tcp_timeout, max_s=max_s, needs_install=needs_install)
     try:
         yield call
     finally:
@@ -344,14 +353,15 @@ async def agent_session(agents: PeerAgents, opts: SshOptions | None, peer: Peer,
 async def agent_run(agents: PeerAgents, opts: SshOptions | None, peer: Peer, kind: AgentKind,
                     program: str, argv: Sequence[str], *, timeout: float,
                     connect_timeout: float | None = None, tcp_timeout: float | None = None,
-                    max_s: float = 120.0) -> SshResult:
+                    max_s: float = 120.0, needs_install: bool = False) -> SshResult:
     """Run *program* on *peer*'s agent within *timeout* overall, as ``ssh_run`` runs a command
     (*connect_timeout*: reaching the peer; *tcp_timeout*: its TCP part)."""
     loop = asyncio.get_running_loop()
     deadline = loop.time() + timeout
     ct = min(float(connect_timeout), timeout) if connect_timeout is not None else timeout
     async with agent_session(agents, opts, peer, kind, program, argv, timeout=ct,
-                             tcp_timeout=tcp_timeout, max_s=max_s) as call:
+                             tcp_timeout=tcp_timeout, max_s=max_s,
+                             needs_install=needs_install) as call:
         if not call.ok:
             return call.result
         return await call.wait(max(deadline - loop.time(), 0.05))

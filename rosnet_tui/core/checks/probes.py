@@ -24,7 +24,7 @@ from typing import Any, TypeVar
 from urllib.parse import urljoin, urlsplit
 
 from rosnet_tui import __version__
-from rosnet_tui.core import agentproto, fleet_tls, ros2, rosproto, zenohproto
+from rosnet_tui.core import agentproto, chatproto, fleet_tls, ros2, rosproto, zenohproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext
 from rosnet_tui.core.checks.data import view
 from rosnet_tui.core.peer_agent import AgentCall, AgentKind, PeerAgents, agent_run, agent_session
@@ -316,11 +316,13 @@ done
                      2>/dev/null | tail -n 1) && L "$b"; }
 [ -n "$py" ] && [ -n "$BOOT" ] && exec "$py" -c "$BOOT" "$@"
 [ -n "$py" ] && exec "$py" - "$@"
-[ -n "$FALLBACK" ] && [ -n "$BOOT" ] && exec python3 -S -c "$BOOT" "$@"
+[ -n "$FALLBACK" ] && [ -n "$BOOT" ] && exec python3 -S -c "$BOOT" "$@" no-install
 [ -n "$FALLBACK" ] && exec python3 -S - "$@"
-echo "$MARK{\"error\": \"no_install\", \"detail\": \"no rosnet-tui installed\"}"
+echo "$MARK$NO_INSTALL"
 exit @EXIT@
 """.replace("@EXIT@", str(NO_INSTALL_EXIT))
+NO_INSTALL_REPORT = '{"error": "no_install", "detail": "no rosnet-tui installed"}'
+"""What a peer without rosnet-tui installed reports (after the program's mark)."""
 
 
 def installed_python_command(*args: str, mark: str, fallback: bool = False,
@@ -333,7 +335,8 @@ def installed_python_command(*args: str, mark: str, fallback: bool = False,
     peer's login shell may be any shell. Never the peer's python3 for a program that needs the
     install's packages. With *boot*, the interpreter runs ``-c boot`` (a loader that reads the
     program from stdin and leaves stdin open: the peer agent's) instead of ``-``."""
-    script = ("MARK=" + shq(mark) + "\n" + ("FALLBACK=1\n" if fallback else "")
+    script = ("MARK=" + shq(mark) + "\nNO_INSTALL=" + shq(NO_INSTALL_REPORT) + "\n"
+              + ("FALLBACK=1\n" if fallback else "")
               + ("BOOT=" + shq(boot) + "\n" if boot else "") + _FIND_INSTALL)
     return "sh -c " + shq(script) + " rosnet-tui-peer " + " ".join(shq(a) for a in args)
 
@@ -351,15 +354,38 @@ def zenoh_peer_command(*args: str, need_zenoh: bool = True) -> str:
 # One program per peer and round runs every probe the round's checks ask of that peer (see
 # core/peer_agent.py): ROS 1's on the peer's python3 without site (stdlib only), ROS 2's on the
 # interpreter of the rosnet-tui installed there (eclipse-zenoh).
+# Both serve the Linux chats' peer side (core/chatproto.py, stdlib). A peer without rosnet-tui
+# gets ROS 2's agent on its python3 (the finder's fallback): what needs the install (the Zenoh
+# probes: needs_install) answers with the finder's no_install report, as a lone command did.
 ROSPROTO_SOURCE = Path(rosproto.__file__).read_bytes()   # the ROS 1 probe program
 ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()    # the ROS 2 (Zenoh) probe program
+CHAT_SOURCE = Path(chatproto.__file__).read_bytes()      # the chats' peer side
+PEER_PYTHON = "python3"   # the peer's python the ROS 1 agent and the chats run with
+
+
+def peer_python() -> str:
+    """The peer's python (the name, looked up on the peer's PATH)."""
+    return PEER_PYTHON
+
+
 ROS_AGENT = AgentKind(
-    "ros1", lambda max_s: f"python3 -S -c {shq(agentproto.BOOT)} {max_s:.0f}",
-    (("ros", ROSPROTO_SOURCE, "main"),))
+    "ros1", lambda max_s: f"{peer_python()} -S -c {shq(agentproto.BOOT)} {max_s:.0f}",
+    (("ros", ROSPROTO_SOURCE, "main"), ("chat", CHAT_SOURCE, "main")))
 ZENOH_AGENT = AgentKind(
     "ros2", lambda max_s: installed_python_command(f"{max_s:.0f}", mark=zenohproto.REPORT_MARK,
-                                                   boot=agentproto.BOOT),
-    (("zenoh", ZENOH_SOURCE, "run_program"),))
+                                                   fallback=True, boot=agentproto.BOOT),
+    (("zenoh", ZENOH_SOURCE, "run_program"), ("chat", CHAT_SOURCE, "main")),
+    (f"{zenohproto.REPORT_MARK}{NO_INSTALL_REPORT}\n", NO_INSTALL_EXIT))
+
+
+def chat_agent(ctx: CheckContext) -> AgentKind:
+    """The agent that runs the chats' peer side in this round (its ROS version's)."""
+    return ZENOH_AGENT if ctx.settings.ros2 else ROS_AGENT
+
+
+def no_python(call: AgentCall | SshResult) -> bool:
+    """The agent could not start for want of a python3 on the peer (exit status 127)."""
+    return call.exit_status == 127 and not call.stdout
 
 
 def _agents(ctx: CheckContext) -> PeerAgents:
@@ -376,21 +402,23 @@ def agent_life(ctx: CheckContext) -> float:
 
 async def peer_run(ctx: CheckContext, peer: Peer, kind: AgentKind, program: str,
                    argv: Sequence[str], *, timeout: float, connect_timeout: float | None = None,
-                   tcp_timeout: float | None = None) -> SshResult:
+                   tcp_timeout: float | None = None, needs_install: bool = False) -> SshResult:
     """Run *program* (one of *kind*'s) with *argv* on *peer*'s agent of the round, as
     ``ssh_run`` would run it alone: the same bounds, the same result."""
     return await agent_run(_agents(ctx), ctx.ssh, peer, kind, program, argv, timeout=timeout,
                            connect_timeout=connect_timeout, tcp_timeout=tcp_timeout,
-                           max_s=agent_life(ctx))
+                           max_s=agent_life(ctx), needs_install=needs_install)
 
 
 def peer_session(ctx: CheckContext, peer: Peer, kind: AgentKind, program: str,
-                 argv: Sequence[str], *, timeout: float, tcp_timeout: float | None = None
+                 argv: Sequence[str], *, timeout: float, tcp_timeout: float | None = None,
+                 needs_install: bool = False
                  ) -> contextlib.AbstractAsyncContextManager[AgentCall]:
     """*program* running on *peer*'s agent for an ``async with`` block, read as ``ssh_session``'s
     session is (``ok``, ``result``, ``read_until``, ``wait``)."""
     return agent_session(_agents(ctx), ctx.ssh, peer, kind, program, argv, timeout=timeout,
-                         tcp_timeout=tcp_timeout, max_s=agent_life(ctx))
+                         tcp_timeout=tcp_timeout, max_s=agent_life(ctx),
+                         needs_install=needs_install)
 
 
 def peer_program_problem(res: SshResult, peer: Peer) -> str | None:

@@ -108,7 +108,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
         ctx, p, ZENOH_AGENT, "zenoh", ["graph", "--expect", ours, "--name", theirs[p.name],
                                        "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)],
         timeout=max(0.5, deadline - time.monotonic()),
-        connect_timeout=max(0.5, ctx.timeout_s * 0.6))))]
+        connect_timeout=max(0.5, ctx.timeout_s * 0.6), needs_install=True)))]
     # Every token seen during the check, not only at the last look: a peer drops its probe node
     # once acknowledged, so with several peers the first one's is gone from a later look while
     # we still wait for another's (issue 21: "the probe node ... not seen", from a member).
@@ -293,8 +293,8 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
     info: dict = {}
     try:
         async with peer_session(ctx, peer, ZENOH_AGENT, "zenoh", argv,
-                                timeout=max(0.5, min(budget_s * 0.3, ctx.timeout_s * 0.6))
-                                ) as sess:
+                                timeout=max(0.5, min(budget_s * 0.3, ctx.timeout_s * 0.6)),
+                                needs_install=True) as sess:
             if not sess.ok:
                 return (Status.SKIP, f"skipped: could not run the other side on {peer.name}: SSH "
                                      f"failed ({sess.result.failure}): {sess.result.detail}", [],
