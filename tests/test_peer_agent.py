@@ -8,11 +8,13 @@ exit status and timeout; the agent bounds its own life (stdin's end, a hard maxi
 
 from __future__ import annotations
 
+import ast
 import asyncio
 import json
 import os
 import shutil
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -109,6 +111,19 @@ def local():
     yield make
     for a in made:
         a.close()
+
+
+@pytest.mark.parametrize("module", [agentproto, chatproto])
+def test_peer_programs_are_py38_stdlib_only(module):
+    """They run on the peer's python3 (as old as Ubuntu 20.04's 3.8), without rosnet-tui."""
+    tree = ast.parse(Path(module.__file__).read_text(), feature_version=(3, 8))
+    imported = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            imported.add((node.module or "").split(".")[0])
+    assert imported <= set(sys.stdlib_module_names) | {"__future__"}, imported
 
 
 def test_concurrent_runs_are_forked_by_one_agent_each_with_its_own_output_and_status(local):
