@@ -306,11 +306,13 @@ def _failed(peer: Peer, result: SshResult, timeout: float) -> AgentCall:
 async def agent_call(agents: PeerAgents, opts: SshOptions | None, peer: Peer, kind: AgentKind,
                      program: str, argv: Sequence[str], *, timeout: float,
                      tcp_timeout: float | None = None, max_s: float = 120.0,
-                     needs_install: bool = False) -> AgentCall:
+                     needs_install: bool = False, start_timeout: float | None = None
+                     ) -> AgentCall:
     """Start *program* with *argv* on *peer*'s agent of *kind*; never raises. *timeout* bounds
     reaching the peer (and is the default for reads and waits), *tcp_timeout* its TCP part, as
     for an SSH session; *max_s* bounds the agent's life if this call starts it; *needs_install*:
-    the run needs the peer's rosnet-tui (see AgentKind.no_install)."""
+    the run needs the peer's rosnet-tui (see AgentKind.no_install); *start_timeout* bounds the
+    wait for the agent to be ready (default: twice the longer of *timeout* and the round's)."""
     pool = getattr(opts, "pool", None)
     if pool is not None:       # the peer's connection first: its failures, within our bounds
         conn, _shared = await pool.connect(opts, peer, timeout, tcp_timeout)
@@ -319,8 +321,10 @@ async def agent_call(agents: PeerAgents, opts: SshOptions | None, peer: Peer, ki
     agent = agents.get(peer, kind)
     task = agent.start(opts, timeout, tcp_timeout, max_s)
     base = float(getattr(opts, "timeout_s", 3.0) or 3.0)
+    if start_timeout is None:
+        start_timeout = max(timeout, base) * 2 + 0.5
     try:
-        started = await asyncio.wait_for(asyncio.shield(task), max(timeout, base) * 2 + 0.5)
+        started = await asyncio.wait_for(asyncio.shield(task), max(start_timeout, 0.05))
     except asyncio.TimeoutError:
         return _failed(peer, SshResult(False, None, "", "", "timeout",
                                        f"the probe program on {peer.name} did not start in time",
@@ -340,10 +344,12 @@ async def agent_call(agents: PeerAgents, opts: SshOptions | None, peer: Peer, ki
 async def agent_session(agents: PeerAgents, opts: SshOptions | None, peer: Peer,
                         kind: AgentKind, program: str, argv: Sequence[str], *, timeout: float,
                         tcp_timeout: float | None = None, max_s: float = 120.0,
-                        needs_install: bool = False) -> AsyncIterator[AgentCall]:
+                        needs_install: bool = False, start_timeout: float | None = None
+                        ) -> AsyncIterator[AgentCall]:
     """:func:`agent_call` for an ``async with`` block; the run is stopped on leaving it."""
     call = await agent_call(agents, opts, peer, kind, program, argv, timeout=timeout,
-                            tcp_timeout=tcp_timeout, max_s=max_s, needs_install=needs_install)
+                            tcp_timeout=tcp_timeout, max_s=max_s, needs_install=needs_install,
+                            start_timeout=start_timeout)
     try:
         yield call
     finally:
@@ -360,8 +366,8 @@ async def agent_run(agents: PeerAgents, opts: SshOptions | None, peer: Peer, kin
     deadline = loop.time() + timeout
     ct = min(float(connect_timeout), timeout) if connect_timeout is not None else timeout
     async with agent_session(agents, opts, peer, kind, program, argv, timeout=ct,
-                             tcp_timeout=tcp_timeout, max_s=max_s,
-                             needs_install=needs_install) as call:
+                             tcp_timeout=tcp_timeout, max_s=max_s, needs_install=needs_install,
+                             start_timeout=deadline - loop.time()) as call:
         if not call.ok:
             return call.result
         return await call.wait(max(deadline - loop.time(), 0.05))
