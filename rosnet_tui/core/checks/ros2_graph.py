@@ -3,7 +3,8 @@
 
 Our side is a probe node here (:class:`rosnet_tui.core.zenohproto.ProbeNode`: liveliness tokens,
 rmw_zenoh's data key, CDR payload, 33-byte attachment); the peer's side is the same module run
-over SSH, by the round's peer agent there (core/peer_agent.py). A failure names the hop where the message was lost.
+over SSH, by the round's peer agent there (core/peer_agent.py). A failure names the hop where the
+message was lost.
 """
 
 from __future__ import annotations
