@@ -64,6 +64,7 @@ class AgentCall:
         self.err: list[str] = []
         self.exit_status: int | None = None
         self.lost = False               # the agent's channel ended while this ran
+        self.ended_detail = ""          # the agent ended before it was ready: how
         self.changed = asyncio.Event()
 
     @property
@@ -98,6 +99,7 @@ class AgentCall:
             self.out, self.err = [result.stdout], [result.stderr]
             self.exit_status = result.exit_status
             self.lost = result.exit_status is None
+            self.ended_detail = result.detail
         else:
             self.lost = True
         self.changed.set()
@@ -136,10 +138,13 @@ class AgentCall:
             return SshResult(False, None, self.stdout, self.stderr, "sshd",
                              f"the session with {self.peer.name} closed", r.fingerprint,
                              r.host_key, r.address, r.tcp)
-        return SshResult(True, self.exit_status, self.stdout, self.stderr, None,
-                         f"ran on {self.peer.name} as {self.peer.ssh_user} (the round's peer "
-                         f"agent), exit status {self.exit_status}", r.fingerprint, r.host_key,
-                         r.address, r.tcp)
+        detail = (f"ran on {self.peer.name} as {self.peer.ssh_user} (the round's peer agent), "
+                  f"exit status {self.exit_status}")
+        if self.ended_detail:
+            detail = f"the probe program on {self.peer.name} ended before it was ready: " \
+                     f"{self.ended_detail}"
+        return SshResult(True, self.exit_status, self.stdout, self.stderr, None, detail,
+                         r.fingerprint, r.host_key, r.address, r.tcp)
 
     def close(self) -> None:
         """Stop the run if it still runs (the agent kills it)."""
@@ -172,16 +177,21 @@ class PeerAgent:
 
     async def _start(self, opts: SshOptions | None, timeout: float, tcp_timeout: float | None,
                      max_s: float) -> SshResult:
-        s = await open_session(opts, self.peer, self.kind.command(max_s), timeout, tcp_timeout)
-        self.session = s
-        if not s.ok:
-            return s.result
         payload = [f"{len(AGENT_SOURCE)}\n".encode(), AGENT_SOURCE]
         payload += [(json.dumps({"load": n, "src": src.decode(), "entry": entry}) + "\n").encode()
                     for n, src, entry in self.kind.programs]
-        await s.write(b"".join(payload))
-        ready = await s.read_until(self._marker(), timeout=max(timeout, 2.0) * 2)
-        if ready is None or f'"{agentproto.READY}"' not in ready:
+        for attempt in (1, 2):
+            s = await open_session(opts, self.peer, self.kind.command(max_s), timeout,
+                                   tcp_timeout)
+            self.session = s
+            if not s.ok:
+                return s.result
+            await s.write(b"".join(payload))
+            ready = await s.read_until(self._marker(), timeout=max(timeout, 2.0) * 2)
+            if ready is not None and f'"{agentproto.READY}"' in ready:
+                self._take_lines()
+                self.reader = asyncio.ensure_future(self._read())
+                return s.result
             res = await s.wait(0.0)
             if res.failure == "timeout":       # still running but silent: give up on it
                 s.close()
@@ -189,11 +199,13 @@ class PeerAgent:
                 return SshResult(False, None, res.stdout, res.stderr, "timeout",
                                  f"the probe program on {self.peer.name} did not start in time",
                                  r.fingerprint, r.host_key, r.address, r.tcp)
-            self.ended = res
+            s.close()
+            # A channel closed under it without a word (no exit status, no output): once more.
+            if attempt == 1 and res.exit_status in (None, -1) and not (res.stdout or res.stderr):
+                continue
+            self.ended = res      # it ended: every run gets its output and exit status
             return s.result
-        self._take_lines()
-        self.reader = asyncio.ensure_future(self._read())
-        return s.result
+        raise AssertionError("unreachable")
 
     def _marker(self) -> str:
         return f"#{self.seq}\n"
