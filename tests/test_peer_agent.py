@@ -34,11 +34,10 @@ PPID = b"import os, sys, time\nprint(os.getppid(), *sys.argv[1:], flush=True)\n"
 
 def alive(pid: int) -> bool:
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
+        with open(f"/proc/{pid}/stat") as f:    # a zombie has ended
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):   # gone (reaped), maybe since we looked
         return False
-    with open(f"/proc/{pid}/stat") as f:        # a zombie has ended
-        return f.read().rsplit(")", 1)[1].split()[0] != "Z"
 
 
 def gone_within(pid: int, seconds: float) -> bool:
