@@ -88,16 +88,24 @@ def master_check(fleet: Any, config: Path, env: dict[str, str], package: Path | 
 
 
 def measure_sizes(fleet: Any, settings: Any, env: dict[str, str], opts: Options, state: Path,
-                  package: Path | None, tag: str) -> dict[int, list[dict[str, Any]]]:
-    """Every size once per repetition, the order alternating (no size always first)."""
+                  package: Path | None, tag: str,
+                  before: Callable[[Path], None] | None = None) -> dict[int, list[dict[str, Any]]]:
+    """Every size once per repetition, the order alternating (no size always first);
+    *before(config)* runs ahead of each (untimed)."""
     configs = {n: write_master_config(fleet, settings, n, state / f"{tag}-{n}.toml")
                for n in SIZES}
     env = dict(env, XDG_STATE_HOME=str(state / f"{tag}-state"))
     runs: dict[int, list[dict[str, Any]]] = {n: [] for n in SIZES}
-    master_check(fleet, configs[SIZES[0]], env, package)    # a warm-up run, not counted
+
+    def one(n: int) -> dict[str, Any]:
+        if before is not None:
+            before(configs[n])
+        return master_check(fleet, configs[n], env, package)
+
+    one(SIZES[0])    # a warm-up run, not counted
     for i in range(opts.reps):
         for n in (SIZES if i % 2 == 0 else tuple(reversed(SIZES))):
-            runs[n].append(master_check(fleet, configs[n], env, package))
+            runs[n].append(one(n))
     return runs
 
 
@@ -143,6 +151,7 @@ def run_fleet_row(opts: Options, log: Callable[[str], None]) -> list[RowResult]:
     res = RowResult(8, TITLE)
     try:
         from tests.lab import LabUnavailable, lab_available
+        from tests.lab.firewall import apply_firewall, remove_firewall
         from tests.lab.fleet import Fleet
         from tests.lab.fleet_ros2 import FleetRos2
     except Exception as exc:  # e.g. the lab's own dependencies are missing
@@ -172,9 +181,13 @@ def run_fleet_row(opts: Options, log: Callable[[str], None]) -> list[RowResult]:
         fleet.reset()
         fleet.start_roscore()
         try:
-            ros1 = measure_sizes(fleet, fleet.settings(fleet.master), fleet.ros_env(fleet.master),
-                                 opts, state, package, "ros1")
+            # ROS 1 as the product sets it up: the master's peers-only firewall loaded for the
+            # members its settings name (so linux.firewall and security.outsider pass too).
+            ros1 = measure_sizes(fleet, fleet.settings(fleet.master),
+                                 fleet.ros_env(fleet.master), opts, state, package, "ros1",
+                                 before=lambda c: apply_firewall(fleet, fleet.master, c))
         finally:
+            remove_firewall(fleet, fleet.master)
             fleet.stop_roscore()
             fleet.reset()
         res.lines += size_lines(ros1, "ROS 1")

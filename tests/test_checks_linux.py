@@ -11,8 +11,8 @@ from rosnet_tui.core.checks import (
     REGISTRY,
     CheckContext,
     linux,
-    linux_chat,
     load_builtin_checks,
+    probes,
     run_check,
 )
 from rosnet_tui.core.hosts import HostsEntry
@@ -173,7 +173,8 @@ async def test_chat_in_by_name(ssh_client, tmp_path):
 
 @pytest.mark.skipif(shutil.which("nc") is None, reason="needs nc")
 async def test_chats_fall_back_to_nc_without_python3(ssh_client, tmp_path, monkeypatch):
-    monkeypatch.setattr(linux_chat, "PYTHON", "no-such-python3")
+    # no python3 on the peer: neither the round's agent nor the chats' own command finds one
+    monkeypatch.setattr(probes, "PEER_PYTHON", "no-such-python3")
     out = await run("linux.chat_out", ctx(settings(peers=[ssh_client.peer()]), tmp_path,
                                           ssh_client, timeout=3.0))
     assert out.status is Status.PASS, out.evidence

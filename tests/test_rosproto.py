@@ -354,3 +354,32 @@ def test_slave_api_of_the_probe(roscore: RosCore):
         assert pub.stopping.is_set()
     finally:
         pub.stop()
+
+
+def test_a_message_counts_as_sent_before_it_leaves():
+    """A subscriber may read the first message and hang up before the sending thread runs again:
+    the publish loop, seeing the hang-up, must find the message counted, or the probe waits for
+    another subscriber to its timeout (bench row 8: ros.pubsub_in took 8.6 s of its 11.5)."""
+    pub = rosproto.ProbePublisher("http://127.0.0.1:9/", "/rosnet_probe/count", env=LOOPBACK_ENV)
+    counted: list[int] = []
+
+    class Watched(socket.socket):       # a real socket that notes the count as a frame leaves
+        def sendall(self, data, flags=0):
+            counted.append(pub.report.sent)
+            return super().sendall(data, flags)
+
+    a, b = socket.socketpair()
+    w = Watched(a.family, a.type, fileno=a.detach())
+    try:
+        pub._send(w, "/rosnet_probe_sub")
+        assert counted == [1] and pub.report.sent == 1
+        assert rosproto.decode_string(rosproto.read_frame(b)).startswith("rosnet-tui probe 1 ")
+        b.close()                         # the other end is gone: a failed send is not counted
+        with pytest.raises(OSError):
+            for _ in range(50):
+                pub._send(w, "/rosnet_probe_sub")
+        assert pub.report.sent == len(counted) - 1
+    finally:
+        w.close()
+        b.close()
+

@@ -1080,13 +1080,21 @@ class ProbePublisher(ProbeNode):
                 pass    # the publish loop notices the hang-up
 
     def _send(self, conn: socket.socket, caller: str) -> None:
+        # Counted before it leaves: the subscriber may read it and hang up before this thread
+        # runs again, and the publish loop must then find it counted (served), or the probe
+        # would wait for another subscriber to its timeout. A failed send is taken back.
         with self._lock:
             self._sent += 1
             frame = encode_string(f"rosnet-tui probe {self._sent} from {self.caller_id}")
-        conn.sendall(frame)
-        with self._lock:
             self.report.sent += 1
             self._per_conn[caller] = self._per_conn.get(caller, 0) + 1
+        try:
+            conn.sendall(frame)
+        except OSError:
+            with self._lock:
+                self.report.sent -= 1
+                self._per_conn[caller] -= 1
+            raise
 
     def _publish_loop(self) -> None:
         while not self.stopping.is_set():

@@ -45,6 +45,9 @@ class CheckContext:
     # One SSH connection per peer for the round (an SshPool; None: one per session). The runner
     # gives every round one; run_checks closes it when the round ends.
     ssh_pool: Any = None
+    # The round's peer agents (a core.peer_agent.PeerAgents, made by the first check that needs
+    # one; None: none yet): one program per peer serving every probe; closed with the round.
+    peer_agents: Any = None
 
     @property
     def ssh(self) -> SshOptions:
@@ -171,6 +174,9 @@ async def run_checks(specs: Iterable[CheckSpec], ctx: CheckContext) -> AsyncIter
         for t in tasks:
             t.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
+        if ctx.peer_agents is not None:    # the round's peer agents end with it (before the
+            ctx.peer_agents.close()        # connections their channels are on)
+            ctx.peer_agents = None
         if ctx.ssh_pool is not None:       # the round's shared SSH connections end with it
             ctx.ssh_pool.close()
             ctx.ssh_pool = type(ctx.ssh_pool)()

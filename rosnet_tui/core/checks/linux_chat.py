@@ -1,8 +1,9 @@
 """Step 3, Linux: the TCP chat by name, both ways (linux.chat_out, linux.chat_in); under ROS 2
 the one connection that crosses the modems, from each member to the master's router port.
 
-The peer's side runs over SSH (:mod:`rosnet_tui.core.ssh`) as small stdlib-only ``python3``
-programs (nothing to install on the peer), with ``nc`` as the fallback when there is no python3.
+The peer's side (:mod:`rosnet_tui.core.chatproto`, stdlib only: nothing to install on the peer)
+runs over SSH by the round's peer agent there, with ``nc`` as the fallback when the peer has no
+python3.
 """
 
 from __future__ import annotations
@@ -12,120 +13,89 @@ import contextlib
 import re
 import secrets
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
 
+from rosnet_tui.core.chatproto import CHAT
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
+    CHAT_SOURCE,
     NO_SSH_USER,
     budget,
+    chat_agent,
     each_peer,
+    no_python,
+    peer_python,
+    peer_run,
+    peer_session,
     python_command,
     shq,
     ssh_peers,
 )
 from rosnet_tui.core.connect import kind_from_text, tcp_failure_kind
 from rosnet_tui.core.listener import ECHO, GREETING
+from rosnet_tui.core.peer_agent import AgentCall
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import SshResult, resolve_ipv4, run_blocking
-from rosnet_tui.core.ssh.session import ssh_run, ssh_session
+from rosnet_tui.core.ssh.session import SshSession, ssh_run, ssh_session
 
 # --------------------------------------------------------------------------- chats
-CHAT = "ROSNET-TUI CHAT"
-PYTHON = "python3"  # what the peer's side runs with; without it, nc does the job
-
-_LISTEN_SCRIPT = r"""
-import random, socket, sys
-port = int(sys.argv[1]); token = sys.argv[2]; wait = float(sys.argv[3])
-srv = None; last = ""
-for p in [port] + [random.randint(20000, 60000) for _ in range(5)]:
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        s.bind(("0.0.0.0", p)); s.listen(4); srv = s; port = p; break
-    except Exception as e:
-        last = str(e); s.close()
-if srv is None:
-    print("ERROR cannot listen: " + last); sys.exit(3)
-print("LISTENING %d" % port); sys.stdout.flush()
-srv.settimeout(wait)
-try:
-    c, a = srv.accept()
-except socket.timeout:
-    print("TIMEOUT nobody connected"); sys.exit(4)
-c.settimeout(3)
-try:
-    c.sendall(("ROSNET-TUI CHAT %s\n" % token).encode())
-    data = b""
-    while b"\n" not in data and len(data) < 512:
-        chunk = c.recv(512)
-        if not chunk:
-            break
-        data += chunk
-    print("FROM %s" % a[0])
-    print("GOT " + data.decode("utf-8", "replace").strip())
-except Exception as e:
-    print("ERROR " + str(e)); sys.exit(5)
-finally:
-    c.close(); srv.close()
-"""
-
-_CONNECT_SCRIPT = r"""
-import socket, sys
-name = sys.argv[1]; port = int(sys.argv[2]); token = sys.argv[3]; t = float(sys.argv[4])
-try:
-    ip = socket.gethostbyname(name)
-except Exception as e:
-    print("RESOLVE-ERROR %s" % e); sys.exit(2)
-print("RESOLVED %s" % ip); sys.stdout.flush()
-try:
-    c = socket.create_connection((ip, port), timeout=t)
-except Exception as e:
-    print("CONNECT-ERROR %s" % e); sys.exit(3)
-c.settimeout(t)
-def line():
-    b = b""
-    while b"\n" not in b and len(b) < 512:
-        x = c.recv(512)
-        if not x:
-            break
-        b += x
-    return b.decode("utf-8", "replace").strip()
-try:
-    print("HELLO " + line()); sys.stdout.flush()
-    c.sendall(("ROSNET-TUI CHAT %s\n" % token).encode())
-    print("ECHO " + line())
-except Exception as e:
-    print("ERROR %s" % e); sys.exit(4)
-finally:
-    c.close()
-"""
-
 
 _IS_OPENBSD_NC = "nc -h 2>&1 | grep -q OpenBSD"
 
 
 def listen_command(port: int, token: str, wait: float) -> str:
-    """Peer side of chat_out: python3 when present, else ``nc -l`` (OpenBSD or traditional)."""
-    py = python_command(_LISTEN_SCRIPT, str(port), token, f"{wait:.1f}", python=PYTHON)
+    """Peer side of chat_out without the round's agent: python3 when present, else ``nc -l``
+    (OpenBSD or traditional)."""
+    py = python_command(CHAT_SOURCE.decode(), "listen", str(port), token, f"{wait:.1f}",
+                        python=peer_python())
     w = max(int(wait + 0.999), 1)
     msg = shq(f"{CHAT} {token}")
     nc = (f"echo LISTENING {port}; echo NC; if {_IS_OPENBSD_NC}; then "
           f"echo {msg} | timeout {w} nc -N -l {port}; else "
           f"echo {msg} | timeout {w} nc -l -p {port}; fi")
-    return f"if command -v {PYTHON} >/dev/null 2>&1; then {py}; else {nc}; fi"
+    return f"if command -v {peer_python()} >/dev/null 2>&1; then {py}; else {nc}; fi"
 
 
 def connect_command(name: str, port: int, token: str, t: float) -> str:
-    """Peer side of chat_in: connect to *name* as the peer resolves it."""
-    py = python_command(_CONNECT_SCRIPT, name, str(port), token, f"{t:.1f}", python=PYTHON)
+    """Peer side of chat_in without the round's agent: connect to *name* as the peer resolves
+    it (python3 when present, else nc)."""
+    py = python_command(CHAT_SOURCE.decode(), "connect", name, str(port), f"{t:.1f}", token,
+                        python=peer_python())
     w = max(int(t + 0.999), 1)
     msg = shq(f"{CHAT} {token}")
     nc = (f"echo NC; echo RESOLVED $(getent ahostsv4 {shq(name)} | head -n1 | cut -d' ' -f1); "
           f"if {_IS_OPENBSD_NC}; then echo {msg} | timeout {w} nc -N {shq(name)} {port}; "
           f"else echo {msg} | timeout {w} nc {shq(name)} {port}; fi")
-    return f"if command -v {PYTHON} >/dev/null 2>&1; then {py}; else {nc}; fi"
+    return f"if command -v {peer_python()} >/dev/null 2>&1; then {py}; else {nc}; fi"
+
+
+@contextlib.asynccontextmanager
+async def _peer_side(ctx: CheckContext, peer: Peer, argv: list[str], shell_command: str, *,
+                     timeout: float, tcp_timeout: float) -> AsyncIterator[AgentCall | SshSession]:
+    """The chat's peer side on *peer* for an ``async with`` block: run by the round's agent
+    there, or, when that found no python3, by *shell_command* (its nc fallback)."""
+    async with peer_session(ctx, peer, chat_agent(ctx), "chat", argv, timeout=timeout,
+                            tcp_timeout=tcp_timeout) as call:
+        if not no_python(call):
+            yield call
+            return
+    async with ssh_session(ctx.ssh, peer, shell_command, timeout=timeout,
+                           tcp_timeout=tcp_timeout) as sess:
+        yield sess
+
+
+async def _peer_chat_run(ctx: CheckContext, peer: Peer, argv: list[str], shell_command: str | None,
+                         *, timeout: float, connect_timeout: float) -> SshResult:
+    """Run the chat's peer side on *peer* to its end (see _peer_side): by the round's agent, or
+    *shell_command* when that found no python3 (None: no fallback)."""
+    res = await peer_run(ctx, peer, chat_agent(ctx), "chat", argv, timeout=timeout,
+                         connect_timeout=connect_timeout, tcp_timeout=ctx.timeout_s)
+    if shell_command is None or not no_python(res):
+        return res
+    return await ssh_run(ctx.ssh, peer, shell_command, timeout=timeout,
+                         connect_timeout=connect_timeout, tcp_timeout=ctx.timeout_s)
 
 
 async def _chat_per_peer(ctx: CheckContext, check_id: str,
@@ -176,8 +146,9 @@ async def check_chat_out(ctx: CheckContext) -> Outcome:
         my_token = secrets.token_hex(6)
         port = ctx.settings.probe.port
         ev: list[str] = []
-        async with ssh_session(ctx.ssh, peer, listen_command(port, peer_token, total * 0.6),
-                               timeout=total * 0.45, tcp_timeout=ctx.timeout_s) as sess:
+        async with _peer_side(ctx, peer, ["listen", str(port), peer_token, f"{total * 0.6:.1f}"],
+                              listen_command(port, peer_token, total * 0.6),
+                              timeout=total * 0.45, tcp_timeout=ctx.timeout_s) as sess:
             if not sess.ok:
                 return _ssh_failure(sess.result, peer)
             out = await sess.read_until("LISTENING", left() * 0.6)
@@ -269,10 +240,10 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
                                                f"{exc.strerror or exc} (see router.port_free)"]
             ev.append(f"we listen on TCP {port}")
             left = max(total - (time.monotonic() - start), 0.5)
-            res = await ssh_run(ctx.ssh, peer,
-                                connect_command(me, port, token, min(left * 0.45, ctx.timeout_s)),
-                                timeout=left * 0.95, connect_timeout=left * 0.45,
-                                tcp_timeout=ctx.timeout_s)
+            t = min(left * 0.45, ctx.timeout_s)
+            res = await _peer_chat_run(ctx, peer, ["connect", me, str(port), f"{t:.1f}", token],
+                                       connect_command(me, port, token, t),
+                                       timeout=left * 0.95, connect_timeout=left * 0.45)
             if not res.ok and res.failure != "timeout" and not res.stdout:
                 return _ssh_failure(res, peer)
             seen = await lst.wait_for_line(token, 0.3)
@@ -313,22 +284,6 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- ROS 2: the Linux chats
-_ROS2_CONNECT = r"""
-import socket, sys
-name = sys.argv[1]; port = int(sys.argv[2]); t = float(sys.argv[3])
-try:
-    ip = socket.gethostbyname(name)
-except Exception as e:
-    print("RESOLVE-ERROR %s" % e); sys.exit(2)
-print("RESOLVED %s" % ip); sys.stdout.flush()
-try:
-    socket.create_connection((ip, port), timeout=t).close()
-except Exception as e:
-    print("CONNECT-ERROR %s" % e); sys.exit(3)
-print("CONNECTED")
-"""
-
-
 def _listening_here(port: int) -> bool:
     """Whether a process listens on TCP *port* here (the master's router, normally)."""
     import psutil  # noqa: PLC0415
@@ -383,10 +338,9 @@ async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
         if not await run_blocking(_listening_here, port, timeout=1.0):
             with contextlib.suppress(OSError):
                 await stack.enter_async_context(ctx.listeners.hold(port))
-        cmd = python_command(_ROS2_CONNECT, me, str(port), f"{t * 0.5:.1f}")
-        got = await each_peer(peers, lambda p: ssh_run(ctx.ssh, p, cmd, timeout=t,
-                                                       connect_timeout=t * 0.5,
-                                                       tcp_timeout=ctx.timeout_s))
+        argv = ["connect", me, str(port), f"{t * 0.5:.1f}"]
+        got = await each_peer(peers, lambda p: _peer_chat_run(ctx, p, argv, None, timeout=t,
+                                                               connect_timeout=t * 0.5))
     ev: list[str] = []
     bad: list[str] = []
     for p, res in zip(peers, got, strict=True):

@@ -24,9 +24,10 @@ from typing import Any, TypeVar
 from urllib.parse import urljoin, urlsplit
 
 from rosnet_tui import __version__
-from rosnet_tui.core import fleet_tls, ros2, zenohproto
+from rosnet_tui.core import agentproto, chatproto, fleet_tls, ros2, rosproto, zenohproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext
 from rosnet_tui.core.checks.data import view
+from rosnet_tui.core.peer_agent import AgentCall, AgentKind, PeerAgents, agent_run, agent_session
 from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.connection import SshResult, run_blocking
 
@@ -313,22 +314,30 @@ done
 [ -n "$py" ] || L /usr/local/bin/rosnet-tui || V /opt/pipx/venvs
 [ -n "$py" ] || { b=$(timeout 3 "${SHELL:-/bin/sh}" -lc "command -v rosnet-tui" </dev/null \
                      2>/dev/null | tail -n 1) && L "$b"; }
+[ -n "$py" ] && [ -n "$BOOT" ] && exec "$py" -c "$BOOT" "$@"
 [ -n "$py" ] && exec "$py" - "$@"
+[ -n "$FALLBACK" ] && [ -n "$BOOT" ] && exec python3 -S -c "$BOOT" "$@" no-install
 [ -n "$FALLBACK" ] && exec python3 -S - "$@"
-echo "$MARK{\"error\": \"no_install\", \"detail\": \"no rosnet-tui installed\"}"
+echo "$MARK$NO_INSTALL"
 exit @EXIT@
 """.replace("@EXIT@", str(NO_INSTALL_EXIT))
+NO_INSTALL_REPORT = '{"error": "no_install", "detail": "no rosnet-tui installed"}'
+"""What a peer without rosnet-tui installed reports (after the program's mark)."""
 
 
-def installed_python_command(*args: str, mark: str, fallback: bool = False) -> str:
+def installed_python_command(*args: str, mark: str, fallback: bool = False,
+                             boot: str | None = None) -> str:
     """The command running a program fed on stdin on a peer with the interpreter of the
     rosnet-tui installed there (its packages: eclipse-zenoh, paramiko, cryptography), found by
     _FIND_INSTALL; one SSH round trip. Without an installation it prints ``<mark>{"error":
     "no_install", ...}`` and exits NO_INSTALL_EXIT, unless *fallback* (a program that also runs
     on the standard library alone: the peer's python3 runs it then). Run by ``sh -c``, so the
     peer's login shell may be any shell. Never the peer's python3 for a program that needs the
-    install's packages."""
-    script = ("MARK=" + shq(mark) + "\n" + ("FALLBACK=1" if fallback else "") + _FIND_INSTALL)
+    install's packages. With *boot*, the interpreter runs ``-c boot`` (a loader that reads the
+    program from stdin and leaves stdin open: the peer agent's) instead of ``-``."""
+    script = ("MARK=" + shq(mark) + "\nNO_INSTALL=" + shq(NO_INSTALL_REPORT) + "\n"
+              + ("FALLBACK=1\n" if fallback else "")
+              + ("BOOT=" + shq(boot) + "\n" if boot else "") + _FIND_INSTALL)
     return "sh -c " + shq(script) + " rosnet-tui-peer " + " ".join(shq(a) for a in args)
 
 
@@ -339,6 +348,77 @@ def zenoh_peer_command(*args: str, need_zenoh: bool = True) -> str:
     not *need_zenoh* (``info`` needs only the standard library: the peer's python3 runs it
     then)."""
     return installed_python_command(*args, mark=zenohproto.REPORT_MARK, fallback=not need_zenoh)
+
+
+# --------------------------------------------------------------------------- the round's peer agents
+# One program per peer and round runs every probe the round's checks ask of that peer (see
+# core/peer_agent.py): ROS 1's on the peer's python3 without site (stdlib only), ROS 2's on the
+# interpreter of the rosnet-tui installed there (eclipse-zenoh).
+# Both serve the Linux chats' peer side (core/chatproto.py, stdlib). A peer without rosnet-tui
+# gets ROS 2's agent on its python3 (the finder's fallback): what needs the install (the Zenoh
+# probes: needs_install) answers with the finder's no_install report, as a lone command did.
+ROSPROTO_SOURCE = Path(rosproto.__file__).read_bytes()   # the ROS 1 probe program
+ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()    # the ROS 2 (Zenoh) probe program
+CHAT_SOURCE = Path(chatproto.__file__).read_bytes()      # the chats' peer side
+PEER_PYTHON = "python3"   # the peer's python the ROS 1 agent and the chats run with
+
+
+def peer_python() -> str:
+    """The peer's python (the name, looked up on the peer's PATH)."""
+    return PEER_PYTHON
+
+
+ROS_AGENT = AgentKind(
+    "ros1", lambda max_s: f"{peer_python()} -S -c {shq(agentproto.BOOT)} {max_s:.0f}",
+    (("ros", ROSPROTO_SOURCE, "main"), ("chat", CHAT_SOURCE, "main")))
+ZENOH_AGENT = AgentKind(
+    "ros2", lambda max_s: installed_python_command(f"{max_s:.0f}", mark=zenohproto.REPORT_MARK,
+                                                   fallback=True, boot=agentproto.BOOT),
+    (("zenoh", ZENOH_SOURCE, "run_program"), ("chat", CHAT_SOURCE, "main")),
+    (f"{zenohproto.REPORT_MARK}{NO_INSTALL_REPORT}\n", NO_INSTALL_EXIT))
+
+
+def chat_agent(ctx: CheckContext) -> AgentKind:
+    """The agent that runs the chats' peer side in this round (its ROS version's)."""
+    return ZENOH_AGENT if ctx.settings.ros2 else ROS_AGENT
+
+
+def no_python(call: AgentCall | SshResult) -> bool:
+    """The agent could not start for want of a python3 on the peer (exit status 127)."""
+    return call.exit_status == 127 and not call.stdout
+
+
+def _agents(ctx: CheckContext) -> PeerAgents:
+    """The round's peer agents (run_checks closes them with the round)."""
+    if ctx.peer_agents is None:
+        ctx.peer_agents = PeerAgents()
+    return ctx.peer_agents
+
+
+def agent_life(ctx: CheckContext) -> float:
+    """Seconds a peer agent may live at most (longer than any check of the round)."""
+    return 60.0 + 10.0 * ctx.timeout_s
+
+
+async def peer_run(ctx: CheckContext, peer: Peer, kind: AgentKind, program: str,
+                   argv: Sequence[str], *, timeout: float, connect_timeout: float | None = None,
+                   tcp_timeout: float | None = None, needs_install: bool = False) -> SshResult:
+    """Run *program* (one of *kind*'s) with *argv* on *peer*'s agent of the round, as
+    ``ssh_run`` would run it alone: the same bounds, the same result."""
+    return await agent_run(_agents(ctx), ctx.ssh, peer, kind, program, argv, timeout=timeout,
+                           connect_timeout=connect_timeout, tcp_timeout=tcp_timeout,
+                           max_s=agent_life(ctx), needs_install=needs_install)
+
+
+def peer_session(ctx: CheckContext, peer: Peer, kind: AgentKind, program: str,
+                 argv: Sequence[str], *, timeout: float, tcp_timeout: float | None = None,
+                 needs_install: bool = False
+                 ) -> contextlib.AbstractAsyncContextManager[AgentCall]:
+    """*program* running on *peer*'s agent for an ``async with`` block, read as ``ssh_session``'s
+    session is (``ok``, ``result``, ``read_until``, ``wait``)."""
+    return agent_session(_agents(ctx), ctx.ssh, peer, kind, program, argv, timeout=timeout,
+                         tcp_timeout=tcp_timeout, max_s=agent_life(ctx),
+                         needs_install=needs_install)
 
 
 def peer_program_problem(res: SshResult, peer: Peer) -> str | None:
@@ -358,7 +438,6 @@ def stderr_tail(res: SshResult) -> str:
 
 # --------------------------------------------------------------------------- ROS 2 (rmw_zenoh)
 # Shared by the ros2.* checks (checks/ros2.py and checks/ros2_graph.py).
-ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()   # the peer program, fed on stdin
 
 
 def zenoh_env(ctx: CheckContext) -> dict[str, str]:

@@ -10,16 +10,17 @@ from __future__ import annotations
 
 import asyncio
 import time
-from pathlib import Path
 from typing import Any
 from urllib.parse import urlparse
 
 from rosnet_tui.core import rosproto
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
+    ROS_AGENT,
     each_peer,
     peer_program_problem,
-    python_stdin_command,
+    peer_run,
+    peer_session,
     ssh_peers,
     stderr_tail,
 )
@@ -28,9 +29,7 @@ from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.connection import SshResult, run_blocking
-from rosnet_tui.core.ssh.session import ssh_run, ssh_session
 
-ROSPROTO_SOURCE = Path(rosproto.__file__).read_bytes()
 READY_MARK = '"rosnet_probe_ready"'
 FACTOR_NODE_URIS = 3.0
 FACTOR_PUBSUB = 4.0
@@ -324,11 +323,11 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
     local_t = max(0.3, min(budget * 0.5, deadline - time.monotonic()))
     remote_t = max(0.5, budget * 0.45)
     include = ["--include", me.caller_id] if registered else []
-    cmd = python_stdin_command("nodes", "--master", uri, "--timeout", f"{remote_t:.1f}", *include)
+    argv = ["nodes", "--master", uri, "--timeout", f"{remote_t:.1f}", *include]
     ssh_t = max(0.5, deadline - time.monotonic())
     remote_tasks = [asyncio.ensure_future(each_peer(
-        peers, lambda p: ssh_run(ctx.ssh, p, cmd, stdin=ROSPROTO_SOURCE, timeout=ssh_t,
-                                 tcp_timeout=ctx.timeout_s), return_exceptions=True))]
+        peers, lambda p: peer_run(ctx, p, ROS_AGENT, "ros", argv, timeout=ssh_t,
+                                  tcp_timeout=ctx.timeout_s), return_exceptions=True))]
     try:
         try:
             local: Any = await run_blocking(_local_nodes, uri, local_t,
@@ -456,11 +455,10 @@ async def _pubsub_out_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
         started = await _start_publisher(pub, ct)
         if started:
             remote_t = max(1.0, budget * 0.55)
-            cmd = python_stdin_command("sub", "--master", uri, "--topic", topic, "--timeout",
-                             f"{remote_t:.1f}")
-            res = await ssh_run(ctx.ssh, peer, cmd, stdin=ROSPROTO_SOURCE,
-                                timeout=max(0.5, deadline - time.monotonic()),
-                                tcp_timeout=ctx.timeout_s)
+            argv = ["sub", "--master", uri, "--topic", topic, "--timeout", f"{remote_t:.1f}"]
+            res = await peer_run(ctx, peer, ROS_AGENT, "ros", argv,
+                                 timeout=max(0.5, deadline - time.monotonic()),
+                                 tcp_timeout=ctx.timeout_s)
     finally:
         local = await run_blocking(pub.stop, timeout=2.0)
     evidence.extend(local.evidence("here (publisher)"))
@@ -496,17 +494,15 @@ async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
     deadline = time.monotonic() + budget
     topic = f"{rosproto.PROBE_PREFIX}/{rosproto.new_probe_id()}"
     remote_t = max(1.5, budget * 0.7)
-    cmd = python_stdin_command("pub", "--master", uri, "--topic", topic, "--timeout", f"{remote_t:.1f}")
+    argv = ["pub", "--master", uri, "--topic", topic, "--timeout", f"{remote_t:.1f}"]
     evidence: list[str] = []
     local: rosproto.ProbeReport | None = None
-    async with ssh_session(ctx.ssh, peer, cmd, timeout=max(0.5, budget * 0.4),
-                           tcp_timeout=ctx.timeout_s) as s:
+    async with peer_session(ctx, peer, ROS_AGENT, "ros", argv, timeout=max(0.5, budget * 0.4),
+                            tcp_timeout=ctx.timeout_s) as s:
         if not s.ok:
             return (Status.SKIP, f"skipped: could not run the publisher on {peer.name}: "
                                  f"SSH failed ({s.result.failure}): {s.result.detail}",
                     evidence, _pubsub_data(peer.name, False))
-        await s.write(ROSPROTO_SOURCE)
-        await s.close_stdin()
         ready = await s.read_until(READY_MARK, timeout=max(0.3, budget * 0.4))
         if ready is not None:
             sub_t = max(0.5, deadline - time.monotonic() - 0.8)

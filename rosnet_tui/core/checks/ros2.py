@@ -2,8 +2,8 @@
 (ros2.router). The graph and live publish/subscribe are in :mod:`.ros2_graph`.
 
 Every probe is a real Zenoh session (eclipse-zenoh) that behaves as an rmw_zenoh node does on the
-wire (:mod:`rosnet_tui.core.zenohproto`). Questions to a peer run the same module over SSH, fed
-on stdin to the interpreter of the rosnet-tui installed there (probes.zenoh_peer_command).
+wire (:mod:`rosnet_tui.core.zenohproto`). Questions to a peer run the same module over SSH, on
+the interpreter of the rosnet-tui installed there, by the round's peer agent (probes.ZENOH_AGENT).
 """
 
 from __future__ import annotations
@@ -19,16 +19,16 @@ import psutil
 from rosnet_tui.core import fleet_tls, ros2, tls_handshake, zenohproto
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
-    ZENOH_SOURCE,
+    ZENOH_AGENT,
     budget,
     close_zenoh,
     each_peer,
     node_endpoint,
     open_zenoh,
+    peer_run,
     ros2_peers,
     router_links,
     zenoh_env,
-    zenoh_peer_command,
     zenoh_peer_problem,
 )
 from rosnet_tui.core.managed_text import ManagedFileError
@@ -37,7 +37,6 @@ from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import resolve_ipv4, run_blocking
-from rosnet_tui.core.ssh.session import ssh_run
 
 FACTOR_ROUTER = 1.0
 DDS_VARS = ("CYCLONEDDS_URI", "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",
@@ -65,8 +64,8 @@ def _read_router_config(path: str) -> tuple[dict | None, str | None]:
 
 async def _peer_infos(ctx: CheckContext, t: float) -> dict[str, dict | str]:
     peers = ros2_peers(ctx)
-    cmd = zenoh_peer_command("info", need_zenoh=False)
-    got = await each_peer(peers, lambda p: ssh_run(ctx.ssh, p, cmd, stdin=ZENOH_SOURCE, timeout=t))
+    got = await each_peer(peers, lambda p: peer_run(ctx, p, ZENOH_AGENT, "zenoh", ["info"],
+                                                    timeout=t))
     out: dict[str, dict | str] = {}
     for p, res in zip(peers, got, strict=True):
         rep = zenohproto.parse_report(res.stdout)

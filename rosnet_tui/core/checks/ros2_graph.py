@@ -3,7 +3,8 @@
 
 Our side is a probe node here (:class:`rosnet_tui.core.zenohproto.ProbeNode`: liveliness tokens,
 rmw_zenoh's data key, CDR payload, 33-byte attachment); the peer's side is the same module run
-over SSH. A failure names the hop where the message was lost.
+over SSH, by the round's peer agent there (core/peer_agent.py). A failure names the hop where the
+message was lost.
 """
 
 from __future__ import annotations
@@ -16,23 +17,23 @@ from typing import Any
 from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
-    ZENOH_SOURCE,
+    ZENOH_AGENT,
     budget,
     close_zenoh,
     each_peer,
     node_domain,
     node_endpoint,
     open_zenoh,
+    peer_run,
+    peer_session,
     ros2_peers,
     router_links,
-    zenoh_peer_command,
     zenoh_peer_problem,
 )
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import run_blocking
-from rosnet_tui.core.ssh.session import ssh_run, ssh_session
 
 FACTOR_GRAPH, FACTOR_PUBSUB = 2.0, 4.0
 
@@ -104,11 +105,11 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     theirs = {p.name: zenohproto.probe_name() for p in peers}
     remote_t = max(0.5, t * 0.55)
     # One task for every peer's side (probes.each_peer: bounded, one SSH connection per peer).
-    tasks = [asyncio.ensure_future(each_peer(peers, lambda p: ssh_run(
-        ctx.ssh, p, zenoh_peer_command("graph", "--expect", ours, "--name", theirs[p.name],
-                                         "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)),
-        stdin=ZENOH_SOURCE, timeout=max(0.5, deadline - time.monotonic()),
-        connect_timeout=max(0.5, ctx.timeout_s * 0.6))))]
+    tasks = [asyncio.ensure_future(each_peer(peers, lambda p: peer_run(
+        ctx, p, ZENOH_AGENT, "zenoh", ["graph", "--expect", ours, "--name", theirs[p.name],
+                                       "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)],
+        timeout=max(0.5, deadline - time.monotonic()),
+        connect_timeout=max(0.5, ctx.timeout_s * 0.6), needs_install=True)))]
     # Every token seen during the check, not only at the last look: a peer drops its probe node
     # once acknowledged, so with several peers the first one's is gone from a later look while
     # we still wait for another's (issue 21: "the probe node ... not seen", from a member).
@@ -286,21 +287,19 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
     remote_t = max(1.0, min(budget_s * 0.6, ctx.timeout_s * 2))
     deadline = min(deadline, time.monotonic() + remote_t + max(1.0, ctx.timeout_s))
     args = (["sub", "--expect", text] if out else ["pub", "--text", text, "--ack", tag])
-    cmd = zenoh_peer_command(*args, "--topic", topic, "--timeout", f"{remote_t:.1f}",
-                               *_member_arg(ctx, peer))
+    argv = [*args, "--topic", topic, "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, peer)]
     got: tuple[str | None, bool | None, int] = (None, None, 0)
     seen_pub: bool | None = None
     ev: list[str] = []
     info: dict = {}
     try:
-        async with ssh_session(ctx.ssh, peer, cmd,
-                               timeout=max(0.5, min(budget_s * 0.3, ctx.timeout_s * 0.6))) as sess:
+        async with peer_session(ctx, peer, ZENOH_AGENT, "zenoh", argv,
+                                timeout=max(0.5, min(budget_s * 0.3, ctx.timeout_s * 0.6)),
+                                needs_install=True) as sess:
             if not sess.ok:
                 return (Status.SKIP, f"skipped: could not run the other side on {peer.name}: SSH "
                                      f"failed ({sess.result.failure}): {sess.result.detail}", [],
                         _pdata(peer.name, False))
-            await sess.write(ZENOH_SOURCE)
-            await sess.close_stdin()
             ready = await sess.read_until(zenohproto.READY_MARK, timeout=max(0.3, budget_s * 0.4))
             if ready is not None and out:
                 while time.monotonic() < deadline - 0.5:
