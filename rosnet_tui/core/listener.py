@@ -14,11 +14,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import random
 import secrets
 import time
 from collections import deque
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterable
 from dataclasses import dataclass
+
+from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN
 
 GREETING = "ROSNET-TUI HELLO"
 ECHO = "ROSNET-TUI ECHO"
@@ -124,6 +127,22 @@ class TestListener:
                 await asyncio.wait_for(self._changed.wait(), left)
 
 
+SPARE_TRIES = 12
+"""Random ports of the range tried for a spare listener: one can be taken (a service, or the local
+end of one of this machine's own connections, which Linux draws from the same numbers)."""
+
+
+def random_ports(n: int, avoid: Iterable[int] = ()) -> list[int]:
+    """*n* distinct random ports of the forwarded range, none of them in *avoid*."""
+    rng, avoid = random.SystemRandom(), set(avoid)
+    out: list[int] = []
+    while len(out) < n:
+        p = rng.randint(PORT_MIN, PORT_MAX)
+        if p not in avoid and p not in out:
+            out.append(p)
+    return out
+
+
 class ListenerPool:
     """Reference-counted listeners shared by the checks of a round (one per port)."""
 
@@ -145,6 +164,25 @@ class ListenerPool:
 
     def get(self, port: int) -> TestListener | None:
         return self._listeners.get(port)
+
+    @contextlib.asynccontextmanager
+    async def hold_spare(self, avoid: Iterable[int] = ()) -> AsyncIterator[TestListener]:
+        """Our listener on a random port of the range that is free, for the ``async with`` body
+        (raises the last OSError when none of :data:`SPARE_TRIES` ports could be bound)."""
+        avoid = set(avoid) | set(self._listeners)
+        problem: OSError | None = None
+        for port in random_ports(SPARE_TRIES, avoid):
+            try:
+                cm = self.hold(port)
+                lst = await cm.__aenter__()
+            except OSError as exc:
+                problem = exc
+                continue
+            async with contextlib.AsyncExitStack() as stack:
+                stack.push_async_exit(cm)       # released as ``hold`` releases it
+                yield lst
+            return
+        raise problem or OSError("no spare port")
 
     @contextlib.asynccontextmanager
     async def hold(self, port: int) -> AsyncIterator[TestListener]:

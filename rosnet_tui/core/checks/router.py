@@ -11,7 +11,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
-import random
 import socket
 from typing import Any, Literal
 
@@ -31,7 +30,7 @@ from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.listener import GREETING, TestListener
 from rosnet_tui.core.netinfo import detect_local_net, interface_ipv4
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Peer
+from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import run_blocking
 from rosnet_tui.core.ssh.session import ssh_run
 from rosnet_tui.core.state import record_local_ip
@@ -308,16 +307,6 @@ def _what_answered(how: PortTalk, text: str) -> str:
     return f"read {text[:60]!r}"
 
 
-def _pick_random_ports(n: int, avoid: set[int]) -> list[int]:
-    rng = random.SystemRandom()
-    out: list[int] = []
-    while len(out) < n:
-        p = rng.randint(PORT_MIN, PORT_MAX)
-        if p not in avoid and p not in out:
-            out.append(p)
-    return out
-
-
 async def _probe_from_peer(ctx: CheckContext, peer: Peer, public_ip: str,
                            ports: dict[int, PortTalk], t_connect: float, total: float,
                            patience: float
@@ -440,14 +429,12 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
             ours[test_port] = None
             evidence.append(f"our listener could not bind {test_port}: {exc.strerror or exc}")
         randoms: list[int] = []
-        for p in _pick_random_ports(12, {test_port, 11311, s.ros.port}):
-            if len(randoms) == 2:
-                break
-            try:
-                ours[p] = await stack.enter_async_context(ctx.listeners.hold(p))
-                randoms.append(p)
-            except OSError:
-                continue
+        for _ in range(2):          # two random ports of the range, each one that is free here
+            with contextlib.suppress(OSError):
+                lst = await stack.enter_async_context(ctx.listeners.hold_spare(
+                    {test_port, 11311, s.ros.port, *randoms}))
+                ours[lst.port] = lst
+                randoms.append(lst.port)
         services: list[int] = []
         for p in (22, s.ros.port or 11311):
             if p not in services and await run_blocking(listening_locally, p, timeout=1.0):

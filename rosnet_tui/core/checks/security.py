@@ -17,7 +17,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import getpass
-import random
 import sys
 from typing import Any
 
@@ -35,7 +34,7 @@ from rosnet_tui.core.checks.probes import (
 )
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Settings
+from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.ssh.session import ssh_run
 
 SSH_PORT = 22
@@ -250,23 +249,22 @@ async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
         return Outcome(Status.SKIP, f"skipped: {why}, so no outsider/insider pair can be made",
                        [], data)
     t = budget(ctx, "security.outsider")
-    rng = random.SystemRandom()
-    avoid = {s.ros.port, s.probe.port, SSH_PORT}
-    spare = next(p for p in iter(lambda: rng.randint(PORT_MIN, PORT_MAX), None) if p not in avoid)
     ev: list[str] = []
-    ports = [spare]
+    ports: list[int] = []
     if s.is_master:     # the master's port is judged only when something listens there
         if await _listens_here(s.ros.port):
-            ports.insert(0, s.ros.port)
+            ports.append(s.ros.port)
         else:
             ev.append(f"nothing listens on {s.ros.port} here (see ros.master): not judged")
     base = s.probe.port_check_url.rstrip("/")
     async with contextlib.AsyncExitStack() as stack:
         try:
-            await stack.enter_async_context(ctx.listeners.hold(spare))
+            spare = await stack.enter_async_context(ctx.listeners.hold_spare(
+                {s.ros.port, s.probe.port, SSH_PORT}))
         except OSError as exc:
-            return Outcome(Status.FAIL, f"cannot listen on port {spare} of the range for the "
+            return Outcome(Status.FAIL, f"cannot listen on a spare port of the range for the "
                                         f"test: {exc.strerror or exc}", ev, data)
+        ports.append(spare.port)
         data["ports"] = ports
         cmd = python_command(_CONNECT, target, f"{t * 0.25:.2f}", *map(str, ports))
         peer = peers[0]

@@ -1,0 +1,43 @@
+"""security.outsider under ROS 1 on loopback: a real sshd as the peer (the insider), a small web
+server as the echoip-style port checker (the outsider), our listener on a spare port of the range.
+"""
+
+from __future__ import annotations
+
+import socket
+
+from rosnet_tui.core import listener
+from rosnet_tui.core.checks import REGISTRY, load_builtin_checks, run_check
+from rosnet_tui.core.settings_model import ProbeSettings, RosSettings, Settings, ThisComponent
+from tests.builders import free_port
+
+
+def _settings(ssh_client, web) -> Settings:
+    return Settings(this=ThisComponent(name="robot", role="master", profile="remote",
+                                       local_ip="127.0.0.1", public_ip="127.0.0.1"),
+                    peers=[ssh_client.peer()],
+                    ros=RosSettings(master="robot", port=free_port(), version=1,
+                                    security="firewall"),
+                    probe=ProbeSettings(port_check_url=web.url("")))
+
+
+async def test_a_spare_port_already_taken_is_passed_over(ssh_client, web, monkeypatch):
+    # A busy port of the range (here: one we hold; on a robot: a connection's ephemeral port)
+    # used to end the check with "cannot listen on port N": the next candidate is taken instead.
+    web.fallback = lambda path: (200, '{"reachable": false}')
+    busy = socket.socket()
+    busy.bind(("0.0.0.0", 0))
+    busy.listen()
+    taken, free = busy.getsockname()[1], free_port()
+    real = listener.random_ports
+    monkeypatch.setattr(listener, "random_ports",
+                        lambda n, avoid=(): [taken, free, *real(n, avoid)][:max(n, 2)])
+    load_builtin_checks()
+    try:
+        r = await run_check(REGISTRY["security.outsider"], ssh_client.ctx(_settings(ssh_client,
+                                                                                     web)))
+    finally:
+        busy.close()
+    assert r.status.value == "pass", (r.summary, r.evidence)
+    assert r.data["ports"] == [free], r.data
+    assert f"/port/{free}" in " ".join(web.hits)
