@@ -323,3 +323,15 @@ async def test_a_peer_without_python3_gives_exit_status_127_to_every_run(ssh_cli
         agents.close()
         opts.pool.close()
     assert all(r.ok and r.exit_status == 127 and probes.no_python(r) for r in got), got
+
+
+def test_a_line_that_is_no_request_is_said_and_the_agent_goes_on(local):
+    """Garbage, a request nested past the recursion limit, a request of the wrong shape: each is
+    answered with an error line, and the next good request still runs."""
+    a = local()
+    a.send_raw(b"not json at all\n" + b"[" * 100_000 + b"\n")
+    a.send(["a list, not a request"])
+    errors = [a.line() for _ in range(3)]
+    assert all(e["id"] is None and e["e"].startswith("agent: ") for e in errors), errors
+    a.send({"run": "p", "id": 9, "argv": ["0", "after"]})
+    assert a.until_exits(1)[9]["o"] == f"{a.pid} 0 after\n"

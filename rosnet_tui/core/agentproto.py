@@ -166,9 +166,14 @@ class Agent:
         timer.start()
         self.send({READY: 1, "pid": os.getpid()})
         for line in iter(inp.readline, b""):
-            msg = None
             try:
                 msg = json.loads(line)
+            except (ValueError, RecursionError):     # not a request of ours: said, skipped
+                msg = None
+            if not isinstance(msg, dict) or not ({"load", "run", "kill"} & set(msg)):
+                self.send({"id": None, "e": "agent: a line that is not a request\n"})
+                continue
+            try:
                 if "load" in msg:
                     self.load(msg["load"], msg["src"], msg.get("entry"))
                 elif "run" in msg:

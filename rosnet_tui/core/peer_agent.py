@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core import agentproto
+from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import SshResult
 from rosnet_tui.core.ssh.options import SshOptions
@@ -220,8 +221,8 @@ class PeerAgent:
             if seq.isdigit():
                 self.seq = int(seq) + 1
             try:
-                msg = json.loads(body)
-            except ValueError:
+                msg = loads_bounded(body, unique_keys=False)
+            except ValueError:      # JsonInputError: not a line of ours (or of a sane peer)
                 continue
             call = self.calls.get(msg.get("id")) if isinstance(msg, dict) else None
             if call is not None:
