@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import agentproto, chatproto, zenohproto
+from rosnet_tui.core import agentproto, chatproto, rosproto, zenohproto
 from rosnet_tui.core.checks import probes
 from rosnet_tui.core.peer_agent import AGENT_SOURCE, AgentKind, PeerAgents, agent_run
 from rosnet_tui.core.ssh.pool import SshPool
@@ -112,9 +112,10 @@ def local():
         a.close()
 
 
-@pytest.mark.parametrize("module", [agentproto, chatproto])
+@pytest.mark.parametrize("module", [agentproto, chatproto, rosproto])
 def test_peer_programs_are_py38_stdlib_only(module):
-    """They run on the peer's python3 (as old as Ubuntu 20.04's 3.8), without rosnet-tui."""
+    """They run on the peer's python3 (as old as Ubuntu 20.04's 3.8), without rosnet-tui (the
+    Zenoh program needs eclipse-zenoh: tests/test_peer_install.py runs it on an install)."""
     tree = ast.parse(Path(module.__file__).read_text(), feature_version=(3, 8))
     imported = set()
     for node in ast.walk(tree):

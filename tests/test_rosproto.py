@@ -6,13 +6,11 @@ every process started here is on 127.0.0.1 and is killed at the end.
 
 from __future__ import annotations
 
-import ast
 import json
 import os
 import socket
 import struct
 import subprocess
-import sys
 import threading
 import time
 import xmlrpc.client
@@ -52,19 +50,6 @@ def unique_topic() -> str:
 
 
 # --------------------------------------------------------------------------- pure parts
-def test_source_is_py38_stdlib_only():
-    text = SOURCE.decode()
-    tree = ast.parse(text, feature_version=(3, 8))
-    imported = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            imported |= {a.name.split(".")[0] for a in node.names}
-        elif isinstance(node, ast.ImportFrom):
-            imported.add((node.module or "").split(".")[0])
-    assert "rosnet_tui" not in imported
-    assert imported <= set(sys.stdlib_module_names), imported - set(sys.stdlib_module_names)
-
-
 def test_connection_header_matches_the_documented_layout():
     # The wiki's example: rostopic publishing std_msgs/String "hello" on /chatter.
     fields = {"message_definition": "string data\n\n",
