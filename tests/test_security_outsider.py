@@ -188,6 +188,78 @@ def test_mtls_router_refuses_every_outsider_and_lets_the_member_in(world):
     assert took < r.timeout_s + 0.5, took
 
 
+class SlowLink:
+    """A TCP relay on 127.0.0.1 to *port* that holds every chunk *delay_s* in each direction: a
+    round trip of 2 x *delay_s*, as a mobile link to the master has (bounded: it stops with the
+    test; one thread per direction and connection)."""
+
+    def __init__(self, port: int, delay_s: float) -> None:
+        import threading
+
+        self.delay_s, self.port_to = delay_s, port
+        self.srv = socket.create_server(("127.0.0.1", 0))
+        self.srv.settimeout(0.2)
+        self.port = self.srv.getsockname()[1]
+        self.stop = threading.Event()
+        self.threads = [threading.Thread(target=self._accept, daemon=True)]
+        self.threads[0].start()
+
+    def _pipe(self, a: socket.socket, b: socket.socket) -> None:
+        a.settimeout(0.2)
+        while not self.stop.is_set():
+            try:
+                data = a.recv(65536)
+            except TimeoutError:
+                continue
+            except OSError:
+                break
+            time.sleep(self.delay_s)
+            try:
+                b.sendall(data) if data else b.shutdown(socket.SHUT_WR)
+            except OSError:
+                break
+            if not data:
+                break
+
+    def _accept(self) -> None:
+        import threading
+
+        while not self.stop.is_set():
+            try:
+                c, _ = self.srv.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            u = socket.create_connection(("127.0.0.1", self.port_to), timeout=2)
+            for a, b in ((c, u), (u, c)):
+                th = threading.Thread(target=self._pipe, args=(a, b), daemon=True)
+                th.start()
+                self.threads.append(th)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.srv.close()
+        for th in self.threads:
+            th.join(2)
+
+
+def test_on_a_slow_link_the_refusals_still_count_as_refusals(world):
+    """The wait for the server's verdict after the handshake follows the link's round trip (here
+    0.5 s): a refusal that comes a round trip late is still read as a refusal, not as a session."""
+    fleet, member_tls, start = world
+    _member_cert(fleet, member_tls)
+    link = SlowLink(start("mtls"), 0.25)
+    try:
+        r = _run(_settings(link.port))
+    finally:
+        link.close()
+    a = r.data["attempts"]
+    assert r.status == "pass", _explain(r)
+    assert a["no_cert"]["result"] == "alert" and a["foreign"]["result"] == "alert", a
+    assert a["insider"]["result"] == "accepted", a
+
+
 def test_plain_router_today_fails_with_security_off(world):
     fleet, member_tls, start = world
     _member_cert(fleet, member_tls)
