@@ -202,3 +202,23 @@ async def test_a_round_connection_that_breaks_midway_is_made_again_for_a_probe(s
         pool.close()
     assert res.ok and res.exit_status == 0 and res.stdout == "done\n", res
     assert "again" in res.detail, res.detail
+
+
+async def test_writing_to_a_session_whose_connection_broke_says_so_without_raising(ssh_client):
+    # paramiko raises EOFError (not an OSError) for a send on a transport whose socket died: it
+    # used to escape the session and end a check with "failed unexpectedly: EOFError".
+    from rosnet_tui.core.ssh.session import ssh_session
+
+    pool = SshPool()
+    opts = pooled(ssh_client, pool)
+    try:
+        async with ssh_session(opts, ssh_client.peer(), "cat >/dev/null; sleep 5",
+                               timeout=5) as s:
+            assert s.ok and await s.write(b"first")
+            conn = pool.start(opts, ssh_client.peer()).result(5)
+            conn.transport.sock.shutdown(socket.SHUT_WR)   # our side can send no more
+            assert await s.write(b"x" * 100_000) is False
+            res = await s.wait(2)
+    finally:
+        pool.close()
+    assert not res.ok and res.exit_status is None and "broke" in res.detail, res

@@ -120,7 +120,7 @@ class SshSession:
                         return False
                     buf = buf[n:]
                     continue
-            except (OSError, paramiko.SSHException):
+            except (OSError, EOFError, paramiko.SSHException):   # EOFError: the link died
                 return False
             if time.monotonic() > deadline or self._chan.closed:
                 return False
