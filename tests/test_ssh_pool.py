@@ -10,7 +10,7 @@ import time
 import pytest
 
 from rosnet_tui.core.ssh.pool import SshPool
-from rosnet_tui.core.ssh.session import ssh_run
+from rosnet_tui.core.ssh.session import ssh_run, ssh_session
 from tests.builders import free_port
 from tests.plugins.ssh import Sshd
 
@@ -207,8 +207,6 @@ async def test_a_round_connection_that_breaks_midway_is_made_again_for_a_probe(s
 async def test_writing_to_a_session_whose_connection_broke_says_so_without_raising(ssh_client):
     # paramiko raises EOFError (not an OSError) for a send on a transport whose socket died: it
     # used to escape the session and end a check with "failed unexpectedly: EOFError".
-    from rosnet_tui.core.ssh.session import ssh_session
-
     pool = SshPool()
     opts = pooled(ssh_client, pool)
     try:

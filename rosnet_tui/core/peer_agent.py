@@ -202,7 +202,7 @@ class PeerAgent:
                                  r.fingerprint, r.host_key, r.address, r.tcp)
             s.close()
             # A channel closed under it without a word (no exit status, no output): once more.
-            if attempt == 1 and res.exit_status in (None, -1) and not (res.stdout or res.stderr):
+            if attempt == 1 and res.exit_status is None and not (res.stdout or res.stderr):
                 continue
             self.ended = res      # it ended: every run gets its output and exit status
             return s.result

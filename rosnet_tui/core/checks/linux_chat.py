@@ -45,17 +45,27 @@ from rosnet_tui.core.ssh.session import SshSession, ssh_run, ssh_session
 _IS_OPENBSD_NC = "nc -h 2>&1 | grep -q OpenBSD"
 
 
+def _nc_chat(token: str, wait: float, openbsd_args: str, traditional_args: str) -> str:
+    """The chat line sent with nc, OpenBSD's (``-N``: hang up after stdin ends) or the
+    traditional one, bounded by ``timeout``."""
+    w = max(int(wait + 0.999), 1)
+    msg = shq(f"{CHAT} {token}")
+    return (f"if {_IS_OPENBSD_NC}; then echo {msg} | timeout {w} nc -N {openbsd_args}; "
+            f"else echo {msg} | timeout {w} nc {traditional_args}; fi")
+
+
+def _python_else(py: str, fallback: str) -> str:
+    """*py* when the peer has its python3, else *fallback*."""
+    return f"if command -v {peer_python()} >/dev/null 2>&1; then {py}; else {fallback}; fi"
+
+
 def listen_command(port: int, token: str, wait: float) -> str:
     """Peer side of chat_out without the round's agent: python3 when present, else ``nc -l``
     (OpenBSD or traditional)."""
     py = python_command(CHAT_SOURCE.decode(), "listen", str(port), token, f"{wait:.1f}",
                         python=peer_python())
-    w = max(int(wait + 0.999), 1)
-    msg = shq(f"{CHAT} {token}")
-    nc = (f"echo LISTENING {port}; echo NC; if {_IS_OPENBSD_NC}; then "
-          f"echo {msg} | timeout {w} nc -N -l {port}; else "
-          f"echo {msg} | timeout {w} nc -l -p {port}; fi")
-    return f"if command -v {peer_python()} >/dev/null 2>&1; then {py}; else {nc}; fi"
+    nc = f"echo LISTENING {port}; echo NC; " + _nc_chat(token, wait, f"-l {port}", f"-l -p {port}")
+    return _python_else(py, nc)
 
 
 def connect_command(name: str, port: int, token: str, t: float) -> str:
@@ -63,12 +73,10 @@ def connect_command(name: str, port: int, token: str, t: float) -> str:
     it (python3 when present, else nc)."""
     py = python_command(CHAT_SOURCE.decode(), "connect", name, str(port), f"{t:.1f}", token,
                         python=peer_python())
-    w = max(int(t + 0.999), 1)
-    msg = shq(f"{CHAT} {token}")
+    target = f"{shq(name)} {port}"
     nc = (f"echo NC; echo RESOLVED $(getent ahostsv4 {shq(name)} | head -n1 | cut -d' ' -f1); "
-          f"if {_IS_OPENBSD_NC}; then echo {msg} | timeout {w} nc -N {shq(name)} {port}; "
-          f"else echo {msg} | timeout {w} nc {shq(name)} {port}; fi")
-    return f"if command -v {peer_python()} >/dev/null 2>&1; then {py}; else {nc}; fi"
+          + _nc_chat(token, t, target, target))
+    return _python_else(py, nc)
 
 
 @contextlib.asynccontextmanager
