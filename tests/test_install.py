@@ -48,12 +48,18 @@ HOSTS = b"127.0.0.1\tlocalhost\n::1 localhost ip6-localhost\n"
 
 
 # --------------------------------------------------------------------------- the README
-def readme_setup_commands() -> list[str]:
-    """The lines of the README's first code block (the set-up commands)."""
+def readme_code_blocks() -> list[list[str]]:
+    """The non-blank lines of each of the README's code blocks, in order."""
     text = (REPO / "README.md").read_text(encoding="utf-8")
-    m = re.search(r"^```[^\n]*\n(.*?)^```", text, re.S | re.M)
-    assert m, "README.md has no code block"
-    return [line for line in m.group(1).splitlines() if line.strip()]
+    blocks = re.findall(r"^```[^\n]*\n(.*?)^```", text, re.S | re.M)
+    assert blocks, "README.md has no code block"
+    return [[line for line in b.splitlines() if line.strip()] for b in blocks]
+
+
+def readme_setup_commands() -> list[str]:
+    """The README's two set-up commands: the user's (its first code block), then the developers'
+    (its second)."""
+    return [line for block in readme_code_blocks()[:2] for line in block]
 
 
 def install_line() -> tuple[str, str]:
@@ -70,6 +76,10 @@ def test_readme_opens_with_the_two_set_up_commands():
         "the README must open with the set-up commands, right under its title"
     commands = readme_setup_commands()
     assert len(commands) == 2, commands
+    user, developers = readme_code_blocks()[:2]
+    # Two blocks, never one paste: the developers' command installs servers and disables
+    # services, which a technician copying the first block onto a robot must never run.
+    assert user == [commands[0]] and developers == [commands[1]], (user, developers)
     head, program = install_line()
     assert program == "~/.local/bin/rosnet-tui", \
         "the program is named by the path it installs to: ~/.local/bin is not on PATH yet"
