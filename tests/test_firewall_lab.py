@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from tests.lab import ADDR
+from tests.lab import ADDR, outsider
 from tests.lab.firewall import secured
 from tests.sync_support.bench import goal_s
 from tests.sync_support.lab_sync import SyncRig, prepare_lab, wait_for
@@ -60,14 +60,14 @@ def nft(lab, host: str, *args: str):
     return lab.run(host, ["nft", *args], timeout=10)
 
 
-def fw(lab, host: str, state, *args: str, config=None):
-    env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
+def fw(lab, host: str, state, *args: str, config=None, **extra: str):
+    env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state), **extra)
     return lab.rosnet(host, "--config", str(config or lab.config_path(host)), *args,
                       env=env, timeout=60)
 
 
-def check(lab, host: str, state, *steps: str) -> dict[str, dict]:
-    env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state))
+def check(lab, host: str, state, *steps: str, **extra: str) -> dict[str, dict]:
+    env = dict(lab.ros_env(host), XDG_STATE_HOME=str(state), **extra)
     argv = ["check", "--json", "-q"] + [a for s in steps for a in ("--step", s)]
     r = lab.rosnet(host, *argv, "--config", str(lab.config_path(host)), env=env, timeout=90)
     assert r.stdout.strip(), r.stderr
@@ -150,6 +150,89 @@ def test_only_the_peer_gets_through_and_undo_leaves_a_foreign_table(fw_lab, tmp_
         lab.call_in("robot", srv.close)
 
 
+TECHNICIAN = ADDR.OUTSIDER_IP     # the technician's mobile line: on the internet, no peer
+LAN_HOST = ADDR.ROBOT_GW          # the robot's modem, a host on the robot's own LAN
+
+
+def test_the_technician_who_applies_it_over_ssh_and_the_lan_still_get_in(fw_lab, tmp_path):
+    """Issue 29: ROS 1 settings with one peer; `firewall apply` runs in an SSH session from an
+    address that is no peer. After it, a real SSH connection from that address still reaches
+    sshd through the forward (SSH only), a host on the robot's LAN reaches SSH and ROS, the
+    stranger is still dropped and the peer still gets in."""
+    lab = fw_lab
+    s = lab.settings("robot")
+    assert s.ros.version == 1 and [p.public_ip for p in s.peers] == [ADDR.LAPTOP_PUBLIC]
+    session = {"SSH_CONNECTION": f"{TECHNICIAN} 50022 {ADDR.ROBOT_LOCAL} 22"}
+    srv = lab.call_in("robot", listen, RANGE_PORT)
+    try:
+        assert outsider.ssh_auth_none(lab, ADDR.ROBOT_PUBLIC).get("methods"), "no SSH before"
+        r = fw(lab, "robot", tmp_path, "firewall", "apply", "--yes", "--no-checks", **session)
+        assert r.returncode == 0, r.stdout + r.stderr
+        preview = r.stdout.split("Loaded the table")[0]
+        assert (f"  this SSH session, {TECHNICIAN} (to sshd port 22; SSH_CONNECTION): SSH "
+                "only, until the next `rosnet-tui firewall apply`") in preview, r.stdout
+        assert "  this machine's LAN (SSH and ROS): 10.10.10.0/24" in preview, r.stdout
+        listing = nft(lab, "robot", "list", "table", "inet", "rosnet_tui").stdout
+        assert f"elements = {{ {TECHNICIAN} . 22 }}" in listing, listing
+        assert "elements = { 10.10.10.0/24 }" in listing, listing
+
+        # The technician: a real SSH connection through the robot's modem, after the table.
+        got = outsider.ssh_auth_none(lab, ADDR.ROBOT_PUBLIC)
+        assert got.get("methods"), got
+        # ... and SSH only: the master's port and the range stay shut to that address.
+        for port in (11311, RANGE_PORT):
+            assert lab.call_in("outsider", tcp_try, TECHNICIAN, ADDR.ROBOT_PUBLIC,
+                               port) in ("timeout", "refused"), port
+        # A host on the robot's LAN: SSH and ROS.
+        for port in (22, RANGE_PORT):
+            assert lab.call_in("robot_modem", tcp_try, LAN_HOST, ADDR.ROBOT_LOCAL,
+                               port) == "connected", port
+        # The stranger: dropped at SSH and at the range. The peer: in.
+        for port in (22, RANGE_PORT):
+            assert lab.call_in("internet", tcp_try, OUTSIDER, ADDR.ROBOT_PUBLIC,
+                               port) in ("timeout", "refused"), port
+            assert lab.call_in("laptop", tcp_try_any, ADDR.ROBOT_PUBLIC, port) == "connected"
+
+        # linux.firewall, run by that session: passes, says who gets in and that it does.
+        got = check(lab, "robot", tmp_path, "linux", **session)["linux.firewall"]
+        assert got["status"] == "pass", got
+        d = got["data"]
+        assert d["sessions"] == [f"{TECHNICIAN} . 22"]
+        # The robot's LAN: its eth0 network (and eth0's IPv6 link-local one, where the kernel
+        # gave it one); the modem's public side is no LAN of the robot's.
+        assert d["lan"] == d["expected_lan"] and d["lan"][0] == "10.10.10.0/24"
+        assert set(d["lan"][1:]) <= {"fe80::/64"}, d["lan"]
+        assert d["client"] == TECHNICIAN
+        assert d["client_in"] == "the SSH session that loaded the table"
+        ev = "\n".join(got["evidence"])
+        assert f"peers (SSH and ROS): {ADDR.LAPTOP_PUBLIC}" in ev
+        assert f"this machine's LAN (SSH and ROS): {', '.join(d['lan'])}" in ev
+        assert f"(SSH, until the next firewall apply): {TECHNICIAN} (port 22)" in ev
+        # Run over SSH from another address that is no peer: a warning naming it.
+        other = {"SSH_CONNECTION": f"{OUTSIDER} 50022 {ADDR.ROBOT_LOCAL} 22"}
+        got = check(lab, "robot", tmp_path, "linux", **other)["linux.firewall"]
+        assert got["status"] == "warn", got
+        assert got["summary"].startswith(f"{OUTSIDER}, where this check runs from over SSH, "
+                                         "would not get in again"), got["summary"]
+        assert got["data"]["client_in"] == ""
+
+        # The next apply, from the console (no SSH session), drops the session's entry.
+        r = fw(lab, "robot", tmp_path, "firewall", "apply", "--yes", "--no-checks")
+        assert r.returncode == 0 and "no SSH session runs this" in r.stdout, r.stdout + r.stderr
+        assert outsider.ssh_auth_none(lab, ADDR.ROBOT_PUBLIC, timeout=1.5).get("error")
+        # ... unless [firewall] allow keeps it for good.
+        cfg = tmp_path / "allow.toml"
+        cfg.write_text(lab.config_path("robot").read_text()
+                       + f'\n[firewall]\nallow = ["{TECHNICIAN}"]\n')
+        r = fw(lab, "robot", tmp_path, "firewall", "apply", "--yes", "--no-checks", config=cfg)
+        assert r.returncode == 0 and f"[firewall] allow (SSH): {TECHNICIAN}" in r.stdout, r.stderr
+        assert outsider.ssh_auth_none(lab, ADDR.ROBOT_PUBLIC).get("methods")
+        assert lab.call_in("outsider", tcp_try, TECHNICIAN, ADDR.ROBOT_PUBLIC,
+                           11311) in ("timeout", "refused")
+    finally:
+        lab.call_in("robot", srv.close)
+
+
 def test_firewall_undo_then_undo_loads_it_again_and_bad_input_exits_2(fw_lab, tmp_path):
     lab = fw_lab
     assert fw(lab, "robot", tmp_path, "firewall", "apply", "--yes", "--no-checks").returncode == 0
@@ -226,11 +309,14 @@ def test_as_a_user_the_exact_sudo_command_loads_the_previewed_table(fw_lab, tmp_
     lab = fw_lab
     fake = tmp_path / "bin"
     fake.mkdir()
+    # Like sudo's env_reset, the stand-in drops the SSH session's variables.
     (fake / "sudo").write_text('#!/bin/sh\necho "sudo $*" > "$(dirname "$0")/called"\n'
-                               '[ "$1" = "-n" ] && shift\nexec "$@"\n')
+                               '[ "$1" = "-n" ] && shift\n'
+                               'exec env -u SSH_CONNECTION -u SSH_CLIENT "$@"\n')
     os.chmod(fake / "sudo", 0o755)
     monkeypatch.setenv("PATH", f"{fake}{os.pathsep}{os.environ.get('PATH', '')}")
     monkeypatch.setattr(privilege, "is_root", lambda: False)
+    monkeypatch.setenv("SSH_CONNECTION", f"{TECHNICIAN} 50022 {ADDR.ROBOT_LOCAL} 22")
     cfg, state = lab.config_path("robot"), tmp_path / "state"
     rc = lab.call_in("robot", main, ["--config", str(cfg), "firewall", "apply", "--yes",
                                      "--no-checks", "--state-dir", str(state)])
@@ -241,7 +327,10 @@ def test_as_a_user_the_exact_sudo_command_loads_the_previewed_table(fw_lab, tmp_
     joined = " ".join(called)
     assert "firewall apply --profile remote --expect-digest" in joined and "--yes" in joined
     assert "needs root; running:" in out and "+table inet rosnet_tui {" in out
-    assert ADDR.LAPTOP_PUBLIC in nft(lab, "robot", "list", "table", "inet", "rosnet_tui").stdout
+    # The session was read here, on the user's side, and handed to root (sudo drops it).
+    assert f"--session-ip {TECHNICIAN} --session-port 22 --yes" in joined
+    listing = nft(lab, "robot", "list", "table", "inet", "rosnet_tui").stdout
+    assert ADDR.LAPTOP_PUBLIC in listing and f"{TECHNICIAN} . 22" in listing
     # The digest names what was previewed: another ruleset is refused, nothing loaded.
     nft(lab, "robot", "delete", "table", "inet", "rosnet_tui")
     r = fw(lab, "robot", state, "firewall", "apply", "--yes", "--no-checks",

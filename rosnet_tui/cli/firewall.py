@@ -4,11 +4,16 @@ The table is rosnet_tui.core.firewall's (`table inet rosnet_tui`, nothing else t
 hosts writer: a preview first, then the change through sudo when this user is not root (our own
 writer re-run under this very Python, with the digest of the previewed ruleset), ONE `nft -f`
 transaction, and an undo journal entry (`rosnet-tui undo` reverses it).
+
+The SSH session that runs `apply` is never locked out: its address is read here, on the user's
+side (sudo's env_reset drops SSH_CONNECTION), named in the preview and handed to the privileged
+re-run with --session-ip, so the digest covers it.
 """
 
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import sys
 from pathlib import Path
 
@@ -46,8 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("firewall", help="ROS 1: let only the peers reach the forwarded ports",
                        description="An nftables table of rosnet-tui's own (table inet "
                                    "rosnet_tui): on the forwarded TCP ports (22, the ROS range, "
-                                   "the master's port) only the peers' addresses, loopback and "
-                                   "established traffic get in. No other table is touched.")
+                                   "the master's port) only the peers' addresses, this machine's "
+                                   "LAN, [firewall] allow (SSH), the SSH session that applies it "
+                                   "(SSH), loopback and established traffic get in. No other "
+                                   "table is touched.")
     p.set_defaults(func=lambda a: (p.print_help(sys.stderr), EXIT_USAGE)[1])
     fs = p.add_subparsers(dest="firewall_command", metavar="ACTION", parser_class=type(p))
 
@@ -63,6 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="refuse unless the ruleset is still the one previewed (used with sudo)")
     a.add_argument("--no-checks", action="store_true",
                    help="do not re-run linux.firewall afterwards")
+    a.add_argument("--session-ip", metavar="ADDR", default=None,
+                   help="the SSH session to keep in on SSH until the next apply (default: the "
+                        "first field of SSH_CONNECTION or SSH_CLIENT; under sudo, the shell's "
+                        "that ran it; else the terminal's login record); 'none': keep none")
+    a.add_argument("--session-port", metavar="PORT", type=int, default=fw.SSH_PORT,
+                   help="the sshd port of that session (default: 22)")
     a.set_defaults(func=run_apply)
 
     s = fs.add_parser("show", help="the ruleset for the settings, and what is loaded now")
@@ -101,13 +114,41 @@ def _sudo_undo(args: argparse.Namespace) -> list[str]:
                                 "--no-checks"])
 
 
+def _session(args: argparse.Namespace) -> tuple[fw.Session | None, bool]:
+    """(the session --session-ip names, whether to detect one instead); raises
+    fw.SessionError for a bad value."""
+    value = args.session_ip
+    if value is None:
+        return None, True
+    if value.strip().lower() == "none":
+        return None, False
+    try:
+        addr = ipaddress.ip_address(value.strip())
+    except ValueError:
+        raise fw.SessionError(f"--session-ip '{value[:40]}' is not an IP address (or 'none')"
+                              ) from None
+    if not 0 < args.session_port < 65536:
+        raise fw.SessionError(f"--session-port {args.session_port} is not a port (1-65535)")
+    return fw.Session(str(addr), args.session_port, "--session-ip"), False
+
+
+def _refuse_session(exc: fw.SessionError) -> int:
+    say(f"rosnet-tui: nothing was changed: {exc}. The table would lock this session out once it "
+        "drops. Name its address with --session-ip ADDR (or 'none' when this is no SSH "
+        "session), or add it to [firewall] allow in the settings.")
+    return EXIT_USAGE
+
+
 def run_apply(args: argparse.Namespace) -> int:
     settings = _settings(args)
     if settings is None:
         return EXIT_USAGE
     profile = args.profile or settings.this.profile
     try:
-        pv = fw.preview(settings, profile)
+        session, detect = _session(args)
+        pv = fw.preview(settings, profile, session=session, detect=detect)
+    except fw.SessionError as exc:
+        return _refuse_session(exc)
     except fw.FirewallSettingsError as exc:
         return report_settings_problems(exc)
     except fw.FirewallError as exc:
@@ -120,21 +161,25 @@ def run_apply(args: argparse.Namespace) -> int:
     if not fw.wanted(settings):
         print(f"note: [ros] security is \"{settings.ros.security}\" in the settings; the "
               "table is loaded because you asked (the check keeps reporting the setting)")
-    print(f"Firewall for {settings.this.name or 'this component'}: table {fw.TABLE}, "
-          f"allowed ({profile} profile): {', '.join(pv.addresses)}")
-    for note in pv.notes:
+    print(f"Firewall for {settings.this.name or 'this component'}: table {fw.TABLE}.")
+    for line in pv.who:
+        print(line)
+    for note in pv.notes[len(pv.who):]:
         print(f"note: {note}")
     if pv.readable and not pv.changed:
         print(f"The table {fw.TABLE} is already loaded exactly so: nothing to change.")
         return EXIT_OK
     sys.stdout.write(pv.diff() if pv.readable else pv.ruleset)
     sys.stdout.flush()
-    stop = confirm(args, "Load this table (one nft transaction)?", dry_run="nothing was changed")
+    kept = (f"; this SSH session, {pv.session.address}, keeps SSH"
+            if pv.session is not None and not pv.session_in else "")
+    stop = confirm(args, f"Load this table (one nft transaction{kept})?",
+                   dry_run="nothing was changed")
     if stop is not None:
         return stop
     if not privilege.is_root():
         cmd = fw.apply_command(config=config_path(args), profile=profile, digest=pv.digest,
-                               state_dir=state_dir_of(args))
+                               state_dir=state_dir_of(args), session=pv.session)
         rc = run_as_root(cmd, f"loading the table {fw.TABLE}", "firewall apply")
     else:
         try:
@@ -163,19 +208,25 @@ def run_show(args: argparse.Namespace) -> int:
         print("ROS 2: the firewall is not used (mutual TLS guards the Zenoh port).")
         return EXIT_OK
     try:
-        addresses = fw.allowed_addresses(settings, profile)
+        try:
+            session = fw.detect_session()
+        except fw.SessionError as exc:
+            print(f"note: {exc}")
+            session = None
+        adm, session_in = fw.admission(settings, profile, session)
     except fw.FirewallSettingsError as exc:
         return report_settings_problems(exc)
     print(f"Allowed on TCP {', '.join(fw.forwarded_ports(settings))} ({profile} profile):")
     for p in settings.peers:
         print(f"  {fw.peer_address(settings, p.name, profile):<15} {p.name}")
-    print("  loopback, and replies to connections this machine made")
+    for line in fw.who_gets_in(settings, adm, profile, session, session_in)[2:]:
+        print(line)
     opened = fw.open_ports(settings)
     if opened:
         print(f"Left open to anyone: TCP {', '.join(map(str, opened))} (probe.port: only "
               "rosnet-tui's own listener answers there, during router.port_open)")
     print("\nThe table rosnet-tui loads:")
-    ruleset = fw.render_ruleset(settings, addresses)
+    ruleset = fw.render_ruleset(settings, adm)
     sys.stdout.write(ruleset)
     try:
         now = fw.current_ruleset()
@@ -188,7 +239,7 @@ def run_show(args: argparse.Namespace) -> int:
         print(f"\nThe table {fw.TABLE} is loaded, exactly so.")
     else:
         print(f"\nThe table {fw.TABLE} loaded now differs:")
-        sys.stdout.write(fw.FirewallPreview(ruleset, now, addresses).diff())
+        sys.stdout.write(fw.FirewallPreview(ruleset, now, adm.peers).diff())
     return EXIT_OK
 
 

@@ -1,10 +1,24 @@
 """ROS 1: only the peers reach the forwarded ports (an nftables table of our own).
 
 The forwards a ROS 1 network needs (the range, 22 and the master's port) let anyone on the internet
-talk to the master and every node. This module keeps one table, ``table inet rosnet_tui``, with a
-set of the peers' addresses and an input chain of its own, hooked before the distribution's
-filter (priority -10): on the forwarded TCP ports it accepts loopback, established/related traffic
-and the peers, and drops the rest. Nothing outside that table is read or changed.
+talk to the master and every node. This module keeps one table, ``table inet rosnet_tui``, with
+sets of addresses and an input chain of its own, hooked before the distribution's filter
+(priority -10). On the forwarded TCP ports it accepts loopback, established/related traffic and:
+
+- the peers (sets peers4/peers6): every forwarded port; the sync service follows their addresses;
+- this machine's LAN (lan4/lan6): the private, link-local and ULA networks of its interfaces'
+  addresses, every forwarded port. The modem's forward never delivers such a source address (it
+  rewrites the destination only), so they are the LAN's hosts, not the internet. A network
+  outside those blocks (a public address block, the carrier's 100.64.0.0/10) and point-to-point
+  links (ppp, wwan, VPN tunnels) do not count as LAN;
+- ``[firewall] allow`` (allow4/allow6): more addresses or networks, SSH (port 22) only;
+- the SSH session that runs ``firewall apply`` (session4/session6: address . port), so the
+  technician who loads the table is never locked out: its address and the sshd port it is
+  connected to, read on the user's side (SSH_CONNECTION, SSH_CLIENT, ...) and part of the
+  previewed ruleset, so the digest covers it. It stays until the next ``firewall apply`` replaces
+  the table (the sync service leaves it alone); ``[firewall] allow`` keeps an address for good.
+
+It drops the rest on those ports. Nothing outside that table is read or changed.
 
 - :func:`render_ruleset` is the text applied; :func:`preview` compares it with what is loaded now.
 - :func:`apply` loads it as ONE ``nft -f`` transaction (create-delete-define: our table is
@@ -26,7 +40,9 @@ import logging
 import os
 import re
 import shutil
+import socket
 import subprocess
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,6 +54,9 @@ FAMILY = "inet"
 NAME = "rosnet_tui"
 TABLE = f"{FAMILY} {NAME}"
 SET4, SET6 = "peers4", "peers6"
+LAN4, LAN6 = "lan4", "lan6"
+ALLOW4, ALLOW6 = "allow4", "allow6"
+SESSION4, SESSION6 = "session4", "session6"
 CHAIN = "input"
 PRIORITY = -10            # before the distribution's filter (priority 0)
 SSH_PORT = 22
@@ -46,10 +65,23 @@ NFT_TIMEOUT_S = 10.0
 LABEL = "firewall: peers only on the forwarded ports"
 
 MODES = ("mtls", "firewall", "none")
+# Only these blocks count as a LAN (private, link-local, unique local): an interface on a public
+# block, or on the carrier's shared 100.64.0.0/10, has the internet or strangers as neighbours.
+LAN_BLOCKS = tuple(ipaddress.ip_network(n) for n in (
+    "10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16", "169.254.0.0/16", "fe80::/10", "fc00::/7"))
+SESSION_VARS = ("SSH_CONNECTION", "SSH_CLIENT")
+ELEVATORS = ("sudo", "doas")          # what may stand between the user's shell and us
+ANCESTORS_MAX = 8
+SESSION_STAYS = ("until the next `rosnet-tui firewall apply` replaces the table; to keep it for "
+                 "good, add it to [firewall] allow")
 
 
 class FirewallError(Exception):
     """nft is missing, refused our ruleset, or may not be run by this user."""
+
+
+class SessionError(FirewallError):
+    """The SSH session running us cannot be told apart (an address that does not parse)."""
 
 
 class FirewallSettingsError(FirewallError):
@@ -123,8 +155,217 @@ def allowed_addresses(settings: Settings, profile: str | None = None) -> list[st
     return out
 
 
+def _net_text(net: ipaddress.IPv4Network | ipaddress.IPv6Network) -> str:
+    """A network as nft lists it: one address without its /32 or /128."""
+    return str(net.network_address) if net.num_addresses == 1 else str(net)
+
+
+def collapse(entries: list[str]) -> list[str]:
+    """Addresses and networks merged where they overlap or touch (nft refuses overlapping
+    intervals in one set), IPv4 first, each family in order."""
+    nets = [ipaddress.ip_network(e, strict=False) for e in entries]
+    out: list[str] = []
+    for version in (4, 6):
+        fam = [n for n in nets if n.version == version]
+        out += [_net_text(n) for n in ipaddress.collapse_addresses(fam)]  # type: ignore[arg-type]
+    return out
+
+
+def allow_networks(settings: Settings) -> list[str]:
+    """[firewall] allow, merged; refuses (FirewallSettingsError) an entry that is no address or
+    network (the settings loader refuses those already; settings made in code may hold one)."""
+    from rosnet_tui.core.settings_model import validate_network
+
+    problems = [(f"firewall.allow[{i}]", why) for i, e in enumerate(settings.firewall.allow)
+                if (why := validate_network(e))]
+    if problems:
+        raise FirewallSettingsError(problems)
+    return collapse([e.strip() for e in settings.firewall.allow])
+
+
+def is_lan(net: ipaddress.IPv4Network | ipaddress.IPv6Network) -> bool:
+    """True when *net* lies inside a private, link-local or unique-local block."""
+    return any(net.version == b.version and net.subnet_of(b)  # type: ignore[arg-type]
+               for b in LAN_BLOCKS)
+
+
+def _prefix_len(netmask: str) -> int | None:
+    try:
+        return bin(int(ipaddress.ip_address(netmask.split("/")[0]))).count("1")
+    except ValueError:
+        return None
+
+
+def lan_networks() -> list[str]:
+    """The networks of this machine's interface addresses that are a LAN (see LAN_BLOCKS):
+    loopback and point-to-point links (ppp, wwan in raw-IP mode, VPN tunnels) left out, and so
+    are networks of one address. Merged, IPv4 first."""
+    import psutil
+
+    try:
+        stats, addrs = psutil.net_if_stats(), psutil.net_if_addrs()
+    except OSError:
+        return []
+    nets: list[str] = []
+    for name, items in addrs.items():
+        flags = set(str(getattr(stats.get(name), "flags", "") or "").split(","))
+        if "loopback" in flags or "pointopoint" in flags or name == "lo":
+            continue
+        for a in items:
+            if a.family not in (socket.AF_INET, socket.AF_INET6) or not a.netmask:
+                continue
+            plen = _prefix_len(a.netmask)
+            if plen is None:
+                continue
+            try:
+                net = ipaddress.ip_interface(f"{a.address.split('%')[0]}/{plen}").network
+            except ValueError:
+                continue
+            if net.num_addresses == 1 or net.network_address.is_loopback:
+                continue
+            if is_lan(net):
+                nets.append(str(net))
+    return collapse(nets)
+
+
+# --------------------------------------------------------------------------- the SSH session
+@dataclass(frozen=True)
+class Session:
+    """Where an SSH session comes from: the client's address and the port of this machine's sshd
+    it is connected to; *source* says where that was read."""
+
+    address: str
+    port: int = SSH_PORT
+    source: str = ""
+
+    @property
+    def element(self) -> str:
+        return f"{self.address} . {self.port}"
+
+
+def parse_session(value: str, var: str, source: str = "") -> Session:
+    """*value* of SSH_CONNECTION ("client port server port") or SSH_CLIENT ("client port
+    port"); refuses (SessionError) one whose first field is no IP address."""
+    fields = value.split()
+    raw = fields[0] if fields else ""
+    try:
+        addr = ipaddress.ip_address(raw.split("%")[0])
+    except ValueError:
+        raise SessionError(f"{var} is set, but its first field '{raw[:40]}' is not an IP "
+                           "address, so the address of this SSH session is not known") from None
+    if addr.version == 6 and addr.ipv4_mapped is not None:
+        addr = addr.ipv4_mapped
+    want = 4 if var == "SSH_CONNECTION" else 3
+    port = SSH_PORT
+    if len(fields) >= want and fields[want - 1].isdigit() and 0 < int(fields[want - 1]) < 65536:
+        port = int(fields[want - 1])
+    return Session(str(addr), port, source or var)
+
+
+def session_from_env(environ: Mapping[str, str]) -> Session | None:
+    """The session named by SSH_CONNECTION (else SSH_CLIENT) in *environ*; None when neither
+    is set."""
+    for var in SESSION_VARS:
+        value = (environ.get(var) or "").strip()
+        if value:
+            return parse_session(value, var)
+    return None
+
+
+def _session_before_sudo() -> Session | None:
+    """Run by sudo (whose env_reset drops SSH_CONNECTION): the session of the shell that ran
+    sudo, from its environment (root may read it)."""
+    import psutil
+
+    try:
+        proc = psutil.Process().parent()
+        hops = 0
+        if proc is None or proc.name() not in ELEVATORS:
+            return None
+        while proc is not None and proc.name() in ELEVATORS and hops < ANCESTORS_MAX:
+            proc, hops = proc.parent(), hops + 1
+        if proc is None:
+            return None
+        env = proc.environ()
+    except (psutil.Error, OSError):
+        return None
+    found = session_from_env(env)
+    if found is None:
+        return None
+    return Session(found.address, found.port, f"{found.source} of the shell that ran sudo")
+
+
+def _session_of_terminal() -> Session | None:
+    """The login record of this process's terminal (what `who am i` shows): sshd writes the
+    client's address there. Only an IP address counts (tmux, screen and X write other words)."""
+    import psutil
+
+    try:
+        tty = psutil.Process().terminal()
+        users = psutil.users() if tty else []
+    except (psutil.Error, OSError):
+        return None
+    for u in users:
+        if tty and f"/dev/{u.terminal}" == tty and u.host:
+            try:
+                addr = ipaddress.ip_address(u.host.split("%")[0])
+            except ValueError:
+                return None
+            return Session(str(addr), SSH_PORT, f"the login record of {u.terminal}")
+    return None
+
+
+def detect_session() -> Session | None:
+    """The SSH session this process runs in: SSH_CONNECTION or SSH_CLIENT; under sudo (which
+    drops them) the ones of the shell that ran sudo; else the login record of the terminal.
+    None: not over SSH, as far as can be told. Raises SessionError for an unreadable one."""
+    return (session_from_env(os.environ) or (_session_before_sudo() if os.geteuid() == 0
+                                              else None) or _session_of_terminal())
+
+
+# --------------------------------------------------------------------------- who gets in
+@dataclass
+class Admission:
+    """Who the table lets in on the forwarded ports (besides loopback and replies)."""
+
+    peers: list[str]                              # addresses: every forwarded port
+    lan: list[str] = field(default_factory=list)  # networks: every forwarded port
+    allow: list[str] = field(default_factory=list)  # addresses/networks: SSH (port 22)
+    sessions: list[Session] = field(default_factory=list)  # address . port: that port
+
+
+def _within(addr: str, entries: list[str]) -> str:
+    a = ipaddress.ip_address(addr)
+    for e in entries:
+        net = ipaddress.ip_network(e, strict=False)
+        if a.version == net.version and a in net:
+            return e
+    return ""
+
+
+def admitted(adm: Admission, address: str, port: int = SSH_PORT) -> str:
+    """Why *address* gets in on TCP *port* under *adm* ("": it does not)."""
+    try:
+        a = ipaddress.ip_address(address)
+    except ValueError:
+        return ""
+    if a.is_loopback:
+        return "loopback"
+    if str(a) in adm.peers:
+        return "a peer"
+    net = _within(str(a), adm.lan)
+    if net:
+        return f"this machine's LAN ({net})"
+    net = _within(str(a), adm.allow)
+    if net and port == SSH_PORT:
+        return f"[firewall] allow ({net})"
+    if any(x.address == str(a) and x.port == port for x in adm.sessions):
+        return "the SSH session that loaded the table"
+    return ""
+
+
 def split_families(addresses: list[str]) -> tuple[list[str], list[str]]:
-    v4 = [a for a in addresses if ipaddress.ip_address(a).version == 4]
+    v4 = [a for a in addresses if ipaddress.ip_network(a.split(" ")[0], strict=False).version == 4]
     return v4, [a for a in addresses if a not in v4]
 
 
@@ -132,26 +373,37 @@ def _elements(addrs: list[str]) -> str:
     return f"elements = {{ {', '.join(addrs)} }}" if addrs else ""
 
 
-def render_ruleset(settings: Settings, addresses: list[str]) -> str:
+def _set(name: str, kind: str, elements: list[str], interval: bool = False) -> list[str]:
+    return [f"\tset {name} {{", f"\t\ttype {kind}", *(["\t\tflags interval"] if interval else []),
+            *([f"\t\t{_elements(elements)}"] if elements else []), "\t}"]
+
+
+def render_ruleset(settings: Settings, adm: Admission) -> str:
     """The table as nft reads it (also what `firewall show` prints)."""
-    v4, v6 = split_families(addresses)
+    p4, p6 = split_families(adm.peers)
+    l4, l6 = split_families(adm.lan)
+    a4, a6 = split_families(adm.allow)
+    s4, s6 = split_families([x.element for x in adm.sessions])
     ports = ", ".join(forwarded_ports(settings))
     lines = [
         f"table {TABLE} {{",
-        f"\tset {SET4} {{",
-        "\t\ttype ipv4_addr",
-        *([f"\t\t{_elements(v4)}"] if v4 else []),
-        "\t}",
-        f"\tset {SET6} {{",
-        "\t\ttype ipv6_addr",
-        *([f"\t\t{_elements(v6)}"] if v6 else []),
-        "\t}",
+        *_set(SET4, "ipv4_addr", p4), *_set(SET6, "ipv6_addr", p6),
+        *_set(LAN4, "ipv4_addr", l4, True), *_set(LAN6, "ipv6_addr", l6, True),
+        *_set(ALLOW4, "ipv4_addr", a4, True), *_set(ALLOW6, "ipv6_addr", a6, True),
+        *_set(SESSION4, "ipv4_addr . inet_service", s4),
+        *_set(SESSION6, "ipv6_addr . inet_service", s6),
         f"\tchain {CHAIN} {{",
         f"\t\ttype filter hook input priority filter - {-PRIORITY}; policy accept;",
         '\t\tiif "lo" accept',
         "\t\tct state established,related accept",
         f"\t\ttcp dport {{ {ports} }} ip saddr @{SET4} accept",
         f"\t\ttcp dport {{ {ports} }} ip6 saddr @{SET6} accept",
+        f"\t\ttcp dport {{ {ports} }} ip saddr @{LAN4} accept",
+        f"\t\ttcp dport {{ {ports} }} ip6 saddr @{LAN6} accept",
+        f"\t\ttcp dport {SSH_PORT} ip saddr @{ALLOW4} accept",
+        f"\t\ttcp dport {SSH_PORT} ip6 saddr @{ALLOW6} accept",
+        f"\t\tip saddr . tcp dport @{SESSION4} accept",
+        f"\t\tip6 saddr . tcp dport @{SESSION6} accept",
     ]
     lines += [f"\t\ttcp dport {p} accept" for p in open_ports(settings)]
     lines += [f"\t\ttcp dport {{ {ports} }} drop", "\t}", "}"]
@@ -209,8 +461,28 @@ def current_ruleset() -> str | None:
     raise FirewallError(f"nft list table {TABLE}: {r.stderr.strip()[:300]}")
 
 
-def current_allowed() -> list[str] | None:
-    """The addresses in our sets now, or None when our table is not loaded."""
+def _elem_text(e: object) -> str:
+    """One set element of nft's JSON listing as the ruleset writes it."""
+    if isinstance(e, (str, int)):
+        return str(e)
+    if isinstance(e, dict):
+        if "elem" in e and isinstance(e["elem"], dict):        # an element with options
+            return _elem_text(e["elem"].get("val"))
+        p = e.get("prefix")
+        if isinstance(p, dict):
+            return f"{p.get('addr')}/{p.get('len')}"
+        c = e.get("concat")
+        if isinstance(c, list):
+            return " . ".join(_elem_text(x) for x in c)
+        r = e.get("range")
+        if isinstance(r, list) and len(r) == 2:
+            return f"{_elem_text(r[0])}-{_elem_text(r[1])}"
+    return ""
+
+
+def current_sets() -> dict[str, list[str]] | None:
+    """Each set of our table now and its elements (sorted), or None when our table is not
+    loaded."""
     r = _nft(["-j", "list", "table", FAMILY, NAME])
     if r.returncode != 0:
         if _denied(r.stderr):
@@ -222,14 +494,34 @@ def current_allowed() -> list[str] | None:
         items = jsonsafe.loads_bounded(r.stdout, unique_keys=False).get("nftables") or []
     except (jsonsafe.JsonInputError, AttributeError):
         raise FirewallError("nft printed JSON that does not parse") from None
-    out: list[str] = []
+    out: dict[str, list[str]] = {}
     for it in items:
         s = it.get("set") if isinstance(it, dict) else None
-        if isinstance(s, dict) and s.get("name") in (SET4, SET6):
-            for e in s.get("elem") or []:
-                if isinstance(e, str):
-                    out.append(e)
-    return sorted(out)
+        if isinstance(s, dict) and isinstance(s.get("name"), str):
+            elems = s.get("elem")
+            texts = (_elem_text(e) for e in (elems if isinstance(elems, list) else []))
+            out[s["name"]] = sorted(t for t in texts if t)
+    return out
+
+
+def current_allowed() -> list[str] | None:
+    """The peers' addresses in our sets now, or None when our table is not loaded."""
+    sets = current_sets()
+    if sets is None:
+        return None
+    return sorted(sets.get(SET4, []) + sets.get(SET6, []))
+
+
+def loaded_admission(sets: dict[str, list[str]]) -> Admission:
+    """Who the loaded table lets in, from its sets (current_sets)."""
+    sessions = []
+    for e in sets.get(SESSION4, []) + sets.get(SESSION6, []):
+        addr, _, port = e.partition(" . ")
+        if port.isdigit():
+            sessions.append(Session(addr, int(port), "the loaded table"))
+    return Admission(peers=sorted(sets.get(SET4, []) + sets.get(SET6, [])),
+                     lan=sets.get(LAN4, []) + sets.get(LAN6, []),
+                     allow=sets.get(ALLOW4, []) + sets.get(ALLOW6, []), sessions=sessions)
 
 
 def load(text: str) -> None:
@@ -247,9 +539,12 @@ def load(text: str) -> None:
 class FirewallPreview:
     ruleset: str                 # what apply loads
     current: str | None          # what is loaded now (None: no table of ours)
-    addresses: list[str]
+    addresses: list[str]         # the peers'
     readable: bool = True        # False: this user could not read the current table
-    notes: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)   # `who` first, then the rest
+    session: Session | None = None   # the SSH session running this (kept in, or already in)
+    session_in: str = ""             # why that session gets in without an entry of its own
+    who: list[str] = field(default_factory=list)     # who gets in (who_gets_in)
 
     @property
     def digest(self) -> str:
@@ -285,10 +580,50 @@ def normalize(text: str | None) -> str:
     return re.sub(r"elements = \{([^}]*)\}", sort_elements, flat)
 
 
-def preview(settings: Settings, profile: str | None = None) -> FirewallPreview:
-    addresses = allowed_addresses(settings, profile)
-    ruleset = render_ruleset(settings, addresses)
-    notes = []
+def admission(settings: Settings, profile: str | None = None,
+              session: Session | None = None) -> tuple[Admission, str]:
+    """Who the table for *settings* lets in, with *session* kept in on its sshd port unless it
+    gets in already; and why it does ("" when it got an entry of its own, or there is none)."""
+    adm = Admission(peers=allowed_addresses(settings, profile), lan=lan_networks(),
+                    allow=allow_networks(settings))
+    why = admitted(adm, session.address, session.port) if session else ""
+    if session is not None and not why:
+        adm.sessions.append(session)
+    return adm, why
+
+
+def who_gets_in(settings: Settings, adm: Admission, profile: str | None = None,
+                session: Session | None = None, session_in: str = "") -> list[str]:
+    """The preview's words for *adm*: who reaches the forwarded ports, and for how long."""
+    profile = profile or settings.this.profile
+    names = {peer_address(settings, p.name, profile): p.name for p in settings.peers}
+    peers = ", ".join(f"{a} ({names[a]})" if a in names else a for a in adm.peers) or "none"
+    out = [f"On TCP {', '.join(forwarded_ports(settings))} only these get in "
+           "(the rest is dropped there):",
+           f"  the peers ({profile} profile; SSH and ROS): {peers}",
+           f"  this machine's LAN (SSH and ROS): {', '.join(adm.lan) or 'none found'}",
+           f"  [firewall] allow (SSH): {', '.join(adm.allow) or 'none'}"]
+    if session is None:
+        out.append("  no SSH session runs this (no SSH_CONNECTION): no other address is kept in")
+    elif session_in:
+        out.append(f"  this SSH session, {session.address}: gets in already ({session_in})")
+    else:
+        out.append(f"  this SSH session, {session.address} (to sshd port {session.port}; "
+                   f"{session.source}): SSH only, {SESSION_STAYS}")
+    out.append("  loopback, and replies to this machine's own connections")
+    return out
+
+
+def preview(settings: Settings, profile: str | None = None, *, session: Session | None = None,
+            detect: bool = True) -> FirewallPreview:
+    """The table for *settings*, and what is loaded now. *session*: the SSH session to keep in
+    (default, with *detect*: the one this process runs in, detect_session)."""
+    if session is None and detect:
+        session = detect_session()
+    adm, session_in = admission(settings, profile, session)
+    ruleset = render_ruleset(settings, adm)
+    who = who_gets_in(settings, adm, profile, session, session_in)
+    notes = list(who)
     if not wanted(settings):
         notes.append(f"[ros] security is '{settings.ros.security}'"
                      + (" (ROS 2: mTLS protects the Zenoh port)" if settings.ros2 else "")
@@ -298,18 +633,28 @@ def preview(settings: Settings, profile: str | None = None) -> FirewallPreview:
     except FirewallError as exc:
         current, readable = None, False
         notes.append(f"the table loaded now is not shown: {exc}")
-    return FirewallPreview(ruleset, current, addresses, readable, notes)
+    return FirewallPreview(ruleset, current, adm.peers, readable, notes, session, session_in,
+                           who)
 
 
-def apply_command(*, config: Path, profile: str, digest: str, state_dir: Path) -> list[str]:
+def session_args(session: Session | None) -> list[str]:
+    """The arguments that hand *session* to the privileged re-run (sudo drops SSH_CONNECTION,
+    and root must build the very ruleset previewed)."""
+    if session is None:
+        return ["--session-ip", "none"]
+    return ["--session-ip", session.address, "--session-port", str(session.port)]
+
+
+def apply_command(*, config: Path, profile: str, digest: str, state_dir: Path,
+                  session: Session | None) -> list[str]:
     """The exact sudo command that loads the previewed table (and nothing else)."""
     from rosnet_tui.core import privilege
 
     def ab(p: Path) -> str:
         return str(Path(p).expanduser().absolute())
     return privilege.sudo_argv(["--config", ab(config), "firewall", "apply", "--profile", profile,
-                                "--expect-digest", digest, "--yes", "--state-dir", ab(state_dir),
-                                "--no-checks"])
+                                "--expect-digest", digest, *session_args(session), "--yes",
+                                "--state-dir", ab(state_dir), "--no-checks"])
 
 
 def apply(pv: FirewallPreview, *, state_dir: Path | None = None) -> str | None:
@@ -362,10 +707,39 @@ def undo_records(records: list[dict], force: bool = False) -> list[str]:
 uj.register_undo(KIND, undo_records)   # an undo of an entry with our table in it
 
 
+def sets_in_text(text: str) -> dict[str, list[str]]:
+    """Each set of a table as nft lists it (or as render_ruleset writes it) and its elements."""
+    out: dict[str, list[str]] = {}
+    for m in re.finditer(r"\bset (\w+) \{(.*?)\n\s*\}", text, re.S):
+        el = re.search(r"elements = \{([^}]*)\}", m.group(2))
+        items = el.group(1).split(",") if el else []
+        out[m.group(1)] = sorted(" ".join(e.split()) for e in items if e.strip())
+    return out
+
+
+def locks_out_this_session(ruleset: str) -> str:
+    """Words for the SSH session running this when *ruleset* would not let it in again ("":
+    it would, or this is no SSH session)."""
+    try:
+        session = detect_session()
+    except SessionError:
+        return ""
+    if session is None or admitted(loaded_admission(sets_in_text(ruleset)), session.address,
+                                   session.port):
+        return ""
+    return (f"it does not let in this SSH session's address, {session.address}: once this "
+            "session drops, SSH from there is refused (add it to [firewall] allow, then "
+            "rosnet-tui firewall apply)")
+
+
 def describe(record: dict) -> str:
+    """What undoing *record* does to the firewall, and whom it would shut out."""
     before = record.get("before")
-    return (f"the firewall table {TABLE}: "
-            + ("put back as it was before" if before else "removed (rosnet-tui created it)"))
+    if not before:
+        return f"the firewall table {TABLE}: removed (rosnet-tui created it)"
+    warning = locks_out_this_session(before) if isinstance(before, str) else ""
+    return f"the firewall table {TABLE}: put back as it was before" + (
+        f"; {warning}" if warning else "")
 
 
 def remove(*, state_dir: Path | None = None) -> str | None:

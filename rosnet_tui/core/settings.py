@@ -20,6 +20,7 @@ from rosnet_tui.core.settings_model import (
     MAX_NESTING,
     MAX_SETTINGS_BYTES,
     ZENOH_PORT_DEFAULT,
+    FirewallSettings,
     Peer,
     RosbridgeSettings,
     Settings,
@@ -47,6 +48,7 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "sync": {"store": str, "folder": str, "interval_s": (int, float), "dns_server": str,
              "zone": str, "tsig_key_file": str},
     "rosbridge": {"enabled": bool, "port": int, "host": str},
+    "firewall": {"allow": list},
 }
 _TYPE_WORDS = {str: "a string in quotes", int: "a whole number", list: "a list [ ... ]",
                (int, float): "a number", bool: "true or false"}
@@ -249,6 +251,9 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
     if "rosbridge" in raw:
         _check_table(text, path, "rosbridge", raw["rosbridge"])
         s.rosbridge = replace(s.rosbridge, **raw["rosbridge"])
+    if "firewall" in raw:
+        _check_table(text, path, "firewall", raw["firewall"])
+        s.firewall = replace(s.firewall, **raw["firewall"])
 
     for key, why in s.problems():
         # Incomplete is fine (the wizard fills it in); wrong is not.
@@ -340,7 +345,7 @@ def _table_values(s: Settings) -> dict[str, dict[str, Any]]:
     if b.host:
         rosbridge["host"] = b.host
     return {"this": this, "ros": ros, "probe": probe, "checks": {"timeout_s": s.checks.timeout_s},
-            "sync": sync, "rosbridge": rosbridge}
+            "sync": sync, "rosbridge": rosbridge, "firewall": {"allow": list(s.firewall.allow)}}
 
 
 def _peer_values(p: Peer) -> dict[str, Any]:
@@ -390,6 +395,8 @@ def render_settings(s: Settings, previous_text: str | None = None) -> str:
         _merge_table(doc, "sync", values["sync"])
     if "rosbridge" in doc or s.rosbridge != RosbridgeSettings():
         _merge_table(doc, "rosbridge", values["rosbridge"])
+    if "firewall" in doc or s.firewall != FirewallSettings():
+        _merge_table(doc, "firewall", values["firewall"])
     if s.peers:
         # Keep peers before [ros] when writing fresh, as in the documented example.
         body = doc.as_string()

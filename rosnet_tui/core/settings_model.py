@@ -137,6 +137,33 @@ def validate_port(value: int | str, *, lo: int = PORT_MIN, hi: int = PORT_MAX) -
     return None
 
 
+def validate_network(value: object) -> str | None:
+    """Return why *value* is not an entry of [firewall] allow (an IPv4 or IPv6 address, or a
+    network in CIDR form such as 203.0.113.0/24 or 2001:db8::/48), or None when it is."""
+    if not isinstance(value, str) or not value.strip():
+        return ("each entry is an address or a network in quotes, like \"203.0.113.7\" or "
+                "\"203.0.113.0/24\"")
+    text = value.strip()
+    if "%" in text:
+        return f"'{echoed(value)}': write the address without its zone (%interface)"
+    try:
+        net = ipaddress.ip_network(text)
+    except ValueError:
+        try:
+            loose = ipaddress.ip_network(text, strict=False)
+        except ValueError:
+            return (f"'{echoed(value)}' is not an address or a network (like 203.0.113.7, "
+                    "203.0.113.0/24 or 2001:db8::/48)")
+        return (f"'{echoed(value)}' has bits set after the prefix: write the network {loose}, "
+                "or the one address without a prefix")
+    if net.prefixlen == 0:
+        return f"'{echoed(value)}' is the whole internet: list the addresses that may get in"
+    first = net.network_address
+    if first.is_multicast or first.is_loopback or first.is_unspecified:
+        return f"'{echoed(value)}' cannot be where a login comes from"
+    return None
+
+
 def validate_ssh_user(value: str) -> str | None:
     if value and not SSH_USER_RE.match(value):
         return f"'{echoed(value)}' is not a valid user name"
@@ -270,6 +297,14 @@ class RosbridgeSettings:
     host: str = ""                   # the component running the bridge ("": the master)
 
 
+@dataclass
+class FirewallSettings:
+    # ROS 1's peers-only firewall: more addresses or networks (IPv4/IPv6, CIDR) that may reach
+    # SSH (port 22), such as an administrator's office; the peers and this machine's LAN get in
+    # anyway (rosnet_tui.core.firewall).
+    allow: list[str] = field(default_factory=list)
+
+
 SYNC_STORES = ("folder", "dns")
 
 
@@ -292,6 +327,7 @@ class Settings:
     checks: CheckSettings = field(default_factory=CheckSettings)
     sync: SyncSettings = field(default_factory=SyncSettings)
     rosbridge: RosbridgeSettings = field(default_factory=RosbridgeSettings)
+    firewall: FirewallSettings = field(default_factory=FirewallSettings)
     # Whether the file had a [sync] table (so saving does not add one the user never asked for).
     has_sync: bool = field(default=False, compare=False, repr=False)
     # When the settings file holding these values was saved (its modification time, seconds since
@@ -394,6 +430,8 @@ class Settings:
             add("rosbridge.host", validate_name(b.host))
             if b.host.lower() not in seen:
                 add("rosbridge.host", f"'{shown(b.host)}' is neither this component nor a peer")
+        for entry in self.firewall.allow:
+            add("firewall.allow", validate_network(entry))
         y = self.sync
         add("sync.store", None if y.store in SYNC_STORES
             else f"must be one of {', '.join(SYNC_STORES)}")

@@ -104,11 +104,12 @@ def firewall_plan(settings: Settings, paths: Paths) -> WritePlan | None:
     return WritePlan(
         title=f"Load the peers-only firewall (nft table {fw.TABLE})",
         explain="ROS 1: on the forwarded TCP ports (22, the ROS range, the master's port) only "
-                "the peers, loopback and replies get in. One nft transaction; no other table "
-                "is touched. Review it:",
+                "the peers, this machine's LAN, [firewall] allow and this SSH session get in "
+                "(below). One nft transaction; no other table is touched. Review it:",
         make_preview=make,
         sudo_command=lambda p, _o: fw.apply_command(config=paths.config_path, profile=profile,
-                                                    digest=p.digest, state_dir=paths.state_dir),
+                                                    digest=p.digest, state_dir=paths.state_dir,
+                                                    session=p.session),
         apply=apply,
         after=affected.FIREWALL,
         footnote="The sync service keeps the allowed addresses current; `rosnet-tui undo` "

@@ -246,7 +246,8 @@ class Lab:
         """A clean environment for *host*: no ROS or proxy variables, the repo importable."""
         env = {k: v for k, v in os.environ.items()
                if not k.startswith("ROS_") and k not in ("PYTHONHOME", "VIRTUAL_ENV")
-               and not k.lower().endswith("_proxy")}  # nothing in the lab goes via a proxy
+               and not k.lower().endswith("_proxy")   # nothing in the lab goes via a proxy
+               and k not in ("SSH_CONNECTION", "SSH_CLIENT", "SSH_TTY")}  # nor over our SSH
         env["PYTHONPATH"] = str(REPO)
         env["PYTHONUNBUFFERED"] = "1"
         if host in self.COMPUTERS:

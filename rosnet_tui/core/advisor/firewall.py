@@ -54,14 +54,19 @@ def _missing(ev: Evidence) -> list[Hit]:
 @rule("security.firewall.stale", "linux", ("linux.firewall",),
       "the firewall's allowed set differs from the peers' addresses",
       "The peers-only table lets in addresses no peer has now, or leaves a peer's current address "
-      "out (that peer is shut out of the master and SSH).",
+      "out (that peer is shut out of the master and SSH); or it leaves out this machine's LAN or "
+      "[firewall] allow, or its rules are not the ones the settings give.",
       "Run `rosnet-tui firewall apply`; keep the sync service running so the set follows "
       "address changes.",
       "linux", "warn")
 def _stale(ev: Evidence) -> list[Hit]:
     d = ev.data("linux.firewall")
     missing, extra = d.get("missing") or [], d.get("extra") or []
-    if ev.s.ros2 or not d.get("present") or not (missing or extra):
+    lan_out = [n for n in d.get("expected_lan") or [] if n not in (d.get("lan") or [])]
+    allow_out = [n for n in d.get("expected_allow") or [] if n not in (d.get("allow") or [])]
+    older = d.get("rules_match") is False
+    if ev.s.ros2 or not d.get("present") or not (missing or extra or lan_out or allow_out
+                                                  or older):
         return []
     parts = []
     if missing:
@@ -69,6 +74,13 @@ def _stale(ev: Evidence) -> list[Hit]:
                      f"reach {ev.me}'s forwarded ports (ROS master, nodes, SSH)")
     if extra:
         parts.append(f"it still lets in {join_and(extra)}, which no peer has now")
+    if lan_out:
+        parts.append(f"it shuts out this machine's LAN {join_and(lan_out)}")
+    if allow_out:
+        parts.append(f"it shuts out {join_and(allow_out)} of [firewall] allow")
+    if older and not (missing or extra or lan_out or allow_out):
+        parts.append("its rules are not the ones the settings give (an older table, or the "
+                     "ports changed)")
     return [Hit(f"The allowed set of {TABLE} on {ev.me} is stale: " + "; ".join(parts) + ".",
                 [f"On {ev.me}: `rosnet-tui firewall apply` (the preview shows the new set).",
                  "Run the sync service (`rosnet-tui sync install-service`): it replaces the set "
@@ -76,3 +88,27 @@ def _stale(ev: Evidence) -> list[Hit]:
                 severity="fail" if missing else "warn",
                 evidence=[f"linux.firewall: missing {join_and(missing) or '-'}, extra "
                           f"{join_and(extra) or '-'}"])]
+
+
+@rule("security.firewall.lockout", "linux", ("linux.firewall",),
+      "the address this check runs from over SSH would not get in again",
+      "The peers-only table lets in the peers, this machine's LAN, [firewall] allow (SSH) and "
+      "the SSH session that loaded it; the address this check came in from over SSH is none of "
+      "them. The open session lives on; once it drops, SSH from there is refused.",
+      "Add that address (or its network) to [firewall] allow in the settings, then run "
+      "`rosnet-tui firewall apply`.",
+      "linux", "warn")
+def _lockout(ev: Evidence) -> list[Hit]:
+    d = ev.data("linux.firewall")
+    client = d.get("client")
+    if ev.s.ros2 or not d.get("present") or not client or d.get("client_in") != "":
+        return []
+    return [Hit(f"This SSH session on {ev.me} comes from {client}, which {TABLE} does not let "
+                "in: it is no peer's address, not on this machine's LAN and not in [firewall] "
+                "allow. The session lives on; once it drops, SSH from "
+                f"{client} is refused until someone at a peer, on the LAN or at the console "
+                "lets it in.",
+                [f"On {ev.me}, add \"{client}\" (or its network) to `allow` under [firewall] in "
+                 "the settings, then run `rosnet-tui firewall apply` from this very session.",
+                 "Or log in from a peer or from this machine's LAN next time."],
+                evidence=[f"linux.firewall: client {client} not admitted"])]

@@ -59,6 +59,7 @@ RULE_ORDER: tuple[str, ...] = (
     "linux.chat.out_fails",
     "linux.chat.both_fail",
     "security.firewall.stale",              # ROS 1: the peers-only table (linux.firewall)
+    "security.firewall.lockout",
     "security.firewall.missing",
     "security.firewall.off",
     # step 4: ROS

@@ -240,6 +240,13 @@ class LinuxFirewallData(TypedDict, total=False):
     missing: list[str]       # peers' addresses not in the set (those peers are shut out)
     extra: list[str]         # addresses in the set no peer has now (stale: a past address)
     rules_match: bool | None  # the table's rules are the ones the settings give
+    lan: list[str]           # this machine's LAN networks in the table (SSH and ROS)
+    allow: list[str]         # [firewall] allow entries in the table (SSH)
+    sessions: list[str]      # the session kept in by the last apply: "address . sshd port"
+    expected_lan: list[str]  # this machine's LAN networks now (private, link-local, ULA)
+    expected_allow: list[str]  # [firewall] allow of the settings, merged
+    client: str | None       # the address this check runs from over SSH (None: not over SSH)
+    client_in: str | None    # why that address gets in ("": it would not; None: not judged)
 
 
 class ChatPeer(TypedDict, total=False):
