@@ -12,14 +12,20 @@ def r(cid: str, status: str, data: dict, step: str) -> CheckResult:
     return CheckResult(cid, step, Status(status), "s", ["e"], 0.1, 3.0, data)
 
 
-def _ssh(**d):
+def _ssh(status: str = "fail", **d):
     data = {"target": "203.0.113.2", "port": 22, "user": "root", "from": "sami",
             "methods": ["publickey"], "root_methods": ["publickey"], "password": False,
             "keyboard_interactive": False, "root_password": False, **d}
 
     def build():
-        return {"security.ssh_auth": r("security.ssh_auth", "fail", data, "linux")}, master()
+        return {"security.ssh_auth": r("security.ssh_auth", status, data, "linux")}, master()
     return build
+
+
+def _ssh_not_reached(**d):
+    """security.ssh_auth's warning: no peer reached sshd, which offers a password here."""
+    return _ssh("warn", **{"methods": [], "root_methods": [], "reachable": False,
+                           "tcp": "refused", **d})
 
 
 def _out(cause: str, ros2: bool = True, **d):
@@ -38,6 +44,8 @@ SECURITY_CASES = {
                                   root_methods=["publickey", "password"], root_password=True),
     "security.ssh.root_password": _ssh(root_methods=["publickey", "keyboard-interactive"],
                                        root_password=True),
+    "security.ssh.password_here": _ssh_not_reached(local_methods=["publickey", "password"],
+                                                   local_root_methods=["publickey", "password"]),
     "security.outsider.off": _out("security_off", security="none"),
     "security.outsider.plain": _out("plain_open"),
     "security.outsider.foreign_ca": _out("foreign_ca"),
@@ -74,6 +82,19 @@ def test_password_login_gets_the_fix_keys_first():
 def test_root_alone_says_how_it_was_seen():
     t = _text(_one("security.ssh.root_password"))
     assert "auth_none for root" in t and "PermitRootLogin prohibit-password" in t
+
+
+def test_an_sshd_out_of_reach_that_offers_passwords_is_a_warning_with_the_fix():
+    f = _one("security.ssh.password_here")
+    assert f.severity == "warn", f
+    t = _text(f)
+    assert "refused" in t and "password" in t and "PasswordAuthentication no" in t, t
+    for quiet in (_ssh_not_reached(local_methods=["publickey"]),      # keys only: nothing to say
+                  _ssh("pass", reachable=False, tcp="timeout", methods=[],
+                       local_methods=["publickey"])):
+        results, s = quiet()
+        assert not [x for x in advise(results, s, strict=True)
+                    if x.rule.startswith("security.")], results
 
 
 def test_each_outsider_cause_names_its_command():

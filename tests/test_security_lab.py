@@ -10,6 +10,9 @@ computer the README's way; default [ros] security: "firewall" on ROS 1, "mtls" o
   ROS 1's ``firewall undo`` restores the plain setup (ROS 2's ``ros apply`` + ``undo``:
   tests/test_ros2_lab.py test_ros_apply_writes_what_the_lab_router_runs_and_undo_restores).
 - The SSH audit names password login with the exact fix.
+- Issue 29: a ROS 2 member whose modem forwards nothing passes every check (an sshd the internet
+  does not reach offers strangers nothing); a ROS 1 component set up with the wizard (no public
+  IP in its settings) gets security.outsider judged at the address isp.public_ip measures.
 
 Elsewhere (not repeated here): pairing within 5 s, an expired member certificate and a foreign CA
 named, removing a member (tests/test_pairing_lab.py); the wizard's one-flow pairing over the pty
@@ -86,6 +89,26 @@ def ros1_config(lab, host: str, **ros) -> str:
     return str(path)
 
 
+def wizard_config(lab, host: str) -> str:
+    """*host*'s settings file as the set-up screen writes it: no public IP of its own (the screen
+    has no field for it; isp.public_ip measures it), beside the default one."""
+    from rosnet_tui.core.settings import atomic_write_text, render_settings
+
+    s = lab.settings(host)
+    path = lab.home(host) / ".config" / "rosnet-tui" / "config-wizard.toml"
+    atomic_write_text(path, render_settings(replace(s, this=replace(s.this, public_ip=""))),
+                      mode=0o644)
+    return str(path)
+
+
+def check_exit(lab, host: str, config, env, state) -> tuple[int, dict[str, dict]]:
+    """`rosnet-tui check --json` (every step) on *host*: (its exit code, {id: entry})."""
+    r = lab.rosnet(host, "check", "--json", "-q", "--config", str(config),
+                   env=dict(env, XDG_STATE_HOME=str(state)), timeout=90)
+    assert r.stdout.strip(), r.stderr
+    return r.returncode, {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+
+
 def rules(entry: dict) -> list[str]:
     return [a["rule"] if isinstance(a, dict) else a for a in entry.get("advice") or []]
 
@@ -125,6 +148,27 @@ def test_ros1_default_shuts_the_outsider_out_while_every_check_passes(ros1_lab, 
             assert out["duration_s"] < 3 * TIMEOUT + 0.5
             assert checks["security.ssh_auth"]["data"]["methods"] == ["publickey"]
             assert checks["linux.firewall"]["status"] == "pass"
+
+
+def test_ros1_component_that_followed_the_wizard_gets_the_outsider_judged(ros1_lab, tmp_path):
+    """Issue 29: the set-up screen asks for no public IP, so the settings carry none; the
+    outsider check used to skip ("no public IP in the settings") though isp.public_ip measured it
+    in the same run. It now tests the measured address, and every check passes."""
+    lab = ros1_lab
+    lab.reset()
+    with secured(lab):
+        for host, public in (("robot", ADDR.ROBOT_PUBLIC), ("laptop", ADDR.LAPTOP_PUBLIC)):
+            cfg = wizard_config(lab, host)
+            code, checks = check_exit(lab, host, cfg, lab.ros_env(host), tmp_path / host)
+            out = checks["security.outsider"]
+            assert out["status"] == "pass", explain(checks)
+            assert out["data"]["target"] == public, out
+            assert not any(out["data"]["outsider_reachable"].values()), out
+            assert all(out["data"]["insider_reachable"].values()), out
+            assert checks["security.ssh_auth"]["data"]["target"] == public, explain(checks)
+            assert checks["isp.public_ip"]["data"]["public_ip"] == public
+            assert all(c["status"] == "pass" for c in checks.values()), explain(checks)
+            assert code == 0, explain(checks)
 
 
 def test_ros1_security_none_and_firewall_undo_let_the_outsider_back_in(ros1_lab, tmp_path):
@@ -221,6 +265,63 @@ def test_ros2_default_mtls_shuts_the_outsider_out_while_every_check_passes(ros2_
         assert all(d["attempts"][k]["result"] != "accepted"
                    for k in ("no_cert", "foreign", "plain")), d
         assert checks["security.outsider"]["duration_s"] < 3 * TIMEOUT + 0.5
+
+
+@pytest.mark.parametrize("modem, tcp", [("none", "timeout"), ("refuse", "refused")])
+def test_ros2_member_whose_modem_forwards_nothing_passes_every_check(ros2_world, tmp_path,
+                                                                     modem, tcp):
+    """Issue 29: a ROS 2 member needs no forward at all, so nothing reaches its sshd from the
+    internet (the modem drops, "none", or resets, "refuse"): the best answer, not "could not
+    read what sshd offers". `check` exits 0 there."""
+    lab = ros2_world.lab
+    ros2_world.healthy()
+    ros2_world.forward(robot="ros2", laptop=modem)
+    try:
+        got = outsider.ssh_auth_none(lab, ADDR.LAPTOP_PUBLIC, timeout=1.5)
+        assert "methods" not in got, got              # the outsider reaches no sshd either
+        code, checks = check_exit(lab, "laptop", ros2_world.config_path("laptop"),
+                                  ros2_world.env("laptop"), tmp_path / "laptop")
+        c = checks["security.ssh_auth"]
+        assert c["status"] == "pass", explain(checks)
+        assert c["data"]["reachable"] is False and c["data"]["tcp"] == tcp, c
+        assert c["data"]["local_methods"] == ["publickey"], c     # this machine's own sshd
+        assert "not reachable from the internet" in c["summary"], c
+        assert all(c["status"] in ("pass", "skip") for c in checks.values()), explain(checks)
+        assert {i for i, c in checks.items() if c["status"] == "skip"} <= ROS2_SKIPS["laptop"]
+        assert code == 0, explain(checks)
+        assert c["duration_s"] < 2 * TIMEOUT + 0.5, c
+    finally:
+        ros2_world.healthy()
+
+
+def test_ros2_member_out_of_reach_whose_sshd_offers_passwords_is_told(ros2_world, tmp_path):
+    """Out of the internet's reach, but sshd offers passwords: a warning with the fix (one
+    forward of 22, or a firewall that shuts out only the peer that looked, would expose it);
+    with 22 forwarded, the same sshd fails as before."""
+    lab = ros2_world.lab
+    ros2_world.healthy()
+    conf = lab._hostdir("laptop") / "etc" / "sshd_config"
+    before = conf.read_text()
+    try:
+        conf.write_text(before.replace("PasswordAuthentication no", "PasswordAuthentication yes"))
+        lab._restart_sshd("laptop", 22)
+        for modem, status in (("none", "warn"), ("ssh", "fail")):
+            ros2_world.forward(robot="ros2", laptop=modem)
+            c = run_checks(lab, "laptop", ros2_world.config_path("laptop"),
+                           "security.ssh_auth")["security.ssh_auth"]
+            assert c["status"] == status, (modem, c)
+            text = "\n".join(c["evidence"])
+            assert "PasswordAuthentication no" in text, c
+            if modem == "none":
+                assert c["data"]["reachable"] is False, c
+                assert "password" in c["data"]["local_methods"], c
+                assert not c["data"].get("password"), c      # not offered to the internet now
+            else:
+                assert c["data"]["reachable"] is True and c["data"]["password"], c
+    finally:
+        conf.write_text(before)
+        lab._restart_sshd("laptop", 22)
+        ros2_world.healthy()
 
 
 def test_ros2_security_none_lets_the_outsider_in_and_the_check_says_so(ros2_world, tmp_path):

@@ -5,6 +5,7 @@ server as the echoip-style port checker (the outsider), our listener on a spare 
 from __future__ import annotations
 
 import socket
+from dataclasses import replace
 
 from rosnet_tui.core import listener
 from rosnet_tui.core.checks import REGISTRY, load_builtin_checks, run_check
@@ -41,3 +42,47 @@ async def test_a_spare_port_already_taken_is_passed_over(ssh_client, web, monkey
     assert r.status.value == "pass", (r.summary, r.evidence)
     assert r.data["ports"] == [free], r.data
     assert f"/port/{free}" in " ".join(web.hits)
+
+
+# ---- issue 29: the set-up screen asks for no public IP; isp.public_ip measures it
+def _wizard_settings(ssh_client, web, urls: list[str]) -> Settings:
+    s = _settings(ssh_client, web)
+    return replace(s, this=replace(s.this, public_ip=""),
+                   probe=replace(s.probe, public_ip_urls=urls))
+
+
+async def test_without_a_public_ip_in_the_settings_the_measured_one_is_tested(ssh_client, web):
+    web.routes["/ip"] = (200, "127.0.0.1\n")
+    web.fallback = lambda path: (200, '{"reachable": false}')
+    load_builtin_checks()
+    r = await run_check(REGISTRY["security.outsider"],
+                        ssh_client.ctx(_wizard_settings(ssh_client, web, [web.url("/ip")])))
+    assert r.status.value == "pass", (r.summary, r.evidence)
+    assert r.data["target"] == "127.0.0.1" and all(r.data["insider_reachable"].values()), r.data
+    assert "/ip" in web.hits
+
+
+async def test_the_rounds_own_measurement_is_read_not_asked_again(ssh_client, web):
+    web.routes["/ip"] = (200, "127.0.0.1\n")
+    web.fallback = lambda path: (200, '{"reachable": false}')
+    load_builtin_checks()
+    ctx = ssh_client.ctx(_wizard_settings(ssh_client, web, [web.url("/ip")]))
+    measured = await run_check(REGISTRY["isp.public_ip"], ctx)
+    assert measured.data["public_ip"] == "127.0.0.1", measured
+    ctx.results[measured.id] = measured           # what run_checks does as a result lands
+    asked = web.hits.count("/ip")
+    r = await run_check(REGISTRY["security.outsider"], ctx)
+    assert r.status.value == "pass", (r.summary, r.evidence)
+    assert r.data["target"] == "127.0.0.1"
+    assert web.hits.count("/ip") == asked         # the round's address, no second ask
+
+
+async def test_no_public_ip_anywhere_skips_saying_why(ssh_client, web):
+    web.routes["/ip"] = (503, "busy")
+    web.fallback = lambda path: (200, '{"reachable": false}')
+    load_builtin_checks()
+    r = await run_check(REGISTRY["security.outsider"],
+                        ssh_client.ctx(_wizard_settings(ssh_client, web, [web.url("/ip")])))
+    assert r.status.value == "skip", (r.summary, r.evidence)
+    assert "public IP is unknown" in r.summary and "isp.public_ip" in r.summary, r.summary
+    assert not any(h.startswith("/port/") for h in web.hits)   # nothing asked of the checker

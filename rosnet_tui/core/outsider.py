@@ -5,7 +5,9 @@
   (it needs paramiko): it opens an SSH transport to this component's public address, asks
   ``auth_none(user)`` and reports the methods the server offers (``BadAuthenticationType``'s
   ``allowed_types``), the same answer any stranger on the internet gets. It never logs in and
-  sends no secret: it does not verify the host key because it authenticates nothing.
+  sends no secret: it does not verify the host key because it authenticates nothing. When no
+  TCP connection is made at all it says how it failed (``tcp``: refused, timeout, unreachable,
+  error): nothing there to offer strangers anything, or no verdict.
 - The TLS probe (standard library only) dials the master's Zenoh port with no client
   certificate, with a certificate from a throwaway CA made here (the "foreign" one, shipped in
   the program text on stdin; the probe writes it to a private temporary folder and removes it),
@@ -27,7 +29,7 @@ TLS_MARK = "ROSNET_OUTSIDER "
 PASSWORD_METHODS = ("password", "keyboard-interactive")
 
 SSH_AUDIT_PROGRAM = r"""
-import json, socket, sys
+import errno, json, socket, sys
 MARK = "ROSNET_SSHAUDIT "
 host, port, t = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 users = sys.argv[4:]
@@ -37,10 +39,29 @@ except ImportError:
     print(MARK + json.dumps({"error": "no_paramiko", "python": sys.executable}))
     sys.exit(3)
 out = {"users": {}, "python": sys.executable}
+
+def tcp_kind(e):
+    if isinstance(e, ConnectionRefusedError):
+        return "refused"
+    if isinstance(e, socket.timeout):
+        return "timeout"
+    if getattr(e, "errno", None) in (errno.EHOSTUNREACH, errno.ENETUNREACH, errno.EHOSTDOWN):
+        return "unreachable"
+    return "error"
+
 for user in users:
     sock = tr = None
     try:
         sock = socket.create_connection((host, port), timeout=t)
+    except OSError as e:
+        if out.get("tcp") == "connected":     # an earlier user got through: this one's error
+            out["users"][user] = {"error": "%s: %s" % (type(e).__name__, e)}
+            continue
+        out["tcp"] = tcp_kind(e)    # no TCP at all: the other users would fare the same
+        out["tcp_error"] = "%s: %s" % (type(e).__name__, e)
+        break
+    out["tcp"] = "connected"
+    try:
         sock.settimeout(t)
         tr = paramiko.Transport(sock)
         tr.banner_timeout = t; tr.handshake_timeout = t; tr.auth_timeout = t
@@ -220,11 +241,24 @@ def as_dict(x: Any) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- SSH audit verdict
+# How the audit's TCP connection to sshd failed when nothing was reached: refused (a reset: a
+# modem that forwards nothing there, or no sshd), timeout (dropped) or unreachable (an ICMP
+# error). Any of these means the internet, seen from that peer, reaches no sshd at all.
+NOT_REACHED = ("refused", "timeout", "unreachable")
+
+
 @dataclass
 class SshAudit:
     methods: list[str]          # offered to an ordinary user
     root_methods: list[str]     # offered to root
     error: str | None
+    tcp: str | None = None      # core/connect.py's kinds ("connected", "refused", ...); None: untold
+    tcp_error: str | None = None  # the failed connection's error, in words
+
+    @property
+    def not_reached(self) -> bool:
+        """Whether the audit found nothing at the address to talk to (no TCP connection)."""
+        return self.tcp in NOT_REACHED and not self.methods and not self.root_methods
 
     @property
     def password(self) -> bool:
@@ -247,7 +281,11 @@ def read_ssh_audit(rep: dict[str, Any], user: str) -> SshAudit:
     def methods(x: Any) -> list[str]:
         got = x.get("methods")
         return [str(m) for m in got] if isinstance(got, list) else []
-    return SshAudit(methods(mine), methods(root), str(err) if err else None)
+    tcp, tcp_error = rep.get("tcp"), rep.get("tcp_error")
+    err = err or tcp_error      # no TCP connection: that is why nothing was read
+    return SshAudit(methods(mine), methods(root), str(err) if err else None,
+                    str(tcp) if isinstance(tcp, str) else None,
+                    str(tcp_error) if tcp_error else None)
 
 
 def ssh_fix(host_name: str, user: str) -> list[str]:

@@ -98,6 +98,7 @@ RULE_ORDER: tuple[str, ...] = (
     # security, what a stranger gets (issue 22): SSH (Linux step), the outsider (ROS step)
     "security.ssh.password",
     "security.ssh.root_password",
+    "security.ssh.password_here",
     "security.outsider.off",
     "security.outsider.plain",
     "security.outsider.foreign_ca",

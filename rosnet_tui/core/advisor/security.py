@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence, join_and
+from rosnet_tui.core.results import Status
 
 
 def _ssh_fix(ev: Evidence, user: str) -> list[str]:
@@ -54,6 +55,31 @@ def _ssh_root(ev: Evidence) -> list[Hit]:
                 "PermitRootLogin says, so check it with `sudo sshd -T | grep -i permitrootlogin`).",
                 _ssh_fix(ev, "root"),
                 evidence=[f"auth_none(root) -> {', '.join(d.get('root_methods') or [])}"])]
+
+
+@rule("security.ssh.password_here", "linux", ("security.ssh_auth",),
+      "sshd offers a password, though the internet does not reach it now",
+      "No peer reached this component's SSH port from the internet, so strangers get nothing "
+      "today; but its sshd offers a password: forwarding port 22 (or a DMZ host), or a firewall "
+      "that shuts out only the peer that looked, would let anyone guess passwords.",
+      "Install keys (`ssh-copy-id`), then `PasswordAuthentication no` and "
+      "`KbdInteractiveAuthentication no`, and reload sshd.",
+      "linux", "warn")
+def _ssh_password_here(ev: Evidence) -> list[Hit]:
+    d = ev.data("security.ssh_auth")
+    local = [str(m) for m in d.get("local_methods") or []]
+    root = [str(m) for m in d.get("local_root_methods") or []]
+    pw = ("password", "keyboard-interactive", "none")
+    offered = [m for m in local if m in pw] or [f"{m} (to root)" for m in root if m in pw]
+    if ev.status("security.ssh_auth") != Status.WARN or d.get("reachable") is not False \
+            or not offered:
+        return []
+    return [Hit(f"No peer reached {ev.me}'s sshd at {d.get('target')}:{d.get('port')} "
+                f"({d.get('from') or 'a peer'}: {d.get('tcp')}), but it offers "
+                f"{join_and(offered)}: one forward of port {d.get('port')} would put a password "
+                "prompt on the internet.", _ssh_fix(ev, str(d.get("user") or "USER")),
+                evidence=[f"sshd here: auth_none({d.get('user')}) -> {', '.join(local)}; "
+                          f"auth_none(root) -> {', '.join(root)}"])]
 
 
 def _cause(ev: Evidence, *causes: str) -> bool:

@@ -427,16 +427,20 @@ class RosRosbridgeData(TypedDict, total=False):
 
 # ---- security (rosnet_tui/core/checks/security.py; issue 22)
 SecuritySshAuthData = TypedDict("SecuritySshAuthData", {
-    "target": str,  # this component's address the peer dialled (public IP; a LAN profile: name)
+    "target": str,  # this component's address the peer dialled (the public IP the internet sees, else the settings'; a LAN profile: name)
     "port": int,  # the SSH port dialled there
     "user": str,  # the user auth_none asked for (this component's login user)
     "from": str,  # the peer that looked ("": none could)
+    "reachable": bool,  # something answered TCP there (False: refused, dropped or no route from every peer that looked: sshd is out of the internet's reach)
+    "tcp": TcpKind,  # how that peer's TCP connection to target:port went
     "methods": list[str],  # what sshd offers that user, unauthenticated (auth_none's allowed types)
     "root_methods": list[str],  # what it offers the user root (how a root password login is seen)
     "password": bool,  # "password" is offered
     "keyboard_interactive": bool,  # "keyboard-interactive" is offered
     "root_password": bool,  # password or keyboard-interactive is offered to root
     "error": str,  # why the offered methods could not be read
+    "local_methods": list[str],  # not reachable: what this machine's sshd offers the user over loopback
+    "local_root_methods": list[str],  # not reachable: what it offers root over loopback
 }, total=False)
 
 

@@ -2,13 +2,17 @@
 
 - ``security.ssh_auth`` (Linux step): a peer asks this component's sshd, at its public address
   and without logging in, which authentication methods it offers (``auth_none``); password or
-  keyboard-interactive is a finding with the fix, and so is a password offered to root.
+  keyboard-interactive is a finding with the fix, and so is a password offered to root. When no
+  peer reaches anything there (refused, dropped, no route: a modem that forwards nothing, the
+  normal ROS 2 member), nothing is offered to strangers: a pass, unless this machine's own sshd
+  offers a password (a warning: one forward, or a ban of that peer alone, would expose it).
 - ``security.outsider`` (ROS step): ROS 2: from a seat that is not the master (a member; the
   master runs it on a member over SSH), a TLS probe at the master's Zenoh port with no client
   certificate, with a foreign one and (read from the same answer) in plain TCP must all be
   refused, and the seat's fleet certificate must get in. ROS 1: the configured echoip-style
   port checker (not a peer) must find the master's port and a port of the range closed, and a
-  peer must still connect to both.
+  peer must still connect to both, at the public IP the internet sees (isp.public_ip's, or the
+  settings' when none is measured).
 The programs and their reading are in core/outsider.py.
 """
 
@@ -25,6 +29,7 @@ from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
     budget,
     each_peer,
+    fetch_public_ip,
     http_get,
     installed_python_command,
     peer_program_problem,
@@ -34,17 +39,42 @@ from rosnet_tui.core.checks.probes import (
 )
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.session import ssh_run
 
 SSH_PORT = 22
 
 
-def _public_target(s: Settings) -> str:
-    """Where the internet reaches this component: its public IP (a LAN profile: its name)."""
-    if s.this.profile == "remote" and s.this.public_ip:
-        return s.this.public_ip
-    return s.this.name
+async def _public_ip(ctx: CheckContext, timeout: float) -> tuple[str | None, list[str]]:
+    """This component's public IP with what to say about it: the address the internet sees
+    (this round's isp.public_ip, or one quick ask of a what-is-my-IP service), else the one in
+    the settings (the set-up screen asks for none); None: neither."""
+    s = ctx.settings
+    seen = await fetch_public_ip(ctx, timeout)
+    if seen and s.this.public_ip and seen != s.this.public_ip:
+        return seen, [f"the internet sees {seen}; the settings say {s.this.public_ip}"]
+    return seen or s.this.public_ip or None, []
+
+
+def _offers_password(methods: list[str]) -> list[str]:
+    return [m for m in methods if m in outsider.PASSWORD_METHODS or m == "none"]
+
+
+async def _audit_here(users: list[str], timeout: float) -> tuple[outsider.SshAudit | None, str]:
+    """What the sshd of this machine offers (the audit program run here against loopback):
+    (the audit, why none)."""
+    out, err = await _run_here(outsider.SSH_AUDIT_PROGRAM.encode(),
+                               ["127.0.0.1", str(SSH_PORT), f"{min(1.0, timeout / 3):.1f}",
+                                *users], timeout)
+    rep = outsider.parse_marked(out, outsider.SSH_MARK)
+    if rep is None or rep.get("error"):
+        return None, err or str((rep or {}).get("error") or "no report")
+    return outsider.read_ssh_audit(rep, users[0]), ""
+
+
+_NOT_REACHED_WORDS = {"refused": "the connection was refused",
+                      "timeout": "no answer (dropped by a modem or firewall)",
+                      "unreachable": "no route (an ICMP error came back)"}
 
 
 # --------------------------------------------------------------------------- security.ssh_auth
@@ -52,59 +82,130 @@ def _public_target(s: Settings) -> str:
        2.0)
 async def check_ssh_auth(ctx: CheckContext) -> Outcome:
     s = ctx.settings
-    target, user = _public_target(s), getpass.getuser()
-    data: dict[str, Any] = {"target": target, "port": SSH_PORT, "user": user}
+    user = getpass.getuser()
+    data: dict[str, Any] = {"target": s.this.name, "port": SSH_PORT, "user": user}
     peers = ssh_peers(s)
-    if not target:
-        return Outcome(Status.SKIP, "skipped: the settings give this component no public IP "
-                                    "or name to test", [], data)
     if not peers:
         return Outcome(Status.SKIP, "skipped: no peer has an SSH user in the settings "
                                     "(peer.ssh_user), so nobody outside can look at our sshd",
                        [], data)
     t = budget(ctx, "security.ssh_auth")
+    loop = asyncio.get_running_loop()
+    end = loop.time() + t * 0.95
+
+    def left() -> float:
+        return max(end - loop.time(), 0.2)
+
+    ev: list[str] = []
+    target = s.this.name     # a LAN profile: the name (nothing comes from the internet)
+    if s.this.profile == "remote":  # where a stranger comes from: the address the internet sees
+        ip, ev = await _public_ip(ctx, min(t * 0.2, 2.0))
+        target = ip or target
+    data["target"] = target
+    if not target:
+        return Outcome(Status.SKIP, "skipped: no public IP is known (isp.public_ip found none, "
+                                    "the settings give none) and this component has no name "
+                                    "to test", ev, data)
     users = [user] if user == "root" else [user, "root"]
-    cmd = installed_python_command(target, str(SSH_PORT), f"{t * 0.3:.1f}", *users,
+    rem = left()
+    cmd = installed_python_command(target, str(SSH_PORT), f"{rem * 0.3:.1f}", *users,
                                    mark=outsider.SSH_MARK)
     got = await each_peer(peers[:2], lambda p: ssh_run(
-        ctx.ssh, p, cmd, stdin=outsider.SSH_AUDIT_PROGRAM, timeout=t * 0.9,
-        connect_timeout=t * 0.4, tcp_timeout=ctx.timeout_s))
-    ev: list[str] = []
+        ctx.ssh, p, cmd, stdin=outsider.SSH_AUDIT_PROGRAM, timeout=rem * 0.85,
+        connect_timeout=min(t * 0.4, rem * 0.45), tcp_timeout=ctx.timeout_s))
+    audits: list[tuple[Peer, outsider.SshAudit, dict[str, Any]]] = []
+    problems: list[str] = []
     for p, res in zip(peers[:2], got, strict=True):
         rep = outsider.parse_marked(res.stdout, outsider.SSH_MARK)
         if rep is None or rep.get("error"):
-            why = peer_program_problem(res, p) or (
+            problems.append(peer_program_problem(res, p) or (
                 f"rosnet-tui is not installed on {p.name} (the audit needs its paramiko)"
                 if rep and rep.get("error") == "no_install" else
-                f"the audit on {p.name} gave no report ({stderr_tail(res) or res.detail})")
-            ev.append(why)
+                f"the audit on {p.name} gave no report ({stderr_tail(res) or res.detail})"))
             continue
-        audit = outsider.read_ssh_audit(rep, user)
-        data.update({"from": p.name, "methods": audit.methods, "root_methods": audit.root_methods,
-                     "password": audit.password,
-                     "keyboard_interactive": audit.keyboard_interactive,
-                     "root_password": audit.root_password})
-        if audit.error and not audit.methods:
-            data["error"] = audit.error
-            return Outcome(Status.FAIL, f"{p.name} could not read what sshd at {target}:"
-                                        f"{SSH_PORT} offers: {audit.error}", ev, data)
-        ev.append(f"{p.name} -> {target}:{SSH_PORT} ({rep.get('banner') or 'sshd'}): "
-                  f"auth_none({user}) offers {', '.join(audit.methods) or 'nothing'}; "
-                  f"auth_none(root) offers {', '.join(audit.root_methods) or 'nothing'}")
-        bad = [m for m in audit.methods if m in outsider.PASSWORD_METHODS or m == "none"]
-        if bad:
-            return Outcome(Status.FAIL, f"sshd at {target}:{SSH_PORT} offers the internet "
-                                        f"{' and '.join(bad)}: anyone can try passwords",
-                           ev + outsider.ssh_fix(s.this.name or target, user), data)
-        if audit.root_password:
-            return Outcome(Status.FAIL, f"sshd at {target}:{SSH_PORT} offers root a password "
-                                        "(methods offered for the user root)",
-                           ev + outsider.ssh_fix(s.this.name or target, user), data)
-        return Outcome(Status.PASS, f"sshd at {target}:{SSH_PORT} offers only "
-                                    f"{', '.join(audit.methods) or 'nothing'} (no password, "
-                                    "also not to root)", ev, data)
+        audits.append((p, outsider.read_ssh_audit(rep, user), rep))
+    ev += problems
+    # A peer that read the methods has the say; then one that reached something it could not
+    # read; only when every peer that looked reached nothing is sshd out of the internet's reach.
+    read = [x for x in audits if x[1].methods]
+    unread = [x for x in audits if not x[1].methods and not x[1].not_reached]
+    if read:
+        return _judge_methods(s, target, user, *read[0], ev, data)
+    if unread:
+        p, audit, _rep = unread[0]
+        data.update({"from": p.name, "tcp": audit.tcp or "error",
+                     "error": audit.error or "no methods"})
+        if audit.tcp == "connected":    # something answers there: reachable, but not read
+            data["reachable"] = True
+        return Outcome(Status.FAIL, f"{p.name} could not read what sshd at {target}:"
+                                    f"{SSH_PORT} offers: {audit.error or 'no methods'}",
+                       ev, data)
+    if audits:
+        return await _judge_not_reached(s, target, users, audits, ev, data, left())
     data["from"] = ""     # not a finding about sshd: the audit could not run (linux.ssh says why)
-    return Outcome(Status.WARN, "no peer could run the SSH audit: " + "; ".join(ev), ev, data)
+    return Outcome(Status.WARN, "no peer could run the SSH audit: " + "; ".join(problems), ev,
+                   data)
+
+
+def _judge_methods(s: Settings, target: str, user: str, p: Peer, audit: outsider.SshAudit,
+                   rep: dict[str, Any], ev: list[str], data: dict[str, Any]) -> Outcome:
+    """The verdict when *p* read what sshd at *target* offers (it is reachable)."""
+    data.update({"from": p.name, "reachable": True, "tcp": "connected",
+                 "methods": audit.methods, "root_methods": audit.root_methods,
+                 "password": audit.password,
+                 "keyboard_interactive": audit.keyboard_interactive,
+                 "root_password": audit.root_password})
+    ev.append(f"{p.name} -> {target}:{SSH_PORT} ({rep.get('banner') or 'sshd'}): "
+              f"auth_none({user}) offers {', '.join(audit.methods) or 'nothing'}; "
+              f"auth_none(root) offers {', '.join(audit.root_methods) or 'nothing'}")
+    bad = _offers_password(audit.methods)
+    if bad:
+        return Outcome(Status.FAIL, f"sshd at {target}:{SSH_PORT} offers the internet "
+                                    f"{' and '.join(bad)}: anyone can try passwords",
+                       ev + outsider.ssh_fix(s.this.name or target, user), data)
+    if audit.root_password:
+        return Outcome(Status.FAIL, f"sshd at {target}:{SSH_PORT} offers root a password "
+                                    "(methods offered for the user root)",
+                       ev + outsider.ssh_fix(s.this.name or target, user), data)
+    return Outcome(Status.PASS, f"sshd at {target}:{SSH_PORT} offers only "
+                                f"{', '.join(audit.methods) or 'nothing'} (no password, "
+                                "also not to root)", ev, data)
+
+
+async def _judge_not_reached(s: Settings, target: str, users: list[str],
+                             audits: list[tuple[Peer, outsider.SshAudit, dict[str, Any]]],
+                             ev: list[str], data: dict[str, Any], timeout: float) -> Outcome:
+    """The verdict when no peer reached anything at *target*:22 (refused, dropped, no route):
+    nothing there is offered to strangers. Port 22 is optional in every role (core/forwarding.py:
+    peers that SSH here are told by their own linux.ssh). A peer alone may be shut out (a ban)
+    while strangers are not, so this machine's own sshd is asked too: if it offers a password,
+    a warning with the fix."""
+    for p, audit, _rep in audits:
+        ev.append(f"{p.name} -> {target}:{SSH_PORT}: {_NOT_REACHED_WORDS[str(audit.tcp)]}"
+                  + (f" ({audit.tcp_error})" if audit.tcp_error else ""))
+    p, audit, _rep = audits[0]
+    data.update({"from": p.name, "reachable": False, "tcp": audit.tcp})
+    where = f"sshd at {target}:{SSH_PORT} is not reachable from the internet"
+    seen = f"{p.name}: {_NOT_REACHED_WORDS[str(audit.tcp)].split(' (')[0]}"
+    here, why = await _audit_here(users, timeout)
+    if here is None:
+        ev.append(f"what sshd here offers was not read ({why})")
+    elif here.not_reached:
+        ev.append(f"no sshd answers on this machine's port {SSH_PORT} either")
+    else:
+        data.update({"local_methods": here.methods, "local_root_methods": here.root_methods})
+        ev.append(f"sshd here (127.0.0.1:{SSH_PORT}): auth_none({users[0]}) offers "
+                  f"{', '.join(here.methods) or 'nothing'}; auth_none(root) offers "
+                  f"{', '.join(here.root_methods) or 'nothing'}")
+        bad = _offers_password(here.methods) or (
+            ["a password to root"] if here.root_password else [])
+        if bad:
+            return Outcome(Status.WARN, f"{where} ({seen}), but sshd here offers "
+                                        f"{' and '.join(bad)}: forwarding port {SSH_PORT} (or a "
+                                        f"firewall that shuts out {p.name} alone) would let "
+                                        "anyone try passwords",
+                           ev + outsider.ssh_fix(s.this.name or target, users[0]), data)
+    return Outcome(Status.PASS, f"{where} ({seen}): it offers strangers nothing", ev, data)
 
 
 # --------------------------------------------------------------------------- security.outsider
@@ -125,10 +226,12 @@ async def _run_here(program: bytes, args: list[str], timeout: float) -> tuple[st
     try:
         out, err = await asyncio.wait_for(proc.communicate(program), timeout)
     except asyncio.TimeoutError:
-        with contextlib.suppress(ProcessLookupError):
-            proc.kill()
-        await proc.wait()
         return "", f"the probe gave no verdict within {timeout:.1f} s"
+    finally:     # timed out, or the check itself was stopped: the program goes with it
+        if proc.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                proc.kill()
+            await proc.wait()
     return out.decode(errors="replace"), err.decode(errors="replace").strip()[-200:]
 
 
@@ -241,15 +344,25 @@ async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
     if s.this.profile != "remote":
         return Outcome(Status.SKIP, "skipped: on a LAN profile nothing is forwarded from the "
                                     "internet", [], data)
-    target = s.this.public_ip
     peers = ssh_peers(s)
-    data["target"] = target
-    if not target or not peers:
-        why = "no public IP in the settings" if not target else "no peer has an SSH user"
-        return Outcome(Status.SKIP, f"skipped: {why}, so no outsider/insider pair can be made",
-                       [], data)
+    if not peers:
+        return Outcome(Status.SKIP, "skipped: no peer has an SSH user, so no outsider/insider "
+                                    "pair can be made", [], data)
     t = budget(ctx, "security.outsider")
-    ev: list[str] = []
+    loop = asyncio.get_running_loop()
+    end = loop.time() + t * 0.95
+
+    def left() -> float:
+        return max(end - loop.time(), 0.2)
+
+    # The port checker tests the address that asks it: the insider tries the same one.
+    target, ev = await _public_ip(ctx, min(t * 0.15, 2.0))
+    data["target"] = target or ""
+    if not target:
+        return Outcome(Status.SKIP, "skipped: this component's public IP is unknown (no "
+                                    "what-is-my-IP service answered, see isp.public_ip, and the "
+                                    "settings give none), so no outsider/insider pair can be "
+                                    "made", ev, data)
     ports: list[int] = []
     if s.is_master:     # the master's port is judged only when something listens there
         if await _listens_here(s.ros.port):
@@ -266,12 +379,13 @@ async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
                                         f"test: {exc.strerror or exc}", ev, data)
         ports.append(spare.port)
         data["ports"] = ports
-        cmd = python_command(_CONNECT, target, f"{t * 0.25:.2f}", *map(str, ports))
+        rem = left()
+        cmd = python_command(_CONNECT, target, f"{rem * 0.25:.2f}", *map(str, ports))
         peer = peers[0]
         res, *outs = await asyncio.gather(
-            ssh_run(ctx.ssh, peer, cmd, timeout=t * 0.8, connect_timeout=t * 0.4,
-                    tcp_timeout=ctx.timeout_s),
-            *(http_get(f"{base}/port/{p}", t * 0.4) for p in ports))
+            ssh_run(ctx.ssh, peer, cmd, timeout=rem * 0.85,
+                    connect_timeout=min(t * 0.4, rem * 0.45), tcp_timeout=ctx.timeout_s),
+            *(http_get(f"{base}/port/{p}", min(t * 0.4, rem * 0.45)) for p in ports))
     data["from"] = peer.name
     outside: dict[str, Any] = {}
     for p, ans in zip(ports, outs, strict=True):
