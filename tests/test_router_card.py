@@ -101,3 +101,51 @@ def test_mac_is_read_from_the_real_interface():
         assert out.stdout.split() == ["02:42:ac:11:00:07", "10.77.0.5"], out.stderr
     finally:
         subprocess.run(["ip", "netns", "delete", ns], capture_output=True, timeout=10)
+
+
+# --------------------------------------------------------------------------- what is exposed
+def _exposure(s) -> str:
+    return " ".join(build_router_card(s, NET).exposure_warning)
+
+
+def _ros2(security: str = "", role: str = "master"):
+    s = robot()
+    s.ros.version = 2
+    if security:
+        s.ros.security = security
+    if role == "member":
+        s.this.role, s.ros.master = "member", "sami"
+    return s
+
+
+def test_ros2_with_mutual_tls_says_only_fleet_certificates_get_in():
+    """Issue 29 §4 row 3: under ROS 2 with mutual TLS (the default) the card said rmw_zenoh has
+    no authentication and whoever reaches 7447 joins."""
+    text = _exposure(_ros2())
+    assert "certificate" in text and "7447" in text
+    assert "no authentication" not in text and "joins" not in text
+
+
+def test_ros2_without_tls_warns_of_the_opt_out():
+    text = _exposure(_ros2("none"))
+    assert 'security = "none"' in text and "no authentication" in text and "7447" in text
+
+
+def test_a_ros2_member_exposes_no_ros_port():
+    text = _exposure(_ros2(role="member"))
+    assert "7447" not in text and "joins" not in text and "keys only" in text
+
+
+def test_ros1_with_the_firewall_says_who_gets_in():
+    """ROS 1's default: the peers-only firewall decides who reaches the range, not the forward."""
+    text = _exposure(robot())
+    assert "peers-only firewall" in text and "addresses you allow" in text
+    assert "firewall apply" in text and "whole internet" not in text
+
+
+def test_ros1_without_the_firewall_exposes_everything_to_everyone():
+    s = robot()
+    s.ros.security = "none"
+    text = _exposure(s)
+    assert "whole internet" in text and 'security = "none"' in text
+    assert "addresses you allow" not in text

@@ -68,3 +68,46 @@ def test_ros_text_per_role():
     assert "is a member" in member
     for text in (master, member):
         assert "ROS_IP" in text and "ROS_HOSTNAME" in text
+
+
+def _variants():
+    """Every combination that changes which checks run: ROS version, role, profile, rosbridge,
+    security."""
+    for version in (1, 2):
+        for role in ("master", "member"):
+            for profile in ("remote", "office"):
+                for bridge in (False, True):
+                    for security in ("", "none"):
+                        s = settings(role, profile=profile)
+                        s.ros.version = version
+                        s.rosbridge.enabled = bridge
+                        if security:
+                            s.ros.security = security
+                        yield s
+
+
+def test_each_step_lists_exactly_the_checks_the_runner_runs():
+    """Issue 29 §4 row 5: a step's list (shown before its checks are loaded) is the runner's
+    pick for the settings: under ROS 2 the Linux step listed linux.firewall, which the runner
+    never runs there."""
+    from rosnet_tui.core.checks.runner import select
+    from rosnet_tui.core.steps import step_for
+
+    for s in _variants():
+        for step in STEPS:
+            listed = step_for(step.id, s).check_ids
+            assert len(set(listed)) == len(listed)
+            assert set(listed) == {c.id for c in select([step.id], settings=s)}, \
+                (step.id, s.ros, s.rosbridge)
+
+
+def test_the_steps_declare_each_check_as_it_registers():
+    """What a step says of each check (its step, ROS version, switch) is what the check
+    registered: the two declarations cannot drift apart."""
+    from rosnet_tui.core.checks import REGISTRY, load_builtin_checks
+    from rosnet_tui.core.steps import STEP_CHECKS
+
+    load_builtin_checks()
+    declared = {cid: (step, ros, switch) for step, checks in STEP_CHECKS.items()
+                for cid, ros, switch in checks}
+    assert declared == {c.id: (c.step, c.ros, c.switch) for c in REGISTRY.values()}

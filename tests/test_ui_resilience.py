@@ -25,6 +25,7 @@ from bench.pty_harness import PtyProcess
 from bench.rows_local import app_title
 from rosnet_tui.core.settings import atomic_write_text, load_settings, render_settings
 from rosnet_tui.core.settings_model import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.ui_state import UiState
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -80,7 +81,8 @@ def test_a_dropped_session_resumes_with_its_results_and_draft(world):
     finally:
         p.close()
     state = json.loads((world.root / "state" / "rosnet-tui" / "ui.json").read_text())
-    assert state["draft"]["peers"][-1] == {"name": "ops-laptop", "local_ip": "10.1.2.3",
+    draft = state["drafts"][UiState.draft_key(world.config)]  # kept for its settings file
+    assert draft["peers"][-1] == {"name": "ops-laptop", "local_ip": "10.1.2.3",
                                            "public_ip": "", "ssh_user": ""}
     assert {"router.local_ip", "router.port_free", "router.listener",
             "router.port_open"} <= set(state["results"])
@@ -99,7 +101,7 @@ def test_a_dropped_session_resumes_with_its_results_and_draft(world):
     finally:
         p.close(b"\x11")
     state = json.loads((world.root / "state" / "rosnet-tui" / "ui.json").read_text())
-    assert "draft" not in state
+    assert not state.get("drafts") and "draft" not in state
 
 
 def test_sigterm_gives_the_terminal_back(world):

@@ -84,3 +84,54 @@ async def test_a_step_first_shown_after_the_switch_is_the_ros2_step(tmp_path):
         step = app.screen
         assert list(step.query_one(CheckList).rows)[0] == "ros2.env"
         assert "Zenoh" in str(step.query_one("#expected-text").render())
+
+
+def ros2_settings():
+    s = complete_settings()
+    s.ros.version = 2
+    return s
+
+
+def quick_registry(step: str):
+    """The registered checks of *step* (their ids, ROS versions and switches), each answering
+    at once: what the runner picks, without touching the network."""
+    from dataclasses import replace
+
+    from rosnet_tui.core.results import Outcome, Status
+
+    async def fine(ctx):
+        return Outcome(Status.PASS, "fine", [])
+
+    return [replace(spec, func=fine) for spec in select([step])]
+
+
+async def test_the_ros2_linux_step_lists_only_the_checks_that_run(tmp_path):
+    """Issue 29 §4 row 5: under ROS 2 the Linux step listed "Only peers get in" (linux.firewall,
+    a ROS 1 check), before and after `r`, where it stayed "not run yet"."""
+    app = make_app(tmp_path, ros2_settings(), specs=quick_registry)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("3")
+        await pilot.pause()
+        picked = [c.id for c in select(["linux"], settings=app.session.settings)]
+        checks = app.screen.query_one(CheckList)
+        assert list(checks.rows) == picked and "linux.firewall" not in picked
+        await pilot.press("r")
+        for _ in range(100):
+            await pilot.pause(0.02)
+            if all(r.state == "pass" for r in checks.rows.values()):
+                break
+        assert {cid: r.state for cid, r in checks.rows.items()} == {c: "pass" for c in picked}
+        assert app.session.step_states()["linux"] == "pass"
+
+
+async def test_the_ros2_router_card_says_only_the_fleet_gets_in(tmp_path):
+    """Issue 29 §4 row 3: the router card (step 2) under ROS 2 with mutual TLS (the default)
+    said rmw_zenoh has no authentication and whoever reaches 7447 joins."""
+    app = make_app(tmp_path, ros2_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("2")
+        await pilot.pause()
+        await pilot.pause()
+        card = str(app.screen.query_one("#router-card").render())
+        assert "!! Exposure" in card and "certificate" in card
+        assert "no authentication" not in card and "joins" not in card

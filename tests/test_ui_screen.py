@@ -12,6 +12,7 @@ from textual.widgets import DataTable, Input
 from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings import load_settings, save_settings
+from rosnet_tui.core.ui_state import UiState
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.widgets import SHORT_TITLES, TITLE_MAX, CheckList
@@ -220,7 +221,8 @@ async def test_results_and_draft_come_back_in_the_next_session(tmp_path):
         await pilot.pause(0.5)  # kept 0.3 s after the last key
     state = json.loads((tmp_path / "state" / "ui.json").read_text())
     assert state["results"]["router.ok"]["result"]["summary"] == "all fine here"
-    assert state["draft"]["peers"][-1]["name"] == "newpeer"
+    draft = state["drafts"][UiState.draft_key(tmp_path / "config.toml")]
+    assert draft["peers"][-1]["name"] == "newpeer"
 
     app = make_app(tmp_path, complete_settings(), specs_for=specs)
     async with app.run_test(size=(80, 24)) as pilot:
@@ -236,7 +238,7 @@ async def test_results_and_draft_come_back_in_the_next_session(tmp_path):
         assert row.state == "pass" and row.at  # the earlier result, shown with its time
         assert "results of" in app.screen.query_one("#verify-pane").border_title
         assert app.session.findings is not None
-    assert "draft" not in json.loads((tmp_path / "state" / "ui.json").read_text())
+    assert not json.loads((tmp_path / "state" / "ui.json").read_text()).get("drafts")
 
 
 def test_a_damaged_state_file_is_ignored(tmp_path):
@@ -277,3 +279,91 @@ def test_every_check_has_a_short_title():
 
     load_builtin_checks()
     assert set(REGISTRY) - set(SHORT_TITLES) == set()
+
+
+@pytest.mark.parametrize("size", [(80, 24), (120, 40)])
+async def test_every_line_of_a_code_block_gets_the_same_indent(tmp_path, size):
+    """Issue 29 §4 row 8: the Configuration pane indented only the first line of a code block
+    (the hosts lines of step 3 stood misaligned)."""
+    from textual.geometry import Region
+
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=size) as pilot:
+        await pilot.press("3")
+        await pilot.pause()
+        text = app.screen.query_one("#config-text")
+        lines = [s.text.rstrip() for s in text.render_lines(Region(0, 0, text.size.width,
+                                                                   text.size.height))]
+    hosts = [line for line in lines if line.strip().endswith(("turtlebot", "sami"))
+             and line.strip()[0].isdigit()]
+    assert [h.split()[-1] for h in hosts] == ["turtlebot", "sami"]
+    assert all(h.startswith("  ") and not h.startswith("   ") for h in hosts), hosts
+    assert len({h.rindex(" ") for h in hosts}) == 1, hosts  # the names in one column
+
+
+def _app_on(config, state, settings=None):
+    """The app on settings file *config*, with the state folder *state* shared by every file."""
+    from rosnet_tui.core.paths import Paths
+    from rosnet_tui.core.session import WizardSession
+    from rosnet_tui.core.settings_model import Settings
+    from rosnet_tui.ui.app import RosnetApp
+    from tests.test_ui import NET
+
+    return RosnetApp(WizardSession(settings or Settings(), Paths(config_path=config,
+                                                                 state_dir=state),
+                                   detect_net=lambda: NET, specs_for=lambda step: []))
+
+
+async def test_a_draft_belongs_to_its_settings_file(tmp_path):
+    """Issue 29 §4 row 2: `--config new.toml`, Ctrl+Q, then the everyday file: a blank set-up
+    opened over complete settings ("typed ..., not saved yet" though nothing was typed), and
+    Ctrl+S would have saved it over that file."""
+    state, new, main = tmp_path / "state", tmp_path / "new.toml", tmp_path / "config.toml"
+    save_settings(complete_settings(), main)
+    app = _app_on(new, state)
+    async with app.run_test(size=(80, 24)) as pilot:   # a first run on new.toml: nothing typed
+        await pilot.pause()
+        assert isinstance(app.screen, SetupScreen)
+        await pilot.press("ctrl+q")
+        await pilot.pause()
+    assert app.session.draft() is None       # nothing typed: no draft
+    app = _app_on(main, state, load_settings(main))
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        assert isinstance(app.screen, StepScreen)
+
+    app = _app_on(new, state)   # now something is typed on new.toml, and left unsaved
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        await pilot.press(*"robot2")
+        await pilot.press("ctrl+q")
+        await pilot.pause()
+    app = _app_on(main, state, load_settings(main))   # not offered over the other file
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        assert isinstance(app.screen, StepScreen) and app.session.draft() is None
+        await pilot.press("s")   # its own set-up shows its own settings
+        await pilot.pause()
+        assert app.screen.query_one("#this-name", Input).value == "turtlebot"
+        await pilot.press("escape")
+        await pilot.pause()
+    assert load_settings(main) == complete_settings() and not new.exists()
+    app = _app_on(new, state)   # and still there for its own file
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.pause()
+        assert isinstance(app.screen, SetupScreen)
+        assert app.screen.query_one("#this-name", Input).value == "robot2"
+
+
+async def test_the_help_fits_one_page_at_80x24(tmp_path):
+    """Every key on one page, as the help says: no line wraps, nothing to scroll."""
+    from rosnet_tui.ui.help_screen import HELP
+
+    app = make_app(tmp_path, complete_settings())
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("question_mark")
+        await pilot.pause()
+        body = app.screen.query_one("#help-body")
+        text = app.screen.query_one("#help-text")
+        assert text.size.height == len(HELP.rstrip("\n").splitlines())   # nothing wrapped
+        assert body.max_scroll_y == 0

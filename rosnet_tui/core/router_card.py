@@ -89,21 +89,54 @@ def _connection_notes(conn: str, ip: str, mac: str, page: str) -> list[str]:
 
 
 def _exposure(settings: Settings) -> list[str]:
+    """What the forwards expose, and to whom, for the settings in force: ROS 2 with or without
+    mutual TLS, master or member; ROS 1 with or without the peers-only firewall."""
+    from rosnet_tui.core.rosbridge import forward_needed
+
+    ssh = "- SSH, when port 22 is forwarded: keys only (PasswordAuthentication no)."
+    off = "- Remove the forwarding when the robot is not in use."
+    bp = settings.rosbridge.port
+    bridge = ([f"- rosbridge (TCP {bp}) takes any client that reaches it, like an unprotected "
+               "master: forward it only while web clients need it."]
+              if forward_needed(settings) else [])
     if settings.ros2:
-        return [f"ROS 2 (rmw_zenoh) has no authentication by default: whoever reaches TCP "
-                f"{settings.ros.zenoh_port} of the master joins the ROS network. Restrict the "
-                "forward to the members' public IPs if the modem can; SSH keys only.",
-                "- Remove the forwarding when the robot is not in use."]
+        port = settings.ros.zenoh_port
+        if not settings.is_master:
+            return ["ROS 2 member: no ROS port is forwarded here (its router connects out to the "
+                    "master's), so nothing of ROS is exposed on this modem.", *bridge, ssh]
+        if settings.ros.security == "mtls":
+            head = (f"Mutual TLS ([ros] security = \"mtls\"): the router on TCP {port} opens a "
+                    "session only for a certificate signed by the fleet's CA; anyone else who "
+                    "reaches the port is refused at the handshake. Restricting the forward to "
+                    "your members' public IPs, where the modem can, narrows it further.")
+        else:
+            head = (f"[ros] security = \"none\": rmw_zenoh has no authentication of its own, so "
+                    f"whoever reaches TCP {port} joins the ROS network and can command the "
+                    "robot. Turn security back on (set-up: Security on, mutual TLS), or at least "
+                    "restrict the forward to your members' public IPs if the modem can.")
+        return [head, *bridge, ssh, off]
+    from rosnet_tui.core import firewall
+
     sources = [f"{p.public_ip} ({p.name})" for p in settings.peers if p.public_ip]
     allow = (f"allow only the peers' public IPs: {', '.join(sources)}" if sources
              else "allow only the peers' public IPs")
+    if firewall.wanted(settings):
+        head = (f"ROS 1 has no authentication: the ROS master ({settings.ros.port}) and every "
+                "node obey anyone who reaches them. With [ros] security = \"firewall\" the "
+                "peers-only firewall (Linux step, `rosnet-tui firewall apply`) lets in only your "
+                f"peers and the addresses you allow, on SSH and TCP {PORT_RANGE}. Until it is "
+                "loaded anyone gets in; and a DMZ host also opens the ports below 1024, which "
+                "the firewall leaves alone.")
+        return [head, f"- If the modem can restrict a rule to source addresses, {allow} there "
+                      "too.", *bridge, ssh, off]
     return [
-        f"ROS 1 has no authentication. Forwarding every port exposes the ROS master "
-        f"({settings.ros.port}) to the whole internet: anyone who reaches it can command the "
-        "robot. It exposes SSH too, when port 22 is forwarded or with a DMZ host.",
+        f"[ros] security = \"none\": no firewall. Forwarding every port exposes the ROS master "
+        f"({settings.ros.port}) and every node to the whole internet, and ROS 1 has no "
+        "authentication: anyone who reaches them can command the robot. It exposes SSH too, "
+        "when port 22 is forwarded or with a DMZ host. Set security back on (set-up: Security "
+        "on) for the peers-only firewall.",
         f"- If the modem can restrict a rule to source addresses, {allow}.",
-        "- SSH: keys only (PasswordAuthentication no in /etc/ssh/sshd_config).",
-        "- Remove the forwarding (or the DMZ host) when the robot is not in use.",
+        *bridge, ssh, off,
     ]
 
 

@@ -267,11 +267,12 @@ class WizardSession:
 
     # ------------------------------------------------------------------ the set-up draft
     def draft(self) -> dict | None:
-        """A set-up form being filled in and not saved yet, from this or an earlier session."""
-        return self.ui_state.draft
+        """The set-up form of this settings file being filled in and not saved yet, from this or
+        an earlier session (never one typed for another file)."""
+        return self.ui_state.draft(self.paths.config_path)
 
     def save_draft(self, fields: dict[str, str], peers: list[dict[str, str]]) -> None:
-        self.ui_state.set_draft(fields, peers)
+        self.ui_state.set_draft(self.paths.config_path, fields, peers)
 
     def clear_draft(self) -> None:
-        self.ui_state.clear_draft()
+        self.ui_state.clear_draft(self.paths.config_path)

@@ -134,10 +134,17 @@ def configure_router(s: Settings) -> str:
         f"2. Reserve **{ip}** for this machine in the modem's DHCP settings, so the address the "
         "modem forwards to does not change after a restart.\n"
         f"3. Keep the test port **{s.probe.port}** free: nothing else should listen on it.")
+    from rosnet_tui.core import firewall
+
     parts.append(
-        "**Exposure.** Forwarding every port shows SSH and the ROS master (port "
-        f"{s.ros.port}) to the whole internet, and ROS 1 has no authentication: anyone who "
-        "reaches the master can drive the robot. Use SSH keys, not passwords.")
+        "**Exposure.** ROS 1 has no authentication: anyone who reaches the ROS master (port "
+        f"{s.ros.port}) can drive the robot, and forwarding every port shows it and SSH to the "
+        "internet. " + (
+            "The Linux step's peers-only firewall (`rosnet-tui firewall apply`) then lets in "
+            "only your peers and the addresses you allow; until it is loaded, anyone gets in."
+            if firewall.wanted(s) else
+            "`[ros] security = \"none\"`: no firewall, so that is the whole internet.")
+        + " Use SSH keys, not passwords.")
     parts.append(_source_restriction(s))
     if bridge:
         parts.append(bridge)
@@ -190,8 +197,9 @@ def configure_linux(s: Settings) -> str:
         parts.insert(-1, "**Only the peers get in (ROS 1).** " + (
             "`rosnet-tui firewall apply` (or `w`, after the hosts set) loads an nftables table "
             f"of ours, `{firewall.TABLE}`: on the forwarded ports (22, {PORT_MIN}-{PORT_MAX}, "
-            f"{s.ros.port}) only the peers' addresses, loopback and replies get in; no other "
-            "table is touched, and `rosnet-tui undo` removes it." if firewall.wanted(s) else
+            f"{s.ros.port}) it lets in only your peers and the addresses you allow (and "
+            "loopback, and replies); no other table is touched, and `rosnet-tui undo` removes "
+            "it." if firewall.wanted(s) else
             "`[ros] security = \"none\"`: no firewall; the forwarded ports answer anyone."))
     if s.ros2:
         parts[-1] = (f"**To verify (ROS 2):** ping and SSH by name, and the one connection ROS 2 "
@@ -345,35 +353,71 @@ def configure_ros2(s: Settings) -> str:
     return "\n\n".join(head)
 
 
-ROS2_CHECK_IDS = ("ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in",
-                  "security.outsider")
 ROS2_EXPECTED = ("Every component's Zenoh router links to the master's router through its one "
                  "forwarded port; every component's nodes are seen, and each can publish and "
                  "subscribe.")
+
+
+# Every check of each step, in the order the step lists them, with the ROS version it belongs to
+# (None: both) and the settings table that must be enabled for it (None: none). The checks
+# register the same facts (CheckSpec.ros and .switch; tests/test_steps.py holds both to one
+# answer), so a step lists exactly the checks the runner runs, before they are even imported.
+STEP_CHECKS: dict[str, tuple[tuple[str, int | None, str | None], ...]] = {
+    "isp": (("isp.internet", None, None), ("isp.public_ip", None, None),
+            ("isp.cgnat", None, None)),
+    "router": (("router.local_ip", None, None), ("router.port_free", None, None),
+               ("router.listener", None, None), ("router.port_open", None, None),
+               ("router.upnp", 2, None)),   # the modem's own word on ROS 2's one port
+    "linux": (("linux.hosts", None, None), ("linux.resolve", None, None),
+              ("linux.ping", None, None), ("linux.ssh", None, None),
+              ("linux.chat_out", None, None), ("linux.chat_in", None, None),
+              ("linux.firewall", 1, None), ("security.ssh_auth", None, None)),
+    "ros": (("ros.env", 1, None), ("ros.master", 1, None), ("ros.node_uris", 1, None),
+            ("ros.pubsub_out", 1, None), ("ros.pubsub_in", 1, None),
+            ("ros2.env", 2, None), ("ros2.router", 2, None), ("ros2.graph", 2, None),
+            ("ros2.pubsub_out", 2, None), ("ros2.pubsub_in", 2, None),
+            ("security.outsider", None, None), ("ros.rosbridge", None, "rosbridge")),
+}
+
+
+def check_applies(ros: int | None, switch: str | None, settings: Settings) -> bool:
+    """Whether a check of ROS version *ros* (None: every version), switched on by the settings
+    table *switch* (None: always on), runs under *settings*."""
+    if switch is not None and getattr(getattr(settings, switch, None), "enabled", False) \
+            is not True:
+        return False
+    return ros is None or ros == settings.ros.version
+
+
+def step_check_ids(step_id: str, settings: Settings) -> tuple[str, ...]:
+    """The checks of *step_id* that run under *settings*, in the step's order."""
+    return tuple(cid for cid, ros, switch in STEP_CHECKS[step_id]
+                 if check_applies(ros, switch, settings))
+
+
+def _ros1_ids(step_id: str) -> tuple[str, ...]:
+    """The step's checks under ROS 1 with every switch off (the steps as declared below)."""
+    return tuple(cid for cid, ros, switch in STEP_CHECKS[step_id]
+                 if ros in (None, 1) and switch is None)
 
 
 STEPS: tuple[Step, ...] = (
     Step("isp",
          "Your provider allows port forwarding on every port of this connection, and the modem "
          "has a public IP address that the other components can reach.",
-         configure_isp, ("isp.internet", "isp.public_ip", "isp.cgnat")),
+         configure_isp, _ros1_ids("isp")),
     Step("router",
          "A port tested from outside the modem is reported Open: the modem forwards it to "
          "this component.",
-         configure_router,
-         ("router.local_ip", "router.port_free", "router.listener", "router.port_open")),
+         configure_router, _ros1_ids("router")),
     Step("linux",
          "The components ping each other by name, open SSH sessions by name, and exchange "
          "messages over TCP by name, whichever side starts.",
-         configure_linux,
-         ("linux.hosts", "linux.resolve", "linux.ping", "linux.ssh", "linux.chat_out",
-          "linux.chat_in", "linux.firewall", "security.ssh_auth")),
+         configure_linux, _ros1_ids("linux")),
     Step("ros",
          "Every component registers with the one ROS master, and each can both publish and "
          "subscribe.",
-         configure_ros,
-         ("ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in",
-          "security.outsider")),
+         configure_ros, _ros1_ids("ros")),
 )
 
 STEP_BY_ID = {s.id: s for s in STEPS}
@@ -381,13 +425,10 @@ assert tuple(STEP_BY_ID) == STEP_IDS, "the steps are listed in the procedure's o
 
 
 def step_for(step_id: str, settings: Settings) -> Step:
-    """The step as *settings*' ROS version has it (ROS 2: the ros2.* checks and expectation),
-    with ros.rosbridge on the ROS step when [rosbridge] is enabled."""
-    step = _step_for_version(step_id, settings)
-    if step_id == "ros" and settings.rosbridge.enabled:
-        step = replace(step, check_ids=(*step.check_ids, "ros.rosbridge"))
-    return step
-
+    """The step as *settings* have it: its expected outcome for the ROS version, and the checks
+    that run under them (ROS 2's ros2.*, ros.rosbridge when [rosbridge] is enabled...)."""
+    return replace(_step_for_version(step_id, settings),
+                   check_ids=step_check_ids(step_id, settings))
 
 
 def _step_for_version(step_id: str, settings: Settings) -> Step:
@@ -402,8 +443,8 @@ def _step_for_version(step_id: str, settings: Settings) -> Step:
             "the members can reach." if master else
             "This machine reaches the internet; nothing needs to reach it (any connection "
             "works, carrier-grade NAT included)."))
-    if step_id == "router":  # the modem's own word on the forward (router.upnp) is ROS 2's
-        return replace(step, check_ids=(*step.check_ids, "router.upnp"), expected=(
+    if step_id == "router":
+        return replace(step, expected=(
             f"Nothing to forward on the {settings.this.profile} LAN: every router reaches the "
             "master's directly." if settings.this.profile != "remote" else
             f"TCP {port}, tested from outside the modem, reaches this component's Zenoh router."
@@ -413,4 +454,4 @@ def _step_for_version(step_id: str, settings: Settings) -> Step:
         return replace(step, expected=(
             "The components ping each other by name and open SSH sessions by name; every member "
             f"reaches the master's router port ({port}) by name."))
-    return replace(step, expected=ROS2_EXPECTED, check_ids=ROS2_CHECK_IDS)
+    return replace(step, expected=ROS2_EXPECTED)

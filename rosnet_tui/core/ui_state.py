@@ -2,8 +2,9 @@
 
 One JSON file in the state directory (``ui.json``), rewritten atomically as things happen: the step
 the user was on, the last result of every check (with when it came), the advisor's findings for
-them, and a set-up form that was being filled in and not saved yet (the draft). The next start
-reads it back; results from an earlier session are shown as such, with their time.
+them, and the set-up forms being filled in and not saved yet (the drafts), each kept under the
+settings file it belongs to. The next start reads it back; results from an earlier session are
+shown as such, with their time.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from rosnet_tui.core.settings import atomic_write_text
 from rosnet_tui.core.state import read_json
 
 UI_FILE = "ui.json"
-VERSION = 2
+VERSION = 3   # 3: drafts kept per settings file ("drafts"), not one per account
 
 
 @dataclass
@@ -135,17 +136,38 @@ class UiState:
         self.data["findings"] = [f.to_dict() for f in findings]
         self.save()
 
-    # ------------------------------------------------------------------ set-up draft
-    @property
-    def draft(self) -> dict[str, Any] | None:
-        d = self.data.get("draft")
+    # ------------------------------------------------------------------ set-up drafts
+    # One per settings file, under its resolved path: a draft typed for one file is never offered
+    # (nor saved) over another. A version 2 "draft" said nothing of its file: it is not offered.
+    @staticmethod
+    def draft_key(config_path: Path) -> str:
+        path = Path(config_path).expanduser()
+        try:
+            return str(path.resolve())
+        except (OSError, RuntimeError):   # a symlink loop: the path as given, made absolute
+            return str(path.absolute())
+
+    def _drafts(self) -> dict[str, Any]:
+        drafts = self.data.get("drafts")
+        if not isinstance(drafts, dict):
+            drafts = self.data["drafts"] = {}
+        self.data.pop("draft", None)
+        return drafts
+
+    def draft(self, config_path: Path) -> dict[str, Any] | None:
+        """The set-up being filled in for *config_path* and not saved yet, if any."""
+        drafts = self.data.get("drafts")
+        d = drafts.get(self.draft_key(config_path)) if isinstance(drafts, dict) else None
         return d if isinstance(d, dict) and isinstance(d.get("fields"), dict) else None
 
-    def set_draft(self, fields: dict[str, str], peers: list[dict[str, str]]) -> None:
-        self.data["draft"] = {"at": now_iso(), "fields": fields, "peers": peers}
+    def set_draft(self, config_path: Path, fields: dict[str, str],
+                  peers: list[dict[str, str]]) -> None:
+        self._drafts()[self.draft_key(config_path)] = {"at": now_iso(), "fields": fields,
+                                                       "peers": peers}
         self.save()
 
-    def clear_draft(self) -> None:
-        if "draft" in self.data:
-            del self.data["draft"]
+    def clear_draft(self, config_path: Path) -> None:
+        key = self.draft_key(config_path)
+        if key in (self.data.get("drafts") or {}) or "draft" in self.data:
+            self._drafts().pop(key, None)
             self.save()

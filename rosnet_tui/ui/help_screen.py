@@ -11,7 +11,7 @@ from textual.widgets import Static
 from rosnet_tui.ui.widgets import KeyBar
 
 HELP = """\
-rosnet-tui: keys                                  Esc, q or ? closes this help
+rosnet-tui: keys                                Esc, q or ? closes this help
 
 Four steps, on every component (robot and laptops) and its own modem: 1 ISP
 (is forwarding allowed, the public IP), 2 Router/modem (forward the ports),
@@ -20,7 +20,7 @@ Each step shows what to expect, what to configure here, and live checks.
 
  1-4    go to a step                 r       run the step's checks
  n / b  next / back                  R       re-run the highlighted check
- s      set-up: this machine, peers  c       cancel running checks (any step)
+ s      set-up: this machine, peers  c       stop running checks (any step)
  a      the advisor: what to do      e/Enter evidence and advice of a check
  w      write the configuration      g       go to the step of the cause
  u      undo the last write/forward  z       zoom the focused pane, or back
@@ -29,6 +29,7 @@ Each step shows what to expect, what to configure here, and live checks.
  q      quit (Ctrl+Q anywhere)       Ctrl+Z  suspend (fg brings it back)
  ?      this help
 
+Previews (w u m k): y goes ahead; Esc or q backs out and skips the rest.
 Set-up: Tab and Shift+Tab move, Ctrl+N adds a peer, Ctrl+S saves, Esc or F10
 goes back. Keys typed ahead on a slow link are applied in the order typed.
 Results, findings and an unsaved set-up survive a dropped session.
@@ -41,7 +42,7 @@ class HelpScreen(ModalScreen[None]):
 
     def compose(self) -> ComposeResult:
         with VerticalScroll(id="help-body"):
-            yield Static(HELP, id="help-text", markup=False)
+            yield Static(HELP.rstrip("\n"), id="help-text", markup=False)
         yield KeyBar()
 
     def action_close(self) -> None:

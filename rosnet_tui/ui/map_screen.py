@@ -14,20 +14,21 @@ from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
-from textual.screen import ModalScreen
 from textual.widgets import Button, Static
 
 from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp.wire import ModemError
+from rosnet_tui.ui.dialog import SCROLL_BINDINGS, ConfirmDialog
 from rosnet_tui.ui.widgets import KeyBar
 
 
-class MapScreen(ModalScreen[bool]):
+class MapScreen(ConfirmDialog[bool]):
     """Preview -> consent -> map. Dismisses True when the modem made (or renewed) a forward."""
 
     BINDINGS = [Binding("escape,q,f10", "cancel", "Cancel", key_display="Esc/q"),
-                Binding("y", "map", "Map")]
+                Binding("y", "map", "Map"), *SCROLL_BINDINGS]
+    CONFIRM_ACTIONS = ("map",)
 
     def __init__(self, settings: Settings, state_dir: Path, timeout: float = 3.0,
                  **kwargs) -> None:
@@ -56,9 +57,10 @@ class MapScreen(ModalScreen[bool]):
     @work(exclusive=True, exit_on_error=False, thread=True)
     def _look(self) -> None:
         plan = fw.preview(self.settings, state_dir=self.state_dir, timeout=self.timeout)
-        self.app.call_from_thread(self._show, plan)
+        self.app.call_from_thread(self.show_plan, plan)
 
-    def _show(self, plan: fw.MapPreview) -> None:
+    def show_plan(self, plan: fw.MapPreview) -> None:
+        """Show what would be asked of the modem; Map (and `y`) only when something can be."""
         self.plan = plan
         text = "\n".join(plan.lines) or plan.blocked
         if plan.blocked and plan.lines:
@@ -69,7 +71,7 @@ class MapScreen(ModalScreen[bool]):
             notes.append("Map asks the modem now; `u` (or `rosnet-tui undo`) removes it again. "
                          "The sync service renews the lease.")
         self.query_one("#write-status", Static).update("\n".join(notes))
-        self.query_one("#write-apply", Button).disabled = bool(plan.blocked)
+        self.set_confirm(not plan.blocked)
 
     @on(Button.Pressed, "#write-cancel")
     def action_cancel(self) -> None:
@@ -79,7 +81,7 @@ class MapScreen(ModalScreen[bool]):
     def action_map(self) -> None:
         if self.plan is None or self.plan.blocked or self.plan.modem is None:
             return
-        self.query_one("#write-apply", Button).disabled = True
+        self.set_confirm(False)   # asked once
         self._do_map()
 
     @work(exclusive=True, exit_on_error=False, thread=True)

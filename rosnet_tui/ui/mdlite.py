@@ -12,6 +12,7 @@ from __future__ import annotations
 import re
 
 from rich.console import Group
+from rich.padding import Padding
 from rich.table import Table
 from rich.text import Text
 
@@ -19,6 +20,7 @@ _INLINE = re.compile(r"\*\*(?P<b>.+?)\*\*|`(?P<c>[^`]+)`|(?<![\w*])\*(?P<i>[^*\s
                      r"|(?<!\w)_(?P<u>[^_\s][^_]*?)_(?!\w)|\[(?P<lt>[^\]]+)\]\((?P<lu>[^)]+)\)")
 _ITEM = re.compile(r"^(\s*)([-*+]|\d+[.)])\s+(.*)$")
 CODE_STYLE = "cyan"
+CODE_INDENT = 2
 
 
 def inline(text: str) -> Text:
@@ -82,9 +84,10 @@ def render(markdown: str) -> Group:
             while i < len(lines) and not lines[i].strip().startswith("```"):
                 code.append(lines[i])
                 i += 1
+            # Every line indented alike (Text.pad_left would indent only the first), a line too
+            # long for the pane too, where it wraps.
             block = Text("\n".join(code).rstrip("\n"), style=CODE_STYLE, no_wrap=False)
-            block.pad_left(2)
-            parts.append(block)
+            parts.append(Padding(block, (0, 0, 0, CODE_INDENT), expand=False))
             i += 1
             continue
         if not stripped:

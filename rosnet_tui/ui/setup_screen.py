@@ -132,6 +132,7 @@ class SetupScreen(Screen[bool]):
         self._next_peer = 0
         self._draft_timer = None
         self._restored_draft = False
+        self._as_opened: tuple | None = None   # the form before any key: typing nothing is no draft
 
     def compose(self) -> ComposeResult:
         s = self.session.settings
@@ -241,6 +242,7 @@ class SetupScreen(Screen[bool]):
     async def on_mount(self) -> None:
         self.title = "rosnet-tui"
         self.sub_title = "set-up"
+        self._as_opened = self.form_fields()
         await self._restore_draft()
         self._update_role()
         self.query_one("#this-name", Input).focus()
@@ -260,7 +262,8 @@ class SetupScreen(Screen[bool]):
         return fields, peers
 
     def keep_draft(self) -> None:
-        """Save the form as typed, unless it says what the saved settings say."""
+        """Save the form as typed, unless nothing was typed or it says what the saved settings
+        say."""
         if self._draft_timer is not None:
             self._draft_timer.stop()
             self._draft_timer = None
@@ -268,7 +271,8 @@ class SetupScreen(Screen[bool]):
             return
         fields, peers = self.form_fields()
         settings, _problems = self.read_form()
-        if settings == self.session.settings and self.session.paths.config_path.exists():
+        if (fields, peers) == self._as_opened or (
+                settings == self.session.settings and self.session.paths.config_path.exists()):
             self.session.clear_draft()
         else:
             self.session.save_draft(fields, peers)

@@ -220,23 +220,34 @@ class StepScreen(Screen):
                                        float(settings.checks.timeout_s)), done)
 
     def action_write(self) -> None:
-        self._offer_write(self.session.write_plan(self.step.id))
-
-    def _offer_write(self, plan) -> None:
-        """Preview and apply *plan*, then offer the write that follows it (the firewall after
-        the hosts set)."""
-        from rosnet_tui.ui.write_screen import WriteScreen
-
+        plan = self.session.write_plan(self.step.id)
         if plan is None:
             return
+        plans = [plan]   # the writes offered one after the other (the hosts set, the firewall)
+        while plans[-1].then is not None and len(plans) < 5:   # a short chain; bounded anyway
+            following = plans[-1].then()
+            if following is None:
+                break
+            plans.append(following)
+        self._offer_write(plans, 0)
 
-        def done(written: bool | None) -> None:
-            if written:
+    def _offer_write(self, plans: list, index: int) -> None:
+        """Preview and apply plans[index], then offer the next one; backing out of any preview
+        ends the sequence (nothing more is offered, nothing more written)."""
+        from rosnet_tui.ui.write_screen import NEXT, WRITTEN, WriteScreen
+
+        plan = plans[index]
+        last = index + 1 == len(plans)
+
+        def done(outcome: str | None) -> None:
+            if outcome == WRITTEN:
                 self.run_specs([s for s in self.specs if s.id in plan.after])
-            if plan.then is not None:
-                self._offer_write(plan.then())
+            if outcome in (WRITTEN, NEXT) and not last:
+                self._offer_write(plans, index + 1)
 
-        self.app.push_screen(WriteScreen(plan, self.session.paths.state_dir), done)
+        self.app.push_screen(WriteScreen(plan, self.session.paths.state_dir,
+                                         place=(index + 1, len(plans)),
+                                         next_title="" if last else plans[index + 1].title), done)
 
     def unknown_host_keys(self) -> list[tuple[str, dict]]:
         """Peers whose SSH host key linux.ssh met but nobody has trusted yet."""

@@ -7,17 +7,20 @@ from textual import on
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
-from textual.screen import ModalScreen
 from textual.widgets import Button, Static
 
 from rosnet_tui.core.ssh.known_hosts import verify_commands
+from rosnet_tui.ui.dialog import ConfirmDialog
 from rosnet_tui.ui.widgets import KeyBar
 
 
-class TrustKeyScreen(ModalScreen[bool]):
+class TrustKeyScreen(ConfirmDialog[bool]):
     """Dismisses True only when the user chose to trust the key."""
 
-    BINDINGS = [Binding("escape,q,f10", "refuse", "Do not trust", key_display="Esc/q")]
+    BINDINGS = [Binding("escape,q,f10", "refuse", "Do not trust", key_display="Esc/q"),
+                Binding("y", "trust", "Trust")]
+    CONFIRM_BUTTON, SAFE_BUTTON = "#trust-yes", "#trust-no"
+    CONFIRM_ACTIONS = ("trust",)
 
     def __init__(self, name: str, port: int, host_key: str, fingerprint: str, address: str,
                  user: str = "", **kwargs) -> None:
@@ -43,11 +46,8 @@ class TrustKeyScreen(ModalScreen[bool]):
                 yield Button(Text("[Do not trust]"), id="trust-no", variant="primary", compact=True)
         yield KeyBar()
 
-    def on_mount(self) -> None:
-        self.query_one("#trust-no", Button).focus()
-
     @on(Button.Pressed, "#trust-yes")
-    def _trust(self) -> None:
+    def action_trust(self) -> None:
         self.dismiss(True)
 
     @on(Button.Pressed, "#trust-no")

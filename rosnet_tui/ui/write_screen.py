@@ -15,7 +15,6 @@ from textual import on
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
-from textual.screen import ModalScreen
 from textual.widgets import Button, Checkbox, Static
 
 from rosnet_tui.core import firewall, privilege
@@ -23,6 +22,7 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 from rosnet_tui.core.write_plans import WritePlan
+from rosnet_tui.ui.dialog import SCROLL_BINDINGS, ConfirmDialog
 from rosnet_tui.ui.widgets import KeyBar
 
 
@@ -40,22 +40,37 @@ def diff_text(diff: str) -> Text:
     return out
 
 
-class WriteScreen(ModalScreen[bool]):
-    """Preview -> confirm -> apply. Dismisses True when something was written."""
+# What a write screen dismisses with: the write was made, the user went on to the next preview of
+# the sequence without writing (nothing to write here), or None (backed out: the sequence ends).
+WRITTEN, NEXT = "written", "next"
+
+
+class WriteScreen(ConfirmDialog[str | None]):
+    """Preview -> confirm -> apply. One of a sequence of previews (the hosts set, then the
+    firewall) says where it is ("1 of 2"); Esc ends the whole sequence."""
 
     BINDINGS = [Binding("escape,q,f10", "cancel", "Cancel", key_display="Esc/q"),
-                Binding("y", "apply", "Apply")]
+                Binding("y", "apply", "Apply"), Binding("y", "next", "Next"), *SCROLL_BINDINGS]
+    CONFIRM_ACTIONS = ("apply", "next")
 
-    def __init__(self, plan: WritePlan, state_dir: Path, **kwargs) -> None:
+    def __init__(self, plan: WritePlan, state_dir: Path, *, place: tuple[int, int] = (1, 1),
+                 next_title: str = "", **kwargs) -> None:
+        """*place*: this preview's number and how many the sequence has; *next_title*: the
+        title of the one after it ("" for none)."""
         super().__init__(**kwargs)
         self.plan = plan
         self.state_dir = state_dir
+        self.place = place
+        self.next_title = next_title
         self.preview: mf.Preview | None = None
         self.option = False
+        self.skipping = False   # nothing to write here: the confirm button goes on to the next
 
     def compose(self) -> ComposeResult:
+        number, count = self.place
         with Vertical(id="write-box"):
-            yield Static(self.plan.title, id="write-title")
+            yield Static(self.plan.title + (f" ({number} of {count})" if count > 1 else ""),
+                         id="write-title", markup=False)
             yield Static(self.plan.explain, id="write-explain")
             if self.plan.option_label and self.plan.option_count():
                 yield Checkbox(self.plan.option_label, id="write-option", compact=True)
@@ -69,7 +84,16 @@ class WriteScreen(ModalScreen[bool]):
 
     def on_mount(self) -> None:
         self.refresh_preview()
-        self.query_one("#write-diff-box").focus()
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action in self.CONFIRM_ACTIONS:   # `y` is Apply or Next, as the button says
+            return self.confirm_enabled() and (action == "next") == self.skipping
+        return super().check_action(action, parameters)
+
+    def _can_write(self, can: bool) -> None:
+        """Apply when there is something to write; else Next when a preview follows."""
+        self.skipping = not can and bool(self.next_title)
+        self.set_confirm(can or self.skipping, "[Next]" if self.skipping else "[Apply]")
 
     @on(Checkbox.Changed, "#write-option")
     def _option(self, event: Checkbox.Changed) -> None:
@@ -83,8 +107,8 @@ class WriteScreen(ModalScreen[bool]):
         except (mt.ManagedFileError, ValueError, OSError) as exc:
             self.preview = None
             self.query_one("#write-diff", Static).update("")
-            status.update(f"Cannot write: {exc}")
-            self.query_one("#write-apply", Button).disabled = True
+            status.update(f"Cannot write: {exc}" + self._then())
+            self._can_write(False)
             return
         p = self.preview
         self.companions = self.plan.companions(self.option)  # more files in the same apply
@@ -101,15 +125,29 @@ class WriteScreen(ModalScreen[bool]):
         if self.plan.footnote:
             notes.append(self.plan.footnote)
         notes += [f"Apply writes {c.path} too." for c in self.companions if c.changed]
-        status.update("\n".join(notes))
-        self.query_one("#write-apply", Button).disabled = not (
-            p.changed or any(c.changed for c in self.companions))
+        status.update("\n".join(notes) + self._then())
+        self._can_write(p.changed or any(c.changed for c in self.companions))
+
+    def _then(self) -> str:
+        if not self.next_title:
+            return ""
+        number, count = self.place
+        return f"\nThen {number + 1} of {count}: {self.next_title}. Esc stops here."
 
     @on(Button.Pressed, "#write-cancel")
     def action_cancel(self) -> None:
-        self.dismiss(False)
+        self.dismiss(None)
+
+    def action_next(self) -> None:
+        self.dismiss(NEXT)
 
     @on(Button.Pressed, "#write-apply")
+    async def _pressed(self) -> None:
+        if self.skipping:
+            self.action_next()
+        else:
+            await self.action_apply()
+
     async def action_apply(self) -> None:
         p = self.preview
         extra = [c for c in getattr(self, "companions", []) if c.changed]
@@ -150,13 +188,15 @@ class WriteScreen(ModalScreen[bool]):
                 self.notify(said, severity="error" if said.startswith(("Pairing failed",
                                                                         "Mutual TLS")) else
                             "information", timeout=10)
-        self.dismiss(True)
+        self.dismiss(WRITTEN)
 
 
-class UndoScreen(ModalScreen[bool]):
+class UndoScreen(ConfirmDialog[bool]):
     """Show what undoing the last apply does, and do it on confirmation."""
 
-    BINDINGS = [Binding("escape,q,f10", "cancel", "Cancel", key_display="Esc/q")]
+    BINDINGS = [Binding("escape,q,f10", "cancel", "Cancel", key_display="Esc/q"),
+                Binding("y", "undo", "Undo"), *SCROLL_BINDINGS]
+    CONFIRM_ACTIONS = ("undo",)
 
     def __init__(self, state_dir: Path, **kwargs) -> None:
         super().__init__(**kwargs)
@@ -180,7 +220,7 @@ class UndoScreen(ModalScreen[bool]):
             self.plan = mf.plan_undo(self.state_dir)
         except mt.ManagedFileError as exc:
             status.update(str(exc))
-            self.query_one("#write-apply", Button).disabled = True
+            self.set_confirm(False)
             return
         diff = self.plan.diff()
         forwards = [(firewall.describe(m) if m.get("kind") == firewall.KIND else
@@ -192,7 +232,7 @@ class UndoScreen(ModalScreen[bool]):
         if self.plan.conflicts:
             notes.append("Undo would lose those changes: run `rosnet-tui undo --force` if you "
                          "are sure.")
-            self.query_one("#write-apply", Button).disabled = True
+            self.set_confirm(False)
         elif self.plan.needs_privilege:
             cmd = privilege.format_command(self._sudo_argv())
             notes.append(f"Needs root: Undo runs, in this terminal, {cmd}")
@@ -208,7 +248,7 @@ class UndoScreen(ModalScreen[bool]):
         self.dismiss(False)
 
     @on(Button.Pressed, "#write-apply")
-    def _undo(self) -> None:
+    def action_undo(self) -> None:
         if self.plan is None:
             return
         try:
