@@ -141,7 +141,7 @@ def configure_router(s: Settings) -> str:
         f"{s.ros.port}) can drive the robot, and forwarding every port shows it and SSH to the "
         "internet. " + (
             "The Linux step's peers-only firewall (`rosnet-tui firewall apply`) then lets in "
-            "only your peers and the addresses you allow; until it is loaded, anyone gets in."
+            "only your peers, your LAN and the addresses you allow; until it is loaded, anyone gets in."
             if firewall.wanted(s) else
             "`[ros] security = \"none\"`: no firewall, so that is the whole internet.")
         + " Use SSH keys, not passwords.")
@@ -197,9 +197,9 @@ def configure_linux(s: Settings) -> str:
         parts.insert(-1, "**Only the peers get in (ROS 1).** " + (
             "`rosnet-tui firewall apply` (or `w`, after the hosts set) loads an nftables table "
             f"of ours, `{firewall.TABLE}`: on the forwarded ports (22, {PORT_MIN}-{PORT_MAX}, "
-            f"{s.ros.port}) it lets in only your peers and the addresses you allow (and "
-            "loopback, and replies); no other table is touched, and `rosnet-tui undo` removes "
-            "it." if firewall.wanted(s) else
+            f"{s.ros.port}) it lets in only your peers, your LAN, the addresses you allow and the "
+            "SSH session that loads it (and loopback, and replies); no other table is "
+            "touched, and `rosnet-tui undo` removes it." if firewall.wanted(s) else
             "`[ros] security = \"none\"`: no firewall; the forwarded ports answer anyone."))
     if s.ros2:
         parts[-1] = (f"**To verify (ROS 2):** ping and SSH by name, and the one connection ROS 2 "

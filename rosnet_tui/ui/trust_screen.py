@@ -17,10 +17,10 @@ from rosnet_tui.ui.widgets import KeyBar
 class TrustKeyScreen(ConfirmDialog[bool]):
     """Dismisses True only when the user chose to trust the key."""
 
-    BINDINGS = [Binding("escape,q,f10", "refuse", "Do not trust", key_display="Esc/q"),
-                Binding("y", "trust", "Trust")]
+    # No key trusts a key: a `y` typed ahead over a slow link, meant for the next write preview,
+    # must never accept an unknown host key. Trusting takes Tab to the button and Enter.
+    BINDINGS = [Binding("escape,q,f10", "refuse", "Do not trust", key_display="Esc/q")]
     CONFIRM_BUTTON, SAFE_BUTTON = "#trust-yes", "#trust-no"
-    CONFIRM_ACTIONS = ("trust",)
 
     def __init__(self, name: str, port: int, host_key: str, fingerprint: str, address: str,
                  user: str = "", **kwargs) -> None:
