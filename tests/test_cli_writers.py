@@ -18,7 +18,7 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import undo_journal as uj
 from rosnet_tui.core.settings import load_settings
-from tests.builders import ROBOT_CONFIG
+from tests.builders import ROBOT_CONFIG, ros2_master
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -330,3 +330,56 @@ def _can_write_as_nobody(tmp_path: Path) -> None:
     if r.returncode != 0:
         pytest.skip(f"cannot run Python as nobody here: {r.stderr.strip()[-200:]}")
     assert r.stdout.split() == ["False", "True", "False", "True"]
+
+
+# --------------------------------------------------------------------------- ros pair --remove
+def _fleet_master(box):
+    """The box as a ROS 2 master with two members (neither has an SSH user: re-pairing them
+    needs no network) and its fleet CA made; the CA's key id."""
+    from rosnet_tui.core import fleet_tls
+    from rosnet_tui.core.settings import render_settings
+    from rosnet_tui.core.settings_model import Peer
+
+    s = ros2_master()
+    s.peers = [Peer(name="sami", public_ip="198.51.100.2"),
+               Peer(name="rover", public_ip="203.0.113.30")]
+    box.cfg.write_text(render_settings(s))
+    made = run(box, "ros", "pair")
+    assert made.returncode == 0, made.stderr
+    box.tls = fleet_tls.tls_paths(box.home / ".config" / "rosnet-tui")
+    return fleet_tls.ca_key_id(box.tls.ca_crt)
+
+
+def test_ros_pair_remove_previews_and_refuses_without_terminal_or_yes(box):
+    """Issue 29 (section 4, row 6): `ros pair --remove` rotated the fleet CA at once."""
+    from rosnet_tui.core import fleet_tls
+
+    ca = _fleet_master(box)
+    out = run(box, "ros", "pair", "--remove", "sami")
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert "Taking sami out of the fleet" in out.stdout
+    assert "a new fleet CA replaces" in out.stdout and "cannot bring it back" in out.stdout
+    assert "every other member must pair again: rover" in out.stdout
+    assert "no terminal" in out.stderr and "--yes" in out.stderr
+    assert fleet_tls.ca_key_id(box.tls.ca_crt) == ca
+    dry = run(box, "ros", "pair", "--remove", "sami", "--dry-run")
+    assert dry.returncode == 0 and "Dry run: nothing was changed." in dry.stdout, dry.stderr
+    assert "Taking sami out of the fleet" in dry.stdout
+    assert fleet_tls.ca_key_id(box.tls.ca_crt) == ca
+    bad = run(box, "ros", "pair", "--dry-run")
+    assert bad.returncode == 2 and "--dry-run goes with --remove" in bad.stderr
+    done = run(box, "ros", "pair", "--remove", "sami", "--yes")
+    assert fleet_tls.ca_key_id(box.tls.ca_crt) != ca
+    assert "rover: NOT re-paired: no SSH user" in done.stdout and done.returncode == 1
+
+
+def test_ros_pair_remove_asks_on_a_terminal(box):
+    from rosnet_tui.core import fleet_tls
+
+    ca = _fleet_master(box)
+    rc, out = run_tty(box, ["ros", "pair", "--remove", "sami"], ["n"])
+    assert rc == 1 and "Rotate the fleet CA now? [y/N]" in out and "Cancelled" in out, out
+    assert fleet_tls.ca_key_id(box.tls.ca_crt) == ca
+    rc, out = run_tty(box, ["ros", "pair", "--remove", "sami"], ["y"])
+    assert "sami is out of the fleet" in out, out
+    assert fleet_tls.ca_key_id(box.tls.ca_crt) != ca
