@@ -383,3 +383,79 @@ def test_ros_pair_remove_asks_on_a_terminal(box):
     rc, out = run_tty(box, ["ros", "pair", "--remove", "sami"], ["y"])
     assert "sami is out of the fleet" in out, out
     assert fleet_tls.ca_key_id(box.tls.ca_crt) != ca
+
+
+# --------------------------------------------------------------------------- what is printed
+def test_the_printed_undo_command_finds_the_change(box, tmp_path):
+    """Issue 29 (section 4, row 10): "Undo with: rosnet-tui undo" left out the --state-dir in use,
+    so that command found nothing. It is printed exactly, shell-quoted, and it works as printed."""
+    import shlex
+
+    state = tmp_path / "my state"        # a space: the quoting matters
+    out = run(box, *hosts_args(box, "--yes", "--state-dir", str(state), "--config",
+                               str(box.cfg)))
+    assert out.returncode == 0, out.stderr
+    line = next(x for x in out.stdout.splitlines() if "Undo with: " in x)
+    printed = line.split("Undo with: ", 1)[1]
+    assert printed == shlex.join(["rosnet-tui", "undo", "--config", str(box.cfg),
+                                  "--state-dir", str(state)])
+    argv = shlex.split(printed)
+    assert argv[:2] == ["rosnet-tui", "undo"]
+    again = run(box, *argv[1:], "--yes", "--no-checks")
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert box.hosts.read_bytes() == HOSTS
+    plain = run(box, *hosts_args(box, "--yes", "--no-checks"))       # the everyday journal
+    assert "Undo with: rosnet-tui undo\n" in plain.stdout + "\n", plain.stdout
+
+
+def test_help_says_what_undo_and_ros_cover_now(box):
+    undo = run(box, "undo", "--help").stdout
+    assert "(hosts or ros)" not in undo
+    for what in ("/etc/hosts", "~/.bashrc", "Zenoh router's config", "firewall", "router map"):
+        assert what in " ".join(undo.split()), what
+    top = " ".join(run(box, "--help").stdout.split())
+    assert "ros write the ROS environment for this component's role (ROS 1 or 2)" in top
+    for args in (["ros", "--help"], ["ros", "apply", "--help"]):
+        text = " ".join(run(box, *args).stdout.split())
+        assert "ROS 1: ROS_MASTER_URI" in text or "ROS 1: the ROS_MASTER_URI" in text, text
+        assert "RMW_IMPLEMENTATION" in text and "fleet CA" in text, text
+
+
+def test_ros2_apply_dry_run_says_it_makes_the_ca_and_makes_nothing(box):
+    """Issue 29 (section 4, row 10): on a ROS 2 master `ros apply --dry-run` did not say that the
+    apply makes the fleet CA and keys; with the files already written it even made them."""
+    from rosnet_tui.core.settings import render_settings
+
+    box.cfg.write_text(render_settings(ros2_master()))
+    tls = box.home / ".config" / "rosnet-tui" / "tls"
+    dry = run(box, "ros", "apply", "--dry-run")
+    assert dry.returncode == 0, dry.stderr
+    said = " ".join(dry.stdout.split())
+    assert "this apply also makes the fleet CA" in said and "this router's certificate" in said
+    assert "Dry run: nothing was written, and no key or certificate made." in said
+    assert not tls.exists()
+    done = run(box, "ros", "apply", "--yes", "--no-checks")
+    assert done.returncode == 0 and (tls / "ca.key").exists(), done.stdout + done.stderr
+    assert "Undo with: rosnet-tui undo" in done.stdout
+    for f in tls.iterdir():
+        f.unlink()
+    again = run(box, "ros", "apply", "--dry-run")        # the files are up to date now
+    assert again.returncode == 0 and "this apply also makes the fleet CA" in again.stdout
+    assert list(tls.iterdir()) == [], again.stdout
+
+
+def test_commands_hosts_prints_to_run_next_name_the_same_files(box):
+    """A sibling of the printed undo command: `hosts show --file F --config C` said "To write
+    this set: rosnet-tui hosts apply --profile remote", which would write /etc/hosts with the
+    everyday settings."""
+    import shlex
+
+    out = run(box, "hosts", "show", "--profile", "remote", "--file", str(box.hosts),
+              "--config", str(box.cfg))
+    line = next(x for x in out.stdout.splitlines() if x.startswith("To write this set: "))
+    argv = shlex.split(line.split(": ", 1)[1])
+    assert argv[:4] == ["rosnet-tui", "hosts", "apply", "--profile"], argv
+    assert argv[argv.index("--file") + 1] == str(box.hosts)
+    assert argv[argv.index("--config") + 1] == str(box.cfg)
+    done = run(box, *argv[1:], "--yes", "--no-checks")
+    assert done.returncode == 0 and b"rosnet-tui" in box.hosts.read_bytes(), done.stderr
