@@ -209,6 +209,27 @@ def missing():
     return r, laptop_settings()
 
 
+def fresh_names(r: dict[str, CheckResult] | None = None) -> dict[str, CheckResult]:
+    """sami's round on a fresh install: /etc/hosts has no line for either name and no DNS knows
+    them, so everything that connects to turtlebot by name fails there (the data as the checks
+    give it: linux.ping's tcp "resolve", linux.ssh's failure "resolve", the chats "ssh:resolve")."""
+    r = r or healthy_laptop()
+    put(r, "linux.hosts", "fail", missing=["sami", "turtlebot"])
+    for n in ("sami", "turtlebot"):
+        r["linux.resolve"].data["names"][n]["resolved"] = None
+    put(r, "linux.resolve", "fail", wrong=["sami", "turtlebot"])
+    put(r, "linux.ping", "fail", peers={"turtlebot": {"icmp": None, "tcp22": False,
+                                                     "tcp": "resolve", "port": 22}})
+    put(r, "linux.ssh", "fail", peers={"turtlebot": {
+        "ok": False, "failure": "resolve", "fingerprint": None, "address": None, "port": 22}})
+    no_ssh(r, "resolve")
+    return r
+
+
+def unresolved():
+    return fresh_names(), laptop_settings()
+
+
 def dupes():
     r = healthy_laptop()
     put(r, "linux.hosts", "warn", duplicates=["turtlebot"])
@@ -270,6 +291,7 @@ def chat(out_ok: bool, in_ok: bool):
 LINUX_CASES: dict[str, Case] = {
     "linux.ssh.host_key_changed": ssh("host_key_changed"),
     "linux.name.loopback": loopback,
+    "linux.name.unresolved": unresolved,
     "linux.name.wrong": wrong,
     "linux.hosts.missing": missing,
     "linux.hosts.duplicates": dupes,
@@ -292,6 +314,12 @@ LINUX_CASES: dict[str, Case] = {
 def bashrc():
     r = healthy_laptop()
     put(r, "ros.env", "warn", bashrc_uri=None, uri_ok=True)
+    return r, laptop_settings()
+
+
+def master_uri_unset():
+    r = healthy_laptop()
+    put(r, "ros.env", "fail", env_uri=None, bashrc_uri=None, uri_ok=False)
     return r, laptop_settings()
 
 
@@ -347,6 +375,7 @@ def peer_cannot_register():
 
 
 ROS_CASES: dict[str, Case] = {
+    "ros.env.master_uri_unset": master_uri_unset,
     "ros.env.master_uri": master_uri,
     "ros.env.bashrc": bashrc,
     "ros.env.ros_ip": ros_ip,

@@ -14,7 +14,7 @@ from rosnet_tui.core.advisor import engine
 from rosnet_tui.core.advisor.engine import Hit
 from rosnet_tui.core.advisor.evidence import Evidence, RuleOrderError
 from rosnet_tui.core.advisor.order import RULE_ORDER
-from tests.builders import healthy_laptop, laptop_settings
+from tests.builders import healthy_laptop, laptop_settings, put
 from tests.golden import codec, record
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -120,6 +120,25 @@ def test_reading_an_undeclared_firing_is_an_error_even_when_not_strict(registry)
     engine.seal((*RULE_ORDER, "test.peek"))
     fs = advisor.advise(healthy_laptop(), laptop_settings(), strict=True)
     assert "test.peek" in [f.rule for f in fs]
+
+
+def test_a_superseded_rule_leaves_no_check_without_advice(registry):
+    """Issue 29 (section 4, row 4): a rule superseded by a more specific one dropped the checks
+    it explained with its findings, and they ended as "no rule explains it". They go to the
+    finding of the rule that superseded it now."""
+    engine.rule("test.specific", "ros", ("ros.master",), "c", "m", "a", "ros", "fail")(
+        lambda ev: [Hit("specific", ["a"], check_ids=["ros.master"])])
+    engine.rule("test.generic", "ros", ("ros.env",), "c", "m", "a", "ros", "fail",
+                superseded_by=("test.specific",))(
+        lambda ev: [Hit("generic", ["a"], check_ids=["ros.env", "ros.master"])])
+    engine.seal((*RULE_ORDER, "test.specific", "test.generic"))
+    r = healthy_laptop()
+    put(r, "ros.env", "fail")
+    put(r, "ros.master", "fail")
+    fs = advisor.advise(r, laptop_settings(), strict=True)
+    rules = [f.rule for f in fs]
+    assert "test.generic" not in rules and "check.unexplained" not in rules, rules
+    assert next(f for f in fs if f.rule == "test.specific").check_ids == ["ros.master", "ros.env"]
 
 
 def test_the_package_keeps_its_old_names():

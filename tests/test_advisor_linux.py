@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from rosnet_tui.core.advisor import advice_by_check
 from tests.advisor_support import (
     chat,
+    fresh_names,
     icmp_filtered,
     ids,
     loopback,
@@ -127,3 +129,42 @@ def test_peer_unreachable_on_a_lan_profile_does_not_talk_about_modems():
     f = only(run(r, s), "linux.peer.unreachable")
     assert "office LAN" in f.meaning and "modem" not in text(f)
     assert "must print 10.10.10.1" in text(f)
+
+
+# --------------------------------------------------------------------------- a fresh install
+def test_a_name_that_does_not_resolve_is_titled_so_and_explains_what_failed_for_it():
+    """Issue 29 (section 4, row 4): on a fresh install no name resolves. The finding is titled
+    "does not resolve" (not "resolves to the wrong address"), and it explains the checks that
+    failed for that reason alone, linux.hosts included: none is left without a rule."""
+    fs = run(fresh_names())
+    un = [f for f in fs if f.rule == "linux.name.unresolved"]
+    assert [f.condition for f in un] == ["a name does not resolve"] * 2, ids(fs)
+    assert "linux.name.wrong" not in ids(fs)
+    tb = next(f for f in un if f.meaning.startswith("turtlebot"))
+    assert "turtlebot does not resolve on sami: /etc/hosts has no line for it" in tb.meaning
+    assert "`203.0.113.2 turtlebot`" in text(tb) and "rosnet-tui hosts apply" in text(tb)
+    assert set(tb.check_ids) == {"linux.resolve", "linux.hosts", "linux.ping", "linux.ssh",
+                                 "linux.chat_out", "linux.chat_in"}
+    assert "check.unexplained" not in ids(fs), [f.meaning for f in fs]
+    advice = advice_by_check(fs)
+    assert [f.rule for f in advice["linux.hosts"]] == ["linux.name.unresolved"] * 2
+
+
+def test_a_name_missing_from_the_hosts_file_that_dns_answers_wrong():
+    r = healthy_laptop()
+    put(r, "linux.hosts", "fail", missing=["turtlebot"])
+    r["linux.resolve"].data["names"]["turtlebot"]["resolved"] = "192.0.2.200"
+    put(r, "linux.resolve", "fail", wrong=["turtlebot"])
+    fs = run(r)
+    f = only(fs, "linux.name.wrong")
+    assert set(f.check_ids) == {"linux.hosts", "linux.resolve"}
+    assert "has no line for turtlebot, so DNS answers 192.0.2.200" in text(f)
+    assert "looks right" not in text(f) and "check.unexplained" not in ids(fs)
+
+
+def test_a_name_the_hosts_file_has_but_the_resolver_does_not_read():
+    r = healthy_laptop()
+    r["linux.resolve"].data["names"]["turtlebot"]["resolved"] = None
+    put(r, "linux.resolve", "fail", wrong=["turtlebot"])
+    f = only(run(r), "linux.name.unresolved")
+    assert f.check_ids == ["linux.resolve"] and "nsswitch.conf" in text(f)

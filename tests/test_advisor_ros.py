@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor import first_failure
 from tests.advisor_support import (
+    fresh_names,
     ids,
     master_down,
     master_uri,
+    master_uri_unset,
     node_uri,
     only,
     peer_cannot_register,
@@ -16,6 +18,39 @@ from tests.advisor_support import (
     text,
 )
 from tests.builders import healthy_laptop, healthy_robot, laptop_settings, put, robot_settings
+
+
+def test_master_uri_unset_is_titled_not_set_and_says_what_to_set():
+    """Issue 29 (section 4, row 4): a fresh install has no ROS_MASTER_URI at all; the finding
+    says it is not set (not "wrong for the role") and what to set."""
+    fs = run(master_uri_unset()[0])
+    f = only(fs, "ros.env.master_uri_unset")
+    assert f.condition == "ROS_MASTER_URI not set" and f.severity == "fail"
+    assert f.meaning.startswith("ROS_MASTER_URI is not set on sami, neither in this shell nor "
+                                "in ~/.bashrc") and "Set it to http://turtlebot:11311" in f.meaning
+    assert "`rosnet-tui ros apply`" in text(f)
+    assert "export ROS_MASTER_URI=http://turtlebot:11311" in text(f)
+    assert "ros.env.master_uri" not in ids(fs) and f.check_ids == ["ros.env"]
+    r = healthy_robot()
+    put(r, "ros.env", "fail", env_uri=None, bashrc_uri=None, uri_ok=False,
+        expected_uri="http://turtlebot:11311")
+    f = only(run(r, robot_settings()), "ros.env.master_uri_unset")
+    assert "turtlebot is the master" in f.meaning
+    # set, to a wrong value: the other rule, and its title
+    f = only(run(master_uri()[0]), "ros.env.master_uri")
+    assert f.condition == "ROS_MASTER_URI wrong for the role" and "not set" not in f.meaning
+
+
+def test_a_master_name_that_does_not_resolve_is_the_first_cause():
+    robot = healthy_robot()
+    robot["linux.resolve"].data["names"]["turtlebot"]["resolved"] = None
+    put(robot, "linux.resolve", "fail", wrong=["turtlebot"])
+    for r, s, first in ((fresh_names(), laptop_settings(), "Does turtlebot lead to the master"),
+                        (robot, robot_settings(), "Map turtlebot")):
+        put(r, "ros.master", "fail", reachable=False, topics=[], nodes=[])
+        f = only(run(r, s), "ros.master.unreachable")
+        assert f.goto_step == "linux" and f.actions[0].startswith(first), f.actions
+        assert "turtlebot does not resolve here" in f.meaning
 
 
 def test_master_uri_wrong_for_member_and_master():

@@ -3,8 +3,9 @@
 
 from __future__ import annotations
 
-from rosnet_tui.core.advisor import advise
+from rosnet_tui.core.advisor import advice_by_check, advise
 from rosnet_tui.core.results import CheckResult, Status
+from tests.advisor_support import fresh_names
 from tests.builders import ros2_master as master
 from tests.builders import ros2_member as member
 
@@ -163,3 +164,46 @@ def test_mtls_closes_the_exposure_finding_and_security_none_keeps_it():
     fs = advise([expiring], member())
     assert ids(fs)[:1] == ["ros2.tls.expired"] and "2026-12-01" in fs[0].meaning
 
+
+
+# --------------------------------------------------------------------------- a fresh install
+def _fresh(settings, ros2_router: dict) -> dict[str, CheckResult]:
+    """A fresh install's round under ROS 2 (issue 29, section 4, row 4), the data as the checks
+    give it: no name resolves (tests/advisor_support.py's fresh_names), so ros2.router stops at
+    the master's name, and no router runs here, so the graph and both exchanges fail at ours."""
+    rs = {k: v for k, v in fresh_names().items() if not k.startswith("ros.")}
+    here = "no Zenoh router answered at tcp/127.0.0.1:7447 within 2.0 s"
+    rs.update((x.id, x) for x in (
+        r("ros2.router", "fail", {"endpoint": "tls/turtlebot:7447", "reachable": False,
+                                  "address": None, "failure": "resolve", **ros2_router}),
+        r("ros2.graph", "fail", {"nodes": [], "topics": [], "seen_from": [], "missing": []},
+          summary="cannot read the graph: this machine's router does not answer at "
+                  "tcp/127.0.0.1:7447"),
+        *(r(c, "fail", {"peer": "turtlebot", "ok": False, "failed_hop": "our_router",
+                        "detail": here}) for c in ("ros2.pubsub_out", "ros2.pubsub_in"))))
+    return rs
+
+
+def test_a_fresh_member_gets_advice_for_every_failed_check():
+    rs = _fresh(member, {"role": "member", "local_router": {
+        "reachable": False, "endpoint": "tcp/127.0.0.1:7447", "failure": "nothing listens"}})
+    fs = advise(rs, member(), strict=True)
+    assert "check.unexplained" not in ids(fs), [(f.rule, f.meaning) for f in fs]
+    advice = advice_by_check(fs)
+    assert [f.rule for f in advice["ros2.graph"]] == ["ros2.router.not_running"]
+    f = advice["ros2.graph"][0]
+    assert f.meaning.startswith("sami's own router is not running: nodes here look for")
+    assert "master's router answers" not in f.meaning
+    assert {f.rule for f in advice["ros2.router"]} == {"linux.name.unresolved",
+                                                      "ros2.router.not_running"}
+
+
+def test_a_fresh_master_gets_advice_for_every_failed_check():
+    rs = _fresh(master, {"role": "master", "listening": [], "listen_problem": "not_running"})
+    for cid in ("linux.ping", "linux.ssh", "linux.chat_out", "linux.chat_in"):
+        rs[cid].data["peers"] = {"sami": rs[cid].data["peers"]["turtlebot"]}
+    fs = advise(rs, master(), strict=True)
+    assert "check.unexplained" not in ids(fs), [(f.rule, f.meaning) for f in fs]
+    advice = advice_by_check(fs)
+    assert [f.rule for f in advice["ros2.graph"]] == ["ros2.router.not_running"]
+    assert "Nothing listens on TCP 7447 on turtlebot" in advice["ros2.graph"][0].meaning

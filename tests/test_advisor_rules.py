@@ -7,6 +7,7 @@ test the pure logic of the rules, no network involved."""
 from __future__ import annotations
 
 import copy
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -190,3 +191,28 @@ def test_docs_script_prints_the_markdown():
     out = subprocess.run([sys.executable, "-m", "rosnet_tui.core.advisor", "--markdown"],
                          capture_output=True, text=True, cwd=ROOT, timeout=60, check=True)
     assert out.stdout == advisor.render_rules_markdown()
+
+
+COMMAND = re.compile(r"`([^`]+)`")
+FILLER = re.compile(r"\b(the|its|this|a|an)\b|\?")    # words a fallback puts where a value goes
+
+
+def test_printed_commands_can_be_run_as_printed():
+    """Issue 29 (section 4, row 10): with the gateway unknown the advice printed the command
+    `ping the modem`. Every rule on its case, and on it again with the gateway, the interface and
+    the test URL unknown: what is printed as a command holds no words standing in for a value."""
+    bad = []
+    for _, build in sorted(CASES.items()):
+        for blank in (False, True):
+            results, s = build()
+            if blank:
+                for r in results.values():
+                    for key in ("gateway", "interface", "url"):
+                        if key in (r.data or {}):
+                            r.data[key] = ""
+                s.this.interface = ""
+            for f in run(results, s):
+                for cmd in COMMAND.findall(" ".join(f.actions)):
+                    if FILLER.search(cmd):
+                        bad.append(f"{f.rule}{' (blank)' if blank else ''}: `{cmd}`")
+    assert bad == []

@@ -18,7 +18,7 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import undo_journal as uj
 from rosnet_tui.core.settings import load_settings
-from tests.builders import ROBOT_CONFIG
+from tests.builders import ROBOT_CONFIG, ros2_master
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -330,3 +330,132 @@ def _can_write_as_nobody(tmp_path: Path) -> None:
     if r.returncode != 0:
         pytest.skip(f"cannot run Python as nobody here: {r.stderr.strip()[-200:]}")
     assert r.stdout.split() == ["False", "True", "False", "True"]
+
+
+# --------------------------------------------------------------------------- ros pair --remove
+def _fleet_master(box):
+    """The box as a ROS 2 master with two members (neither has an SSH user: re-pairing them
+    needs no network) and its fleet CA made; the CA's key id."""
+    from rosnet_tui.core import fleet_tls
+    from rosnet_tui.core.settings import render_settings
+    from rosnet_tui.core.settings_model import Peer
+
+    s = ros2_master()
+    s.peers = [Peer(name="sami", public_ip="198.51.100.2"),
+               Peer(name="rover", public_ip="203.0.113.30")]
+    box.cfg.write_text(render_settings(s))
+    made = run(box, "ros", "pair")
+    assert made.returncode == 0, made.stderr
+    box.tls = fleet_tls.tls_paths(box.home / ".config" / "rosnet-tui")
+    return fleet_tls.ca_key_id(box.tls.ca_crt)
+
+
+def test_ros_pair_remove_previews_and_refuses_without_terminal_or_yes(box):
+    """Issue 29 (section 4, row 6): `ros pair --remove` rotated the fleet CA at once."""
+    from rosnet_tui.core import fleet_tls
+
+    ca = _fleet_master(box)
+    out = run(box, "ros", "pair", "--remove", "sami")
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert "Taking sami out of the fleet" in out.stdout
+    assert "a new fleet CA replaces" in out.stdout and "cannot bring it back" in out.stdout
+    assert "every other member must pair again: rover" in out.stdout
+    assert "no terminal" in out.stderr and "--yes" in out.stderr
+    assert fleet_tls.ca_key_id(box.tls.ca_crt) == ca
+    dry = run(box, "ros", "pair", "--remove", "sami", "--dry-run")
+    assert dry.returncode == 0 and "Dry run: nothing was changed." in dry.stdout, dry.stderr
+    assert "Taking sami out of the fleet" in dry.stdout
+    assert fleet_tls.ca_key_id(box.tls.ca_crt) == ca
+    bad = run(box, "ros", "pair", "--dry-run")
+    assert bad.returncode == 2 and "--dry-run goes with --remove" in bad.stderr
+    done = run(box, "ros", "pair", "--remove", "sami", "--yes")
+    assert fleet_tls.ca_key_id(box.tls.ca_crt) != ca
+    assert "rover: NOT re-paired: no SSH user" in done.stdout and done.returncode == 1
+
+
+def test_ros_pair_remove_asks_on_a_terminal(box):
+    from rosnet_tui.core import fleet_tls
+
+    ca = _fleet_master(box)
+    rc, out = run_tty(box, ["ros", "pair", "--remove", "sami"], ["n"])
+    assert rc == 1 and "Rotate the fleet CA now? [y/N]" in out and "Cancelled" in out, out
+    assert fleet_tls.ca_key_id(box.tls.ca_crt) == ca
+    rc, out = run_tty(box, ["ros", "pair", "--remove", "sami"], ["y"])
+    assert "sami is out of the fleet" in out, out
+    assert fleet_tls.ca_key_id(box.tls.ca_crt) != ca
+
+
+# --------------------------------------------------------------------------- what is printed
+def test_the_printed_undo_command_finds_the_change(box, tmp_path):
+    """Issue 29 (section 4, row 10): "Undo with: rosnet-tui undo" left out the --state-dir in use,
+    so that command found nothing. It is printed exactly, shell-quoted, and it works as printed."""
+    import shlex
+
+    state = tmp_path / "my state"        # a space: the quoting matters
+    out = run(box, *hosts_args(box, "--yes", "--state-dir", str(state), "--config",
+                               str(box.cfg)))
+    assert out.returncode == 0, out.stderr
+    line = next(x for x in out.stdout.splitlines() if "Undo with: " in x)
+    printed = line.split("Undo with: ", 1)[1]
+    assert printed == shlex.join(["rosnet-tui", "undo", "--config", str(box.cfg),
+                                  "--state-dir", str(state)])
+    argv = shlex.split(printed)
+    assert argv[:2] == ["rosnet-tui", "undo"]
+    again = run(box, *argv[1:], "--yes", "--no-checks")
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert box.hosts.read_bytes() == HOSTS
+    plain = run(box, *hosts_args(box, "--yes", "--no-checks"))       # the everyday journal
+    assert "Undo with: rosnet-tui undo\n" in plain.stdout + "\n", plain.stdout
+
+
+def test_help_says_what_undo_and_ros_cover_now(box):
+    undo = run(box, "undo", "--help").stdout
+    assert "(hosts or ros)" not in undo
+    for what in ("/etc/hosts", "~/.bashrc", "Zenoh router's config", "firewall", "router map"):
+        assert what in " ".join(undo.split()), what
+    top = " ".join(run(box, "--help").stdout.split())
+    assert "ros write the ROS environment for this component's role (ROS 1 or 2)" in top
+    for args in (["ros", "--help"], ["ros", "apply", "--help"]):
+        text = " ".join(run(box, *args).stdout.split())
+        assert "ROS 1: ROS_MASTER_URI" in text or "ROS 1: the ROS_MASTER_URI" in text, text
+        assert "RMW_IMPLEMENTATION" in text and "fleet CA" in text, text
+
+
+def test_ros2_apply_dry_run_says_it_makes_the_ca_and_makes_nothing(box):
+    """Issue 29 (section 4, row 10): on a ROS 2 master `ros apply --dry-run` did not say that the
+    apply makes the fleet CA and keys; with the files already written it even made them."""
+    from rosnet_tui.core.settings import render_settings
+
+    box.cfg.write_text(render_settings(ros2_master()))
+    tls = box.home / ".config" / "rosnet-tui" / "tls"
+    dry = run(box, "ros", "apply", "--dry-run")
+    assert dry.returncode == 0, dry.stderr
+    said = " ".join(dry.stdout.split())
+    assert "this apply also makes the fleet CA" in said and "this router's certificate" in said
+    assert "Dry run: nothing was written, and no key or certificate made." in said
+    assert not tls.exists()
+    done = run(box, "ros", "apply", "--yes", "--no-checks")
+    assert done.returncode == 0 and (tls / "ca.key").exists(), done.stdout + done.stderr
+    assert "Undo with: rosnet-tui undo" in done.stdout
+    for f in tls.iterdir():
+        f.unlink()
+    again = run(box, "ros", "apply", "--dry-run")        # the files are up to date now
+    assert again.returncode == 0 and "this apply also makes the fleet CA" in again.stdout
+    assert list(tls.iterdir()) == [], again.stdout
+
+
+def test_commands_hosts_prints_to_run_next_name_the_same_files(box):
+    """A sibling of the printed undo command: `hosts show --file F --config C` said "To write
+    this set: rosnet-tui hosts apply --profile remote", which would write /etc/hosts with the
+    everyday settings."""
+    import shlex
+
+    out = run(box, "hosts", "show", "--profile", "remote", "--file", str(box.hosts),
+              "--config", str(box.cfg))
+    line = next(x for x in out.stdout.splitlines() if x.startswith("To write this set: "))
+    argv = shlex.split(line.split(": ", 1)[1])
+    assert argv[:4] == ["rosnet-tui", "hosts", "apply", "--profile"], argv
+    assert argv[argv.index("--file") + 1] == str(box.hosts)
+    assert argv[argv.index("--config") + 1] == str(box.cfg)
+    done = run(box, *argv[1:], "--yes", "--no-checks")
+    assert done.returncode == 0 and b"rosnet-tui" in box.hosts.read_bytes(), done.stderr

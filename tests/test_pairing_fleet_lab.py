@@ -21,7 +21,7 @@ def test_removing_a_member_rotates_the_ca_and_re_pairs_the_rest(fleet_ros2_world
     sami_key = fleet_ros2_world.tls_paths("sami").node_key.read_bytes()
     old_ca = fleet_tls.ca_key_id(fleet_ros2_world.tls_paths(master).ca_crt)
     t0 = time.monotonic()
-    r = lab.rosnet(master, "ros", "pair", "--remove", "member2", "--config",
+    r = lab.rosnet(master, "ros", "pair", "--remove", "member2", "--yes", "--config",
                    str(fleet_ros2_world.config_path(master)), env=fleet_ros2_world.env(master), timeout=60)
     took = time.monotonic() - t0
     print(f"remove + re-pair of 1 member: {took:.2f} s (whole CLI process)\n{r.stdout}")

@@ -153,7 +153,7 @@ def test_removing_a_member_shuts_it_out_at_once(ros2):
     the old CA is refused and ros2.router names it."""
     lab = ros2.lab
     old_ca = fleet_tls.ca_key_id(ros2.tls_paths("robot").ca_crt)
-    r = lab.rosnet("robot", "ros", "pair", "--remove", "sami", "--config",
+    r = lab.rosnet("robot", "ros", "pair", "--remove", "sami", "--yes", "--config",
                    str(ros2.config_path("robot")), env=ros2.env("robot"))
     assert r.returncode == 0, r.stdout + r.stderr
     assert "sami is out of the fleet" in r.stdout

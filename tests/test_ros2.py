@@ -78,6 +78,26 @@ def test_forwarding_per_version_and_role():
 
 
 # --------------------------------------------------------------------------- wire format
+@pytest.mark.parametrize("wire,ros", [
+    ("std_msgs::msg::dds_::String_", "std_msgs/msg/String"),
+    ("geometry_msgs::msg::dds_::TwistStamped_", "geometry_msgs/msg/TwistStamped"),
+    ("my_pkg::msg::dds_::My_Type__", "my_pkg/msg/My_Type_"),   # one "_" is the DDS suffix
+    ("example_interfaces::srv::dds_::AddTwoInts_", "example_interfaces/srv/AddTwoInts"),
+    ("std_msgs::msg::String", "std_msgs/msg/String"),           # without the dds_ part
+    ("std_msgs::msg::dds_::String", "std_msgs/msg/String"),     # without the trailing _
+    ("std_msgs/msg/String", "std_msgs/msg/String"),             # already the ROS form
+    ("String_", "String_"), ("", ""), ("::", "::"), ("dds_::", "dds_::"), ("a::::b", "a/b"),
+])
+def test_a_type_is_named_as_ros_2_users_write_it(wire, ros):
+    """Issue 29 (section 4, row 9): ros2.graph said /chatter [std_msgs::msg::dds_::String_]."""
+    assert zenohproto.ros_type(wire) == ros
+    if not wire:
+        return                      # no type chunk on the wire: no token to read
+    tok = zenohproto.parse_token(zenohproto.endpoint_token(0, "abc", "7", "8", "MS", "listener",
+                                                           "/chatter", type_name=wire))
+    assert tok is not None and tok["type"] == ros
+
+
 def test_keys_tokens_payloads_and_attachments_have_rmw_zenohs_layout():
     assert zenohproto.topic_key(0, "/chatter") == (
         "0/chatter/std_msgs::msg::dds_::String_/RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db"
@@ -89,6 +109,7 @@ def test_keys_tokens_payloads_and_attachments_have_rmw_zenohs_layout():
     tok = zenohproto.parse_token(pub)
     assert (tok["kind"], tok["topic"], tok["name"], tok["namespace"]) == ("MP", "/chatter",
                                                                          "talker", "/")
+    assert tok["type"] == "std_msgs/msg/String"     # as `ros2 topic list -t` says it
     assert zenohproto.parse_token("@ros2_lv/0/a") is None
     payload = zenohproto.encode_string("hi")
     assert payload == b"\x00\x01\x00\x00\x03\x00\x00\x00hi\x00"

@@ -123,6 +123,18 @@ def test_a_remote_node_in_peer_mode_is_graph_seen_data_dropped(ros2):
     assert "ros2.peer_mode" in rules(robot["ros2.router"]), explain(robot)
 
 
+def test_the_graph_names_topic_types_as_ros_2_users_write_them(ros2):
+    """Issue 29 (section 4, row 9): a talker on /chatter was listed as
+    /chatter [std_msgs::msg::dds_::String_], where `ros2 topic list -t` says std_msgs/msg/String."""
+    ros2.node("laptop", "talker", topic="/chatter")
+    robot = ros2.check("robot")
+    graph = robot["ros2.graph"]
+    assert graph["status"] == "pass", explain(robot)
+    assert ["/chatter", "std_msgs/msg/String"] in graph["data"]["topics"], explain(robot)
+    assert "topics: /chatter [std_msgs/msg/String]" in graph["evidence"], explain(robot)
+    assert "dds_" not in str(graph), explain(robot)
+
+
 def test_a_domain_id_mismatch_is_named(ros2):
     ros2.write_bashrc("laptop", ROS_DOMAIN_ID="5")
     laptop = ros2.check("laptop")

@@ -23,12 +23,13 @@ SUBCOMMAND_MODULES = ("check", "hosts", "ros", "router", "firewall", "undo", "re
 SUBCOMMAND_HELP = {
     "check": "run the live checks headless and print what they saw",
     "hosts": "write this component's hosts set into /etc/hosts",
-    "ros": "write ROS_MASTER_URI for this component's role into ~/.bashrc",
+    "ros": "write the ROS environment for this component's role (ROS 1 or 2) into ~/.bashrc",
     "router": "let the modem forward this component's port itself (UPnP IGD, NAT-PMP, PCP)",
     "firewall": "ROS 1: let only the peers reach the forwarded ports",
-    "undo": "restore the files of the last change rosnet-tui made",
+    "undo": "take back the last change rosnet-tui made: files, firewall or modem forwards",
     "report": "write a shareable report: settings, results and advice",
-    "sync": "keep hosts entries and ROS_MASTER_URI right when public IPs change (a service)",
+    "sync": "keep hosts entries (and ROS 1's ROS_MASTER_URI) right when public IPs change; "
+            "renew forwards and certificates (a service)",
     "probe_server": "run your own what-is-my-IP and port-check service (echoip-compatible)",
 }
 

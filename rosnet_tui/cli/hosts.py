@@ -19,6 +19,7 @@ from rosnet_tui.cli.common import (
 from rosnet_tui.cli.writing import (
     add_writer_options,
     ask,
+    command_line,
     confirm,
     file_of,
     load_settings_for,
@@ -139,12 +140,18 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
     return rc, settings
 
 
+def _file_arg(args: argparse.Namespace) -> list[str]:
+    """--file as given to this command, for a command printed for the user to run next."""
+    return ["--file", str(file_of(args, DEFAULT_HOSTS_PATH))] if args.file else []
+
+
 def run_apply(args: argparse.Namespace) -> int:
     rc, settings = apply_profile(args, args.profile)
     if rc == EXIT_OK and settings is not None and args.profile \
             and args.profile != settings.this.profile and not args.dry_run:
         print(f"note: the settings still name '{settings.this.profile}' as the active profile; "
-              f"'rosnet-tui hosts use {args.profile}' switches both")
+              f"{command_line(args, 'hosts', 'use', args.profile, *_file_arg(args))} switches "
+              "both")
     return rc
 
 
@@ -200,7 +207,8 @@ def run_show(args: argparse.Namespace) -> int:
     else:
         print(f"{path}: the '{now}' set is active in the rosnet-tui block.")
     if preview.changed:
-        print(f"To write this set: rosnet-tui hosts apply --profile {profile}")
+        print("To write this set: "
+              + command_line(args, "hosts", "apply", "--profile", profile, *_file_arg(args)))
     else:
         print("The file already has exactly this set.")
     for note in preview.notes:

@@ -25,6 +25,7 @@ from rosnet_tui.cli.common import (
 from rosnet_tui.cli.writing import (
     add_writer_options,
     ask,
+    command_line,
     confirm,
     file_of,
     load_settings_for,
@@ -44,15 +45,32 @@ from rosnet_tui.core.bashrc import ROS_IP_REASON, find_ros_ip_lines, preview_bas
 from rosnet_tui.core.hosts import WriterSettingsError
 from rosnet_tui.core.paths import default_bashrc_path
 
+HELP = "write the ROS environment for this component's role (ROS 1 or 2) into ~/.bashrc"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("ros", help="write ROS_MASTER_URI for this component's role into ~/.bashrc",
-                       description="ROS settings for this component's role, in a marked block "
-                                   "of ~/.bashrc (or another shell file).")
+    p = sub.add_parser("ros", help=HELP,
+                       description="The ROS environment for this component's role, in a marked "
+                                   "block of ~/.bashrc (or another shell file). ROS 1: "
+                                   "ROS_MASTER_URI. ROS 2 ([ros] version = 2): "
+                                   "RMW_IMPLEMENTATION=rmw_zenoh_cpp, ROS_DOMAIN_ID and "
+                                   "ZENOH_ROUTER_CONFIG_URI, with the Zenoh router's config file "
+                                   "it names; under mutual TLS also the fleet CA and this "
+                                   "router's key and certificate (the master), or pairing with "
+                                   "the master (a member).")
     p.set_defaults(func=lambda a: (p.print_help(sys.stderr), EXIT_USAGE)[1])
     rs = p.add_subparsers(dest="ros_command", metavar="ACTION", parser_class=type(p))
 
-    a = rs.add_parser("apply", help="write the ROS_MASTER_URI block")
+    a = rs.add_parser("apply", help="write the block (ROS 1: ROS_MASTER_URI; ROS 2: rmw_zenoh "
+                                    "and the router's config), after a preview",
+                      description="Show what changes, ask, then write. ROS 1: the "
+                                  "ROS_MASTER_URI block of ~/.bashrc. ROS 2: RMW_IMPLEMENTATION, "
+                                  "ROS_DOMAIN_ID and ZENOH_ROUTER_CONFIG_URI in ~/.bashrc, and "
+                                  "the Zenoh router's config file; under mutual TLS ([ros] "
+                                  "security = \"mtls\", the default) the master also gets the "
+                                  "fleet CA and its router's key and certificate, a member pairs "
+                                  "with the master over SSH. `rosnet-tui undo` takes the files "
+                                  "back, not the CA or keys.")
     add_writer_options(a, file_help="shell file to write (default: ~/.bashrc)")
     a.add_argument("--comment-ros-ip", action="store_true",
                    help="also comment out ROS_IP / ROS_HOSTNAME lines (they break remote "
@@ -162,9 +180,16 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
     print(f"ROS 2 (rmw_zenoh) settings for {settings.this.name}, {role}:")
     for p in previews:
         show_preview(p)
+    tls = _tls_plan(settings) if ros2.mtls(settings) else ""
+    if tls:
+        print(tls)
     changed = [p for p in previews if p.changed]
+    if args.dry_run:    # before anything is made: the TLS files are made even with no file to write
+        print("Dry run: nothing was written" + (", and no key or certificate made." if tls
+                                                 else "."))
+        return EXIT_OK
     if changed:
-        stop = confirm(args, "Write these changes?", dry_run="nothing was written")
+        stop = confirm(args, "Write these changes?")
         if stop is not None:
             return stop
         try:
@@ -175,7 +200,7 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
             return EXIT_FAIL
         print(f"Wrote {', '.join(str(p.path) for p in changed)}. Backups: "
               f"{', '.join(str(b) for b in result.backups) or 'none (new files)'}. "
-              "Undo with: rosnet-tui undo")
+              f"Undo with: {command_line(args, 'undo')}")
     print("New shells get it from the file. For this shell, run:")
     for line in lines:
         print(f"  {line}")
@@ -189,6 +214,23 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
         rerun_checks(affected.ros2_write(ros2.mtls(settings)), settings,
                      paths_of(args, bashrc_path=path))
     return rc
+
+
+def _tls_plan(settings) -> str:
+    """What the apply does for mutual TLS besides the files above (nothing is done here)."""
+    from rosnet_tui.core import fleet_tls, pairing
+
+    paths = fleet_tls.tls_paths(ros2.config_dir())
+    if settings.is_master:
+        plan = pairing.master_plan(settings, paths)
+        return ("Mutual TLS: this apply also makes " + "; ".join(plan) + ". `rosnet-tui undo` "
+                "does not remove them.") if plan else ""
+    why = pairing.needs_pairing(settings, paths)
+    if why is None:
+        return ""
+    return (f"Mutual TLS: this apply then pairs with the master {settings.master_name} over SSH "
+            f"({why}): a key made here (it stays here) and a certificate the master signs, in "
+            f"{paths.dir}.")
 
 
 def _fleet_tls(settings) -> int:

@@ -6,6 +6,7 @@
   the request on stdin or pasted), ``--install`` here (reads what ``--sign`` printed).
 - On the master, ``ros pair`` makes the CA and the master's certificate (as ``ros apply`` does);
   ``--remove NAME`` takes a member out of the fleet: a new CA, and every other member re-paired.
+  It says what will happen first and asks (``--yes`` for scripts, ``--dry-run`` to only look).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import asyncio
 import sys
 
 from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, say
-from rosnet_tui.cli.writing import load_settings_for
+from rosnet_tui.cli.writing import confirm, load_settings_for
 from rosnet_tui.core import fleet_tls, pairing
 from rosnet_tui.core.fleet_tls import TlsError
 from rosnet_tui.core.ros2 import config_dir
@@ -38,7 +39,12 @@ def register(rs: argparse._SubParsersAction) -> None:
                    help="read what `ros pair --sign` printed on stdin and install it here")
     g.add_argument("--remove", metavar="NAME",
                    help="on the master: take member NAME out of the fleet (a new CA; the other "
-                        "members are re-paired over SSH)")
+                        "members are re-paired over SSH); says what will happen and asks first")
+    p.add_argument("--yes", "-y", action="store_true",
+                   help="with --remove: go ahead without asking (needed where there is no "
+                        "terminal)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="with --remove: show what would happen, change nothing")
     p.add_argument("--timeout", type=float, default=pairing.PAIR_TIMEOUT_S,
                    help="seconds for pairing over SSH (default: %(default)s)")
     p.set_defaults(func=run_pair)
@@ -56,6 +62,10 @@ def run_pair(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     if not settings.ros2:
         say("rosnet-tui: pairing is for ROS 2 ([ros] version = 2); ROS 1 uses the firewall")
+        return EXIT_USAGE
+    if args.dry_run and not args.remove:
+        say("rosnet-tui: --dry-run goes with --remove (the other pairing actions show nothing "
+            "first)")
         return EXIT_USAGE
     paths = fleet_tls.tls_paths(config_dir())
     try:
@@ -113,17 +123,27 @@ def run_pair(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+NOT_ROTATING = ("rosnet-tui: not rotating the fleet CA without a confirmation, and there is no "
+                "terminal to ask on: read the above, then run the same command with --yes")
+
+
 def _remove(args: argparse.Namespace, settings, paths) -> int:
-    """A new CA: the removed member's certificate stops being trusted; the others re-pair."""
+    """A new CA: the removed member's certificate stops being trusted; the others re-pair.
+    Said first, then asked (or --yes, --dry-run)."""
     if not settings.is_master:
         say("rosnet-tui: --remove runs on the master (it holds the fleet CA)")
         return EXIT_USAGE
     if settings.peer(args.remove) is None:
         say(f"rosnet-tui: {args.remove} is not a peer in the settings")
         return EXIT_USAGE
+    others = [p for p in settings.peers if p.name != args.remove]
+    _preview_remove(args.remove, settings, paths, others)
+    stop = confirm(args, "Rotate the fleet CA now?", dry_run="nothing was changed",
+                   cancelled="Cancelled: nothing was changed.", no_terminal=NOT_ROTATING)
+    if stop is not None:
+        return stop
     fleet_tls.rotate_ca(paths, settings.this.name)
     pairing.prepare_master(settings, paths)
-    others = [p for p in settings.peers if p.name != args.remove]
     rc = EXIT_OK
     results = asyncio.run(pairing.repair_members(settings, paths, others, timeout=args.timeout))
     for name, ok, detail in results:
@@ -132,3 +152,23 @@ def _remove(args: argparse.Namespace, settings, paths) -> int:
     print(f"{args.remove} is out of the fleet: a new CA signed this router's certificate; restart "
           "the router here (and on each re-paired member). Remove it from [[peer]] too.")
     return rc
+
+
+def _preview_remove(name: str, settings, paths, others: list) -> None:
+    """What --remove NAME will do, before it asks."""
+    ca = "a new fleet CA replaces" if paths.ca_crt.exists() else "a new fleet CA is made in"
+    print(f"Taking {name} out of the fleet, on {settings.this.name} (the master):")
+    print(f"  - {ca} {paths.dir}: every certificate the old CA signed stops being trusted, "
+          f"{name}'s too. The old CA is deleted; `rosnet-tui undo` cannot bring it back.")
+    print("  - this router's certificate is signed again by the new CA: restart the router here "
+          "afterwards.")
+    if not others:
+        print("  - no other member to pair again.")
+        return
+    print(f"  - every other member must pair again: {', '.join(p.name for p in others)}. It "
+          "happens now, over SSH; each restarts its router afterwards.")
+    no_ssh = [p.name for p in others if not p.ssh_user]
+    if no_ssh:
+        print(f"    No SSH user in the settings for {', '.join(no_ssh)}: run `rosnet-tui ros "
+              "pair` there afterwards (or the text way: --print-request, --sign, --install).")
+    print("    Until a member is paired again, its router cannot link to this one.")

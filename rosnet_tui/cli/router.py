@@ -22,7 +22,7 @@ from rosnet_tui.cli.common import (
     say,
     state_dir_of,
 )
-from rosnet_tui.cli.writing import confirm, paths_of, rerun_checks
+from rosnet_tui.cli.writing import command_line, confirm, paths_of, rerun_checks
 from rosnet_tui.core import affected
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp import journal
@@ -224,8 +224,9 @@ def run_map(args: argparse.Namespace) -> int:
     for p in result.refreshed:
         print(f"Renewed the lease of TCP {p} (already forwarded by rosnet-tui).")
     if result.entry_id:
-        print(f"Recorded as change #{result.entry_id}. Undo with: rosnet-tui undo (or rosnet-tui "
-              "router unmap). The sync service renews the lease; so does running this again.")
+        print(f"Recorded as change #{result.entry_id}. Undo with: {command_line(args, 'undo')} "
+              f"(or {command_line(args, 'router', 'unmap')}). The sync service renews the lease; "
+              "so does running this again.")
     if not args.no_checks:
         rerun_checks(affected.FORWARD, settings, paths_of(args))
     return EXIT_OK

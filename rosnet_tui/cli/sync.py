@@ -39,14 +39,17 @@ UNIT_NAME = "rosnet-tui-sync.service"
 _DESCRIPTION = (
     "Publish this component's addresses (local IP, public IP) to a shared record store and "
     "follow the peers' records: when a peer's address changes, rewrite this component's hosts "
-    "set and ROS_MASTER_URI (the safe writer: our block only, atomic, with a backup), then run "
-    "the affected checks again. The store is set in the settings' [sync] table: a shared folder "
-    "(Syncthing, Dropbox, NFS) or a DNS zone taking TSIG-signed dynamic updates.")
+    "set and, under ROS 1, ROS_MASTER_URI (the safe writer: our block only, atomic, with a "
+    "backup), then run the affected checks again. It also renews the leases of the forwards "
+    "`router map` made and, under ROS 2's mutual TLS, this component's fleet certificate before "
+    "it expires. The store is set in the settings' [sync] table: a shared folder (Syncthing, "
+    "Dropbox, NFS) or a DNS zone taking TSIG-signed dynamic updates.")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("sync", help="keep hosts entries and ROS_MASTER_URI right when public IPs "
-                                    "change (a service)",
+    p = sub.add_parser("sync", help="keep hosts entries (and ROS 1's ROS_MASTER_URI) right when "
+                                    "public IPs change; renew forwards and certificates (a "
+                                    "service)",
                        description=_DESCRIPTION,
                        epilog="Exit codes: 0 stopped cleanly (or --once went well), 1 a round "
                               "failed, 2 usage or settings error.")

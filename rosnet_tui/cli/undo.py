@@ -1,4 +1,5 @@
-"""`rosnet-tui undo`: put back the files of the last apply, byte for byte (one apply per call)."""
+"""`rosnet-tui undo`: take back the last change rosnet-tui made (one per call): the files it wrote,
+byte for byte, the firewall table it loaded or removed, or the modem forwards it made."""
 
 from __future__ import annotations
 
@@ -27,10 +28,15 @@ from rosnet_tui.core.upnp.journal import describe as describe_forward
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("undo", help="restore the files of the last change rosnet-tui made",
-                       description="Restore, byte for byte, the files of the last apply "
-                                   "(hosts or ros). One apply per call; run it again to go "
-                                   "further back.")
+    p = sub.add_parser("undo", help="take back the last change rosnet-tui made: files, "
+                                    "firewall or modem forwards",
+                       description="Take back the last change rosnet-tui made, one per call "
+                                   "(run it again to go further back): the files it wrote, put "
+                                   "back byte for byte (/etc/hosts by `hosts apply` or sync, "
+                                   "~/.bashrc and the Zenoh router's config by `ros apply`), "
+                                   "the firewall table `firewall apply` loaded (or `firewall "
+                                   "undo` removed), or the modem forwards `router map` made. "
+                                   "Not the fleet CA and keys (`ros pair`).")
     add_config_option(p)
     p.add_argument("--yes", "-y", action="store_true",
                    help="restore without asking (needed where there is no terminal)")

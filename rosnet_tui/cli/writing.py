@@ -93,6 +93,18 @@ def add_writer_options(p: argparse.ArgumentParser, *, file_help: str) -> None:
                    help="do not re-run the affected checks after writing")
 
 
+def command_line(args: argparse.Namespace, *words: str) -> str:
+    """``rosnet-tui WORDS`` as the user must type it to act on what this command recorded:
+    with its --config and --state-dir when they were given (else undo looks in the everyday
+    journal and finds nothing), shell-quoted."""
+    argv = ["rosnet-tui", *words]
+    if getattr(args, "config", None):
+        argv += ["--config", str(config_path(args).absolute())]
+    if getattr(args, "state_dir", None):
+        argv += ["--state-dir", str(state_dir_of(args))]
+    return privilege.format_command(argv)
+
+
 def print_changes(changes: Iterable[mt.LineChange]) -> None:
     for c in changes:
         print(f"  line {c.lineno}: {c.old.strip()}")
@@ -170,7 +182,7 @@ def write_preview(args: argparse.Namespace, preview: mf.Preview, sudo_cmd: list[
         how = " in place (the file is a mount point)" if result.in_place else ""
         backups = ", ".join(str(b) for b in result.backups) or "none (the file was new)"
         print(f"Wrote {preview.path}{how}. Backup: {backups}. "
-              f"Undo with: rosnet-tui undo")
+              f"Undo with: {command_line(args, 'undo')}")
     return EXIT_OK
 
 

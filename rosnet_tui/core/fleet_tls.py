@@ -194,16 +194,24 @@ def issue(ca_crt: Any, ca_key: Any, public_key: Any, cn: str, names: list[str], 
             .sign(ca_key, hashes.SHA256()))
 
 
+def master_cert_current(paths: TlsPaths, name: str, public_ip: str = "") -> bool:
+    """The master's certificate is there, from the CA installed here, names it as members dial
+    it (its name; its public IP when known) and is good for a while."""
+    if not (paths.node_crt.exists() and paths.ca_crt.exists()):
+        return False
+    s = cert_summary(paths.node_crt)
+    want = [name] + ([public_ip] if public_ip else [])
+    return (s["issuer_key_id"] == ca_key_id(paths.ca_crt) and set(want) <= set(s["sans"])
+            and s["days_left"] > WARN_DAYS)
+
+
 def ensure_master_cert(paths: TlsPaths, name: str, public_ip: str = "", *,
                        renew: bool = False) -> bool:
     """The master's own key and certificate, naming it as members dial it (True: made now)."""
     ensure_node_key(paths)
     want = [name] + ([public_ip] if public_ip else [])
-    if not renew and paths.node_crt.exists():
-        s = cert_summary(paths.node_crt)
-        if (s["issuer_key_id"] == ca_key_id(paths.ca_crt) and set(want) <= set(s["sans"])
-                and s["days_left"] > WARN_DAYS):
-            return False
+    if not renew and master_cert_current(paths, name, public_ip):
+        return False
     ca = load_cert(paths.ca_crt)
     cert = issue(ca, _load_key(paths.ca_key), _load_key(paths.node_key).public_key(), name, want)
     _write(paths.node_crt, _cert_pem(cert), 0o644)

@@ -36,15 +36,38 @@ class PairResult:
     seconds: float = 0.0
 
 
+def _ca_words(paths: TlsPaths) -> str:
+    return f"the fleet CA ({paths.ca_crt}; its key {paths.ca_key} stays here, 0600)"
+
+
+def _cert_words(s: Settings, paths: TlsPaths) -> str:
+    return f"this router's certificate ({paths.node_crt}, naming {s.this.name})"
+
+
 def prepare_master(s: Settings, paths: TlsPaths, *, renew: bool = False) -> list[str]:
     """On the master: the fleet CA (made once) and the master's certificate naming it as members
     dial it (its name; its public IP when known). Returns what was made (for the user)."""
     made = []
     if fleet_tls.ensure_ca(paths, s.this.name):
-        made.append(f"the fleet CA ({paths.ca_crt}; its key {paths.ca_key} stays here, 0600)")
+        made.append(_ca_words(paths))
     if fleet_tls.ensure_master_cert(paths, s.this.name, s.this.public_ip, renew=renew):
-        made.append(f"this router's certificate ({paths.node_crt}, naming {s.this.name})")
+        made.append(_cert_words(s, paths))
     return made
+
+
+def master_plan(s: Settings, paths: TlsPaths) -> list[str]:
+    """What :func:`prepare_master` would make now, in its words; nothing is made (a preview)."""
+    plan = []
+    if not (paths.ca_key.exists() and paths.ca_crt.exists()):
+        plan.append(_ca_words(paths))
+    try:
+        current = fleet_tls.master_cert_current(paths, s.this.name, s.this.public_ip)
+    except (TlsError, OSError, ValueError):
+        current = False             # unreadable: prepare_master makes a new one
+    if plan or not current:
+        plan.append(_cert_words(s, paths)
+                    + ("" if paths.node_key.exists() else f" and its key ({paths.node_key}, 0600)"))
+    return plan
 
 
 def needs_pairing(s: Settings, paths: TlsPaths) -> str | None:

@@ -79,8 +79,22 @@ def endpoint_token(domain: int, zid: str, nid: str, eid: str, kind: str, name: s
             f"{mangle(name)}/{mangle(topic)}/{mangle(type_name)}/{mangle(type_hash)}/{qos}")
 
 
+def ros_type(wire: str) -> str:
+    """A type name as ROS 2 users write it (``ros2 topic list -t``): ``std_msgs/msg/String``
+    for the DDS form on the wire, ``std_msgs::msg::dds_::String_``. The ``dds_`` part and its
+    trailing ``_`` may be missing; anything else comes back as it was (never raises)."""
+    text = str(wire)
+    if "::" not in text:
+        return text
+    head, sep, last = text.rpartition("dds_::")
+    if sep:                                   # <pkg>::<msg|srv|action>::dds_::<Type>_
+        last = last[:-1] if last.endswith("_") and len(last) > 1 else last
+    return "/".join(p for p in (head + last if sep else text).split("::") if p) or text
+
+
 def parse_token(key: str) -> dict[str, Any] | None:
-    """A liveliness token's fields, or None when *key* is not an rmw_zenoh token."""
+    """A liveliness token's fields, or None when *key* is not an rmw_zenoh token. The type of
+    an endpoint is given as ROS 2 users write it (:func:`ros_type`)."""
     parts = str(key).split("/")
     if len(parts) < 9 or parts[0] != LV_PREFIX or not all(parts[:9]):
         return None
@@ -92,7 +106,8 @@ def parse_token(key: str) -> dict[str, Any] | None:
         return out if len(parts) == 9 else None
     if kind not in ("MP", "MS", "SS", "SC") or len(parts) < 13:
         return None
-    out.update(topic=demangle(parts[9]), type=demangle(parts[10]), hash=demangle(parts[11]),
+    out.update(topic=demangle(parts[9]), type=ros_type(demangle(parts[10])),
+               hash=demangle(parts[11]),
                qos="/".join(parts[12:]))
     return out
 

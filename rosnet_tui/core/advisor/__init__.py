@@ -6,7 +6,8 @@ Where things live:
   and registry, :func:`advise` (evaluate, supersede, catch-alls, sort);
 - :mod:`.evidence`: :class:`Evidence` (what a rule reads: results, settings, the checks'
   declared data) and the helpers several steps' rules share;
-- :mod:`.isp`, :mod:`.router`, :mod:`.linux`, :mod:`.ros` (:mod:`.ros2` for ROS 2, :mod:`.rosbridge`
+- :mod:`.isp`, :mod:`.router`, :mod:`.linux` (:mod:`.names` for names and the hosts file),
+  :mod:`.ros` (:mod:`.ros2` for ROS 2, :mod:`.rosbridge`
   for web clients): the rules, one module per step,
   named like the checks whose data they read (Table 1 and security.exposed are the router's;
   :mod:`.router_upnp` reads router.upnp, the modem's own word; :mod:`.security` reads
@@ -24,6 +25,7 @@ from rosnet_tui.core.advisor import (  # noqa: F401  (declare the rules)
     firewall,
     isp,
     linux,
+    names,
     ros,
     ros2,
     ros2_tls,

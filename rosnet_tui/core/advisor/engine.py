@@ -225,6 +225,38 @@ def _sort_key(f: Finding, pos: dict[str, int], steps: dict[str, str]) -> tuple:
             pos.get(f.rule, len(pos)), f.order)
 
 
+def _supersede(by_rule: dict[str, list[Finding]]) -> list[Finding]:
+    """The findings of the rules not superseded, in RULE_ORDER.
+
+    A superseded rule's findings are dropped, not the checks they explained: a check that no
+    kept finding names goes to the first kept finding of the rule that superseded it (a more
+    specific account of the same failure), so it never ends up with no advice at all.
+    """
+    def dropped(rid: str) -> bool:
+        return any(s in by_rule for s in _REGISTRY[rid].superseded_by)
+
+    def heir(rid: str) -> str | None:         # acyclic: seal() checked superseded_by
+        for s in _REGISTRY[rid].superseded_by:
+            if s in by_rule:
+                h = s if not dropped(s) else heir(s)
+                if h is not None:
+                    return h
+        return None
+
+    kept = [f for rl in RULES if rl.id in by_rule and not dropped(rl.id) for f in by_rule[rl.id]]
+    explained = {c for f in kept for c in f.check_ids}
+    for rl in RULES:
+        if rl.id not in by_rule or not dropped(rl.id):
+            continue
+        lost = [c for f in by_rule[rl.id] for c in f.check_ids if c not in explained]
+        h = heir(rl.id)
+        if lost and h is not None:
+            target = by_rule[h][0]
+            target.check_ids.extend(dict.fromkeys(c for c in lost if c not in target.check_ids))
+            explained.update(lost)
+    return kept
+
+
 def advise(results: Mapping[str, CheckResult] | Iterable[CheckResult], settings: Settings,
            *, strict: bool = False) -> list[Finding]:
     """All findings that apply to *results*, most important first.
@@ -265,10 +297,7 @@ def advise(results: Mapping[str, CheckResult] | Iterable[CheckResult], settings:
                         list(h.check_ids if h.check_ids is not None else rl.check_ids),
                         h.severity or rl.severity, h.order, rl.condition, list(h.evidence))
                 for h in hits]
-    findings: list[Finding] = []
-    for rl in RULES:
-        if rl.id in by_rule and not any(s in by_rule for s in rl.superseded_by):
-            findings.extend(by_rule[rl.id])
+    findings = _supersede(by_rule)
     explained = {c for f in findings for c in f.check_ids}
     findings.extend(_catch_all(ev, explained))
     steps = {rl.id: rl.step for rl in RULES}

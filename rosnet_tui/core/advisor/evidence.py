@@ -18,7 +18,7 @@ from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Settings
 
 FORWARD_RANGE = f"{PORT_MIN}-{PORT_MAX}"
 __all__ = ["FORWARD_RANGE", "Evidence", "RuleOrderError", "cgnat_text", "chat_ok",
-           "is_unreachable", "join_and", "linux_peers", "offline_ids", "peer_state", "status_of",
+           "does_not_resolve", "is_unreachable", "join_and", "linux_peers", "offline_ids", "peer_state", "status_of",
            "uri_host"]
 
 
@@ -211,6 +211,14 @@ def cgnat_text(ev: Evidence) -> tuple[str, list[str], list[str]]:
                 "question as carrier-grade NAT)."]
     return meaning, acts, [f"isp.cgnat: cgnat={bool(d.get('cgnat'))}, "
                            f"double_nat={bool(d.get('double_nat'))}, wan_ip={wan}, hop={hop}"]
+
+
+def does_not_resolve(ev: Evidence, name: str) -> bool:
+    """linux.resolve found no address at all for *name* here."""
+    rd = ev.data("linux.resolve")
+    info = (rd.get("names") or {}).get(name)
+    return name in (rd.get("wrong") or []) and isinstance(info, Mapping) \
+        and not info.get("resolved")
 
 
 def peer_state(ev: Evidence, name: str) -> dict[str, object]:

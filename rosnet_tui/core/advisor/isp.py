@@ -35,15 +35,19 @@ def _no_dns(ev: Evidence) -> list[Hit]:
     if d.get("failed_part") != "dns" and d.get("dns_ok") is not False:
         return []
     host = _url_host(d.get("url", ""))
-    gw = ev.data("router.local_ip").get("gateway") or "the modem"
+    gw = ev.data("router.local_ip").get("gateway")
+    # A command is printed only as it can be run: with the gateway's address, or said in words.
+    ping = (f"`ping {gw}`" if gw else
+            "ping (its address is the one after \"default via\" in `ip route`)")
+    look_up = f"`getent hosts {host}`" if d.get("url") else "`getent hosts` on a well-known name"
     return [Hit(
         f"{ev.me} cannot resolve names (looking up {host} failed): the DNS server it uses does "
         "not answer, or the link to the modem is down.",
-        [f"Check the link: `ip route` must show a default route via {gw}; a mobile hotspot may "
-         "have lost its signal or its data allowance.",
+        [f"Check the link: `ip route` must show a default route via {gw or 'the modem'}; a "
+         "mobile hotspot may have lost its signal or its data allowance.",
          "See which DNS server is used: `resolvectl status` (systemd-resolved) or "
          "`cat /etc/resolv.conf`; it should be the modem or the provider's server.",
-         f"Test by hand: `getent hosts {host}`. If the modem answers `ping {gw}` but names still "
+         f"Test by hand: {look_up}. If the modem answers {ping} but names still "
          "fail, set a DNS server explicitly in the network settings (NetworkManager: "
          "`nmcli connection modify CONNECTION ipv4.dns ADDRESS`).",
          "Then re-run the ISP step."],

@@ -1,4 +1,5 @@
-"""Step 3 (Linux): the rules that read the linux.* checks (names, hosts file, ping, SSH, chat)."""
+"""Step 3 (Linux): the rules that read the linux.* checks about reaching the peers (ping, SSH,
+chat); the names and the hosts file have theirs in :mod:`.names`."""
 
 from __future__ import annotations
 
@@ -9,7 +10,6 @@ from rosnet_tui.core.advisor.evidence import (
     FORWARD_RANGE,
     Evidence,
     is_unreachable,
-    join_and,
     linux_peers,
     peer_state,
 )
@@ -22,136 +22,6 @@ from rosnet_tui.core.advisor.ranking import (
     ssh_refused_first,
 )
 from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN
-
-
-def _name_role(ev: Evidence, name: str) -> str:
-    if name == ev.s.this.name:
-        return "its own local IP"
-    if ev.remote:
-        return f"{name}'s public IP"
-    return f"{name}'s address on the {ev.s.this.profile} LAN"
-
-
-@rule("linux.name.loopback", "linux", ("linux.hosts", "linux.resolve"),
-      "a name maps to loopback (127.0.1.1)",
-      "A network name points at this machine's loopback (the 127.0.1.1 line installers write): "
-      "anything that derives an address from it talks to itself, and ROS nodes can end up "
-      "advertising an address no peer can use.",
-      "Remove the name from the 127.0.1.1 line of /etc/hosts and add the right address line.",
-      "linux", "fail")
-def _name_loopback(ev: Evidence) -> list[Hit]:
-    hd, rd = ev.data("linux.hosts"), ev.data("linux.resolve")
-    names = list(dict.fromkeys([*(hd.get("loopback") or []), *(rd.get("loopback") or [])]))
-    hits = []
-    for name in names:
-        exp = (rd.get("names") or {}).get(name, {}).get("expected") or ev.expected_ip(name) or "?"
-        found = (rd.get("names") or {}).get(name, {}).get("resolved") or "127.0.1.1"
-        ids = [c for c in ("linux.hosts", "linux.resolve")
-               if name in (ev.data(c).get("loopback") or [])]
-        hits.append(Hit(
-            f"{name} resolves to the loopback address {found} on {ev.me}, not to "
-            f"{exp} ({_name_role(ev, name)}): programs here that look the name up talk to "
-            "themselves, and ROS nodes can bind or advertise an address no peer reaches.",
-            [f"In /etc/hosts on {ev.me}, take {name} off the `{found} ...` line (delete the line "
-             f"if {name} is all it holds; keep `127.0.0.1 localhost`).",
-             f"Make sure the line `{exp} {name}` is there (`rosnet-tui hosts apply` writes "
-             "the right entries).",
-             f"Check with `getent hosts {name}`: it must print {exp}."],
-            check_ids=ids, severity="fail" if any(ev.is_fail(c) for c in ids) else "warn",
-            evidence=[f"{name} -> {found}"]))
-    return hits
-
-
-@rule("linux.name.wrong", "linux", ("linux.hosts", "linux.resolve"),
-      "a name resolves to the wrong address",
-      "A network name leads to an address that is not the component's (stale public IP, typo, "
-      "another line or a DNS record winning).",
-      "Correct the hosts line for that name (or find what else answers: nsswitch order, a "
-      "second line, DNS).",
-      "linux", "fail")
-def _name_wrong(ev: Evidence) -> list[Hit]:
-    hd, rd = ev.data("linux.hosts"), ev.data("linux.resolve")
-    loop = set(hd.get("loopback") or []) | set(rd.get("loopback") or [])
-    hosts_wrong = {w["name"]: w for w in hd.get("wrong") or [] if isinstance(w, Mapping)}
-    names = [n for n in dict.fromkeys([*(rd.get("wrong") or []), *hosts_wrong]) if n not in loop]
-    hits = []
-    for name in names:
-        info = (rd.get("names") or {}).get(name, {})
-        hw = hosts_wrong.get(name, {})
-        exp = info.get("expected") or hw.get("expected") or ev.expected_ip(name) or "?"
-        found = info.get("resolved") or hw.get("found")
-        ids = []
-        if name in hosts_wrong:
-            ids.append("linux.hosts")
-        if name in (rd.get("wrong") or []):
-            ids.append("linux.resolve")
-        if name in hosts_wrong:
-            old = hw.get("found") or found or "?"
-            acts = [f"In /etc/hosts on {ev.me}, change `{old} {name}` to `{exp} {name}` "
-                    "(`rosnet-tui hosts apply` writes the computed entries, with a preview)."]
-        elif found:
-            acts = [f"The hosts file of {ev.me} looks right, yet the system resolver answers "
-                    f"{found}: run `getent hosts {name}`, check that /etc/nsswitch.conf lists "
-                    "`files` before `dns` for hosts, and look for a DNS record or a second "
-                    f"hosts line for {name}."]
-        else:
-            acts = [f"{name} does not resolve on {ev.me}: add `{exp} {name}` to /etc/hosts "
-                    "(`rosnet-tui hosts apply`)."]
-        if name != ev.s.this.name and ev.remote:
-            acts.append(f"If {exp} is itself out of date, {name}'s public IP has moved: update "
-                        f"the settings (or let address sync do it: `rosnet-tui sync`).")
-        acts.append(f"Check with `getent hosts {name}`: it must print {exp}.")
-        if found:
-            meaning = (f"{name} resolves to {found} on {ev.me}, but it should be {exp} "
-                       f"({_name_role(ev, name)}): everything that uses the name goes to the "
-                       "wrong place.")
-        else:
-            meaning = (f"{name} does not resolve on {ev.me}; it should be {exp} "
-                       f"({_name_role(ev, name)}).")
-        hits.append(Hit(meaning, acts, check_ids=ids,
-                        severity="fail" if any(ev.is_fail(c) for c in ids) else "warn",
-                        evidence=[f"{name} -> {found or 'nothing'}, expected {exp}"]))
-    return hits
-
-
-@rule("linux.hosts.missing", "linux", ("linux.hosts",),
-      "a name is missing from the hosts file",
-      "The hosts file has no line for a component, so its name depends on DNS (if it resolves "
-      "at all).",
-      "Add the missing line(s) (`rosnet-tui hosts apply`).",
-      "linux", "warn")
-def _hosts_missing(ev: Evidence) -> list[Hit]:
-    hd, rd = ev.data("linux.hosts"), ev.data("linux.resolve")
-    missing = [n for n in hd.get("missing") or []
-               if n not in (rd.get("wrong") or []) and n not in (rd.get("loopback") or [])]
-    if not missing:
-        return []
-    lines = [f"`{ev.expected_ip(n) or '?'} {n}`" for n in missing]
-    return [Hit(f"/etc/hosts on {ev.me} has no line for {join_and(missing)}.",
-                [f"Add {join_and(lines)} to /etc/hosts on {ev.me} (`rosnet-tui hosts apply` "
-                 "writes them, with a preview and a backup)."],
-                severity=ev.sev("linux.hosts", "warn"),
-                evidence=[f"linux.hosts: missing {join_and(missing)}"])]
-
-
-@rule("linux.hosts.duplicates", "linux", ("linux.hosts",),
-      "a name appears on several hosts lines",
-      "The name has several addresses in the hosts file; which one a program gets is not "
-      "guaranteed.",
-      "Keep one line per name.",
-      "linux", "warn")
-def _hosts_dupes(ev: Evidence) -> list[Hit]:
-    dupes = ev.data("linux.hosts").get("duplicates") or []
-    if not dupes:
-        return []
-    keep = [f"`{ev.expected_ip(n) or '?'} {n}`" for n in dupes]
-    return [Hit(f"{join_and(dupes)} appear{'s' if len(dupes) == 1 else ''} on several lines of "
-                f"/etc/hosts on {ev.me} with different addresses: the resolver may pick any of "
-                "them (glibc even prefers 127.0.1.1).",
-                [f"Keep only {join_and(keep)} and delete the other lines for "
-                 f"{'that name' if len(dupes) == 1 else 'those names'}."],
-                severity=ev.sev("linux.hosts", "warn"),
-                evidence=[f"linux.hosts: duplicates {join_and(dupes)}"])]
 
 
 def _ssh_caused(ev: Evidence, name: str) -> list[str]:
@@ -423,7 +293,8 @@ def _ssh_sshd(ev: Evidence) -> list[Hit]:
       "SSH: the peer's name does not resolve",
       "The peer's name has no address here, so nothing can connect to it by name.",
       "Add the peer's hosts line (`rosnet-tui hosts apply`).",
-      "linux", "fail", superseded_by=("linux.name.wrong", "linux.hosts.missing"))
+      "linux", "fail", superseded_by=("linux.name.unresolved", "linux.name.wrong",
+                                      "linux.hosts.missing"))
 def _ssh_resolve(ev: Evidence) -> list[Hit]:
     hits = []
     for name, st in (ev.data("linux.ssh").get("peers") or {}).items():

@@ -43,6 +43,7 @@ RULE_ORDER: tuple[str, ...] = (
     "router.upnp.missing",
     # step 3: Linux
     "linux.name.loopback",
+    "linux.name.unresolved",
     "linux.name.wrong",
     "linux.hosts.missing",
     "linux.hosts.duplicates",
@@ -63,6 +64,7 @@ RULE_ORDER: tuple[str, ...] = (
     "security.firewall.missing",
     "security.firewall.off",
     # step 4: ROS
+    "ros.env.master_uri_unset",
     "ros.env.master_uri",
     "ros.env.bashrc",
     "ros.env.ros_ip",

@@ -26,7 +26,7 @@ import ipaddress
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from rosnet_tui.core.advisor.evidence import Evidence
+from rosnet_tui.core.advisor.evidence import Evidence, does_not_resolve
 from rosnet_tui.core.results import Status
 
 # (observation, what it makes more or less likely): the docs' table, strongest first.
@@ -488,6 +488,9 @@ def master_causes(ev: Evidence, master: str) -> list[Cause]:
         if own.get("resolved") and here and own["resolved"] != here:
             addr.up(60, f"{ev.me} resolves to {own['resolved']}, but this machine's address "
                         f"is {here} now")
+        if does_not_resolve(ev, ev.me):
+            addr.up(80, f"{ev.me} does not resolve here (linux.resolve): ROS_MASTER_URI "
+                        "names nothing")
         if kind == "refused":
             core.up(40, f"port {port} was refused on this machine: nothing listens there")
         return rank([core, addr, fwd, peer], ["roscore", "address", "forwarding", "peer"])
@@ -515,4 +518,7 @@ def master_causes(ev: Evidence, master: str) -> list[Cause]:
     moved = resolved_elsewhere(ev, master)
     if moved:
         addr.up(60, f"{master} resolves to {moved[0]} here, not to {moved[1]}")
+    if does_not_resolve(ev, master):
+        addr.up(80, f"{master} does not resolve here (linux.resolve): no connection to it can "
+                    "even start")
     return rank([core, fwd, addr, peer], ["roscore", "forwarding", "peer", "address"])

@@ -23,6 +23,44 @@ def _ros_trouble(ev: Evidence) -> bool:
     return any(ev.is_fail(c) for c in ("ros.node_uris", "ros.pubsub_out", "ros.pubsub_in"))
 
 
+def _uri_rule(ev: Evidence, exp: str) -> str:
+    """What ROS_MASTER_URI must be on this component, and why."""
+    if ev.s.is_master:
+        return (f"{ev.me} is the master: its ROS_MASTER_URI must use its own name or local IP "
+                f"({exp}); roscore will not start on its public IP.")
+    return (f"{ev.me} is a member: its ROS_MASTER_URI must use the master's name ({exp}), "
+            "which its hosts file maps to the master's public IP.")
+
+
+def _expected_uri(ev: Evidence) -> str:
+    return ev.data("ros.env").get("expected_uri") \
+        or f"http://{ev.s.master_name or 'MASTER'}:{ev.s.ros.port}"
+
+
+@rule("ros.env.master_uri_unset", "ros", ("ros.env",),
+      "ROS_MASTER_URI not set",
+      "Neither this shell nor ~/.bashrc sets ROS_MASTER_URI: nodes started here do not know "
+      "where the master is (they stop at once, or look for one on localhost).",
+      "Set `export ROS_MASTER_URI=http://MASTER:11311` in ~/.bashrc (`rosnet-tui ros apply`), "
+      "open a new shell, restart the nodes.",
+      "ros", "fail")
+def _master_uri_unset(ev: Evidence) -> list[Hit]:
+    d = ev.data("ros.env")
+    if not d or d.get("uri_ok") is not False or d.get("env_uri") or d.get("bashrc_uri"):
+        return []
+    exp = _expected_uri(ev)
+    return [Hit(f"ROS_MASTER_URI is not set on {ev.me}, neither in this shell nor in "
+                f"~/.bashrc: nodes started here do not know where the master is. Set it to "
+                f"{exp}. {_uri_rule(ev, exp)}",
+                [f"`rosnet-tui ros apply` on {ev.me} writes `export ROS_MASTER_URI={exp}` into "
+                 "~/.bashrc (it shows the change first; `rosnet-tui undo` takes it back).",
+                 f"Then open a new terminal (or run `export ROS_MASTER_URI={exp}` in this one) "
+                 "and start the nodes from there."],
+                severity=ev.sev("ros.env", "fail"),
+                evidence=[f"ros.env: ROS_MASTER_URI set neither in the environment nor in "
+                          f"~/.bashrc, expected {exp}"])]
+
+
 @rule("ros.env.master_uri", "ros", ("ros.env",),
       "ROS_MASTER_URI wrong for the role",
       "Nodes started here look for the master at the wrong place (a member must use the "
@@ -32,24 +70,15 @@ def _ros_trouble(ev: Evidence) -> bool:
       "ros", "fail")
 def _master_uri(ev: Evidence) -> list[Hit]:
     d = ev.data("ros.env")
-    if not d or d.get("uri_ok") is not False:
-        return []
-    exp = d.get("expected_uri") or f"http://{ev.s.master_name or 'MASTER'}:{ev.s.ros.port}"
     env_uri, rc_uri = d.get("env_uri"), d.get("bashrc_uri")
-    shown = env_uri or rc_uri
-    if ev.s.is_master:
-        why = (f"{ev.me} is the master: its ROS_MASTER_URI must use its own name or local IP "
-               f"({exp}); roscore will not start on its public IP.")
-    else:
-        why = (f"{ev.me} is a member: its ROS_MASTER_URI must use the master's name ({exp}), "
-               "which its hosts file maps to the master's public IP.")
-    if not shown:
-        meaning = f"ROS_MASTER_URI is not set on {ev.me}. {why}"
-    elif env_uri and rc_uri and env_uri != rc_uri and rc_uri == exp:
+    if not d or d.get("uri_ok") is not False or not (env_uri or rc_uri):
+        return []                       # not set at all: ros.env.master_uri_unset
+    exp = _expected_uri(ev)
+    if env_uri and rc_uri and env_uri != rc_uri and rc_uri == exp:
         meaning = (f"~/.bashrc has the right ROS_MASTER_URI ({exp}), but this shell still has "
                    f"{env_uri}: it was opened before the change.")
     else:
-        meaning = f"ROS_MASTER_URI is {shown} on {ev.me}. {why}"
+        meaning = f"ROS_MASTER_URI is {env_uri or rc_uri} on {ev.me}. {_uri_rule(ev, exp)}"
     acts = [f"In ~/.bashrc on {ev.me}: `export ROS_MASTER_URI={exp}`, replacing any other "
             "ROS_MASTER_URI line (`rosnet-tui ros apply` writes it, with a preview).",
             f"In open terminals: `export ROS_MASTER_URI={exp}` (or open a new one), then "

@@ -149,9 +149,10 @@ def _not_running(ev: Evidence) -> list[Hit]:
                     _start_router(ev, where), check_ids=ids,
                     evidence=[f"ros2.router: {r.get('failure')}"])]
     if local and local.get("reachable") is False:
-        return [Hit(f"{ev.me}'s own router is not running: the master's router answers, but "
-                    f"nodes here look for their router at {local.get('endpoint')} and find "
-                    "nothing.", _start_router(ev, ev.me) + [
+        seen = "the master's router answers, but " if r.get("reachable") else ""
+        return [Hit(f"{ev.me}'s own router is not running: {seen}nodes here look for their "
+                    f"router at {local.get('endpoint')} and find nothing.",
+                    _start_router(ev, ev.me) + [
                         f"Or, for a lone node without a router: client mode straight to "
                         f"{_master(ev)} (`rosnet-tui ros apply --client`)."],
                     check_ids=ids, evidence=[f"ros2.router: local router {local.get('failure')}"])]

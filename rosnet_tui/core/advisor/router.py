@@ -33,7 +33,8 @@ def _no_link(ev: Evidence) -> list[Hit]:
     d = ev.data("router.local_ip")
     if not d or not ev.is_fail("router.local_ip") or (d.get("local_ip") and d.get("gateway")):
         return []
-    iface = d.get("interface") or ev.s.this.interface or "the network interface"
+    known = d.get("interface") or ev.s.this.interface
+    iface = known or "the network interface"
     if not d.get("local_ip"):
         meaning = (f"{ev.me} has no IPv4 address on {iface}: the link is down (cable unplugged, "
                    "Wi-Fi off or not joined) or the modem's DHCP did not answer.")
@@ -42,13 +43,20 @@ def _no_link(ev: Evidence) -> list[Hit]:
                    "it cannot reach the modem as its gateway (DHCP incomplete, or a static "
                    "address without a gateway).")
     ids = ["router.local_ip"] + (offline_ids(ev) if ev.is_fail("isp.internet") else [])
-    return [Hit(meaning,
-                [f"Check the link: `ip addr show {iface}` must show an address and state UP; "
-                 "reconnect the cable or the Wi-Fi (`nmcli device status`).",
-                 f"Renew the address: `sudo nmcli device reapply {iface}` (NetworkManager) or "
-                 f"`sudo dhclient -v {iface}`; `ip route` must then show a default route via "
-                 "the modem.",
-                 "Then run the checks again from step 1."],
+    if known:
+        acts = [f"Check the link: `ip addr show {iface}` must show an address and state UP; "
+                "reconnect the cable or the Wi-Fi (`nmcli device status`).",
+                f"Renew the address: `sudo nmcli device reapply {iface}` (NetworkManager) or "
+                f"`sudo dhclient -v {iface}`; `ip route` must then show a default route via "
+                "the modem."]
+    else:   # no interface to name: the commands that list them, and the rest in words
+        acts = ["Find the interface that connects to the modem: `nmcli device status` (or "
+                "`ip addr`) lists them; it must show an address and state UP. Reconnect the "
+                "cable or the Wi-Fi.",
+                "Renew its address with NetworkManager's `sudo nmcli device reapply` followed by "
+                "the interface's name (or dhclient's `sudo dhclient -v` and the name); `ip route` "
+                "must then show a default route via the modem."]
+    return [Hit(meaning, acts + ["Then run the checks again from step 1."],
                 check_ids=ids,
                 evidence=[f"router.local_ip: address {d.get('local_ip') or 'none'}, gateway "
                           f"{d.get('gateway') or 'none'} on {iface}"])]

@@ -256,15 +256,31 @@ async def check_router(ctx: CheckContext) -> Outcome:
     if not s.is_master and how == "router":
         local_task = asyncio.ensure_future(open_zenoh(node_ep, max(0.2, t * 0.3)))
     if s.is_master:
-        data["listening"] = await run_blocking(_listening, port, timeout=1.0)
-        ev.append(f"TCP {port} listened on here: {', '.join(data['listening']) or 'nothing'}")
+        data["listening"] = lst = await run_blocking(_listening, port, timeout=1.0)
+        ev.append(f"TCP {port} listened on here: {', '.join(lst) or 'nothing'}")
+        # Known before the name is looked up: a name missing from /etc/hosts must not hide it.
+        problem = None
+        if not lst:
+            problem = "not_running"
+            cfg_listen = [e for e in _router_config_listen(ctx) if ros2.listen_problem(e, ipv6)
+                          == "ipv6_only"]
+            if cfg_listen and not ipv6:
+                problem = "ipv6_only"
+        elif all(is_loopback(a) for a in lst):
+            problem = "loopback"
+        data["listen_problem"] = problem
     addrs, err = await resolve_ipv4(name, min(1.0, t * 0.25))
     if not addrs:
         data["failure"] = "resolve"
-        if local_task:
-            await close_zenoh((await local_task)[0])
+        also = ""
+        if local_task is not None:   # this machine's own router is asked all the same
+            data["local_router"] = await _local_router(local_task, node_ep, ev)
+            if not data["local_router"]["reachable"]:
+                also = f"; this machine's own router does not answer at {node_ep} either"
+        elif s.is_master and data["listen_problem"] == "not_running":
+            also = f"; nothing listens on TCP {port} here either (is rmw_zenohd running?)"
         return Outcome(Status.FAIL, f"the master's name {name} does not resolve here ({err}): add "
-                                    "it to /etc/hosts (Linux step)", ev, data)
+                                    f"it to /etc/hosts (Linux step){also}", ev, data)
     data["address"] = addrs[0]
     ev.append(f"{name} resolves to {addrs[0]}")
     kind, words = await _tcp(addrs[0], port, max(0.2, min(t * 0.4, deadline - time.monotonic())))
@@ -281,33 +297,9 @@ async def check_router(ctx: CheckContext) -> Outcome:
                                       timeout=max(0.2, deadline - time.monotonic()))
     await close_zenoh(session)
     data["failure"] = kind
-    local: dict[str, Any] = {"reachable": False, "endpoint": node_ep, "zid": None,
-                             "version": None, "routers": [], "failure": None}
+    local: dict[str, Any] = {}
     if local_task is not None:
-        ls, lwhy = await local_task
-        if ls is not None:
-            li = await run_blocking(zenohproto.router_info, ls, 0.5, timeout=1.0)
-            await close_zenoh(ls)
-            local.update(reachable=True, zid=li.get("zid"), version=li.get("version"),
-                         routers=router_links(li))
-            ev.append(f"this machine's router at {node_ep}: {li.get('zid')} "
-                      f"{li.get('version') or ''}, linked to router(s) {local['routers'] or 'none'}")
-        else:
-            local["failure"] = lwhy
-            ev.append(f"this machine's router at {node_ep}: {lwhy}")
-        data["local_router"] = local
-    if s.is_master:
-        lst = data["listening"]
-        problem = None
-        if not lst:
-            problem = "not_running"
-            cfg_listen = [e for e in _router_config_listen(ctx) if ros2.listen_problem(e, ipv6)
-                          == "ipv6_only"]
-            if cfg_listen and not ipv6:
-                problem = "ipv6_only"
-        elif all(is_loopback(a) for a in lst):
-            problem = "loopback"
-        data["listen_problem"] = problem
+        data["local_router"] = local = await _local_router(local_task, node_ep, ev)
     if info:
         data.update(reachable=True, router_zid=info.get("zid"), router_version=info.get("version"),
                     locators=info.get("locators") or [])
@@ -365,6 +357,25 @@ async def check_router(ctx: CheckContext) -> Outcome:
                                     f"{data['tls']['not_after'][:10]})", ev, data)
     return Outcome(Status.PASS, f"the master's Zenoh router{ver} answers at {endpoint} "
                                 f"({addrs[0]})", ev, data)
+
+
+async def _local_router(task: asyncio.Future, endpoint: str, ev: list[str]) -> dict[str, Any]:
+    """What the session *task* opened to this machine's own router found (ros2.router's
+    ``local_router``); the session is closed."""
+    local: dict[str, Any] = {"reachable": False, "endpoint": endpoint, "zid": None,
+                             "version": None, "routers": [], "failure": None}
+    ls, lwhy = await task
+    if ls is None:
+        local["failure"] = lwhy
+        ev.append(f"this machine's router at {endpoint}: {lwhy}")
+        return local
+    li = await run_blocking(zenohproto.router_info, ls, 0.5, timeout=1.0)
+    await close_zenoh(ls)
+    local.update(reachable=True, zid=li.get("zid"), version=li.get("version"),
+                 routers=router_links(li))
+    ev.append(f"this machine's router at {endpoint}: {li.get('zid')} "
+              f"{li.get('version') or ''}, linked to router(s) {local['routers'] or 'none'}")
+    return local
 
 
 def _router_config_listen(ctx: CheckContext) -> list[str]:
