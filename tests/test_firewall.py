@@ -17,10 +17,12 @@ from pathlib import Path
 import pytest
 
 from rosnet_tui.core import firewall as fw
+from rosnet_tui.core import netinfo
 from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.results import CheckResult, Status
 from rosnet_tui.core.settings import render_settings
 from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.ssh import origin
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -71,8 +73,8 @@ def test_every_accept_rule_of_the_ruleset_exactly():
     adm = fw.Admission(peers=["198.51.100.2", "2001:db8::7"],
                        lan=["10.10.10.0/24", "fe80::/64"],
                        allow=["203.0.113.0/28", "2001:db8:1::/48"],
-                       sessions=[fw.Session("203.0.113.50", 22),
-                                 fw.Session("2001:db8::50", 2222)])
+                       sessions=[origin.Session("203.0.113.50", 22),
+                                 origin.Session("2001:db8::50", 2222)])
     text = fw.render_ruleset(s, adm)
     assert _chain(text) == [
         "type filter hook input priority filter - 10; policy accept;",
@@ -110,7 +112,7 @@ def test_every_accept_rule_of_the_ruleset_exactly():
 
 def test_who_gets_in_peers_everywhere_lan_everywhere_allow_and_session_on_ssh_only():
     adm = fw.Admission(peers=["198.51.100.2"], lan=["10.10.10.0/24"], allow=["192.0.2.0/28"],
-                       sessions=[fw.Session("203.0.113.50", 22)])
+                       sessions=[origin.Session("203.0.113.50", 22)])
     assert fw.admitted(adm, "198.51.100.2", 11311) == "a peer"
     assert fw.admitted(adm, "10.10.10.77", 11311) == "this machine's LAN (10.10.10.0/24)"
     assert fw.admitted(adm, "192.0.2.5", 22) == "[firewall] allow (192.0.2.0/28)"
@@ -122,33 +124,33 @@ def test_who_gets_in_peers_everywhere_lan_everywhere_allow_and_session_on_ssh_on
 
 
 def test_the_session_is_read_from_ssh_connection_or_ssh_client():
-    assert fw.session_from_env({"SSH_CONNECTION": SESSION}) == \
-        fw.Session("203.0.113.50", 22, "SSH_CONNECTION")
-    assert fw.session_from_env({"SSH_CLIENT": "203.0.113.50 5555 2222"}) == \
-        fw.Session("203.0.113.50", 2222, "SSH_CLIENT")
+    assert origin.session_from_env({"SSH_CONNECTION": SESSION}) == \
+        origin.Session("203.0.113.50", 22, "SSH_CONNECTION")
+    assert origin.session_from_env({"SSH_CLIENT": "203.0.113.50 5555 2222"}) == \
+        origin.Session("203.0.113.50", 2222, "SSH_CLIENT")
     # SSH_CONNECTION first; an IPv6 client with a zone; an IPv4 client on a dual-stack socket.
     both = {"SSH_CONNECTION": "2001:db8::5 1 2001:db8::1 22", "SSH_CLIENT": "192.0.2.9 1 22"}
-    assert fw.session_from_env(both).address == "2001:db8::5"
-    assert fw.session_from_env({"SSH_CONNECTION": "fe80::5%eth0 1 fe80::1%eth0 22"}
+    assert origin.session_from_env(both).address == "2001:db8::5"
+    assert origin.session_from_env({"SSH_CONNECTION": "fe80::5%eth0 1 fe80::1%eth0 22"}
                                ).address == "fe80::5"
-    assert fw.session_from_env({"SSH_CONNECTION": "::ffff:203.0.113.50 1 ::ffff:10.0.0.1 22"}
+    assert origin.session_from_env({"SSH_CONNECTION": "::ffff:203.0.113.50 1 ::ffff:10.0.0.1 22"}
                                ).address == "203.0.113.50"
-    assert fw.session_from_env({}) is None and fw.session_from_env({"SSH_CONNECTION": " "}) is None
-    with pytest.raises(fw.SessionError, match="not an IP address"):
-        fw.session_from_env({"SSH_CONNECTION": "somewhere 1 10.0.0.1 22"})
+    assert origin.session_from_env({}) is None and origin.session_from_env({"SSH_CONNECTION": " "}) is None
+    with pytest.raises(origin.SessionError, match="not an IP address"):
+        origin.session_from_env({"SSH_CONNECTION": "somewhere 1 10.0.0.1 22"})
 
 
 def test_the_session_gets_an_entry_unless_it_gets_in_already():
     s = robot()
     s.firewall.allow = ["192.0.2.0/28"]
-    adm, why = fw.admission(s, session=fw.Session("203.0.113.50", 22, "SSH_CONNECTION"))
-    assert why == "" and adm.sessions == [fw.Session("203.0.113.50", 22, "SSH_CONNECTION")]
-    adm, why = fw.admission(s, session=fw.Session("198.51.100.2", 22))
+    adm, why = fw.admission(s, session=origin.Session("203.0.113.50", 22, "SSH_CONNECTION"))
+    assert why == "" and adm.sessions == [origin.Session("203.0.113.50", 22, "SSH_CONNECTION")]
+    adm, why = fw.admission(s, session=origin.Session("198.51.100.2", 22))
     assert why == "a peer" and adm.sessions == []
-    adm, why = fw.admission(s, session=fw.Session("192.0.2.3", 22))
+    adm, why = fw.admission(s, session=origin.Session("192.0.2.3", 22))
     assert why.startswith("[firewall] allow") and adm.sessions == []
-    adm, why = fw.admission(s, session=fw.Session("192.0.2.3", 2222))   # allow is SSH (22) only
-    assert why == "" and adm.sessions == [fw.Session("192.0.2.3", 2222)]
+    adm, why = fw.admission(s, session=origin.Session("192.0.2.3", 2222))   # allow is SSH (22) only
+    assert why == "" and adm.sessions == [origin.Session("192.0.2.3", 2222)]
     adm, why = fw.admission(s, session=None)
     assert why == "" and adm.sessions == []
     assert adm.allow == ["192.0.2.0/28"] and adm.peers == ["198.51.100.2", "198.51.100.40"]
@@ -161,10 +163,10 @@ def test_only_private_link_local_and_unique_local_networks_count_as_lan():
            "fd12:3456::/64")
     public = ("203.0.113.0/24", "198.51.100.0/24", "100.64.0.0/10", "100.64.1.0/24",
               "2001:db8::/64", "10.0.0.0/7", "172.32.0.0/16")
-    assert all(fw.is_lan(ipaddress.ip_network(n)) for n in lan)
-    assert not any(fw.is_lan(ipaddress.ip_network(n)) for n in public)
-    got = fw.lan_networks()                       # this machine's own, whatever it has
-    assert all(fw.is_lan(ipaddress.ip_network(n)) for n in got), got
+    assert all(netinfo.is_lan(ipaddress.ip_network(n)) for n in lan)
+    assert not any(netinfo.is_lan(ipaddress.ip_network(n)) for n in public)
+    got = netinfo.lan_networks()                       # this machine's own, whatever it has
+    assert all(netinfo.is_lan(ipaddress.ip_network(n)) for n in got), got
     assert not any(ipaddress.ip_network(n).network_address.is_loopback for n in got)
 
 
@@ -221,7 +223,7 @@ def test_undo_to_a_table_that_shuts_this_session_out_says_so_before_it_asks(monk
     old = fw.render_ruleset(robot(), fw.Admission(peers=["198.51.100.2"]))
     listed = old.replace("\t}\n\tset", "\t}\n\n\tset")       # as nft lists it
     kept = fw.render_ruleset(robot(), fw.Admission(peers=["198.51.100.2"],
-                                                   sessions=[fw.Session("203.0.113.50", 22)]))
+                                                   sessions=[origin.Session("203.0.113.50", 22)]))
     assert fw.sets_in_text(kept)["session4"] == ["203.0.113.50 . 22"]
     monkeypatch.setenv("SSH_CONNECTION", SESSION)
     said = fw.describe({"kind": fw.KIND, "before": listed})
@@ -527,16 +529,16 @@ def test_the_checks_words_for_who_gets_in_and_for_the_ssh_client():
             "allow4": ["192.0.2.0/28"], "allow6": [], "session4": ["203.0.113.50 . 22"],
             "session6": []}
     loaded = fw.loaded_admission(sets)
-    assert loaded.sessions == [fw.Session("203.0.113.50", 22, "the loaded table")]
+    assert loaded.sessions == [origin.Session("203.0.113.50", 22, "the loaded table")]
     assert who_evidence(loaded) == [
         "peers (SSH and ROS): 198.51.100.2",
         "this machine's LAN (SSH and ROS): 10.10.10.0/24",
         "[firewall] allow (SSH): 192.0.2.0/28",
         "the SSH session that loaded it (SSH, until the next firewall apply): "
         "203.0.113.50 (port 22)"]
-    assert client_words(loaded, fw.Session("203.0.113.50", 22))[0] == \
+    assert client_words(loaded, origin.Session("203.0.113.50", 22))[0] == \
         "the SSH session that loaded the table"
-    why, line = client_words(loaded, fw.Session("203.0.113.51", 22))
+    why, line = client_words(loaded, origin.Session("203.0.113.51", 22))
     assert why == "" and line == ("this check runs over SSH from 203.0.113.51 (sshd port 22): "
                                   "would NOT get in once this session drops")
 

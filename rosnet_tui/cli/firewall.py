@@ -38,6 +38,7 @@ from rosnet_tui.cli.writing import (
 from rosnet_tui.core import firewall as fw
 from rosnet_tui.core import privilege
 from rosnet_tui.core.settings_model import PROFILES, Settings
+from rosnet_tui.core.ssh import origin
 
 FIREWALL_CHECKS = ("linux.firewall",)
 
@@ -114,9 +115,9 @@ def _sudo_undo(args: argparse.Namespace) -> list[str]:
                                 "--no-checks"])
 
 
-def _session(args: argparse.Namespace) -> tuple[fw.Session | None, bool]:
+def _session(args: argparse.Namespace) -> tuple[origin.Session | None, bool]:
     """(the session --session-ip names, whether to detect one instead); raises
-    fw.SessionError for a bad value."""
+    origin.SessionError for a bad value."""
     value = args.session_ip
     if value is None:
         return None, True
@@ -125,14 +126,14 @@ def _session(args: argparse.Namespace) -> tuple[fw.Session | None, bool]:
     try:
         addr = ipaddress.ip_address(value.strip())
     except ValueError:
-        raise fw.SessionError(f"--session-ip '{value[:40]}' is not an IP address (or 'none')"
+        raise origin.SessionError(f"--session-ip '{value[:40]}' is not an IP address (or 'none')"
                               ) from None
     if not 0 < args.session_port < 65536:
-        raise fw.SessionError(f"--session-port {args.session_port} is not a port (1-65535)")
-    return fw.Session(str(addr), args.session_port, "--session-ip"), False
+        raise origin.SessionError(f"--session-port {args.session_port} is not a port (1-65535)")
+    return origin.Session(str(addr), args.session_port, "--session-ip"), False
 
 
-def _refuse_session(exc: fw.SessionError) -> int:
+def _refuse_session(exc: origin.SessionError) -> int:
     say(f"rosnet-tui: nothing was changed: {exc}. The table would lock this session out once it "
         "drops. Name its address with --session-ip ADDR (or 'none' when this is no SSH "
         "session), or add it to [firewall] allow in the settings.")
@@ -147,7 +148,7 @@ def run_apply(args: argparse.Namespace) -> int:
     try:
         session, detect = _session(args)
         pv = fw.preview(settings, profile, session=session, detect=detect)
-    except fw.SessionError as exc:
+    except origin.SessionError as exc:
         return _refuse_session(exc)
     except fw.FirewallSettingsError as exc:
         return report_settings_problems(exc)
@@ -209,8 +210,8 @@ def run_show(args: argparse.Namespace) -> int:
         return EXIT_OK
     try:
         try:
-            session = fw.detect_session()
-        except fw.SessionError as exc:
+            session = origin.detect_session()
+        except origin.SessionError as exc:
             print(f"note: {exc}")
             session = None
         adm, session_in = fw.admission(settings, profile, session)

@@ -40,15 +40,15 @@ import logging
 import os
 import re
 import shutil
-import socket
 import subprocess
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from rosnet_tui.core import jsonsafe
 from rosnet_tui.core import undo_journal as uj
+from rosnet_tui.core.netinfo import collapse, lan_networks
 from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Settings
+from rosnet_tui.core.ssh.origin import SSH_PORT, Session, SessionError, detect_session
 
 FAMILY = "inet"
 NAME = "rosnet_tui"
@@ -59,29 +59,17 @@ ALLOW4, ALLOW6 = "allow4", "allow6"
 SESSION4, SESSION6 = "session4", "session6"
 CHAIN = "input"
 PRIORITY = -10            # before the distribution's filter (priority 0)
-SSH_PORT = 22
 KIND = "nft_table"        # the journal entry's kind (managed_file's undo dispatches on it)
 NFT_TIMEOUT_S = 10.0
 LABEL = "firewall: peers only on the forwarded ports"
 
 MODES = ("mtls", "firewall", "none")
-# Only these blocks count as a LAN (private, link-local, unique local): an interface on a public
-# block, or on the carrier's shared 100.64.0.0/10, has the internet or strangers as neighbours.
-LAN_BLOCKS = tuple(ipaddress.ip_network(n) for n in (
-    "10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16", "169.254.0.0/16", "fe80::/10", "fc00::/7"))
-SESSION_VARS = ("SSH_CONNECTION", "SSH_CLIENT")
-ELEVATORS = ("sudo", "doas")          # what may stand between the user's shell and us
-ANCESTORS_MAX = 8
 SESSION_STAYS = ("until the next `rosnet-tui firewall apply` replaces the table; to keep it for "
                  "good, add it to [firewall] allow")
 
 
 class FirewallError(Exception):
     """nft is missing, refused our ruleset, or may not be run by this user."""
-
-
-class SessionError(FirewallError):
-    """The SSH session running us cannot be told apart (an address that does not parse)."""
 
 
 class FirewallSettingsError(FirewallError):
@@ -155,22 +143,6 @@ def allowed_addresses(settings: Settings, profile: str | None = None) -> list[st
     return out
 
 
-def _net_text(net: ipaddress.IPv4Network | ipaddress.IPv6Network) -> str:
-    """A network as nft lists it: one address without its /32 or /128."""
-    return str(net.network_address) if net.num_addresses == 1 else str(net)
-
-
-def collapse(entries: list[str]) -> list[str]:
-    """Addresses and networks merged where they overlap or touch (nft refuses overlapping
-    intervals in one set), IPv4 first, each family in order."""
-    nets = [ipaddress.ip_network(e, strict=False) for e in entries]
-    out: list[str] = []
-    for version in (4, 6):
-        fam = [n for n in nets if n.version == version]
-        out += [_net_text(n) for n in ipaddress.collapse_addresses(fam)]  # type: ignore[arg-type]
-    return out
-
-
 def allow_networks(settings: Settings) -> list[str]:
     """[firewall] allow, merged; refuses (FirewallSettingsError) an entry that is no address or
     network (the settings loader refuses those already; settings made in code may hold one)."""
@@ -181,146 +153,6 @@ def allow_networks(settings: Settings) -> list[str]:
     if problems:
         raise FirewallSettingsError(problems)
     return collapse([e.strip() for e in settings.firewall.allow])
-
-
-def is_lan(net: ipaddress.IPv4Network | ipaddress.IPv6Network) -> bool:
-    """True when *net* lies inside a private, link-local or unique-local block."""
-    return any(net.version == b.version and net.subnet_of(b)  # type: ignore[arg-type]
-               for b in LAN_BLOCKS)
-
-
-def _prefix_len(netmask: str) -> int | None:
-    try:
-        return bin(int(ipaddress.ip_address(netmask.split("/")[0]))).count("1")
-    except ValueError:
-        return None
-
-
-def lan_networks() -> list[str]:
-    """The networks of this machine's interface addresses that are a LAN (see LAN_BLOCKS):
-    loopback and point-to-point links (ppp, wwan in raw-IP mode, VPN tunnels) left out, and so
-    are networks of one address. Merged, IPv4 first."""
-    import psutil
-
-    try:
-        stats, addrs = psutil.net_if_stats(), psutil.net_if_addrs()
-    except OSError:
-        return []
-    nets: list[str] = []
-    for name, items in addrs.items():
-        flags = set(str(getattr(stats.get(name), "flags", "") or "").split(","))
-        if "loopback" in flags or "pointopoint" in flags or name == "lo":
-            continue
-        for a in items:
-            if a.family not in (socket.AF_INET, socket.AF_INET6) or not a.netmask:
-                continue
-            plen = _prefix_len(a.netmask)
-            if plen is None:
-                continue
-            try:
-                net = ipaddress.ip_interface(f"{a.address.split('%')[0]}/{plen}").network
-            except ValueError:
-                continue
-            if net.num_addresses == 1 or net.network_address.is_loopback:
-                continue
-            if is_lan(net):
-                nets.append(str(net))
-    return collapse(nets)
-
-
-# --------------------------------------------------------------------------- the SSH session
-@dataclass(frozen=True)
-class Session:
-    """Where an SSH session comes from: the client's address and the port of this machine's sshd
-    it is connected to; *source* says where that was read."""
-
-    address: str
-    port: int = SSH_PORT
-    source: str = ""
-
-    @property
-    def element(self) -> str:
-        return f"{self.address} . {self.port}"
-
-
-def parse_session(value: str, var: str, source: str = "") -> Session:
-    """*value* of SSH_CONNECTION ("client port server port") or SSH_CLIENT ("client port
-    port"); refuses (SessionError) one whose first field is no IP address."""
-    fields = value.split()
-    raw = fields[0] if fields else ""
-    try:
-        addr = ipaddress.ip_address(raw.split("%")[0])
-    except ValueError:
-        raise SessionError(f"{var} is set, but its first field '{raw[:40]}' is not an IP "
-                           "address, so the address of this SSH session is not known") from None
-    if addr.version == 6 and addr.ipv4_mapped is not None:
-        addr = addr.ipv4_mapped
-    want = 4 if var == "SSH_CONNECTION" else 3
-    port = SSH_PORT
-    if len(fields) >= want and fields[want - 1].isdigit() and 0 < int(fields[want - 1]) < 65536:
-        port = int(fields[want - 1])
-    return Session(str(addr), port, source or var)
-
-
-def session_from_env(environ: Mapping[str, str]) -> Session | None:
-    """The session named by SSH_CONNECTION (else SSH_CLIENT) in *environ*; None when neither
-    is set."""
-    for var in SESSION_VARS:
-        value = (environ.get(var) or "").strip()
-        if value:
-            return parse_session(value, var)
-    return None
-
-
-def _session_before_sudo() -> Session | None:
-    """Run by sudo (whose env_reset drops SSH_CONNECTION): the session of the shell that ran
-    sudo, from its environment (root may read it)."""
-    import psutil
-
-    try:
-        proc = psutil.Process().parent()
-        hops = 0
-        if proc is None or proc.name() not in ELEVATORS:
-            return None
-        while proc is not None and proc.name() in ELEVATORS and hops < ANCESTORS_MAX:
-            proc, hops = proc.parent(), hops + 1
-        if proc is None:
-            return None
-        env = proc.environ()
-    except (psutil.Error, OSError):
-        return None
-    found = session_from_env(env)
-    if found is None:
-        return None
-    return Session(found.address, found.port, f"{found.source} of the shell that ran sudo")
-
-
-def _session_of_terminal() -> Session | None:
-    """The login record of this process's terminal (what `who am i` shows): sshd writes the
-    client's address there. Only an IP address counts (tmux, screen and X write other words)."""
-    import psutil
-
-    try:
-        tty = psutil.Process().terminal()
-        users = psutil.users() if tty else []
-    except (psutil.Error, OSError):
-        return None
-    for u in users:
-        if tty and f"/dev/{u.terminal}" == tty and u.host:
-            try:
-                addr = ipaddress.ip_address(u.host.split("%")[0])
-            except ValueError:
-                return None
-            return Session(str(addr), SSH_PORT, f"the login record of {u.terminal}")
-    return None
-
-
-def detect_session() -> Session | None:
-    """The SSH session this process runs in: SSH_CONNECTION or SSH_CLIENT; under sudo (which
-    drops them) the ones of the shell that ran sudo; else the login record of the terminal.
-    None: not over SSH, as far as can be told. Raises SessionError for an unreadable one."""
-    return (session_from_env(os.environ) or (_session_before_sudo() if os.geteuid() == 0
-                                              else None) or _session_of_terminal())
 
 
 # --------------------------------------------------------------------------- who gets in

@@ -93,3 +93,71 @@ def with_detected(settings: Settings, net: LocalNet | None = None) -> Settings:
     elif not interface and net.local_ip == local_ip:
         interface = net.interface
     return replace(settings, this=replace(t, local_ip=local_ip, interface=interface))
+
+
+# --------------------------------------------------------------------------- this machine's LAN
+# Only these blocks count as a LAN (private, link-local, unique local): an interface on a public
+# block, or on the carrier's shared 100.64.0.0/10, has the internet or strangers as neighbours.
+LAN_BLOCKS = tuple(ipaddress.ip_network(n) for n in (
+    "10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16", "169.254.0.0/16", "fe80::/10", "fc00::/7"))
+
+
+def _net_text(net: ipaddress.IPv4Network | ipaddress.IPv6Network) -> str:
+    """A network as nft lists it: one address without its /32 or /128."""
+    return str(net.network_address) if net.num_addresses == 1 else str(net)
+
+
+def collapse(entries: list[str]) -> list[str]:
+    """Addresses and networks merged where they overlap or touch (nft refuses overlapping
+    intervals in one set), IPv4 first, each family in order."""
+    nets = [ipaddress.ip_network(e, strict=False) for e in entries]
+    out: list[str] = []
+    for version in (4, 6):
+        fam = [n for n in nets if n.version == version]
+        out += [_net_text(n) for n in ipaddress.collapse_addresses(fam)]  # type: ignore[arg-type]
+    return out
+
+
+def is_lan(net: ipaddress.IPv4Network | ipaddress.IPv6Network) -> bool:
+    """True when *net* lies inside a private, link-local or unique-local block."""
+    return any(net.version == b.version and net.subnet_of(b)  # type: ignore[arg-type]
+               for b in LAN_BLOCKS)
+
+
+def _prefix_len(netmask: str) -> int | None:
+    try:
+        return bin(int(ipaddress.ip_address(netmask.split("/")[0]))).count("1")
+    except ValueError:
+        return None
+
+
+def lan_networks() -> list[str]:
+    """The networks of this machine's interface addresses that are a LAN (see LAN_BLOCKS):
+    loopback and point-to-point links (ppp, wwan in raw-IP mode, VPN tunnels) left out, and so
+    are networks of one address. Merged, IPv4 first."""
+    import psutil
+
+    try:
+        stats, addrs = psutil.net_if_stats(), psutil.net_if_addrs()
+    except OSError:
+        return []
+    nets: list[str] = []
+    for name, items in addrs.items():
+        flags = set(str(getattr(stats.get(name), "flags", "") or "").split(","))
+        if "loopback" in flags or "pointopoint" in flags or name == "lo":
+            continue
+        for a in items:
+            if a.family not in (socket.AF_INET, socket.AF_INET6) or not a.netmask:
+                continue
+            plen = _prefix_len(a.netmask)
+            if plen is None:
+                continue
+            try:
+                net = ipaddress.ip_interface(f"{a.address.split('%')[0]}/{plen}").network
+            except ValueError:
+                continue
+            if net.num_addresses == 1 or net.network_address.is_loopback:
+                continue
+            if is_lan(net):
+                nets.append(str(net))
+    return collapse(nets)

@@ -514,10 +514,6 @@ class UndeclaredKeyError(Exception):
     """
 
 
-def _is_typeddict(tp: Any) -> bool:
-    return typing.is_typeddict(tp)
-
-
 _HINTS: dict[type, dict[str, Any]] = {}
 
 
@@ -546,18 +542,18 @@ def _strip(tp: Any) -> Any:
 def _wrap(value: Any, tp: Any, where: str) -> Any:
     """Wrap nested dicts whose declared type is a TypedDict (directly, in a list, as dict values)."""
     tp = _strip(tp)
-    if _is_typeddict(tp) and isinstance(value, dict):
+    if typing.is_typeddict(tp) and isinstance(value, dict):
         return CheckData(where, value, tp)
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
     if origin in (list, tuple) and args and isinstance(value, list):
         inner = _strip(args[0])
-        if _is_typeddict(inner):
+        if typing.is_typeddict(inner):
             return [CheckData(f"{where}[]", v, inner) if isinstance(v, dict) else v
                     for v in value]
     if origin is dict and len(args) == 2 and isinstance(value, dict):
         inner = _strip(args[1])
-        if _is_typeddict(inner):
+        if typing.is_typeddict(inner):
             return {k: CheckData(f"{where}[{k!r}]", v, inner) if isinstance(v, dict) else v
                     for k, v in value.items()}
     return value
@@ -639,15 +635,15 @@ def _collect(data: Mapping[str, Any], td: type, where: str, out: list[str]) -> N
             out.append(f"{where}.{key}")
             continue
         tp = _strip(hints[key])
-        if _is_typeddict(tp) and isinstance(value, Mapping):
+        if typing.is_typeddict(tp) and isinstance(value, Mapping):
             _collect(value, tp, f"{where}.{key}", out)
             continue
         origin, args = typing.get_origin(tp), typing.get_args(tp)
-        if origin in (list, tuple) and args and _is_typeddict(_strip(args[0])):
+        if origin in (list, tuple) and args and typing.is_typeddict(_strip(args[0])):
             for v in value if isinstance(value, list) else []:
                 if isinstance(v, Mapping):
                     _collect(v, _strip(args[0]), f"{where}.{key}[]", out)
-        elif origin is dict and len(args) == 2 and _is_typeddict(_strip(args[1])):
+        elif origin is dict and len(args) == 2 and typing.is_typeddict(_strip(args[1])):
             for k, v in (value.items() if isinstance(value, Mapping) else []):
                 if isinstance(v, Mapping):
                     _collect(v, _strip(args[1]), f"{where}.{key}[{k!r}]", out)

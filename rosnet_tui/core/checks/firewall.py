@@ -14,8 +14,10 @@ import asyncio
 from typing import Any
 
 from rosnet_tui.core import firewall as fw
+from rosnet_tui.core import netinfo
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.ssh import origin
 
 
 def _read() -> tuple[str | None, dict[str, list[str]] | None]:
@@ -23,11 +25,11 @@ def _read() -> tuple[str | None, dict[str, list[str]] | None]:
     return now, (fw.current_sets() if now is not None else None)
 
 
-def _client() -> tuple[fw.Session | None, str]:
+def _client() -> tuple[origin.Session | None, str]:
     """The SSH session this check runs in (None: none), and why it is not known ("")."""
     try:
-        return fw.detect_session(), ""
-    except fw.SessionError as exc:
+        return origin.detect_session(), ""
+    except origin.SessionError as exc:
         return None, str(exc)
 
 
@@ -41,7 +43,7 @@ def who_evidence(loaded: fw.Admission) -> list[str]:
             f"{sessions or 'none'}"]
 
 
-def client_words(adm: fw.Admission, client: fw.Session) -> tuple[str, str]:
+def client_words(adm: fw.Admission, client: origin.Session) -> tuple[str, str]:
     """(why *client* gets in under *adm*, "" when it does not; the evidence line)."""
     why = fw.admitted(adm, client.address, client.port)
     return why, (f"this check runs over SSH from {client.address} (sshd port {client.port}): "
@@ -70,7 +72,7 @@ async def check_firewall(ctx: CheckContext) -> Outcome:
         expected_allow = fw.allow_networks(s)
     except fw.FirewallSettingsError as exc:
         expected_allow, why = [], why or str(exc)
-    expected_lan = fw.lan_networks()
+    expected_lan = netinfo.lan_networks()
     data.update(expected=expected, expected_lan=expected_lan, expected_allow=expected_allow)
     try:
         now, sets = await asyncio.wait_for(asyncio.to_thread(_read), ctx.timeout_s)
