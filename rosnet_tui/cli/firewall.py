@@ -28,6 +28,7 @@ from rosnet_tui.cli.common import (
     state_dir_of,
 )
 from rosnet_tui.cli.writing import (
+    command_line,
     confirm,
     load_settings_for,
     paths_of,
@@ -192,7 +193,8 @@ def run_apply(args: argparse.Namespace) -> int:
         if entry is None:
             print(f"The table {fw.TABLE} was already loaded exactly so.")
         else:
-            print(f"Loaded the table {fw.TABLE} (journal #{entry}). Undo with: rosnet-tui undo")
+            print(f"Loaded the table {fw.TABLE} (journal #{entry}). Undo with: "
+                  f"{command_line(args, 'undo')}")
     if rc == EXIT_OK and not args.no_checks:
         rerun_checks(FIREWALL_CHECKS, settings, paths_of(args))
     return rc
@@ -270,8 +272,8 @@ def run_undo(args: argparse.Namespace) -> int:
             say(f"rosnet-tui: {exc}")
             return EXIT_FAIL
         rc = EXIT_OK
-        print(f"Removed the table {fw.TABLE}" + (f" (journal #{entry}; `rosnet-tui undo` loads "
-                                                 "it again)." if entry else "."))
+        print(f"Removed the table {fw.TABLE}" + (f" (journal #{entry}; `{command_line(args, 'undo')}` "
+                                                 "loads it again)." if entry else "."))
     if rc == EXIT_OK and not args.no_checks:
         rerun_checks(FIREWALL_CHECKS, settings, paths_of(args))
     return rc

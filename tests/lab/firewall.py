@@ -10,9 +10,13 @@ from pathlib import Path
 
 def apply_firewall(lab, host: str, config: Path) -> None:
     """`rosnet-tui firewall apply --yes` on *host* (lab or fleet), its journal in a scratch dir."""
+    state = lab.home(host) / ".firewall-state"
     r = lab.rosnet(host, "firewall", "apply", "--yes", "--no-checks", "--config", str(config),
-                   "--state-dir", str(lab.home(host) / ".firewall-state"), timeout=60)
+                   "--state-dir", str(state), timeout=60)
     assert r.returncode == 0, r.stdout + r.stderr
+    # The undo it prints is the one that finds this journal (issue 29, section 4, row 10).
+    undo = next(x for x in r.stdout.splitlines() if "Undo with: " in x).split("Undo with: ")[1]
+    assert f"--state-dir {state}" in undo and f"--config {config}" in undo, undo
 
 
 def remove_firewall(lab, host: str) -> None:
