@@ -33,6 +33,7 @@ import pytest
 from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core.checks.linux import check_hosts
 from rosnet_tui.core.checks.runner import RunOptions, make_context
+from rosnet_tui.core.cut_writes import INPLACE_DIR
 from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.settings import load_settings
 from tests.builders import ROBOT_CONFIG, random_hosts
@@ -57,7 +58,7 @@ class Container:
         self.cfg.write_text(ROBOT_CONFIG)
         if etc == "ro":
             prep = "mount --bind /etc /etc && mount -o remount,bind,ro /etc"
-            self.journal_dir = self.xdg / "rosnet-tui" / mw.INPLACE_DIR
+            self.journal_dir = self.xdg / "rosnet-tui" / INPLACE_DIR
         else:
             (tmp / "up").mkdir()
             (tmp / "work").mkdir()
@@ -250,7 +251,7 @@ def _cut_journaled_in(sd: Path, tmp_path: Path, monkeypatch) -> tuple[Path, byte
     old = b"127.0.0.1\tlocalhost\n" + b"10.9.9.9\tother\n" * 300
     target.write_bytes(old)
     new = b"127.0.0.1\tlocalhost\n# new\n"
-    assert _cut(target, new, monkeypatch, journal_dir=sd / mw.INPLACE_DIR) not in (old, new)
+    assert _cut(target, new, monkeypatch, journal_dir=sd / INPLACE_DIR) not in (old, new)
     cfg = tmp_path / "settings.toml"
     cfg.write_text(ROBOT_CONFIG)
     return target, new, cfg
@@ -278,7 +279,7 @@ def test_a_journal_in_the_default_state_dir_is_found_by_a_reader_not_told_it(tmp
     """The writer journaled in the state dir (the file's folder may not be written); a reader
     given no state dir (``hosts show``, ``check``) looks in the default one."""
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
-    jdir = tmp_path / "xdg" / "rosnet-tui" / mw.INPLACE_DIR
+    jdir = tmp_path / "xdg" / "rosnet-tui" / INPLACE_DIR
     target = _unwritable_folder(tmp_path, monkeypatch) / "hosts"
     old = b"# old\n" * 400
     target.write_bytes(old)
@@ -325,4 +326,4 @@ def test_hosts_show_finds_the_journal_in_the_state_dir_it_is_given(tmp_path, mon
     assert main(["hosts", "show", "--config", str(cfg), "--file", str(target),
                  "--state-dir", str(sd)]) == 0
     assert "has no rosnet-tui block yet" in capsys.readouterr().out
-    assert target.read_bytes() == new and not list((sd / mw.INPLACE_DIR).iterdir())
+    assert target.read_bytes() == new and not list((sd / INPLACE_DIR).iterdir())

@@ -322,7 +322,10 @@ def _cut_in_place(path: Path, new: bytes, monkeypatch) -> None:
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root (to read as another user)")
-def test_a_user_reading_roots_cut_write_sees_what_it_will_be_and_changes_nothing(monkeypatch):
+def test_a_user_reading_roots_torn_write_is_told_so_and_changes_nothing(monkeypatch):
+    """Issue 29: the user may not complete root's cut write, so reading it is refused, saying
+    the file is torn and the root command that completes it (it used to answer with what the
+    file would hold, while every other program read the mix)."""
     folder = Path(__import__("tempfile").mkdtemp(prefix="rosnet-h15-"))
     try:
         os.chmod(folder, 0o755)
@@ -336,16 +339,47 @@ def test_a_user_reading_roots_cut_write_sees_what_it_will_be_and_changes_nothing
         os.setegid(65534)
         os.seteuid(65534)                                       # read as the user "nobody"
         try:
-            seen = mw.read_bytes(target)
+            with pytest.raises(mw.TornFileError) as refused:
+                mw.read_bytes(target)
         finally:
             os.seteuid(0)
             os.setegid(0)
-        assert seen == new
+        said = str(refused.value)
+        assert f"{target} is torn" in said
+        assert said.endswith(f"-m rosnet_tui hosts show --file {target}")
+        assert said.split("run: ")[1].startswith("sudo ")
         assert target.read_bytes() == torn                      # nobody may not write it
         assert mw.read_bytes(target) == new == target.read_bytes()   # root completes it
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     tally(AREA, 1, 1, "reader without write permission")
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root (to read as another user)")
+def test_a_user_reading_roots_cut_write_that_is_whole_reads_it_as_it_is(monkeypatch):
+    """A cut write that left the old or the new bytes is no mix: the user reads the file as it
+    is (root's next run completes it)."""
+    folder = Path(__import__("tempfile").mkdtemp(prefix="rosnet-h15-"))
+    try:
+        os.chmod(folder, 0o755)
+        target = folder / "hosts"
+        old, new = b"# old\n" * 10, b"# new, longer\n" * 10
+        target.write_bytes(old)
+        os.chmod(target, 0o644)
+        _cut_in_place(target, new, monkeypatch)                 # grew: nothing to truncate
+        assert target.read_bytes() == new
+        assert [p.name for p in folder.iterdir() if p.name.endswith(".inplace")]
+        os.setegid(65534)
+        os.seteuid(65534)
+        try:
+            assert mw.read_bytes(target) == new
+        finally:
+            os.seteuid(0)
+            os.setegid(0)
+        assert mw.read_bytes(target) == new
+        assert not [p.name for p in folder.iterdir() if p.name.endswith(".inplace")]
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root (to make another user's file)")
