@@ -66,7 +66,7 @@ class Judge:
         return "plain" if data == self.plain else "block" if data == self.block else "torn"
 
 
-def _crash(rng: random.Random, big: bool, i: int) -> list:
+def _kill_plan(rng: random.Random, big: bool, i: int) -> list:
     if i % 10 == 3:
         return ["truncate"]                               # the writer's own crash point
     roll = rng.random()
@@ -92,7 +92,8 @@ def _next_run(bench: HostsBench, judge: Judge, which: int, before: str) -> None:
         now = judge.kind()
         want = "fail" if now == "plain" else "pass"
         assert checks["linux.hosts"]["status"] == want, (now, checks["linux.hosts"])
-        assert checks["linux.resolve"]["status"] == want, (now, checks["linux.resolve"])
+        if now == "block":   # the resolver read the whole file too (glibc, not our reader)
+            assert checks["linux.resolve"]["status"] == "pass", checks["linux.resolve"]
     elif which == 2:   # stops before it reads the hosts file: no settings there
         r = bench.run("hosts", "show", "--config", str(bench.dir / "missing.toml"))
         assert r.rc == 2, r.err
@@ -130,7 +131,7 @@ def _kill_many(bench: HostsBench, kills: int, seed: int, big: bool) -> dict:
         state = judge.kind()
         assert state in ("plain", "block"), state
         cmd = apply if state == "plain" else undo
-        crash = _crash(rng, big, stats["kills"])
+        crash = _kill_plan(rng, big, stats["kills"])
         r = bench.run(*cmd, crash=crash)
         if not r.killed:                                  # the kill came after its end
             assert r.rc == 0, (crash, r.err)
