@@ -122,10 +122,12 @@ def complete_cut_writes(argv: list[str]) -> None:
         if not found:
             return
         from rosnet_tui.core.managed_write import complete_cut_writes as complete
+        from rosnet_tui.core.privilege import format_command, sudo_argv
 
         configs = [Path(c).expanduser().absolute() for c in _option_values(argv, "--config")]
         config = (configs or [default_config_path()])[-1]
-        for line in complete(found, config=config if config.is_file() else None):
+        for line in complete(found, config=config if config.is_file() else None,
+                             sudo=lambda args: format_command(sudo_argv(args))):
             say(f"rosnet-tui: {line}")
     except Exception:  # noqa: BLE001 - a look-ahead only; the command's own reads decide
         return

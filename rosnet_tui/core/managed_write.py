@@ -23,6 +23,7 @@ import json
 import os
 import re
 import secrets
+import shlex
 import stat
 import time
 from collections.abc import Callable
@@ -46,24 +47,26 @@ _before_truncate: Callable[[], None] | None = None
 
 class TornFileError(ManagedFileError):
     """The file holds a mix of old and new bytes (an in-place write of ours was cut short) and
-    this process may not complete it; the message says which command does."""
+    this process may not complete it; the message says which command does. *sudo* renders the
+    command that runs rosnet-tui as root with the given arguments (the command line passes the
+    exact one); *config* is the settings file that run should use."""
 
-    def __init__(self, path: Path, journal_dir: Path | None = None,
-                 config: Path | None = None) -> None:
+    def __init__(self, path: Path, journal_dir: Path | None = None, config: Path | None = None,
+                 sudo: Callable[[list[str]], str] | None = None) -> None:
         self.path = Path(path)
-        self.command = completion_command(path, journal_dir, config)
+        args = completion_args(path, journal_dir, config)
+        self.command = sudo(args) if sudo else "sudo rosnet-tui " + shlex.join(args)
         super().__init__(
             f"{path} is torn: a write of rosnet-tui was cut short, and every program reads a mix "
             "of its old and new lines until it is completed. Only root may complete it; run: "
             + self.command)
 
 
-def completion_command(path: Path, journal_dir: Path | None = None,
-                       config: Path | None = None) -> str:
-    """The command that completes a cut write of *path* as root: any run of rosnet-tui does it
-    first (a read-only one here), told where the journal is and the settings to use."""
+def completion_args(path: Path, journal_dir: Path | None = None,
+                    config: Path | None = None) -> list[str]:
+    """rosnet-tui's arguments for a run that completes a cut write of *path* (run as root): any
+    run does that first; a read-only one, told where the journal is and which settings to use."""
     from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
-    from rosnet_tui.core.privilege import format_command, sudo_argv
 
     args = ["hosts", "show"]
     if Path(path) != DEFAULT_HOSTS_PATH:
@@ -72,7 +75,7 @@ def completion_command(path: Path, journal_dir: Path | None = None,
         args += ["--state-dir", str(Path(journal_dir).parent)]
     if config is not None:
         args += ["--config", str(config)]
-    return format_command(sudo_argv(args))
+    return args
 
 
 # --------------------------------------------------------------------------- preview
@@ -381,11 +384,12 @@ def find_cut_writes(path: Path, *, journal_dir: Path | None = None,
 
 
 def complete_cut_writes(found: list[tuple[str, str | None]], *, config: Path | None = None,
+                        sudo: Callable[[list[str]], str] | None = None,
                         wait_s: float = 2.0) -> list[str]:
     """Complete the cut writes :func:`rosnet_tui.core.cut_writes.pending` found (at start-up,
     before anything reads a file); what to tell the user, one line each: what was completed,
-    and the files that stay torn because this process may not write them (with the command,
-    given *config*, that completes them)."""
+    and the files that stay torn because this process may not write them (with the command
+    that completes them: see :class:`TornFileError`)."""
     said = []
     for path, folder in found:
         try:
@@ -400,7 +404,7 @@ def complete_cut_writes(found: list[tuple[str, str | None]], *, config: Path | N
             elif c.outcome == "completed" and c.changed:
                 said.append(f"completed a write of {c.path} that a killed run had begun")
             elif c.outcome == "left" and c.torn:
-                said.append(str(TornFileError(c.path, c.journal_dir, config)))
+                said.append(str(TornFileError(c.path, c.journal_dir, config, sudo)))
     return said
 
 

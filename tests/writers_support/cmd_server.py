@@ -124,7 +124,8 @@ def serve() -> None:
     import rosnet_tui.cli.hosts
     import rosnet_tui.cli.undo  # noqa: F401
     from rosnet_tui.core import undo_journal as uj
-    from rosnet_tui.core.checks.runner import load_builtin_checks, select
+    from rosnet_tui.core.checks import load_builtin_checks
+    from rosnet_tui.core.checks.runner import select
 
     load_builtin_checks()
     select(steps=["linux"])
