@@ -25,6 +25,7 @@ from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core import undo_journal as uj
+from rosnet_tui.core.cut_writes import MAGIC, journal_target
 from tests.hardening_tally import tally
 
 REPO = Path(__file__).resolve().parents[1]
@@ -78,9 +79,12 @@ def test_a_deeply_nested_undo_journal_entry_is_skipped_not_a_crash(tmp_path):
     tally(AREA, 1, 1, "undo journal")
 
 
-def test_an_in_place_journal_with_a_deep_header_is_not_trusted():
-    head = mw.INPLACE_MAGIC + DEEP.encode() + b"\n"
+def test_an_in_place_journal_with_a_deep_header_is_not_trusted(tmp_path):
+    head = MAGIC + DEEP.encode() + b"\n"
     assert mw._parse_journal(head) is None
+    journal = tmp_path / ".hosts.rosnet-tui.1-2.inplace"
+    journal.write_bytes(head)
+    assert journal_target(str(journal)) is None        # what start-up reads of it: no crash
 
 
 def test_peer_and_network_json_parsers_refuse_deep_nesting():

@@ -129,12 +129,14 @@ def _lines(proc: subprocess.Popen, deadline: float):
             yield line.decode(errors="replace")
 
 
-def run_kills(bench: KillBench, mode: str, kills: int, budget_s: float, seed: int) -> dict:
+def run_kills(bench: KillBench, mode: str, kills: int, seed: int) -> dict:
+    """*kills* SIGKILLs, however long they take (a budget of seconds made the count, and so the
+    verdict, depend on how busy the machine was)."""
     rng = random.Random(seed)
     stats = {"kills": 0, "torn_seen": 0, "recovered": 0, "old": 0, "new": 0, "starts": 0}
     started = time.monotonic()
     prev = "A"
-    while stats["kills"] < kills and time.monotonic() - started < budget_s:
+    while stats["kills"] < kills:
         proc = bench.spawn(mode)
         try:
             lines = _lines(proc, time.monotonic() + 20)
@@ -180,13 +182,14 @@ def run_kills(bench: KillBench, mode: str, kills: int, budget_s: float, seed: in
 
 @ROOT_AND_MOUNT
 def test_hundreds_of_sigkills_during_in_place_writes_of_a_large_bind_mounted_file(tmp_path):
-    """Raw writes, large file (2 MB and 2.5 MB versions): 200 kills, each at a random moment of
+    """Raw writes, large file (2 MB and 2.5 MB versions): 120 kills, each at a random moment of
     a large write (the journal's or the file's)."""
     bench = KillBench(tmp_path, random_hosts(2_000_000, 1), random_hosts(2_500_000, 2))
-    stats = run_kills(bench, "raw", kills=200, budget_s=40, seed=15)
+    stats = run_kills(bench, "raw", kills=120, seed=15)
     print(stats)
-    assert stats["kills"] >= 150, stats
-    assert stats["torn_seen"] >= 1, f"no kill landed inside a write: {stats}"
+    assert stats["kills"] == 120, stats
+    # Few kills land inside the rewrite itself now that it is one write and the truncation (no
+    # fsync between them): tests/test_hosts_torn.py kills inside that write on purpose.
     assert stats["recovered"] == stats["torn_seen"], stats
     assert not bench.journals()
     assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
@@ -196,14 +199,14 @@ def test_hundreds_of_sigkills_during_in_place_writes_of_a_large_bind_mounted_fil
 
 @ROOT_AND_MOUNT
 def test_hundreds_of_sigkills_during_apply_and_undo_in_place(tmp_path):
-    """hosts apply / undo of a 3,000-line block on top of a 1 MB bind-mounted file: 100 kills;
+    """hosts apply / undo of a 3,000-line block on top of a 1 MB bind-mounted file: 60 kills;
     after each, the next run reads the old or the new file and undo never finds a conflict."""
     a = random_hosts(1_000_000, 3)
     b = mt.encode(mt.compose_block(mt.decode(a), BODY, position="top"))
     bench = KillBench(tmp_path, a, b)
-    stats = run_kills(bench, "apply", kills=100, budget_s=25, seed=16)
+    stats = run_kills(bench, "apply", kills=60, seed=16)
     print(stats)
-    assert stats["kills"] >= 60, stats
+    assert stats["kills"] == 60, stats
     assert stats["recovered"] == stats["torn_seen"], stats
     assert not bench.journals()
     assert bench.dst.read_bytes() == bench.underneath
@@ -322,7 +325,10 @@ def _cut_in_place(path: Path, new: bytes, monkeypatch) -> None:
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root (to read as another user)")
-def test_a_user_reading_roots_cut_write_sees_what_it_will_be_and_changes_nothing(monkeypatch):
+def test_a_user_reading_roots_torn_write_is_told_so_and_changes_nothing(monkeypatch):
+    """Issue 29: the user may not complete root's cut write, so reading it is refused, saying
+    the file is torn and the root command that completes it (it used to answer with what the
+    file would hold, while every other program read the mix)."""
     folder = Path(__import__("tempfile").mkdtemp(prefix="rosnet-h15-"))
     try:
         os.chmod(folder, 0o755)
@@ -336,16 +342,46 @@ def test_a_user_reading_roots_cut_write_sees_what_it_will_be_and_changes_nothing
         os.setegid(65534)
         os.seteuid(65534)                                       # read as the user "nobody"
         try:
-            seen = mw.read_bytes(target)
+            with pytest.raises(mw.TornFileError) as refused:
+                mw.read_bytes(target)
         finally:
             os.seteuid(0)
             os.setegid(0)
-        assert seen == new
+        said = str(refused.value)
+        assert f"{target} is torn" in said
+        assert said.endswith(f"run: sudo rosnet-tui hosts show --file {target}")
         assert target.read_bytes() == torn                      # nobody may not write it
         assert mw.read_bytes(target) == new == target.read_bytes()   # root completes it
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     tally(AREA, 1, 1, "reader without write permission")
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root (to read as another user)")
+def test_a_user_reading_roots_cut_write_that_is_whole_reads_it_as_it_is(monkeypatch):
+    """A cut write that left the old or the new bytes is no mix: the user reads the file as it
+    is (root's next run completes it)."""
+    folder = Path(__import__("tempfile").mkdtemp(prefix="rosnet-h15-"))
+    try:
+        os.chmod(folder, 0o755)
+        target = folder / "hosts"
+        old, new = b"# old\n" * 10, b"# new, longer\n" * 10
+        target.write_bytes(old)
+        os.chmod(target, 0o644)
+        _cut_in_place(target, new, monkeypatch)                 # grew: nothing to truncate
+        assert target.read_bytes() == new
+        assert [p.name for p in folder.iterdir() if p.name.endswith(".inplace")]
+        os.setegid(65534)
+        os.seteuid(65534)
+        try:
+            assert mw.read_bytes(target) == new
+        finally:
+            os.seteuid(0)
+            os.setegid(0)
+        assert mw.read_bytes(target) == new
+        assert not [p.name for p in folder.iterdir() if p.name.endswith(".inplace")]
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root (to make another user's file)")

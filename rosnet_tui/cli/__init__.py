@@ -13,7 +13,7 @@ import importlib
 import sys
 
 from rosnet_tui import __version__
-from rosnet_tui.cli.common import EXIT_USAGE, add_config_option
+from rosnet_tui.cli.common import EXIT_USAGE, add_config_option, complete_cut_writes
 
 # Sub-command modules, in the order --help lists them.
 SUBCOMMAND_MODULES = ("check", "hosts", "ros", "router", "firewall", "undo", "report", "sync",
@@ -71,6 +71,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    complete_cut_writes(argv)   # a write a killed run left half done, before anything reads
     if not argv:  # the wizard, as most people start it: no parser to build
         from rosnet_tui.cli.wizard import run_wizard
 

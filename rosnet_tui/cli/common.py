@@ -82,6 +82,57 @@ def config_path(args: argparse.Namespace) -> Path:
     return Path(args.config).expanduser() if getattr(args, "config", None) else default_config_path()
 
 
+def _option_values(argv: list[str], option: str) -> list[str]:
+    """The values given to *option* in *argv* (``--opt VALUE`` or ``--opt=VALUE``)."""
+    out = []
+    for i, a in enumerate(argv):
+        if a == option and i + 1 < len(argv):
+            out.append(argv[i + 1])
+        elif a.startswith(option + "="):
+            out.append(a[len(option) + 1:])
+    return out
+
+
+def complete_cut_writes(argv: list[str]) -> None:
+    """Run first by every command, before anything reads a file: complete the in-place writes
+    of rosnet-tui that a killed run left half done (a torn /etc/hosts, which every program on the
+    machine reads), or, where this user may not, say that the file is torn and which command
+    completes it. A few stats when nothing is pending; never stops the command (its own reads
+    complete or refuse again)."""
+    try:
+        from rosnet_tui.core.cut_writes import pending
+        from rosnet_tui.core.paths import (
+            DEFAULT_HOSTS_PATH,
+            default_bashrc_path,
+            default_config_path,
+            default_state_dir,
+        )
+
+        files: list[Path | str] = [Path(f).expanduser().absolute()
+                                   for f in _option_values(argv, "--file")]
+        dirs: list[Path | str] = [Path(d).expanduser().absolute()
+                                  for d in _option_values(argv, "--state-dir")]
+        files.append(DEFAULT_HOSTS_PATH)
+        try:
+            files.append(default_bashrc_path())
+            dirs.append(default_state_dir())
+        except (RuntimeError, KeyError):   # no home folder
+            pass
+        found = pending(files, dirs)
+        if not found:
+            return
+        from rosnet_tui.core.managed_write import complete_cut_writes as complete
+        from rosnet_tui.core.privilege import format_command, sudo_argv
+
+        configs = [Path(c).expanduser().absolute() for c in _option_values(argv, "--config")]
+        config = (configs or [default_config_path()])[-1]
+        for line in complete(found, config=config if config.is_file() else None,
+                             sudo=lambda args: format_command(sudo_argv(args))):
+            say(f"rosnet-tui: {line}")
+    except Exception:  # noqa: BLE001 - a look-ahead only; the command's own reads decide
+        return
+
+
 def say(msg: str) -> None:
     """A message on stderr (refusals, errors, what a command could not do)."""
     print(msg, file=sys.stderr, flush=True)

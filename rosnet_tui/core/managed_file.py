@@ -14,12 +14,12 @@ The flow the UI and the CLI share:
    under ``ip netns exec``), where rename fails with EBUSY/EXDEV.
 3. :func:`plan_undo` / :func:`apply_undo` put the files of the last apply back, byte for byte.
 
-An in-place rewrite cannot be atomic, so it is journaled: the old and the new bytes go to a
-journal file beside the target first (``.NAME.rosnet-tui.DEV-INODE.inplace``, fsynced, locked by
-the writer while it writes), then the target is rewritten, then the journal is removed. A writer
-killed at any moment leaves the old content, the new one, or a mix of the two with its journal:
-the next read through :func:`read_bytes` (every preview, apply and undo) completes the write. Temp
-files of killed writers (beside the target, in the state dir) are removed by the next run.
+Applies and undos write through one writer, :func:`rosnet_tui.core.managed_write.write_file`. An
+in-place rewrite cannot be atomic, so it is journaled first (:mod:`rosnet_tui.core.cut_writes`):
+a writer killed at any moment leaves the old content, the new one, or a mix of the two with its
+journal, and the next run of rosnet-tui completes it before it reads anything (or, as a user who
+may not write the file, says it is torn and which command completes it). Temp files of killed
+writers (beside the target, in the state dir) are removed by the next run.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rosnet_tui.core.cut_writes import INPLACE_DIR
 from rosnet_tui.core.managed_text import (
     ManagedFileError,
     NothingToUndoError,
@@ -46,7 +47,6 @@ from rosnet_tui.core.managed_text import (
     split_lines,
 )
 from rosnet_tui.core.managed_write import (
-    INPLACE_DIR,
     MAX_FILE_BYTES,
     WriteOutcome,
     can_write,

@@ -1,11 +1,16 @@
 """Writing one file safely: atomic rename, or a journaled in-place rewrite where the file is a
-mount point, and recovery of an in-place write that was cut short.
+mount point, and completing an in-place write that was cut short.
 
-An in-place rewrite cannot be atomic, so it is journaled: the old and the new bytes go to a
-journal file beside the target first (``.NAME.rosnet-tui.DEV-INODE.inplace``, fsynced, locked by
-the writer while it writes), then the target is rewritten, then the journal is removed. A writer
-killed at any moment leaves the old content, the new one, or a mix of the two with its journal:
-the next read through :func:`read_bytes` completes the write.
+An in-place rewrite cannot be atomic, so it is journaled (:mod:`.cut_writes` says where): the old
+and the new bytes go to a journal first (fsynced, renamed into place, its folder fsynced, locked
+by the writer while it writes), then the file is rewritten (one write of the whole new content,
+the truncation right after it when the file shrinks, then fsync: other programs may read a mix
+for no longer than that), then the journal is removed. A writer killed at any moment leaves the
+old content, the new one, or a mix of the two with its journal. The next run completes it
+before it reads anything (:func:`complete_cut_writes`, from the command line's start-up), and so
+does every read through :func:`read_bytes`. A process that may not write the file (a user, after
+root's write was cut) cannot: reading a torn file then raises :class:`TornFileError`, which says
+which command completes it.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import json
 import os
 import re
 import secrets
+import shlex
 import stat
 import time
 from collections.abc import Callable
@@ -25,21 +31,51 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rosnet_tui.core import tempfiles
+from rosnet_tui.core.cut_writes import INPLACE_DIR, MAGIC, journal_name
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.managed_text import ManagedFileError, PermissionNeededError, decode
 from rosnet_tui.core.regular_file import FileRefusedError, read_regular
 
 LOCK_TIMEOUT_S = 10.0
-_TMP_RE = tempfiles.MANAGED_TMP
-INPLACE_MAGIC = b"rosnet-tui in-place journal 1\n"
-# Where an in-place write journals when the target's folder may not be written.
-INPLACE_DIR = "inplace"
 
 # Test hook: called between the fsync of a managed file's temp file and the rename (crash tests
 # set it).
 _before_rename: Callable[[], None] | None = None
 # Test hook: called between the in-place write and its truncation (crash tests set it).
 _before_truncate: Callable[[], None] | None = None
+
+
+class TornFileError(ManagedFileError):
+    """The file holds a mix of old and new bytes (an in-place write of ours was cut short) and
+    this process may not complete it; the message says which command does. *sudo* renders the
+    command that runs rosnet-tui as root with the given arguments (the command line passes the
+    exact one); *config* is the settings file that run should use."""
+
+    def __init__(self, path: Path, journal_dir: Path | None = None, config: Path | None = None,
+                 sudo: Callable[[list[str]], str] | None = None) -> None:
+        self.path = Path(path)
+        args = completion_args(path, journal_dir, config)
+        self.command = sudo(args) if sudo else "sudo rosnet-tui " + shlex.join(args)
+        super().__init__(
+            f"{path} is torn: a write of rosnet-tui was cut short, and every program reads a mix "
+            "of its old and new lines until it is completed. Only root may complete it; run: "
+            + self.command)
+
+
+def completion_args(path: Path, journal_dir: Path | None = None,
+                    config: Path | None = None) -> list[str]:
+    """rosnet-tui's arguments for a run that completes a cut write of *path* (run as root): any
+    run does that first; a read-only one, told where the journal is and which settings to use."""
+    from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
+
+    args = ["hosts", "show"]
+    if Path(path) != DEFAULT_HOSTS_PATH:
+        args += ["--file", str(path)]
+    if journal_dir is not None:
+        args += ["--state-dir", str(Path(journal_dir).parent)]
+    if config is not None:
+        args += ["--config", str(config)]
+    return args
 
 
 # --------------------------------------------------------------------------- preview
@@ -49,18 +85,16 @@ def read_bytes(path: Path, *, state_dir: Path | None = None,
 
     Every read of a file rosnet-tui writes goes through here. An in-place write that was cut
     short (its journal is still beside the file, or in the in-place folder of *state_dir* or of
-    the default state dir) is completed first when this process may write the file; otherwise
-    the bytes it will have once completed are returned. Whichever command wrote it, the reader
-    never sees a mix of the old and the new bytes. A writer still at work is waited for, up to
-    *wait_s*."""
+    the default state dir) is completed first, so the reader never sees a mix of the old and
+    the new bytes; when this process may not complete it, TornFileError (a file that is old or
+    new, with a journal this process may not act on, is read as it is). A writer still at work
+    is waited for, up to *wait_s*."""
     try:
-        effective = recover_in_place(
+        recover_in_place(
             Path(path), journal_dir=Path(state_dir) / INPLACE_DIR if state_dir else None,
             wait_s=wait_s)
         real = Path(os.path.realpath(path))
         _remove_stale_temps(real.parent, real.name)
-        if effective is not None:
-            return effective
         return _read_regular(Path(path))
     except FileNotFoundError:
         return None
@@ -86,7 +120,7 @@ def settle(path: Path, *, state_dir: Path | None = None,
            wait_s: float = LOCK_TIMEOUT_S) -> None:
     """Complete a cut-short in-place write of *path*, for readers that must open the file
     themselves (the stdlib-only programs that also run on peers); never raises."""
-    with contextlib.suppress(OSError):
+    with contextlib.suppress(OSError, ManagedFileError):
         recover_in_place(Path(path),
                          journal_dir=Path(state_dir) / INPLACE_DIR if state_dir else None,
                          wait_s=wait_s)
@@ -206,26 +240,22 @@ def write_all(fd: int, data: bytes) -> None:
 
 
 # --------------------------------------------------------------------------- in-place journal
-def _journal_name(real: Path, st: os.stat_result) -> str:
-    return f".{real.name}.rosnet-tui.{st.st_dev:x}-{st.st_ino:x}.inplace"
-
-
 def _journal_bytes(real: Path, st: os.stat_result, old: bytes, new: bytes) -> bytes:
     head = {"path": str(real), "dev": st.st_dev, "ino": st.st_ino,
             "old_len": len(old), "old_sha256": hashlib.sha256(old).hexdigest(),
             "new_len": len(new), "new_sha256": hashlib.sha256(new).hexdigest()}
-    return INPLACE_MAGIC + json.dumps(head, sort_keys=True).encode() + b"\n" + old + new
+    return MAGIC + json.dumps(head, sort_keys=True).encode() + b"\n" + old + new
 
 
 def _parse_journal(data: bytes) -> tuple[dict, bytes, bytes] | None:
     """(header, old, new) of an in-place journal, or None when it is not a whole, valid one."""
-    if not data.startswith(INPLACE_MAGIC):
+    if not data.startswith(MAGIC):
         return None
-    nl = data.find(b"\n", len(INPLACE_MAGIC))
+    nl = data.find(b"\n", len(MAGIC))
     if nl < 0:
         return None
     try:
-        head = loads_bounded(data[len(INPLACE_MAGIC):nl].decode("utf-8"))
+        head = loads_bounded(data[len(MAGIC):nl].decode("utf-8"))
         old_len, new_len = int(head["old_len"]), int(head["new_len"])
     except (ValueError, TypeError, KeyError):   # JsonInputError, UnicodeDecodeError included
         return None
@@ -252,21 +282,38 @@ def _common_prefix(a: bytes, b: bytes) -> int:
     return lo
 
 
+_SECTOR = 512
+
+
 def _is_torn(cur: bytes, old: bytes, new: bytes) -> bool:
     """Whether *cur* is what rewriting *old* with *new* in place leaves when cut short: the new
-    bytes up to some point, the old ones after it (not yet truncated, or extended)."""
+    bytes up to some point and the old ones after it (a killed writer: not yet truncated, or
+    extended); or, after the machine itself went down, each 512-byte sector the old one or the
+    new one (zeros where the file grew)."""
     k = _common_prefix(cur, new)
-    return cur[k:] == old[k:]
+    if cur[k:] == old[k:]:
+        return True
+    if not min(len(old), len(new)) <= len(cur) <= max(len(old), len(new)):
+        return False
+    for i in range(0, len(cur), _SECTOR):
+        c = cur[i:i + _SECTOR]
+        if c != new[i:i + len(c)] and c != old[i:i + len(c)] \
+                and not (i >= len(old) and c == bytes(len(c))):
+            return False
+    return True
 
 
 def _rewrite(real: Path, data: bytes) -> None:
-    fd = os.open(real, os.O_WRONLY | os.O_NOFOLLOW)
+    """*data* into *real* through its own inode, keeping the time other programs may read a mix
+    as short as in place allows: one write of the whole buffer, the truncation right after it
+    (when the file shrinks), then one fsync."""
+    fd = os.open(real, os.O_WRONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
     try:
         write_all(fd, data)
-        os.fsync(fd)
         if _before_truncate is not None:
             _before_truncate()
-        os.ftruncate(fd, len(data))
+        if os.fstat(fd).st_size != len(data):
+            os.ftruncate(fd, len(data))
         os.fsync(fd)
     finally:
         os.close(fd)
@@ -286,35 +333,86 @@ def journal_dirs(journal_dir: Path | None = None) -> list[Path]:
     return out
 
 
-def recover_in_place(path: Path, *, journal_dir: Path | None = None,
-                     wait_s: float = LOCK_TIMEOUT_S) -> bytes | None:
-    """Complete an in-place write of *path* that was cut short, from its journal (beside the
-    file, in *journal_dir*, or in the default state dir's in-place folder).
+@dataclass(frozen=True)
+class CutWrite:
+    """An in-place write that was cut short, as found, and what became of it: ``completed``
+    (the file holds the new bytes now), ``left`` (this process may not write the file, or
+    could not), ``dropped`` (someone else changed the file since, or the journal was not whole:
+    the file is left as it is)."""
 
-    Returns None when there is nothing to do (no journal: read the file as it is) or when the
-    write was completed here; when this process may not write the file (a user previewing what
-    root's service left), the bytes the file will hold once completed. A journal whose writer is
-    still at work (it holds the journal's lock) is waited for, up to *wait_s*. The file is
-    changed only when it holds the journal's old bytes, its new ones, or a mix that only that
-    write leaves; after anyone else's change the journal is dropped and the file left alone.
-    Raises OSError (FileNotFoundError when *path* does not exist).
-    """
+    path: Path
+    journal: Path
+    torn: bool        # the file held a mix of old and new bytes when found
+    changed: bool     # completing it changed the file
+    outcome: str
+
+    @property
+    def journal_dir(self) -> Path | None:
+        """The state dir's in-place folder that held the journal (None: beside the file)."""
+        return None if self.journal.parent == self.path.parent else self.journal.parent
+
+
+def recover_in_place(path: Path, *, journal_dir: Path | None = None,
+                     wait_s: float = LOCK_TIMEOUT_S) -> None:
+    """Complete an in-place write of *path* that was cut short, from its journal (beside the
+    file, in *journal_dir*, or in the default state dir's in-place folder): see
+    :func:`find_cut_writes`. Raises TornFileError when the file is torn and this process may
+    not complete it; OSError (FileNotFoundError when *path* does not exist)."""
+    for cut in find_cut_writes(path, journal_dir=journal_dir, wait_s=wait_s):
+        if cut.outcome == "left" and cut.torn:
+            raise TornFileError(cut.path, cut.journal_dir)
+
+
+def find_cut_writes(path: Path, *, journal_dir: Path | None = None,
+                    wait_s: float = LOCK_TIMEOUT_S) -> list[CutWrite]:
+    """Complete the in-place writes of *path* that were cut short, where this process may; what
+    was found. A journal whose writer is still at work (it holds the journal's lock) is waited
+    for, up to *wait_s*. The file is changed only when it holds the journal's old bytes, its new
+    ones, or a mix that only that write leaves (it is then rolled forward to the new bytes);
+    after anyone else's change the journal is dropped and the file left alone. Raises OSError
+    (FileNotFoundError when *path* does not exist)."""
     real = Path(os.path.realpath(path))
     st = os.stat(real)
-    name = _journal_name(real, st)
+    name = journal_name(real.name, st)
     jpaths = [real.parent / name] + [d / name for d in journal_dirs(journal_dir)]
-    for jpath in jpaths:
-        got = _recover_from(real, st, jpath, wait_s)
-        if got is not None:
-            return got
-    return None
+    found = []
+    for jpath in dict.fromkeys(jpaths):
+        cut = _recover_from(real, st, jpath, wait_s)
+        if cut is not None:
+            found.append(cut)
+    return found
 
 
-def _recover_from(real: Path, st: os.stat_result, jpath: Path, wait_s: float) -> bytes | None:
+def complete_cut_writes(found: list[tuple[str, str | None]], *, config: Path | None = None,
+                        sudo: Callable[[list[str]], str] | None = None,
+                        wait_s: float = 2.0) -> list[str]:
+    """Complete the cut writes :func:`rosnet_tui.core.cut_writes.pending` found (at start-up,
+    before anything reads a file); what to tell the user, one line each: what was completed,
+    and the files that stay torn because this process may not write them (with the command
+    that completes them: see :class:`TornFileError`)."""
+    said = []
+    for path, folder in found:
+        try:
+            cuts = find_cut_writes(Path(path), journal_dir=Path(folder) if folder else None,
+                                   wait_s=wait_s)
+        except OSError:
+            continue
+        for c in cuts:
+            if c.outcome == "completed" and c.torn:
+                said.append(f"{c.path} was torn (a write of rosnet-tui was cut short): "
+                            "completed, it holds the new content now")
+            elif c.outcome == "completed" and c.changed:
+                said.append(f"completed a write of {c.path} that a killed run had begun")
+            elif c.outcome == "left" and c.torn:
+                said.append(str(TornFileError(c.path, c.journal_dir, config, sudo)))
+    return said
+
+
+def _recover_from(real: Path, st: os.stat_result, jpath: Path, wait_s: float) -> CutWrite | None:
     deadline = time.monotonic() + wait_s
     while True:
         try:
-            jfd = os.open(jpath, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+            jfd = os.open(jpath, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
         except OSError:
             return None                       # none (the usual case), or not ours to read
         try:
@@ -336,62 +434,70 @@ def _recover_from(real: Path, st: os.stat_result, jpath: Path, wait_s: float) ->
                     or not stat.S_ISREG(jst.st_mode):
                 return None
             with os.fdopen(os.dup(jfd), "rb") as f:
-                parsed = _parse_journal(f.read(2 * st.st_size + (64 << 20)))
-            cur = real.read_bytes()
-            target = None
-            if parsed is not None and parsed[0].get("path") == str(real) \
-                    and (parsed[0].get("dev"), parsed[0].get("ino")) == (st.st_dev, st.st_ino):
-                _, old, new = parsed
-                if cur in (new, old) or _is_torn(cur, old, new):
-                    target = new
-            effective = target if target is not None and target != cur else None
-            if not (os.access(real, os.W_OK, effective_ids=True) and os.access(jpath.parent, os.W_OK | os.X_OK, effective_ids=True)):
-                return effective              # a user reading what root will complete
-            try:
-                if effective is not None:
-                    _rewrite(real, effective)
-                    if real.read_bytes() != effective:
-                        return effective      # not completed: the journal stays for later
-                os.unlink(jpath)
-            except OSError:
-                return effective              # e.g. a read-only mount: same as not allowed
-            fsync_dir(jpath.parent)
-            return None
+                parsed = _parse_journal(f.read(min(jst.st_size, 2 * MAX_FILE_BYTES + (1 << 20))))
+            return _settle_from(real, st, jpath, parsed)
         finally:
             os.close(jfd)
+
+
+def _settle_from(real: Path, st: os.stat_result, jpath: Path,
+                 parsed: tuple[dict, bytes, bytes] | None) -> CutWrite:
+    """Roll the file forward from a journal whose lock we hold; what became of it."""
+    cur = real.read_bytes()
+    target, torn = None, False
+    if parsed is not None and parsed[0].get("path") == str(real) \
+            and (parsed[0].get("dev"), parsed[0].get("ino")) == (st.st_dev, st.st_ino):
+        _, old, new = parsed
+        if cur == new or cur == old or _is_torn(cur, old, new):
+            target, torn = new, cur not in (old, new)
+    changed = target is not None and target != cur
+    if not (os.access(real, os.W_OK, effective_ids=True)
+            and os.access(jpath.parent, os.W_OK | os.X_OK, effective_ids=True)):
+        return CutWrite(real, jpath, torn, False, "left")   # a user after root's cut write
+    try:
+        if changed:
+            _rewrite(real, target)
+            if real.read_bytes() != target:
+                return CutWrite(real, jpath, torn, True, "left")   # the journal stays
+        os.unlink(jpath)
+    except OSError:
+        return CutWrite(real, jpath, torn, False, "left")   # e.g. a read-only mount
+    fsync_dir(jpath.parent)
+    return CutWrite(real, jpath, torn, changed, "dropped" if target is None else "completed")
 
 
 def _write_in_place(real: Path, data: bytes, journal_dir: Path | None = None) -> None:
     """Rewrite an existing file through its own inode (mount points, hard links, other owners).
 
     Journaled (see the module docstring): a kill at any moment leaves the old bytes, the new
-    ones, or a state the next :func:`read_bytes` completes. Read back to verify; on a mismatch
-    the old bytes are put back. The journal goes beside the file, or into *journal_dir* when
-    the file's folder may not be written (then only a write through the same state dir
-    completes it); with neither, the write is not journaled.
+    ones, or a state the next run completes. Read back to verify; on a mismatch the old bytes
+    are put back. The journal goes beside the file, or into *journal_dir* when the file's folder
+    may not be written (then only a run that looks in that state dir completes it); with
+    neither, the write is not journaled.
     """
     recover_in_place(real, journal_dir=journal_dir)
     old = real.read_bytes()
     st = os.stat(real)
-    folder = real.parent if os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True) else journal_dir
+    folder = real.parent if os.access(real.parent, os.W_OK | os.X_OK, effective_ids=True) \
+        else journal_dir
     if folder is not None and folder == journal_dir:
         try:
-            os.makedirs(folder, mode=0o700, exist_ok=True)
+            _make_journal_dir(Path(folder))
         except OSError:
             folder = None
     jfd: int | None = None
     jpath: Path | None = None
     if folder is not None:
-        jpath = Path(folder) / _journal_name(real, st)
+        jpath = Path(folder) / journal_name(real.name, st)
         tmp = Path(folder) / f".{real.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-        jfd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW,
+        jfd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC,
                       stat.S_IMODE(st.st_mode) & 0o644)
         try:
             fcntl.flock(jfd, fcntl.LOCK_EX)   # held until the write is done (or we die)
             write_all(jfd, _journal_bytes(real, st, old, data))
             os.fsync(jfd)
             os.rename(tmp, jpath)
-            fsync_dir(Path(folder))
+            fsync_dir(Path(folder))           # the intent is on disk before the file is touched
         except BaseException:
             os.close(jfd)
             with contextlib.suppress(OSError):
@@ -416,6 +522,22 @@ def _write_in_place(real: Path, data: bytes, journal_dir: Path | None = None) ->
     finally:
         if jfd is not None:
             os.close(jfd)
+
+
+def _make_journal_dir(folder: Path) -> None:
+    """A state dir's in-place folder: private (0700), but readable when root writes in a user's
+    state dir (sudo), so that the user's next run sees root's journal (and can say the file is
+    torn); only root may change it."""
+    if folder.is_dir():
+        return
+    parent = folder.parent
+    parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+    try:
+        os.mkdir(folder, 0o700)
+    except FileExistsError:
+        return
+    if os.geteuid() == 0 and os.stat(parent).st_uid != 0:
+        os.chmod(folder, 0o755)
 
 
 def _put_back(real: Path, old: bytes, jpath: Path | None) -> None:
