@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.lab import ADDR, Lab, cleanup, procs
+from tests.lab import ADDR, HOSTS, Lab, cleanup, procs
+from tests.lab.lab import links_behind
 
 pytestmark = pytest.mark.lab
 
@@ -171,6 +172,24 @@ def test_stale_hosts_unplugged_and_lossy(healthy_lab):
         assert ("netem" in qdisc) or ("tbf" in qdisc)
         assert lab.http_get("laptop", f"{ADDR.PROBE_URL}/ip", timeout=15)[0] == 200
     assert "netem" not in lab.run("robot_modem", ["tc", "qdisc", "show", "dev", "wan0"]).stdout
+
+
+def test_links_are_up_when_the_lab_hands_them_out(lab):
+    """Issue 29: router.local_ip failed "eth0 is down" on a lab just built: the kernel sets a
+    link's state up to a second after its carrier, so the lab now waits for it (bounded), after
+    building and after every variant or reset that switches or moves links. The state is read
+    here right away, as the product reads it."""
+    def behind() -> dict:
+        return {h: b for h in HOSTS if (b := links_behind(lab.ns(h)))}
+
+    assert behind() == {}                                   # as built
+    for name, options in (("unplugged", {"side": "laptop"}), ("unplugged", {"side": "robot"}),
+                          ("double_nat", {}), ("cgnat", {})):
+        with lab.variant(name, **options):
+            assert behind() == {}, name                     # the variant's own links
+        assert behind() == {}, f"after {name}"              # and the links brought back
+        eth0 = json.loads(lab.run("laptop", ["ip", "-j", "link", "show", "eth0"]).stdout)[0]
+        assert eth0["operstate"] == "UP"
 
 
 def test_set_robot_wan_moves_the_public_address(healthy_lab):

@@ -126,15 +126,22 @@ def test_peer_programs_are_py38_stdlib_only(module):
     assert imported <= set(sys.stdlib_module_names) | {"__future__"}, imported
 
 
-def test_concurrent_runs_are_forked_by_one_agent_each_with_its_own_output_and_status(local):
-    a = local()
-    t0 = time.monotonic()
+# Each run marks itself in a folder, then waits (bounded) until all have: it ends 7 only when it
+# met the others, which runs one after another never do (the first would wait out its bound).
+MEET = (b"import os, sys, time\nhere, me, n = sys.argv[1], sys.argv[2], int(sys.argv[3])\n"
+        b"open(os.path.join(here, me), 'w').close()\nend = time.monotonic() + 30\n"
+        b"while len(os.listdir(here)) < n and time.monotonic() < end:\n    time.sleep(0.01)\n"
+        b"print(os.getppid(), me, flush=True)\nsys.exit(7 if len(os.listdir(here)) >= n else 1)\n")
+
+
+def test_concurrent_runs_are_forked_by_one_agent_each_with_its_own_output_and_status(local,
+                                                                                    tmp_path):
+    a = local(programs=(("meet", MEET, None),))
     for rid in (1, 2, 3):
-        a.send({"run": "p", "id": rid, "argv": ["0.3", f"run{rid}"]})
+        a.send({"run": "meet", "id": rid, "argv": [str(tmp_path), f"run{rid}", "3"]})
     runs = a.until_exits(3)
-    assert time.monotonic() - t0 < 0.9 + 0.5       # concurrent: not 3 x 0.3 s one after another
     for rid in (1, 2, 3):     # the agent is every run's parent: no interpreter of its own
-        assert runs[rid] == {"o": f"{a.pid} 0.3 run{rid}\n", "e": "", "x": 7}
+        assert runs[rid] == {"o": f"{a.pid} run{rid}\n", "e": "", "x": 7}   # 7: they met
 
 
 def test_a_run_of_a_module_gets_its_entry_called_with_argv_and_its_errors_on_stderr(local):

@@ -156,10 +156,8 @@ async def test_per_peer_work_runs_concurrently_bounded_and_in_order(ssh_client, 
         return p.name
 
     peers = [Peer(f"member{i}") for i in range(12)]
-    t0 = time.monotonic()
     got = await each_peer(peers, work, limit=8)
-    assert got == [p.name for p in peers] and peak == 8
-    assert time.monotonic() - t0 < 0.6          # two waves of 0.1 s, not twelve
+    assert got == [p.name for p in peers] and peak == 8   # 8 at once: concurrent, and bounded
     pool = SshPool()
     opts = pooled(ssh_client, pool)
     try:

@@ -42,6 +42,8 @@ RELIED_ON: tuple[Reliance, ...] = (
     Reliance("textual.message_pump:MessagePump", "_closed", "attribute", True),
     Reliance("textual.message_pump:MessagePump", "_closing", "attribute", True),
     Reliance("textual.screen:Screen", "_callbacks", "attribute", True),
+    Reliance("textual.screen:Screen", "_layout_required", "attribute", True),
+    Reliance("textual.screen:Screen", "_recompose_required", "attribute", True),
     Reliance("textual.screen:Screen", "_binding_chain", "attribute"),
     Reliance("textual.screen:Screen", "_push_result_callback", "method"),
     Reliance("textual.dom:DOMNode", "_merged_bindings", "attribute", True),
@@ -95,6 +97,17 @@ def pump_idle(pump) -> bool:
 def callbacks_pending(screen) -> bool:
     """Whether *screen* still has callbacks waiting for the next refresh."""
     return bool(screen._callbacks)
+
+
+def layout_pending(screen) -> bool:
+    """Whether *screen* owes a layout (or a recompose) it has not done yet.
+
+    Textual lays a screen out from a timer once its messages are handled, not through a message:
+    between the screen going idle and that timer firing (late on a loaded machine) every queue
+    is empty, yet a widget just shown or mounted has no place, and the focus order, which Textual
+    sorts by place, puts it first.
+    """
+    return bool(screen._layout_required or screen._recompose_required)
 
 
 def app_leaving(app) -> bool:

@@ -206,6 +206,7 @@ class Fleet(Lab):
         self._configure_namespaces()
         t3 = time.monotonic()
         self._start_services()
+        self.settle_links()
         t4 = time.monotonic()
         for name in self.COMPUTERS:
             self.install_rosnet(name)

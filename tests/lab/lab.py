@@ -99,6 +99,45 @@ def _check_kernel(ns: str) -> None:
         raise LabUnavailable(f"unshare --uts does not work: {r.stderr.strip()}")
 
 
+LINK_VARIANTS = ("unplugged", "double_nat", "cgnat")   # the variants that switch or move links
+LINKS_SETTLE_S = 5.0   # the kernel's link watcher needs up to ~1 s; more only on a stalled machine
+
+
+def links_behind(namespace: str) -> list[str]:
+    """The links of *namespace* whose state the kernel has not caught up with yet: switched on,
+    and their carrier there but the state not UP (or the carrier gone, the state still UP).
+
+    The kernel's link watcher sets the state up to a second after the carrier changes (at once
+    only for an "urgent" change, which a veth whose two ends have the same index in their
+    namespaces, every lab link, is not). Programs that read the state (router.local_ip, `ip
+    link`'s "state DOWN") would meet a link that already carries traffic as not running.
+    """
+    r = subprocess.run(["ip", "-n", namespace, "-j", "link", "show"], capture_output=True,
+                       text=True, timeout=10)
+    if r.returncode != 0:
+        raise RuntimeError(f"ip link in {namespace}: {r.stderr.strip()}")
+    behind = []
+    for link in json.loads(r.stdout or "[]"):
+        flags = link.get("flags", [])
+        if "UP" in flags and ("LOWER_UP" in flags) != (link.get("operstate") in ("UP", "UNKNOWN")):
+            behind.append(f"{link.get('ifname')} ({link.get('operstate')}, "
+                          f"{'carrier' if 'LOWER_UP' in flags else 'no carrier'})")
+    return behind
+
+
+def wait_links_settled(namespaces: list[str], timeout: float = LINKS_SETTLE_S) -> None:
+    """Return once no link of *namespaces* is behind (links_behind); raise after *timeout*."""
+    deadline = time.monotonic() + timeout
+    while True:
+        behind = {ns: b for ns in namespaces if (b := links_behind(ns))}
+        if not behind:
+            return
+        if time.monotonic() >= deadline:
+            raise RuntimeError(f"links whose state did not follow their carrier in {timeout} s: "
+                               f"{behind}")
+        time.sleep(0.02)
+
+
 def _write_in_place(path: Path, text: str, mode: int | None = None) -> None:
     """Rewrite *path* keeping its inode: /etc/hosts and resolv.conf are bind-mounted files."""
     with open(path, "w", encoding="utf-8") as f:
@@ -442,6 +481,13 @@ class Lab:
         # 4. services, started together, then waited for together
         self._start_services()
 
+        # 5. no link handed out before the kernel calls it up (links_behind)
+        self.settle_links()
+
+    def settle_links(self) -> None:
+        """Wait (bounded) until every link's state follows its carrier (links_behind)."""
+        wait_links_settled([self.ns(h) for h in self.HOSTS])
+
     def _create_links(self, lines: list[str]) -> None:
         """Run the `ip -batch` *lines* that add the namespaces and their links."""
         r = subprocess.run(["ip", "-batch", "-"], input="\n".join(lines) + "\n", text=True,
@@ -659,6 +705,8 @@ class Lab:
         try:
             self._apply(name, **options)
             self._state["variant"] = name
+            if name in LINK_VARIANTS:
+                self.settle_links()
             yield self
         finally:
             self.reset()
@@ -717,6 +765,7 @@ class Lab:
         for h in COMPUTERS:
             readme_install.install(self.home(h))
         st = self._state
+        links_moved = bool(st["unplugged"] or st["double_nat"] or st["cgnat"])
         for s in ("robot", "laptop"):
             if st["forward"][s] != "healthy":
                 self._set_forwarding(s, "healthy")
@@ -744,6 +793,8 @@ class Lab:
             if self.bashrc_path(h).read_text() != topology.bashrc_text(h):
                 _write_in_place(self.bashrc_path(h), topology.bashrc_text(h))
         self._reset_state()
+        if links_moved:
+            self.settle_links()   # the links brought back up are up when handed out
 
     def write_hosts(self, host: str, text: str) -> None:
         """Replace *host*'s /etc/hosts content in place (running processes see it too)."""

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from . import procs
-from .lab import Lab
+from .lab import Lab, wait_links_settled
 from .topology import ADDR
 
 TABLE = "rnl_upnp"
@@ -157,6 +157,7 @@ class UpnpModem:
                         "echo 0 > /proc/sys/net/ipv4/conf/lan1/rp_filter; "
                         "iptables -I INPUT -i lan1 -j ACCEPT; "
                         "iptables -I FORWARD -i lan1 -o wan0 -j ACCEPT")
+        wait_links_settled([self.lan2, modem])
 
     def _remove_lan2(self) -> None:
         modem = self.lab.ns("robot_modem")

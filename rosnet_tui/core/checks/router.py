@@ -28,7 +28,13 @@ from rosnet_tui.core.checks.probes import (
 from rosnet_tui.core.connect import kind_from_text
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.listener import GREETING, TestListener
-from rosnet_tui.core.netinfo import detect_local_net, interface_ipv4
+from rosnet_tui.core.netinfo import (
+    LinkState,
+    LocalNet,
+    detect_local_net,
+    interface_ipv4,
+    link_state,
+)
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import run_blocking
@@ -41,19 +47,21 @@ from rosnet_tui.core.state import record_local_ip
 async def check_local_ip(ctx: CheckContext) -> Outcome:
     t = ctx.settings.this
     expected = t.local_ip
-    net = await run_blocking(detect_local_net, timeout=budget(ctx, "router.local_ip") * 0.8)
-    interface = t.interface or net.interface
+
+    def look() -> tuple[LocalNet, str, LinkState | None]:
+        net = detect_local_net()
+        interface = t.interface or net.interface
+        return net, interface, link_state(interface) if interface else None
+
+    net, interface, link = await run_blocking(look, timeout=budget(ctx, "router.local_ip") * 0.8)
     evidence = [f"default route: {net.gateway or 'none'}"
                 + (f" via {net.interface}" if net.interface else "")]
-    stats = psutil.net_if_stats()
     local_ip, mask = interface_ipv4(interface) if interface else ("", "")
-    if interface:
-        up = interface in stats and stats[interface].isup
+    up = link is not None and link.up
+    if link is not None:
         evidence.append(f"{interface}{' (from the settings)' if t.interface else ''}: "
-                        f"{'up' if up else 'DOWN' if interface in stats else 'no such interface'}, "
-                        f"{local_ip or 'no IPv4 address'}" + (f"/{mask}" if mask else ""))
-    else:
-        up = False
+                        f"{link.word}, {local_ip or 'no IPv4 address'}"
+                        + (f"/{mask}" if mask else ""))
     gateway = net.gateway if (not net.interface or net.interface == interface) else ""
     addrs_here = {a.address for addrs in psutil.net_if_addrs().values() for a in addrs
                   if a.family == socket.AF_INET}
@@ -73,12 +81,11 @@ async def check_local_ip(ctx: CheckContext) -> Outcome:
     if not interface:
         return Outcome(Status.FAIL, "no network interface with an IPv4 address: this machine is not "
                                     "on a network", evidence, data)
-    if interface not in stats:
+    if link is None or not link.exists:
         return Outcome(Status.FAIL, f"the interface {interface} from the settings does not exist "
                                     "here", evidence, data)
     if not up:
-        return Outcome(Status.FAIL, f"{interface} is down (cable unplugged or Wi-Fi off)",
-                       evidence, data)
+        return Outcome(Status.FAIL, f"{interface} is down ({link.why})", evidence, data)
     if not local_ip:
         return Outcome(Status.FAIL, f"{interface} has no IPv4 address (no DHCP lease?)",
                        evidence, data)
