@@ -18,10 +18,20 @@ FRESH_HOSTS = "127.0.0.1\tlocalhost\n::1\tlocalhost ip6-localhost ip6-loopback\n
 
 
 def unexplained(doc: dict) -> list[str]:
-    """The checks left to the catch-all, but for the security checks, whose data does not say
-    why they could not run (another part of issue 29 changes them)."""
+    """The checks left to the catch-all: none, the security checks included (SSH to a peer
+    whose name does not resolve is why they could not run)."""
     return [c for f in doc["findings"] if f["rule"] == "check.unexplained"
-            for c in f["check_ids"] if not c.startswith("security.")]
+            for c in f["check_ids"]]
+
+
+def every_failure_explained(doc: dict) -> None:
+    """Every check that failed or warned is named by a finding other than the catch-alls."""
+    named = {c for f in doc["findings"] if f["rule"] not in ("check.unexplained",
+                                                            "check.no_verdict")
+             for c in f["check_ids"]}
+    bad = [c["id"] for c in doc["checks"] if c["status"] in ("fail", "warn")
+           and c["id"] not in named]
+    assert bad == [], explain_report(doc)
 
 
 def titles(doc: dict) -> set[str]:
@@ -48,6 +58,7 @@ def test_ros1_fresh_install(ros1_lab, tmp_path, host):
         lab.reset()
     me, peer = lab.hostname(host), lab.hostname("laptop" if host == "robot" else "robot")
     assert unexplained(doc) == [], explain_report(doc)
+    every_failure_explained(doc)
     names_do_not_resolve(doc, me, peer)
     uri = [f for f in doc["findings"] if f["rule"] == "ros.env.master_uri_unset"]
     assert [f["condition"] for f in uri] == ["ROS_MASTER_URI not set"], explain_report(doc)
@@ -68,6 +79,7 @@ def test_ros2_fresh_install(ros2, tmp_path, host):
     doc = lab_report(lab, host, ros2.config_path(host), env)
     me, peer = lab.hostname(host), lab.hostname("laptop" if host == "robot" else "robot")
     assert unexplained(doc) == [], explain_report(doc)
+    every_failure_explained(doc)
     names_do_not_resolve(doc, me, peer)
     graph = [f["rule"] for f in doc["findings"] if "ros2.graph" in f["check_ids"]]
     assert "ros2.router.not_running" in graph, explain_report(doc)

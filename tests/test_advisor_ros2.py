@@ -105,6 +105,32 @@ def test_ros1_rules_stay_quiet_on_ros2_results():
     assert not [f for f in fs if f.rule.startswith("ros.")]
 
 
+def test_ros2_env_warnings_are_explained():
+    """ros2.env warns when rmw_zenoh is exported in one place only, when ROS_DISTRO is unset and
+    when localhost-only or DDS settings linger: each gets advice, not "no rule explains it"."""
+    def env(**data):
+        base = {"dds": False, "rmw": "rmw_zenoh_cpp", "bashrc_rmw": "rmw_zenoh_cpp",
+                "rmw_ok": True, "domain_ok": True, "distro": "jazzy", "warnings": []}
+        return [r("ros2.env", "warn", {**base, **data})]
+
+    def only(fs, rule):
+        assert "check.unexplained" not in ids(fs), ids(fs)
+        return next(f for f in fs if f.rule == rule)
+
+    f = only(advise(env(bashrc_rmw=None, rmw_ok=False), member()), "ros2.env.rmw_one_place")
+    assert f.severity == "warn" and "~/.bashrc" in f.meaning and "new shell" in f.meaning
+    assert any("rosnet-tui ros apply" in a for a in f.actions)
+    f = only(advise(env(rmw=None, rmw_ok=False), member()), "ros2.env.rmw_one_place")
+    assert "this shell" in f.meaning and any("source ~/.bashrc" in a for a in f.actions)
+    f = only(advise(env(distro=None), member()), "ros2.env.no_distro")
+    assert "ROS_DISTRO" in f.meaning and any("/opt/ros/" in a for a in f.actions)
+    f = only(advise(env(warnings=["localhost_only", "dds_settings"]), member()),
+             "ros2.env.leftovers")
+    assert "ROS_LOCALHOST_ONLY" in f.meaning and "DDS" in f.meaning
+    # a healthy environment: none of them
+    assert not [f for f in advise(env(), member()) if f.rule.startswith("ros2.env")]
+
+
 # Cases for tests/test_advisor_rules.py's CASES (every rule fires on its case and stays silent on the
 # healthy ROS 1 network): rule id -> () -> (results by id, settings).
 def _case(settings, *results: CheckResult):
@@ -115,6 +141,10 @@ ROS2_CASES = {
     "ros2.env.dds": _case(member, r("ros2.env", "fail", {"dds": True, "rmw": None})),
     "ros2.env.domain": _case(member, r("ros2.env", "fail", {"domain_ok": False,
                                                             "domain_id": "5"})),
+    "ros2.env.rmw_one_place": _case(member, r("ros2.env", "warn", {
+        "dds": False, "rmw": "rmw_zenoh_cpp", "bashrc_rmw": None, "rmw_ok": False})),
+    "ros2.env.no_distro": _case(member, r("ros2.env", "warn", {"distro": None})),
+    "ros2.env.leftovers": _case(member, r("ros2.env", "warn", {"warnings": ["localhost_only"]})),
     "ros2.env.distro": _case(member, r("ros2.env", "fail", {
         "distro": "jazzy", "distro_mismatch": ["turtlebot"],
         "peer_distros": {"turtlebot": "humble"}})),

@@ -216,3 +216,19 @@ def test_printed_commands_can_be_run_as_printed():
                     if FILLER.search(cmd):
                         bad.append(f"{f.rule}{' (blank)' if blank else ''}: `{cmd}`")
     assert bad == []
+
+
+def test_exposure_says_what_the_peers_only_firewall_lets_in():
+    """ROS 1's default protection is the peers-only firewall: the advisor's exposure text says
+    who really gets in (the router card's sentence), and the whole internet only without it."""
+    from rosnet_tui.core.router_card import ros1_exposure
+
+    s = robot_settings()
+    assert s.ros.security == "firewall"
+    f = only(run(healthy_robot(), s), "security.exposed")
+    assert ros1_exposure(s) in f.meaning
+    assert "only the peers, this machine's LAN" in f.meaning and "until it is loaded" in f.meaning
+    s.ros.security = "none"
+    f = only(run(healthy_robot(), s), "security.exposed")
+    assert ros1_exposure(s) in f.meaning and "whole internet" in f.meaning
+    assert "only the peers" not in f.meaning

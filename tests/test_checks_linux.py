@@ -122,6 +122,16 @@ async def test_ping_by_name_with_the_tcp_fallback_reported(tmp_path):
     assert any("ping localhost (127.0.0.1): reply" in e for e in r.evidence)
 
 
+async def test_ping_says_a_name_that_does_not_resolve(tmp_path):
+    """A fresh install: the peer's name is in no hosts file yet. That is no silent peer."""
+    s = settings(peers=[Peer(name="turtlebot.invalid", public_ip="203.0.113.2")])
+    r = await run("linux.ping", ctx(s, tmp_path))
+    assert r.status is Status.FAIL, r.evidence
+    assert "turtlebot.invalid does not resolve" in r.summary, r.summary
+    assert "no answer" not in r.summary
+    assert r.data["peers"]["turtlebot.invalid"]["tcp"] == "resolve"
+
+
 async def test_ping_skips_without_peers(tmp_path):
     r = await run("linux.ping", ctx(settings(peers=[]), tmp_path))
     assert r.status is Status.SKIP and "no peers" in r.summary

@@ -105,6 +105,7 @@ def _next_run(bench: HostsBench, judge: Judge, which: int, before: str) -> None:
             assert f"run: sudo {sys.executable} -m rosnet_tui hosts show --config " \
                    f"{bench.config}" in r.err, r.err
             assert "/etc/hosts is torn" in r.out                  # and where show looks at it
+            assert r.rc == 1, r.out                               # a failed state
             assert judge.kind() == "torn"                     # the user could not complete it
         else:
             assert r.rc == 0, r.err
@@ -330,6 +331,49 @@ def test_roots_journal_in_a_users_state_dir_is_seen_by_that_user(monkeypatch):
         assert f"--file {target} --state-dir {sd}" in said[0]
         assert target.read_bytes() == torn
         assert mw.read_bytes(target, state_dir=sd) == NEW                 # root completes it
+    finally:
+        import shutil
+
+        shutil.rmtree(top, ignore_errors=True)
+
+
+@ROOT
+def test_hosts_show_on_a_torn_file_only_root_may_complete_fails(monkeypatch, capsys):
+    """`hosts show` by a user who may not complete the torn file: it says so and exits 1 (a
+    failed state, not a usage error), not 0 as if all were well."""
+    from rosnet_tui.cli import main
+
+    top = Path(tempfile.mkdtemp(prefix="rosnet-torn-"))
+    try:
+        os.chmod(top, 0o755)
+        folder, sd = top / "etc", top / "state"
+        folder.mkdir(mode=0o755)
+        sd.mkdir(mode=0o700)
+        os.chown(sd, NOBODY, NOBODY)
+        cfg = top / "config.toml"
+        cfg.write_text(ROBOT_CONFIG)
+        os.chmod(cfg, 0o644)
+        target = folder / "hosts"
+        target.write_bytes(OLD)
+        os.chmod(target, 0o644)
+        real_access = os.access
+        monkeypatch.setattr(os, "access", lambda p, m, **kw: False if Path(p) == folder
+                            else real_access(p, m, **kw))
+        torn = _cut(target, NEW, monkeypatch, journal_dir=sd / cut_writes.INPLACE_DIR)
+        monkeypatch.undo()
+        monkeypatch.setenv("XDG_STATE_HOME", str(sd))
+        os.setegid(NOBODY)
+        os.seteuid(NOBODY)
+        try:
+            rc = main(["hosts", "show", "--file", str(target), "--state-dir", str(sd),
+                       "--config", str(cfg)])
+        finally:
+            os.seteuid(0)
+            os.setegid(0)
+        out = capsys.readouterr()
+        assert f"{target} is torn" in out.out + out.err
+        assert rc == 1, (out.out, out.err)
+        assert target.read_bytes() == torn
     finally:
         import shutil
 

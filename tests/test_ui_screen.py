@@ -367,3 +367,27 @@ async def test_the_help_fits_one_page_at_80x24(tmp_path):
         text = app.screen.query_one("#help-text")
         assert text.size.height == len(HELP.rstrip("\n").splitlines())   # nothing wrapped
         assert body.max_scroll_y == 0
+
+
+async def test_the_write_screen_prints_the_undo_command_that_finds_the_journal(tmp_path):
+    """Issue 29 §4 row 10's sibling: the write screen said `rosnet-tui undo` without the
+    settings file and state dir in use; that command looks in the everyday journal and finds
+    nothing. It gives the exact command (the one the command line prints)."""
+    from rosnet_tui.core.privilege import rosnet_command
+    from tests.test_ui import make_app as make_ui_app
+
+    bashrc = tmp_path / "bashrc"
+    bashrc.write_text("alias ll='ls -l'\n")
+    app = make_ui_app(tmp_path, complete_settings(), bashrc_path=bashrc)
+    undo = rosnet_command(["undo"], config=tmp_path / "config.toml", state_dir=tmp_path / "state")
+    assert undo == (f"rosnet-tui undo --config {tmp_path / 'config.toml'} "
+                    f"--state-dir {tmp_path / 'state'}")
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("4", "w")
+        await pilot.pause()
+        assert type(app.screen).__name__ == "WriteScreen"
+        status = str(app.screen.query_one("#write-status").render())
+        assert f"`{undo}` reverts" in status.replace("\n", " "), status
+        await pilot.press("escape")
+        await pilot.pause()
+    assert bashrc.read_text() == "alias ll='ls -l'\n"

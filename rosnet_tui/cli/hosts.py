@@ -194,6 +194,9 @@ def run_show(args: argparse.Namespace) -> int:
     sys.stdout.write(block)
     try:
         preview = preview_hosts(settings, profile, path, state_dir=state_dir_of(args))
+    except mw.TornFileError as exc:      # only root may complete it: a failed state
+        print(f"\n{exc}")
+        return EXIT_FAIL
     except mt.ManagedFileError as exc:
         print(f"\n{path}: {exc}")
         return EXIT_OK

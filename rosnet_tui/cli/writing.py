@@ -97,12 +97,9 @@ def command_line(args: argparse.Namespace, *words: str) -> str:
     """``rosnet-tui WORDS`` as the user must type it to act on what this command recorded:
     with its --config and --state-dir when they were given (else undo looks in the everyday
     journal and finds nothing), shell-quoted."""
-    argv = ["rosnet-tui", *words]
-    if getattr(args, "config", None):
-        argv += ["--config", str(config_path(args).absolute())]
-    if getattr(args, "state_dir", None):
-        argv += ["--state-dir", str(state_dir_of(args))]
-    return privilege.format_command(argv)
+    return privilege.rosnet_command(
+        words, config=config_path(args) if getattr(args, "config", None) else None,
+        state_dir=state_dir_of(args) if getattr(args, "state_dir", None) else None)
 
 
 def print_changes(changes: Iterable[mt.LineChange]) -> None:

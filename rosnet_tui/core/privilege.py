@@ -18,6 +18,7 @@ from pathlib import Path
 
 import rosnet_tui
 from rosnet_tui.core.managed_write import can_write
+from rosnet_tui.core.paths import Paths, default_config_path, default_state_dir
 
 SUDO = "sudo"
 
@@ -76,6 +77,27 @@ def undo_command(*, entry_id: str, state_dir: Path, force: bool = False) -> list
 def format_command(argv: Sequence[str]) -> str:
     """A command line the user can read and paste."""
     return shlex.join(argv)
+
+
+def rosnet_command(words: Sequence[str], *, config: Path | None = None,
+                   state_dir: Path | None = None) -> str:
+    """``rosnet-tui WORDS`` as the user must type it to act on what a session recorded: with
+    its settings file and state dir when they are not the everyday ones (else `undo` looks in
+    the everyday journal and finds nothing), shell-quoted. The CLI and the TUI both print it."""
+    argv = ["rosnet-tui", *words]
+    if config is not None:
+        argv += ["--config", _abs(config)]
+    if state_dir is not None:
+        argv += ["--state-dir", _abs(state_dir)]
+    return format_command(argv)
+
+
+def session_command(words: Sequence[str], paths: Paths) -> str:
+    """:func:`rosnet_command` for a session on *paths*: the settings file and state dir are
+    named when they differ from the everyday ones."""
+    config = None if _abs(paths.config_path) == _abs(default_config_path()) else paths.config_path
+    state = None if _abs(paths.state_dir) == _abs(default_state_dir()) else paths.state_dir
+    return rosnet_command(words, config=config, state_dir=state)
 
 
 def run_privileged(argv: Sequence[str], *, interactive: bool = True,

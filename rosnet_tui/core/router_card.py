@@ -121,23 +121,32 @@ def _exposure(settings: Settings) -> list[str]:
     allow = (f"allow only the peers' public IPs: {', '.join(sources)}" if sources
              else "allow only the peers' public IPs")
     if firewall.wanted(settings):
-        head = (f"ROS 1 has no authentication: the ROS master ({settings.ros.port}) and every "
-                "node obey anyone who reaches them. With [ros] security = \"firewall\" the "
-                "peers-only firewall (Linux step, `rosnet-tui firewall apply`) lets in only your "
-                f"peers and the addresses you allow, on SSH and TCP {PORT_RANGE}. Until it is "
-                "loaded anyone gets in; and a DMZ host also opens the ports below 1024, which "
-                "the firewall leaves alone.")
+        head = (ros1_exposure(settings) + " That holds for SSH and TCP " + PORT_RANGE + "; a "
+                "DMZ host also opens the ports below 1024, which the firewall leaves alone.")
         return [head, f"- If the modem can restrict a rule to source addresses, {allow} there "
                       "too.", *bridge, ssh, off]
     return [
-        f"[ros] security = \"none\": no firewall. Forwarding every port exposes the ROS master "
-        f"({settings.ros.port}) and every node to the whole internet, and ROS 1 has no "
-        "authentication: anyone who reaches them can command the robot. It exposes SSH too, "
-        "when port 22 is forwarded or with a DMZ host. Set security back on (set-up: Security "
-        "on) for the peers-only firewall.",
+        ros1_exposure(settings) + " Forwarding every port exposes SSH too, when port 22 is "
+        "forwarded or with a DMZ host. Set security back on (set-up: Security on) for the "
+        "peers-only firewall.",
         f"- If the modem can restrict a rule to source addresses, {allow}.",
         *bridge, ssh, off,
     ]
+
+
+def ros1_exposure(settings: Settings) -> str:
+    """Who can command a ROS 1 component through its forwards, for the settings in force: the
+    one sentence of the router card, the Router step and the advisor."""
+    from rosnet_tui.core import firewall
+
+    head = (f"ROS 1 has no authentication: the ROS master ({settings.ros.port}) and every node "
+            "obey anyone who reaches them.")
+    if firewall.wanted(settings):
+        return head + (" With [ros] security = \"firewall\" the peers-only firewall (Linux "
+                       "step, `rosnet-tui firewall apply`) lets in only the peers, this "
+                       "machine's LAN, the addresses you allow ([firewall] allow) and the SSH "
+                       "session that loaded it; until it is loaded, anyone on the internet.")
+    return head + " [ros] security = \"none\": no firewall, so that is the whole internet."
 
 
 def build_router_card(settings: Settings, net: LocalNet | None = None) -> RouterCard:

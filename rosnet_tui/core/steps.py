@@ -134,17 +134,10 @@ def configure_router(s: Settings) -> str:
         f"2. Reserve **{ip}** for this machine in the modem's DHCP settings, so the address the "
         "modem forwards to does not change after a restart.\n"
         f"3. Keep the test port **{s.probe.port}** free: nothing else should listen on it.")
-    from rosnet_tui.core import firewall
+    from rosnet_tui.core.router_card import ros1_exposure
 
-    parts.append(
-        "**Exposure.** ROS 1 has no authentication: anyone who reaches the ROS master (port "
-        f"{s.ros.port}) can drive the robot, and forwarding every port shows it and SSH to the "
-        "internet. " + (
-            "The Linux step's peers-only firewall (`rosnet-tui firewall apply`) then lets in "
-            "only your peers, your LAN and the addresses you allow; until it is loaded, anyone gets in."
-            if firewall.wanted(s) else
-            "`[ros] security = \"none\"`: no firewall, so that is the whole internet.")
-        + " Use SSH keys, not passwords.")
+    parts.append("**Exposure.** Forwarding every port shows the ROS master and SSH to the "
+                 "internet. " + ros1_exposure(s) + " Use SSH keys, not passwords.")
     parts.append(_source_restriction(s))
     if bridge:
         parts.append(bridge)

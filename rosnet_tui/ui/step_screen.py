@@ -245,7 +245,7 @@ class StepScreen(Screen):
             if outcome in (WRITTEN, NEXT) and not last:
                 self._offer_write(plans, index + 1)
 
-        self.app.push_screen(WriteScreen(plan, self.session.paths.state_dir,
+        self.app.push_screen(WriteScreen(plan, self.session.paths,
                                          place=(index + 1, len(plans)),
                                          next_title="" if last else plans[index + 1].title), done)
 
@@ -292,7 +292,7 @@ class StepScreen(Screen):
             if undone:
                 self.run_specs([s for s in self.specs if s.id in affected.UNDO])
 
-        self.app.push_screen(UndoScreen(self.session.paths.state_dir), done)
+        self.app.push_screen(UndoScreen(self.session.paths), done)
 
     def action_go_finding(self) -> None:
         """Go back to the step that the highlighted check's first finding points to."""

@@ -8,8 +8,6 @@ password in the terminal; the exact command is shown first.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
@@ -20,6 +18,7 @@ from textual.widgets import Button, Checkbox, Static
 from rosnet_tui.core import firewall, privilege
 from rosnet_tui.core import managed_file as mf
 from rosnet_tui.core import managed_text as mt
+from rosnet_tui.core.paths import Paths
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 from rosnet_tui.core.write_plans import WritePlan
 from rosnet_tui.ui.dialog import SCROLL_BINDINGS, ConfirmDialog
@@ -53,13 +52,14 @@ class WriteScreen(ConfirmDialog[str | None]):
                 Binding("y", "apply", "Apply"), Binding("y", "next", "Next"), *SCROLL_BINDINGS]
     CONFIRM_ACTIONS = ("apply", "next")
 
-    def __init__(self, plan: WritePlan, state_dir: Path, *, place: tuple[int, int] = (1, 1),
+    def __init__(self, plan: WritePlan, paths: Paths, *, place: tuple[int, int] = (1, 1),
                  next_title: str = "", **kwargs) -> None:
         """*place*: this preview's number and how many the sequence has; *next_title*: the
         title of the one after it ("" for none)."""
         super().__init__(**kwargs)
         self.plan = plan
-        self.state_dir = state_dir
+        self.state_dir = paths.state_dir
+        self.undo = privilege.session_command(["undo"], paths)   # the exact command
         self.place = place
         self.next_title = next_title
         self.preview: mf.Preview | None = None
@@ -121,7 +121,7 @@ class WriteScreen(ConfirmDialog[str | None]):
             cmd = privilege.format_command(self.plan.sudo_command(p, self.option))
             notes.append(f"{p.path} needs root: Apply runs, in this terminal, {cmd}")
         elif p.changed:
-            notes.append(f"Apply writes {p.path} (backup kept; `rosnet-tui undo` reverts).")
+            notes.append(f"Apply writes {p.path} (backup kept; `{self.undo}` reverts).")
         if self.plan.footnote:
             notes.append(self.plan.footnote)
         notes += [f"Apply writes {c.path} too." for c in self.companions if c.changed]
@@ -181,7 +181,7 @@ class WriteScreen(ConfirmDialog[str | None]):
         except (mt.ManagedFileError, OSError) as exc:
             self.notify(f"Not written: {exc}", severity="error", timeout=10)
             return
-        self.notify(f"Wrote {p.path}. `rosnet-tui undo` reverts it.", timeout=5)
+        self.notify(f"Wrote {p.path}. `{self.undo}` reverts it.", timeout=5)
         if self.plan.after_write is not None:   # ROS 2 mutual TLS: CA or pairing (<= 5 s)
             said = await self.plan.after_write()
             if said:
@@ -198,9 +198,10 @@ class UndoScreen(ConfirmDialog[bool]):
                 Binding("y", "undo", "Undo"), *SCROLL_BINDINGS]
     CONFIRM_ACTIONS = ("undo",)
 
-    def __init__(self, state_dir: Path, **kwargs) -> None:
+    def __init__(self, paths: Paths, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.state_dir = state_dir
+        self.state_dir = paths.state_dir
+        self.force = privilege.session_command(["undo", "--force"], paths)
         self.plan: mf.UndoPlan | None = None
 
     def compose(self) -> ComposeResult:
@@ -230,8 +231,8 @@ class UndoScreen(ConfirmDialog[bool]):
                                                      Text("\n".join(forwards)))
         notes = [f"Changed since by someone else: {c}" for c in self.plan.conflicts]
         if self.plan.conflicts:
-            notes.append("Undo would lose those changes: run `rosnet-tui undo --force` if you "
-                         "are sure.")
+            notes.append(f"Undo would lose those changes: run `{self.force}` if you are "
+                         "sure.")
             self.set_confirm(False)
         elif self.plan.needs_privilege:
             cmd = privilege.format_command(self._sudo_argv())

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence, join_and
+from rosnet_tui.core.router_card import ros1_exposure
 
 TABLE = "table inet rosnet_tui"
 
@@ -21,7 +22,7 @@ def _off(ev: Evidence) -> list[Hit]:
         return []
     return [Hit(f"The settings of {ev.me} say `[ros] security = \"none\"`: nothing but the modem "
                 "stands between the internet and the ROS master, every node and SSH here. "
-                "Anyone who reaches the master can list the graph, publish and shut nodes down.",
+                + ros1_exposure(ev.s),
                 [f"On {ev.me}, set `security = \"firewall\"` under [ros] (the set-up screen asks "
                  "it), then run `rosnet-tui firewall apply` (a preview first; through sudo).",
                  "Or, where the modem can restrict a forward by source address, allow only the "
@@ -42,7 +43,7 @@ def _missing(ev: Evidence) -> list[Hit]:
     peers = [p.name for p in ev.s.peers]
     return [Hit(f"{ev.me} has no {TABLE}: the ports its modem forwards (22, the ROS range, "
                 f"the master's port) answer the whole internet, not only "
-                f"{join_and(peers) or 'the peers'}.",
+                f"{join_and(peers) or 'the peers'}. " + ros1_exposure(ev.s),
                 [f"On {ev.me}: `rosnet-tui firewall apply` (or `w` on the Linux step): a "
                  "preview, then one nft transaction through sudo; `rosnet-tui undo` takes it "
                  "back.",

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence, does_not_resolve, join_and
+from rosnet_tui.core.results import Status
 
 # (check, the key of its per-peer data, the values that mean "the name did not resolve here")
 _NAME_FAILURES = (("linux.ping", "tcp", ("resolve",)),
@@ -50,7 +51,21 @@ def failed_by_name(ev: Evidence, name: str) -> list[str]:
     if ev.s.ros2 and name == ev.s.master_name and ev.is_fail("ros2.router") \
             and ev.data("ros2.router").get("failure") == "resolve":
         ids.append("ros2.router")
+    # The security checks look from a peer over SSH: they could not run there (a warning, or a
+    # failure), and a member's own probe dials the master by name.
+    for cid in ("security.ssh_auth", "security.outsider"):
+        if ev.status(cid) in (Status.FAIL, Status.WARN) and (
+                (ev.data(cid).get("ssh_failures") or {}).get(name) == "resolve"
+                or cid == "security.outsider" and _probe_by_name(ev, name)):
+            ids.append(cid)
     return ids
+
+
+def _probe_by_name(ev: Evidence, name: str) -> bool:
+    """A ROS 2 member's outsider probe found nothing at the master, whose name is *name*."""
+    d = ev.data("security.outsider")
+    return ev.s.ros2 and not ev.s.is_master and name == ev.s.master_name \
+        and d.get("from") == "here" and d.get("cause") == "unreachable"
 
 
 def _sev(ev: Evidence, ids: list[str]) -> str:

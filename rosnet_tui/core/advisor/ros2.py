@@ -12,6 +12,7 @@ from __future__ import annotations
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence, join_and
 from rosnet_tui.core.advisor.ranking import peer_tcp
+from rosnet_tui.core.ros2 import RMW_ZENOH
 
 
 def _on(ev: Evidence) -> bool:
@@ -370,6 +371,81 @@ def _distro(ev: Evidence) -> list[Hit]:
                  "Then restart the routers and the nodes."],
                 check_ids=[c for c in ("ros2.env", "ros2.graph") if ev.is_fail(c)]
                 + _hops(ev, "data_dropped"), evidence=facts)]
+
+
+@rule("ros2.env.rmw_one_place", "ros", ("ros2.env",),
+      "RMW_IMPLEMENTATION=rmw_zenoh_cpp in this shell or in ~/.bashrc, not in both",
+      "Shells that lack it run ROS 2 on DDS: nodes started there find no one across the modems, "
+      "or are listed with no data.",
+      "`rosnet-tui ros apply` writes the export into ~/.bashrc; `source ~/.bashrc` loads it "
+      "into this shell.",
+      "ros", "warn")
+def _rmw_one_place(ev: Evidence) -> list[Hit]:
+    d = ev.data("ros2.env")
+    if not _on(ev) or d.get("dds") is not False or d.get("rmw_ok") is not False:
+        return []
+    here, there = d.get("rmw"), d.get("bashrc_rmw")
+    if there != RMW_ZENOH:
+        why = (f"this shell has RMW_IMPLEMENTATION={here}, ~/.bashrc "
+               f"{'says ' + there if there else 'does not export it'}: every new shell (and "
+               "what starts from one) runs ROS 2 on DDS")
+    else:
+        why = (f"~/.bashrc exports RMW_IMPLEMENTATION={there}, this shell "
+               f"{'has ' + here if here else 'does not have it'} (it was opened before, or does "
+               "not read ~/.bashrc): nodes started from it run ROS 2 on DDS")
+    return [Hit(f"On {ev.me}, {why}, and DDS does not cross the modems.",
+                [f"On {ev.me}: `rosnet-tui ros apply` writes RMW_IMPLEMENTATION=rmw_zenoh_cpp "
+                 "into ~/.bashrc (a preview first).",
+                 "Then `source ~/.bashrc` (or open a new shell) and restart the nodes started "
+                 "from the old one."],
+                evidence=[f"ros2.env: environment {here or 'not set'}, ~/.bashrc "
+                          f"{there or 'not set'}"])]
+
+
+@rule("ros2.env.no_distro", "ros", ("ros2.env",),
+      "ROS_DISTRO is not set (no ROS 2 sourced)",
+      "The shell that ran the checks has no ROS 2 set up: ros2, rmw_zenohd and the nodes are "
+      "not found there, and the distro cannot be compared with the peers'.",
+      "Install ROS 2 if needed and add `source /opt/ros/<distro>/setup.bash` to ~/.bashrc.",
+      "ros", "warn")
+def _no_distro(ev: Evidence) -> list[Hit]:
+    d = ev.data("ros2.env")
+    if not _on(ev) or "distro" not in d or d.get("distro"):
+        return []
+    return [Hit(f"ROS_DISTRO is not set on {ev.me}: no ROS 2 is sourced in the shell that ran "
+                "the checks, so ros2, rmw_zenohd and the nodes are not found there, and nobody "
+                "can tell whether its distro matches the peers'.",
+                [f"On {ev.me}: install ROS 2 if it is missing (`ls /opt/ros`), then add "
+                 "`source /opt/ros/<distro>/setup.bash` to ~/.bashrc, before the lines of "
+                 "rosnet-tui.",
+                 "Open a new shell and run the checks again."],
+                evidence=["ros2.env: ROS_DISTRO not set"])]
+
+
+LEFTOVERS = {
+    "localhost_only": "ROS_LOCALHOST_ONLY keeps the nodes on this machine",
+    "discovery_localhost": "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST limits discovery to this "
+                           "machine",
+    "dds_settings": "DDS settings (CYCLONEDDS_URI, FASTRTPS_DEFAULT_PROFILES_FILE...) do nothing "
+                    "under rmw_zenoh and mislead whoever reads them",
+}
+
+
+@rule("ros2.env.leftovers", "ros", ("ros2.env",),
+      "localhost-only or DDS settings left in the environment",
+      "ROS_LOCALHOST_ONLY or ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST keep nodes from other "
+      "machines; DDS variables do nothing under rmw_zenoh.",
+      "Remove them from ~/.bashrc (and the shell), then restart the nodes.",
+      "ros", "warn")
+def _leftovers(ev: Evidence) -> list[Hit]:
+    codes = [c for c in ev.data("ros2.env").get("warnings") or [] if c in LEFTOVERS]
+    if not _on(ev) or not codes:
+        return []
+    return [Hit(f"On {ev.me}: " + "; ".join(LEFTOVERS[c] for c in codes) + ".",
+                [f"On {ev.me}: delete those exports from ~/.bashrc (and `unset` them in this "
+                 "shell), then restart the router and the nodes.",
+                 "The evidence of ros2.env names the values found."],
+                evidence=[f"ros2.env: {', '.join(codes)}"])]
 
 
 @rule("ros2.link.missing", "ros", ("ros2.router", "ros2.graph", "ros2.pubsub_out",

@@ -18,6 +18,7 @@ from rosnet_tui.core.advisor.evidence import (
     offline_ids,
 )
 from rosnet_tui.core.advisor.ranking import Cause, local_ip_moved, nat_seen, table1_causes
+from rosnet_tui.core.router_card import ros1_exposure
 from rosnet_tui.core.settings_model import PORT_MAX
 
 
@@ -429,8 +430,9 @@ def _port_no_verdict(ev: Evidence) -> list[Hit]:
 # ---- security -------------------------------------------------------------------------------
 @rule("security.exposed", "router", ("router.port_open",),
       "ports reachable from the internet (forwarding or DMZ in use)",
-      "Forwarding exposes this component to the whole internet: SSH to password guessing, and "
-      "the ROS master to anyone - ROS 1 has no authentication at all.",
+      "Forwarding exposes this component: SSH to password guessing, and the ROS master (ROS 1 "
+      "has no authentication) to whoever the peers-only firewall lets in, or to the whole "
+      "internet without it.",
       "SSH keys only (`PasswordAuthentication no`), restrict source addresses on the modem to "
       "the peers, forward only while needed.",
       "router", "security")
@@ -453,9 +455,7 @@ def _exposed(ev: Evidence) -> list[Hit]:
         parts.append("With the whole range (or DMZ) forwarded, SSH and every other service here "
                      "are as exposed as the test port.")
     if ev.s.ros.port in reach or ev.s.is_master:
-        parts.append(f"The ROS master ({ev.s.ros.port}) is reachable too (or will be once it "
-                     "runs): ROS 1 has no authentication, so anyone who reaches it can list, "
-                     "publish to and command the robot.")
+        parts.append(ros1_exposure(ev.s))
     acts.append(f"On {me}: accept SSH keys only - in /etc/ssh/sshd_config set "
                 "`PasswordAuthentication no` and `KbdInteractiveAuthentication no`, then "
                 "`sudo systemctl reload ssh` (install your keys first: `ssh-copy-id`).")

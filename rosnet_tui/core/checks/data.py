@@ -7,8 +7,7 @@ fails the ordinary test run instead of silently switching a rule off. Producers 
 same declarations by :func:`undeclared` (the check runner calls it in strict mode, which the
 test suite turns on).
 
-This module imports nothing but the standard library, so the advisor can depend on it without
-depending on any check module.
+Standard library only: the advisor depends on it, not on any check module.
 """
 
 from __future__ import annotations
@@ -29,10 +28,9 @@ def strict() -> bool:
 
 # --------------------------------------------------------------------------- declarations
 # One TypedDict per check id (total=False: a check sets the keys its verdict has evidence for; a
-# skip may carry only a few). Nested shapes (per-peer dicts, port rows) are TypedDicts too, and
-# :func:`view` and :func:`undeclared` follow them into lists and dict values. The comment on each
-# key is its documentation; README.md's table of the checks lists the top-level keys.
-# Values are JSON: str, int, bool, None, lists and dicts (dict keys are strings).
+# skip may carry only a few). Nested shapes (per-peer dicts, port rows) are TypedDicts too, which
+# :func:`view` and :func:`undeclared` follow. The comment on each key is its documentation;
+# README.md's table of the checks lists the top-level keys. Values are JSON (dict keys: str).
 
 # How a TCP connection attempt went (rosnet_tui/core/connect.py): "connected"; "refused" (something
 # at the address answered with a reset: online, rejecting the port); "timeout" (nothing answered:
@@ -441,6 +439,7 @@ SecuritySshAuthData = TypedDict("SecuritySshAuthData", {
     "error": str,  # why the offered methods could not be read
     "local_methods": list[str],  # not reachable: what this machine's sshd offers the user over loopback
     "local_root_methods": list[str],  # not reachable: what it offers root over loopback
+    "ssh_failures": dict[str, str],  # by peer: how SSH to it failed (ssh FAILURES: "resolve"...) when the audit could not run there
 }, total=False)
 
 
@@ -471,6 +470,7 @@ SecurityOutsiderData = TypedDict("SecurityOutsiderData", {
     "outsider_reachable": dict[str, bool | None],  # ROS 1, by port: the port checker got in (None: no verdict)
     "insider_reachable": dict[str, bool],  # ROS 1, by port: the peer got in
     "cause": OutsiderCause | None,  # why it failed (None: it passed)
+    "ssh_failures": dict[str, str],  # by peer: how SSH to it failed (as in security.ssh_auth) when the probe could not run there
 }, total=False)
 
 

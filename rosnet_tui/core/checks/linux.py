@@ -278,16 +278,21 @@ async def check_ping(ctx: CheckContext) -> Outcome:
     ok: list[str] = []
     tcp_only: list[str] = []
     down: list[str] = []
+    unresolved: list[str] = []
     for p, (icmp, kind, lines) in zip(peers, got, strict=True):
         tcp = kind == "connected"
         data["peers"][p.name] = {"icmp": icmp, "tcp22": tcp, "tcp": kind,
                                  "port": p.ssh_port or 22}
         evidence.extend(lines)
-        (ok if icmp else tcp_only if tcp else down).append(p.name)
-    if down:
-        return Outcome(Status.FAIL, f"no answer from {', '.join(down)} (neither ping nor TCP "
-                                    f"{'/'.join(sorted({str(p.ssh_port or 22) for p in peers}))})",
-                       evidence, data)
+        (ok if icmp else tcp_only if tcp else unresolved if kind == "resolve"
+         else down).append(p.name)
+    if down or unresolved:
+        parts = ([f"{', '.join(unresolved)} {'does' if len(unresolved) == 1 else 'do'} not "
+                  "resolve (no address for the name: see linux.hosts)"] if unresolved else [])
+        if down:
+            ports = "/".join(sorted({str(p.ssh_port or 22) for p in peers}))
+            parts.append(f"no answer from {', '.join(down)} (neither ping nor TCP {ports})")
+        return Outcome(Status.FAIL, "; ".join(parts), evidence, data)
     if tcp_only:
         return Outcome(Status.WARN, f"{', '.join(tcp_only)} did not answer ping but accepted TCP on "
                                     "the SSH port: ICMP is filtered on the way, which is harmless",

@@ -116,6 +116,8 @@ async def check_ssh_auth(ctx: CheckContext) -> Outcome:
     audits: list[tuple[Peer, outsider.SshAudit, dict[str, Any]]] = []
     problems: list[str] = []
     for p, res in zip(peers[:2], got, strict=True):
+        if res.failure:
+            data.setdefault("ssh_failures", {})[p.name] = res.failure
         rep = outsider.parse_marked(res.stdout, outsider.SSH_MARK)
         if rep is None or rep.get("error"):
             problems.append(peer_program_problem(res, p) or (
@@ -255,6 +257,8 @@ async def _outsider_ros2(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
         rep = outsider.parse_marked(res.stdout, outsider.TLS_MARK)
         problem = None if rep is not None else (peer_program_problem(res, peer) or
                                                 f"no report ({stderr_tail(res) or res.detail})")
+        if res.failure:
+            data["ssh_failures"] = {peer.name: res.failure}
         if rep is None and res.failure:   # no way to look from outside: unknown, not insecure
             return Outcome(Status.WARN, f"not judged from outside: {problem}", [], data)
     else:
@@ -403,6 +407,8 @@ async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
     data["insider_reachable"] = inside
     if not res.ok:
         ev.append(f"SSH to {peer.name} failed ({res.failure}): {res.detail}")
+        if res.failure:
+            data["ssh_failures"] = {peer.name: res.failure}
     if any(v is None for v in outside.values()):
         data["cause"] = "checker_unavailable"
         return Outcome(Status.FAIL, f"the port checker ({base}) gave no verdict: the outsider's "
@@ -412,6 +418,9 @@ async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
         open_ = [p for p, v in outside.items() if v]
         return Outcome(Status.FAIL, f"an outsider ({base}) reaches port "
                                     f"{', '.join(open_)} of {target}", ev, data)
+    if res.failure:     # the insider never tried: its view is unknown, not blocked
+        return Outcome(Status.WARN, f"outsiders are refused; whether {peer.name} gets in is "
+                                    f"not known: SSH to it failed ({res.failure})", ev, data)
     if not all(inside.values()):
         data["cause"] = "insider_blocked"
         return Outcome(Status.FAIL, f"outsiders are refused, but {peer.name} cannot connect "
