@@ -3,13 +3,10 @@
 from __future__ import annotations
 
 import os
-import pty
-import select
 import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import pytest
@@ -19,6 +16,7 @@ from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core import undo_journal as uj
 from rosnet_tui.core.settings import load_settings
 from tests.builders import ROBOT_CONFIG, ros2_master
+from tests.prompts import run_answering
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -56,35 +54,8 @@ def run(box, *args: str, env: dict | None = None) -> subprocess.CompletedProcess
 
 def run_tty(box, args: list[str], answers: list[str], timeout: float = 30) -> tuple[int, str]:
     """Run on a pseudo-terminal; answer each '[y/N]' prompt in turn."""
-    master, slave = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "rosnet_tui", *args], stdin=slave,
-                            stdout=slave, stderr=slave, cwd=REPO, env=box.env,
-                            start_new_session=True)
-    os.close(slave)
-    out, pending = b"", list(answers)
-    deadline = time.monotonic() + timeout
-    try:
-        while time.monotonic() < deadline:
-            r, _, _ = select.select([master], [], [], 0.1)
-            if r:
-                try:
-                    chunk = os.read(master, 4096)
-                except OSError:
-                    chunk = b""
-                if not chunk:
-                    break
-                out += chunk
-                if pending and out.count(b"[y/N]") > len(answers) - len(pending):
-                    os.write(master, pending.pop(0).encode() + b"\n")
-            elif proc.poll() is not None:
-                break
-        rc = proc.wait(timeout=max(0.1, deadline - time.monotonic()))
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=5)
-        os.close(master)
-    return rc, out.decode(errors="replace")
+    return run_answering([sys.executable, "-m", "rosnet_tui", *args], answers, env=box.env,
+                         cwd=REPO, timeout=timeout)
 
 
 def hosts_args(box, *extra: str) -> list[str]:

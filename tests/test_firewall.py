@@ -6,12 +6,9 @@ from __future__ import annotations
 
 import copy
 import os
-import pty
-import select
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -23,6 +20,7 @@ from rosnet_tui.core.results import CheckResult, Status
 from rosnet_tui.core.settings import render_settings
 from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh import origin
+from tests.prompts import run_answering
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -375,39 +373,6 @@ def test_a_session_that_cannot_be_told_is_refused_with_the_way_out(tmp_path):
     assert r.returncode == 0 and "203.0.113.50" not in r.stdout, r.stderr
 
 
-def _run_tty(argv: list[str], env: dict[str, str], answer: str,
-             timeout: float = 60) -> tuple[int, str]:
-    """Run *argv* on a pseudo-terminal; answer the first '[y/N]' with *answer*."""
-    master, slave = pty.openpty()
-    proc = subprocess.Popen(argv, stdin=slave, stdout=slave, stderr=slave, cwd=REPO, env=env,
-                            start_new_session=True)
-    os.close(slave)
-    out, answered = b"", False
-    deadline = time.monotonic() + timeout
-    try:
-        while time.monotonic() < deadline:
-            if select.select([master], [], [], 0.1)[0]:
-                try:
-                    chunk = os.read(master, 4096)
-                except OSError:
-                    chunk = b""
-                if not chunk:
-                    break
-                out += chunk
-                if not answered and b"[y/N]" in out:
-                    os.write(master, answer.encode() + b"\n")
-                    answered = True
-            elif proc.poll() is not None:
-                break
-        rc = proc.wait(timeout=max(0.1, deadline - time.monotonic()))
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=5)
-        os.close(master)
-    return rc, out.decode(errors="replace")
-
-
 def test_the_prompt_names_the_session_it_keeps(tmp_path):
     """On a terminal: everything before the question, and the question says it; "n" loads
     nothing. As root, in a network namespace of its own (nothing of this machine touched)."""
@@ -416,7 +381,8 @@ def test_the_prompt_names_the_session_it_keeps(tmp_path):
     own_netns = ["unshare", "--net"] if os.geteuid() == 0 and shutil.which("unshare") else []
     argv = [*own_netns, sys.executable, "-m", "rosnet_tui", "--config", str(cfg), "firewall",
             "apply", "--no-checks"]
-    rc, out = _run_tty(argv, _env(SSH_CONNECTION=SESSION, PYTHONPATH=str(REPO)), "n")
+    rc, out = run_answering(argv, ["n"], env=_env(SSH_CONNECTION=SESSION, PYTHONPATH=str(REPO)),
+                            cwd=REPO, timeout=60)
     before = out.split("[y/N]")[0]
     assert "this SSH session, 203.0.113.50 (to sshd port 22; SSH_CONNECTION): SSH only" in before
     assert "elements = { 203.0.113.50 . 22 }" in before

@@ -294,6 +294,26 @@ def test_a_mix_by_sectors_is_completed_and_a_foreign_change_is_left(tmp_path, mo
         assert not [p for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
 
 
+def _cut_by_root_for_a_user(top: Path, monkeypatch) -> tuple[Path, Path, bytes]:
+    """Under *top*: root's in-place write of etc/hosts cut before truncation, journalled in a
+    state folder of the user nobody's (root may not write etc/, so the journal goes there);
+    (the file, that state folder, the torn bytes)."""
+    os.chmod(top, 0o755)
+    folder, sd = top / "etc", top / "state"
+    folder.mkdir(mode=0o755)
+    sd.mkdir(mode=0o700)
+    os.chown(sd, NOBODY, NOBODY)
+    target = folder / "hosts"
+    target.write_bytes(OLD)
+    os.chmod(target, 0o644)
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, m, **kw: False if Path(p) == folder
+                        else real_access(p, m, **kw))
+    torn = _cut(target, NEW, monkeypatch, journal_dir=sd / cut_writes.INPLACE_DIR)
+    monkeypatch.undo()
+    return target, sd, torn
+
+
 @ROOT
 def test_roots_journal_in_a_users_state_dir_is_seen_by_that_user(monkeypatch):
     """root (sudo) writing a file whose folder it may not write journals in the user's state
@@ -301,19 +321,7 @@ def test_roots_journal_in_a_users_state_dir_is_seen_by_that_user(monkeypatch):
     finds the file torn and says so instead of reading the mix."""
     top = Path(tempfile.mkdtemp(prefix="rosnet-torn-"))
     try:
-        os.chmod(top, 0o755)
-        folder, sd = top / "etc", top / "state"
-        folder.mkdir(mode=0o755)
-        sd.mkdir(mode=0o700)
-        os.chown(sd, NOBODY, NOBODY)
-        target = folder / "hosts"
-        target.write_bytes(OLD)
-        os.chmod(target, 0o644)
-        real_access = os.access
-        monkeypatch.setattr(os, "access", lambda p, m, **kw: False if Path(p) == folder
-                            else real_access(p, m, **kw))
-        torn = _cut(target, NEW, monkeypatch, journal_dir=sd / cut_writes.INPLACE_DIR)
-        monkeypatch.undo()
+        target, sd, torn = _cut_by_root_for_a_user(top, monkeypatch)
         jdir = sd / cut_writes.INPLACE_DIR
         assert os.stat(jdir).st_uid == 0 and os.stat(jdir).st_mode & 0o777 == 0o755
         os.setegid(NOBODY)
@@ -345,22 +353,10 @@ def test_hosts_show_on_a_torn_file_only_root_may_complete_fails(monkeypatch, cap
 
     top = Path(tempfile.mkdtemp(prefix="rosnet-torn-"))
     try:
-        os.chmod(top, 0o755)
-        folder, sd = top / "etc", top / "state"
-        folder.mkdir(mode=0o755)
-        sd.mkdir(mode=0o700)
-        os.chown(sd, NOBODY, NOBODY)
+        target, sd, torn = _cut_by_root_for_a_user(top, monkeypatch)
         cfg = top / "config.toml"
         cfg.write_text(ROBOT_CONFIG)
         os.chmod(cfg, 0o644)
-        target = folder / "hosts"
-        target.write_bytes(OLD)
-        os.chmod(target, 0o644)
-        real_access = os.access
-        monkeypatch.setattr(os, "access", lambda p, m, **kw: False if Path(p) == folder
-                            else real_access(p, m, **kw))
-        torn = _cut(target, NEW, monkeypatch, journal_dir=sd / cut_writes.INPLACE_DIR)
-        monkeypatch.undo()
         monkeypatch.setenv("XDG_STATE_HOME", str(sd))
         os.setegid(NOBODY)
         os.seteuid(NOBODY)
