@@ -66,7 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", type=Path, default=DEFAULT_JSON, metavar="FILE",
                    help=f"write the results as JSON here (default {DEFAULT_JSON.relative_to(REPO)})")
     p.add_argument("--markdown", type=Path, default=None, metavar="FILE",
-                   help="also write the table as Markdown (for the README's Performance section)")
+                   help="also write the table as Markdown (for docs/PERFORMANCE.md)")
     return p
 
 

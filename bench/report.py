@@ -1,4 +1,4 @@
-"""The results: a rich table on the terminal, Markdown for the README, JSON for machines."""
+"""The results: a rich table on the terminal, Markdown for docs/PERFORMANCE.md, JSON for machines."""
 
 from __future__ import annotations
 

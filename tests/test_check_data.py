@@ -1,9 +1,10 @@
 """The declared data of the checks (rosnet_tui/core/checks/data.py): the `check --json` contract.
 
 Every registered check id has a declaration and every declaration a check; each declared key is
-documented; README.md's table of the checks lists exactly the declared top-level keys; producers
-report no undeclared key (here for every check's early branches, with real sockets on loopback;
-the other check tests run under ROSNET_TUI_STRICT_DATA=1, where run_check refuses such a key).
+documented; docs/COMMANDS.md's table of the checks lists exactly the declared top-level keys;
+producers report no undeclared key (here for every check's early branches, with real sockets on
+loopback; the other check tests run under ROSNET_TUI_STRICT_DATA=1, where run_check refuses such
+a key).
 """
 
 from __future__ import annotations
@@ -91,19 +92,20 @@ def test_every_declared_key_has_a_comment_saying_what_it_holds():
     assert found == names
 
 
-# --------------------------------------------------------------------------- README
+# --------------------------------------------------------------------------- docs/COMMANDS.md
 def readme_table() -> dict[str, list[str]]:
-    """README's table of the checks: check id -> the keys of its `data` column, in order."""
-    text = (ROOT / "README.md").read_text()
-    section = text[text.index("### The checks"):]
-    section = section[:section.index("\n###")]
+    """docs/COMMANDS.md's table of the checks: check id -> the keys of its `data` column, in
+    order."""
+    text = (ROOT / "docs" / "COMMANDS.md").read_text()
+    section = text[text.index("## The checks"):]
+    section = re.split(r"\n#", section[1:], maxsplit=1)[0]
     rows = [ln for ln in section.splitlines() if ln.startswith("| `")]
     out: dict[str, list[str]] = {}
     for row in rows:
         cells = [c.strip() for c in row.strip().strip("|").split(" | ")]
         keys = re.findall(r"`([^`]+)`", cells[-1])
         for cid in re.findall(r"`([a-z0-9]+\.[a-z_]+)`", cells[0]):
-            assert cid not in out, f"{cid} twice in README's table"
+            assert cid not in out, f"{cid} twice in docs/COMMANDS.md's table"
             out[cid] = keys
     return out
 
@@ -114,10 +116,10 @@ def expected_cell(check_id: str) -> str:
 
 def test_readme_table_lists_exactly_the_declared_top_level_keys():
     table = readme_table()
-    assert sorted(table) == sorted(data.DATA), "README's table of the checks lists other ids"
+    assert sorted(table) == sorted(data.DATA), "docs/COMMANDS.md's table of the checks lists other ids"
     for cid, keys in table.items():
         declared = list(typing.get_type_hints(data.DATA[cid]))
-        assert keys == declared, (f"README's data column for {cid} drifted from data.py; "
+        assert keys == declared, (f"docs/COMMANDS.md's data column for {cid} drifted from data.py; "
                                   f"it should read: {expected_cell(cid)}")
         assert set(keys) == data.declared_keys(cid)
 

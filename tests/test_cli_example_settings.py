@@ -1,5 +1,5 @@
-"""The README's example settings, without the optional local_ip, work with every command that
-reads settings (issue 14), and `--yes` answers every question a command would ask.
+"""The example settings of docs/SETTINGS.md, without the optional local_ip, work with every
+command that reads settings (issue 14), and `--yes` answers every question a command would ask.
 
 Nothing leaves this machine: the example's web services are pointed at a closed port on
 127.0.0.1, the hosts file and ~/.bashrc are files in a temporary folder.
@@ -23,9 +23,9 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def readme_example() -> str:
-    """The settings example of README.md ("The settings file"), as documented."""
-    text = (REPO / "README.md").read_text(encoding="utf-8")
-    section = text.split("## The settings file", 1)[1]
+    """The settings example of docs/SETTINGS.md ("The settings file"), as documented."""
+    text = (REPO / "docs" / "SETTINGS.md").read_text(encoding="utf-8")
+    section = text.split("# The settings file", 1)[1]
     return re.search(r"```toml\n(.*?)```", section, re.S).group(1)
 
 

@@ -164,11 +164,11 @@ def test_no_product_module_uses_another_modules_private_name():
     assert not bad, "private names used across modules:\n" + "\n".join(bad)
 
 
-def test_the_readmes_where_things_live_table_names_files_that_exist():
-    """README, Development: every module the table names exists (a file moved is a row to fix)."""
+def test_the_development_docs_where_things_live_table_names_files_that_exist():
+    """docs/DEVELOPMENT.md: every module the table names exists (a file moved is a row to fix)."""
     import re
 
-    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    lines = (ROOT / "docs" / "DEVELOPMENT.md").read_text(encoding="utf-8").splitlines()
     start = next(n for n, line in enumerate(lines) if "Where things live" in line)
     rows = []
     for line in lines[start + 1:]:
@@ -191,4 +191,4 @@ def test_the_readmes_where_things_live_table_names_files_that_exist():
             base = ROOT if path.startswith("tests/") else PKG
             if not (base / path).exists():
                 missing.append(path)
-    assert not missing, f"README's table names what is not there: {missing}"
+    assert not missing, f"docs/DEVELOPMENT.md's table names what is not there: {missing}"

@@ -31,7 +31,7 @@ class Outcome:
 
 @dataclass
 class CheckResult:
-    """One check's verdict. Its JSON form is a contract (see README, "rosnet-tui check")."""
+    """One check's verdict. Its JSON form is a contract (docs/COMMANDS.md: `check --json`)."""
 
     id: str
     step: str

@@ -1,6 +1,6 @@
 """Settings: the TOML file that describes this component, its peers and the probes.
 
-The schema is part of the product (README, "The settings file"). Loading never raises anything
+The schema is part of the product (docs/SETTINGS.md). Loading never raises anything
 but :class:`SettingsError`, which names the line and key at fault; saving is atomic and keeps the
 comments and layout of a hand-edited file.
 """
@@ -317,7 +317,7 @@ def _mtime(path: Path) -> float | None:
 # --------------------------------------------------------------------------- saving
 _HEADER = """\
 # rosnet-tui settings. Edit by hand or with the wizard (rosnet-tui); the wizard keeps your
-# comments. Schema: see "The settings file" in the README.
+# comments. Schema: see docs/SETTINGS.md.
 """
 
 

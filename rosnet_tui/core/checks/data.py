@@ -30,7 +30,7 @@ def strict() -> bool:
 # One TypedDict per check id (total=False: a check sets the keys its verdict has evidence for; a
 # skip may carry only a few). Nested shapes (per-peer dicts, port rows) are TypedDicts too, which
 # :func:`view` and :func:`undeclared` follow. The comment on each key is its documentation;
-# README.md's table of the checks lists the top-level keys. Values are JSON (dict keys: str).
+# docs/COMMANDS.md's table of the checks lists the top-level keys. Values are JSON (dict keys: str).
 
 # How a TCP connection attempt went (rosnet_tui/core/connect.py): "connected"; "refused" (something
 # at the address answered with a reset: online, rejecting the port); "timeout" (nothing answered:
