@@ -89,7 +89,7 @@ MARK = "ROSNET_OUTSIDER "
 host, port, t = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 wait = min(1.0, t)
 
-def attempt(cert=None, key=None, ca=None):
+def attempt(cert=None, key=None, ca=None, patient=True):
     try:
         raw = socket.create_connection((host, port), timeout=t)
     except socket.timeout:
@@ -127,9 +127,11 @@ def attempt(cert=None, key=None, ca=None):
     out["tls"] = s.version()
     out["server_cert"] = base64.b64encode(s.getpeercert(True) or b"").decode()
     # TLS 1.3: the server's verdict on our certificate follows the handshake, half a round trip
-    # after our last message; the handshake took about a round trip, so five of its length (at
-    # least 0.4 s, at most `wait`) is ample. Silence then means the certificate was taken.
-    s.settimeout(min(wait, max(0.4, 5 * (time.monotonic() - started))))
+    # after our last message. Silence until the wait ends means the certificate was taken. A
+    # stranger (patient) waits the whole per-step timeout: its healthy answer is a refusal, which
+    # ends the wait at once, and a busy router's late refusal must not read as a session. The
+    # insider's healthy answer is silence: five handshake times (0.4 s to `wait`) are ample.
+    s.settimeout(t if patient else min(wait, max(0.4, 5 * (time.monotonic() - started))))
     try:
         got = s.recv(1)
         out["result"] = "accepted" if got else "closed"
@@ -172,7 +174,7 @@ try:
         rep["insider"] = {"result": "no_fleet_cert", "detail": why}
     jobs = [("no_cert",), ("foreign", os.path.join(tmp, "crt"), os.path.join(tmp, "key"))]
     if not missing:
-        jobs.append(("insider", *files))
+        jobs.append(("insider", *files, False))
     threads = [threading.Thread(target=run, args=j, daemon=True) for j in jobs]
     for th in threads:
         th.start()
