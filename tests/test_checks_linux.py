@@ -15,10 +15,16 @@ from rosnet_tui.core.checks import (
     probes,
     run_check,
 )
-from rosnet_tui.core.hosts import HostsEntry
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import (
+    Peer,
+    ProbeSettings,
+    RosSettings,
+    Settings,
+    ThisComponent,
+)
+from rosnet_tui.core.files.hosts import HostsEntry
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings_model import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 from tests.builders import probe_settings as settings

@@ -1,4 +1,4 @@
-"""The round's peer agent (core/agentproto.py, the master's side core/peer_agent.py): one program
+"""The round's peer agent (core/peer/agentproto.py, the master's side core/peer/peer_agent.py): one program
 per peer and round serves every probe the checks run there (issue 25, bench row 8).
 
 The program itself runs here under the distribution's ``python3 -S`` as a peer runs it (fed on
@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import agentproto, chatproto, rosproto, zenohproto
 from rosnet_tui.core.checks import probes
-from rosnet_tui.core.peer_agent import AGENT_SOURCE, AgentKind, PeerAgents, agent_run
+from rosnet_tui.core.peer import agentproto, chatproto, rosproto, zenohproto
+from rosnet_tui.core.peer.peer_agent import AGENT_SOURCE, AgentKind, PeerAgents, agent_run
 from rosnet_tui.core.ssh.pool import SshPool
 from rosnet_tui.core.ssh.session import ssh_run
 from tests.builders import free_port

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import zenohproto
 from rosnet_tui.core.checks import probes
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.ssh.connection import SshResult
 
 SRC = Path(zenohproto.__file__).read_bytes()

@@ -143,7 +143,7 @@ async def test_per_peer_work_runs_concurrently_bounded_and_in_order(ssh_client, 
     """each_peer: every peer at once up to the bound, results in the peers' order; real SSH
     sessions on one shared connection per peer."""
     from rosnet_tui.core.checks.probes import each_peer
-    from rosnet_tui.core.settings_model import Peer
+    from rosnet_tui.core.config.settings_model import Peer
 
     running = peak = 0
 

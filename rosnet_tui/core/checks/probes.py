@@ -24,11 +24,18 @@ from typing import Any, TypeVar
 from urllib.parse import urljoin, urlsplit
 
 from rosnet_tui import __version__
-from rosnet_tui.core import agentproto, chatproto, fleet_tls, ros2, rosproto, zenohproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext
 from rosnet_tui.core.checks.data import view
-from rosnet_tui.core.peer_agent import AgentCall, AgentKind, PeerAgents, agent_run, agent_session
-from rosnet_tui.core.settings_model import Peer, Settings
+from rosnet_tui.core.config.settings_model import Peer, Settings
+from rosnet_tui.core.peer import agentproto, chatproto, rosproto, zenohproto
+from rosnet_tui.core.peer.peer_agent import (
+    AgentCall,
+    AgentKind,
+    PeerAgents,
+    agent_run,
+    agent_session,
+)
+from rosnet_tui.core.ros import fleet_tls, ros2
 from rosnet_tui.core.ssh.connection import SshResult, run_blocking
 
 MAX_BODY = 64 * 1024
@@ -342,7 +349,7 @@ def installed_python_command(*args: str, mark: str, fallback: bool = False,
 
 
 def zenoh_peer_command(*args: str, need_zenoh: bool = True) -> str:
-    """The command running the Zenoh peer program (core/zenohproto.py, fed on stdin) on a peer
+    """The command running the Zenoh peer program (core/peer/zenohproto.py, fed on stdin) on a peer
     with the interpreter of the rosnet-tui installed there (:func:`installed_python_command`).
     Without an installation it prints a ``no_install`` report and exits NO_INSTALL_EXIT, unless
     not *need_zenoh* (``info`` needs only the standard library: the peer's python3 runs it
@@ -352,9 +359,9 @@ def zenoh_peer_command(*args: str, need_zenoh: bool = True) -> str:
 
 # --------------------------------------------------------------------------- the round's peer agents
 # One program per peer and round runs every probe the round's checks ask of that peer (see
-# core/peer_agent.py): ROS 1's on the peer's python3 without site (stdlib only), ROS 2's on the
+# core/peer/peer_agent.py): ROS 1's on the peer's python3 without site (stdlib only), ROS 2's on the
 # interpreter of the rosnet-tui installed there (eclipse-zenoh).
-# Both serve the Linux chats' peer side (core/chatproto.py, stdlib). A peer without rosnet-tui
+# Both serve the Linux chats' peer side (core/peer/chatproto.py, stdlib). A peer without rosnet-tui
 # gets ROS 2's agent on its python3 (the finder's fallback): what needs the install (the Zenoh
 # probes: needs_install) answers with the finder's no_install report, as a lone command did.
 ROSPROTO_SOURCE = Path(rosproto.__file__).read_bytes()   # the ROS 1 probe program

@@ -2,7 +2,7 @@
 (ros2.router). The graph and live publish/subscribe are in :mod:`.ros2_graph`.
 
 Every probe is a real Zenoh session (eclipse-zenoh) that behaves as an rmw_zenoh node does on the
-wire (:mod:`rosnet_tui.core.zenohproto`). Questions to a peer run the same module over SSH, on
+wire (:mod:`rosnet_tui.core.peer.zenohproto`). Questions to a peer run the same module over SSH, on
 the interpreter of the rosnet-tui installed there, by the round's peer agent (probes.ZENOH_AGENT).
 """
 
@@ -16,7 +16,6 @@ from typing import Any
 
 import psutil
 
-from rosnet_tui.core import fleet_tls, ros2, tls_handshake, zenohproto
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
     ZENOH_AGENT,
@@ -31,11 +30,13 @@ from rosnet_tui.core.checks.probes import (
     zenoh_env,
     zenoh_peer_problem,
 )
-from rosnet_tui.core.managed_text import ManagedFileError
-from rosnet_tui.core.managed_write import read_text
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.files.managed_text import ManagedFileError
+from rosnet_tui.core.files.managed_write import read_text
+from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.ros import fleet_tls, ros2, tls_handshake
 from rosnet_tui.core.ssh.connection import resolve_ipv4, run_blocking
 
 FACTOR_ROUTER = 1.0

@@ -1,9 +1,9 @@
 """Step 4 for ROS 2 over rmw_zenoh: the graph (ros2.graph) and live publish/subscribe both ways
 (ros2.pubsub_out, ros2.pubsub_in), each through the routers as a real node's data goes.
 
-Our side is a probe node here (:class:`rosnet_tui.core.zenohproto.ProbeNode`: liveliness tokens,
+Our side is a probe node here (:class:`rosnet_tui.core.peer.zenohproto.ProbeNode`: liveliness tokens,
 rmw_zenoh's data key, CDR payload, 33-byte attachment); the peer's side is the same module run
-over SSH, by the round's peer agent there (core/peer_agent.py). A failure names the hop where the
+over SSH, by the round's peer agent there (core/peer/peer_agent.py). A failure names the hop where the
 message was lost.
 """
 
@@ -14,7 +14,6 @@ import secrets
 import time
 from typing import Any
 
-from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
     ZENOH_AGENT,
@@ -30,9 +29,11 @@ from rosnet_tui.core.checks.probes import (
     router_links,
     zenoh_peer_problem,
 )
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.ros import ros2
 from rosnet_tui.core.ssh.connection import run_blocking
 
 FACTOR_GRAPH, FACTOR_PUBSUB = 2.0, 4.0

@@ -1,7 +1,7 @@
 """Step 2, Router/modem: local address, the test port, our listener, and forwarding from outside.
 
 ``router.port_open`` is the procedure's "start ``nc -l PORT``, ask a port checker" loop: our own
-listener (:mod:`rosnet_tui.core.listener`) answers on each port we probe, and the outside view
+listener (:mod:`rosnet_tui.core.net.listener`) answers on each port we probe, and the outside view
 comes from the peer over SSH (it connects to our public IP and must read our listener's greeting,
 so a port forwarded to the wrong machine is caught) or from the echoip service in the settings.
 """
@@ -25,10 +25,11 @@ from rosnet_tui.core.checks.probes import (
     round_public_ip,
     ssh_peers,
 )
-from rosnet_tui.core.connect import kind_from_text
+from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.jsonsafe import loads_bounded
-from rosnet_tui.core.listener import GREETING, TestListener
-from rosnet_tui.core.netinfo import (
+from rosnet_tui.core.net.connect import kind_from_text
+from rosnet_tui.core.net.listener import GREETING, TestListener
+from rosnet_tui.core.net.netinfo import (
     LinkState,
     LocalNet,
     detect_local_net,
@@ -36,10 +37,9 @@ from rosnet_tui.core.netinfo import (
     link_state,
 )
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.saved.state import record_local_ip
 from rosnet_tui.core.ssh.connection import run_blocking
 from rosnet_tui.core.ssh.session import ssh_run
-from rosnet_tui.core.state import record_local_ip
 
 
 # --------------------------------------------------------------------------- router.local_ip
