@@ -111,7 +111,7 @@ class Container:
         self.holder.stderr.close()
 
 
-_PAUSED = ("import sys, time\nfrom rosnet_tui.core import managed_write as mw\n"
+_PAUSED = ("import sys, time\nfrom rosnet_tui.core.files import managed_write as mw\n"
            "mw._before_truncate = lambda: time.sleep(1.0)\n"
            "from rosnet_tui.cli import main\nsys.exit(main(sys.argv[1:]))\n")
 

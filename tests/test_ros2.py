@@ -236,7 +236,7 @@ def test_the_zenoh_peer_program_runs_with_the_peers_site_packages(tmp_path):
     import subprocess
     import sys
 
-    from rosnet_tui.core.checks.probes import python_stdin_command, zenoh_peer_command
+    from rosnet_tui.core.peer.commands import python_stdin_command, zenoh_peer_command
 
     cmd = zenoh_peer_command("graph", "--timeout", "1")
     assert cmd.startswith("sh -c ") and 'exec "$py" - "$@"' in cmd

@@ -21,7 +21,9 @@ from urllib.parse import urlsplit
 import psutil
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import budget, fetch_public_ip, http_get, parse_ip
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.http import http_get
+from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, parse_ip
 from rosnet_tui.core.net.netinfo import is_overlay
 from rosnet_tui.core.procedure import is_ip
 from rosnet_tui.core.results import Outcome, Status

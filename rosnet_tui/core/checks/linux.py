@@ -17,12 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
-    NO_SSH_USER,
-    budget,
-    each_peer,
-    ssh_peers,
-)
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.peers import NO_SSH_USER, each_peer, ssh_peers
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.files.hosts import HostsEntry, hosts_entries
 from rosnet_tui.core.files.managed_text import ManagedFileError

@@ -17,24 +17,21 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
+from rosnet_tui.core.checks.probes.agents import (
     CHAT_SOURCE,
-    NO_SSH_USER,
-    budget,
     chat_agent,
-    each_peer,
     no_python,
     peer_python,
     peer_run,
     peer_session,
-    python_command,
-    shq,
-    ssh_peers,
 )
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.peers import NO_SSH_USER, each_peer, ssh_peers
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.net.connect import kind_from_text, tcp_failure_kind
 from rosnet_tui.core.net.listener import ECHO, GREETING
 from rosnet_tui.core.peer.chatproto import CHAT
+from rosnet_tui.core.peer.commands import python_command, shq
 from rosnet_tui.core.peer.peer_agent import AgentCall
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.connection import SshResult, resolve_ipv4, run_blocking

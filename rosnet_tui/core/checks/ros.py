@@ -14,15 +14,14 @@ from typing import Any
 from urllib.parse import urlparse
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
+from rosnet_tui.core.checks.probes.agents import (
     ROS_AGENT,
-    each_peer,
     peer_program_problem,
     peer_run,
     peer_session,
-    ssh_peers,
     stderr_tail,
 )
+from rosnet_tui.core.checks.probes.peers import each_peer, ssh_peers
 from rosnet_tui.core.config.settings_model import Peer, Settings
 from rosnet_tui.core.files.hosts import own_ip
 from rosnet_tui.core.peer import rosproto

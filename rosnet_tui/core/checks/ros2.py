@@ -3,7 +3,7 @@
 
 Every probe is a real Zenoh session (eclipse-zenoh) that behaves as an rmw_zenoh node does on the
 wire (:mod:`rosnet_tui.core.peer.zenohproto`). Questions to a peer run the same module over SSH, on
-the interpreter of the rosnet-tui installed there, by the round's peer agent (probes.ZENOH_AGENT).
+the interpreter of the rosnet-tui installed there, by the round's peer agent (probes.agents.ZENOH_AGENT).
 """
 
 from __future__ import annotations
@@ -17,14 +17,13 @@ from typing import Any
 import psutil
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
-    ZENOH_AGENT,
-    budget,
+from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_run
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.peers import each_peer
+from rosnet_tui.core.checks.probes.ros2 import (
     close_zenoh,
-    each_peer,
     node_endpoint,
     open_zenoh,
-    peer_run,
     ros2_peers,
     router_links,
     zenoh_env,

@@ -15,16 +15,14 @@ import time
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
-    ZENOH_AGENT,
-    budget,
+from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_run, peer_session
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.peers import each_peer
+from rosnet_tui.core.checks.probes.ros2 import (
     close_zenoh,
-    each_peer,
     node_domain,
     node_endpoint,
     open_zenoh,
-    peer_run,
-    peer_session,
     ros2_peers,
     router_links,
     zenoh_peer_problem,
@@ -105,7 +103,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     peers = ros2_peers(ctx)
     theirs = {p.name: zenohproto.probe_name() for p in peers}
     remote_t = max(0.5, t * 0.55)
-    # One task for every peer's side (probes.each_peer: bounded, one SSH connection per peer).
+    # One task for every peer's side (probes.peers.each_peer: bounded, one SSH connection per peer).
     tasks = [asyncio.ensure_future(each_peer(peers, lambda p: peer_run(
         ctx, p, ZENOH_AGENT, "zenoh", ["graph", "--expect", ours, "--name", theirs[p.name],
                                        "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)],

@@ -22,7 +22,7 @@ from typing import Any
 
 from rosnet_tui.core import jsonsafe
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import budget
+from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.net.connect import tcp_failure_kind
 from rosnet_tui.core.peer import rosproto

@@ -17,14 +17,10 @@ from typing import Any, Literal
 import psutil
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
-    budget,
-    fetch_public_ip,
-    http_get,
-    python_command,
-    round_public_ip,
-    ssh_peers,
-)
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.http import http_get
+from rosnet_tui.core.checks.probes.peers import ssh_peers
+from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, round_public_ip
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.net.connect import kind_from_text
@@ -36,6 +32,7 @@ from rosnet_tui.core.net.netinfo import (
     interface_ipv4,
     link_state,
 )
+from rosnet_tui.core.peer.commands import python_command
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.saved.state import record_local_ip
 from rosnet_tui.core.ssh.connection import run_blocking

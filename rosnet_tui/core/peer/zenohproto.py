@@ -15,7 +15,7 @@ the two discover each other but never match each other's data keys.
 
 This file runs on its own too (``<python> - sub|pub|graph ...`` fed on stdin over SSH), with the
 interpreter of the rosnet-tui installed on the peer (its virtual environment has eclipse-zenoh;
-checks/probes.py finds it), whatever that rosnet-tui's version. It imports only the standard
+peer/commands.py finds it), whatever that rosnet-tui's version. It imports only the standard
 library at the top; ``zenoh`` is imported when a session is opened.
 """
 

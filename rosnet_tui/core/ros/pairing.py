@@ -7,7 +7,7 @@ installs the CA certificate and the member's certificate: one SSH round trip.
 
 The master's side is ``core/ros/fleet_tls.py`` itself, fed on stdin to the interpreter of the
 rosnet-tui installed on the master (found by the same shell prelude that runs the Zenoh peer
-program, ``probes.zenoh_peer_command``). A program on stdin rather than a sub-command of the
+program, ``peer.commands.zenoh_peer_command``). A program on stdin rather than a sub-command of the
 master's ``rosnet-tui``: it needs only that installation's ``cryptography``, so a member pairs
 with a master running an older rosnet-tui, and no command name has to be found on the master's
 PATH (pipx puts it where a non-login SSH shell often does not look).
@@ -93,7 +93,7 @@ def master_peer(s: Settings) -> Any:
 
 def tls_command(*args: str) -> str:
     """The command running fleet_tls.py (fed on stdin) with the peer's installed interpreter."""
-    from rosnet_tui.core.checks.probes import zenoh_peer_command
+    from rosnet_tui.core.peer.commands import zenoh_peer_command
 
     return zenoh_peer_command(*args)
 
