@@ -33,7 +33,7 @@ CHECK_TIMEOUT = 120.0
 
 def write_master_config(fleet: Any, settings: Any, members: int, path: Path) -> Path:
     """*settings* (the master's) with only its first *members* peers, written to *path*."""
-    from rosnet_tui.core.settings import atomic_write_text, render_settings
+    from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 
     atomic_write_text(path, render_settings(replace(settings, peers=settings.peers[:members])),
                       mode=0o644)

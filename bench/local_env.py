@@ -47,8 +47,8 @@ def base_env() -> dict[str, str]:
 def write_settings(path: Path, *, probe_url: str, public_ip_url: str, test_port: int,
                    timeout_s: float = 3.0) -> None:
     """A complete settings file pointing only at loopback addresses."""
-    from rosnet_tui.core.settings import atomic_write_text, render_settings
-    from rosnet_tui.core.settings_model import Peer, ThisComponent
+    from rosnet_tui.core.config.settings_model import Peer, ThisComponent
+    from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
     from tests.builders import checked_settings
 
     s = checked_settings(

@@ -24,7 +24,7 @@ def app_title(key: str) -> str:
     """Text that is on the screen only while that step is shown: the first words of its
     expected outcome (from the core's step data, so a change of the UI's wording does not
     break the bench; five words always fit on the pane's first line at 80 columns)."""
-    from rosnet_tui.core.steps import STEPS
+    from rosnet_tui.core.wizard.steps import STEPS
 
     return " ".join(STEPS[int(key) - 1].expected.split()[:5])
 

@@ -15,14 +15,14 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rosnet_tui.core.netinfo import LocalNet
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Peer, Settings, ThisComponent
+from rosnet_tui.core.net.netinfo import LocalNet
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings_model import Peer, Settings, ThisComponent
-from rosnet_tui.core.steps import STEPS
+from rosnet_tui.core.wizard.steps import STEPS
 
 if TYPE_CHECKING:
-    from rosnet_tui.core.session import WizardSession
+    from rosnet_tui.core.wizard.session import WizardSession
 
 SIZES = ((80, 24), (120, 40))
 DEFAULT_OUT = Path(__file__).resolve().parent.parent / "screenshots"
@@ -67,7 +67,7 @@ DEMO_RESULTS = [
 
 def _session(tmpdir: Path, settings: Settings) -> WizardSession:
     """A session of the demo component, its files in *tmpdir*."""
-    from rosnet_tui.core.session import WizardSession
+    from rosnet_tui.core.wizard.session import WizardSession
 
     return WizardSession(settings, Paths(config_path=tmpdir / "config.toml",
                                          state_dir=tmpdir / "state"), detect_net=demo_net)

@@ -11,8 +11,8 @@ from collections.abc import Callable
 
 from rosnet_tui.core import advisor
 from rosnet_tui.core.advisor import Finding, advise
+from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings_model import Settings
 from tests.builders import (
     healthy_laptop,
     healthy_robot,

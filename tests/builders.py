@@ -12,9 +12,7 @@ import socket
 from dataclasses import replace
 from pathlib import Path
 
-from rosnet_tui.core.netinfo import LocalNet
-from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings_model import (
+from rosnet_tui.core.config.settings_model import (
     CheckSettings,
     Peer,
     ProbeSettings,
@@ -23,6 +21,8 @@ from rosnet_tui.core.settings_model import (
     SyncSettings,
     ThisComponent,
 )
+from rosnet_tui.core.net.netinfo import LocalNet
+from rosnet_tui.core.results import CheckResult, Status
 
 # The robot's settings file as a person writes it (the CLI tests hand it to --config).
 ROBOT_CONFIG = """\

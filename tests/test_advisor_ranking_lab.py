@@ -16,7 +16,7 @@ import json
 
 import pytest
 
-from rosnet_tui.core.settings import atomic_write_text, render_settings
+from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 from tests.advisor_support import explain_report, first_failure_in, lab_report
 
 pytestmark = pytest.mark.lab

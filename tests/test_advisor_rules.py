@@ -16,9 +16,9 @@ import pytest
 
 from rosnet_tui.core import advisor
 from rosnet_tui.core.advisor import advice_by_check, advise, all_rules
+from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings_model import Settings
 from tests.advisor_support import (
     GENERAL_CASES,
     ISP_CASES,
@@ -221,7 +221,7 @@ def test_printed_commands_can_be_run_as_printed():
 def test_exposure_says_what_the_peers_only_firewall_lets_in():
     """ROS 1's default protection is the peers-only firewall: the advisor's exposure text says
     who really gets in (the router card's sentence), and the whole internet only without it."""
-    from rosnet_tui.core.router_card import ros1_exposure
+    from rosnet_tui.core.exposure.router_card import ros1_exposure
 
     s = robot_settings()
     assert s.ros.security == "firewall"

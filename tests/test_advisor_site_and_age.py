@@ -21,10 +21,10 @@ import pytest
 from rosnet_tui.core.advisor import advise, first_failure
 from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.checks.data import undeclared
-from rosnet_tui.core.hosts import hosts_entries
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.files.hosts import hosts_entries
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings import load_settings, render_settings, save_settings
+from rosnet_tui.core.saved.settings import load_settings, render_settings, save_settings
 from tests.advisor_support import ids, run, ssh_shut_out
 from tests.builders import healthy_laptop, laptop_settings, put
 from tests.builders import ros2_member as member
@@ -218,7 +218,7 @@ def test_the_wizard_dates_its_settings_when_it_saves_them_or_finds_them_saved(tm
     import dataclasses
     import os
 
-    from rosnet_tui.core.session import WizardSession
+    from rosnet_tui.core.wizard.session import WizardSession
 
     path = tmp_path / "config.toml"
     session = WizardSession(laptop_settings(), Paths(config_path=path, state_dir=tmp_path))

@@ -50,7 +50,7 @@ def laptop_config(ros2_world: Ros2World, tmp_path, robot_public: str):
     """sami's ROS 2 settings, turtlebot at *robot_public* (its hosts line says the same)."""
     from dataclasses import replace
 
-    from rosnet_tui.core.settings import atomic_write_text, render_settings
+    from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 
     s = ros2_world.settings("laptop")
     s = replace(s, peers=[replace(p, public_ip=robot_public) for p in s.peers])

@@ -87,7 +87,7 @@ def test_isp_cgnat_from_the_modems_empty_address_is_worded_as_such():
                        "hop": None})
     f = only(advise([res], member()), "ros2.cgnat")   # a member: harmless under ROS 2
     assert f.severity == "info"
-    from rosnet_tui.core.settings_model import Settings, ThisComponent
+    from rosnet_tui.core.config.settings_model import Settings, ThisComponent
 
     ros1 = Settings(this=ThisComponent(name="turtlebot", role="master"))
     f = only(advise([res], ros1), "isp.cgnat")

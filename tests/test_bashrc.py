@@ -11,9 +11,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core.bashrc import (
+from rosnet_tui.core.config.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files.bashrc import (
     apply_bashrc,
     export_line,
     find_ros_ip_lines,
@@ -21,8 +22,7 @@ from rosnet_tui.core.bashrc import (
     preview_bashrc,
     shell_lines,
 )
-from rosnet_tui.core.hosts import WriterSettingsError
-from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.files.hosts import WriterSettingsError
 
 needs_bash = pytest.mark.skipif(not shutil.which("bash"), reason="bash is not installed")
 

@@ -24,9 +24,15 @@ from rosnet_tui.core.checks import (
     data,
     run_check,
 )
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import (
+    Peer,
+    ProbeSettings,
+    RosSettings,
+    Settings,
+    ThisComponent,
+)
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 

@@ -12,13 +12,19 @@ from rosnet_tui.core.checks import (
     CheckContext,
     linux,
     load_builtin_checks,
-    probes,
     run_check,
 )
-from rosnet_tui.core.hosts import HostsEntry
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.checks.probes import agents as probe_agents
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import (
+    Peer,
+    ProbeSettings,
+    RosSettings,
+    Settings,
+    ThisComponent,
+)
+from rosnet_tui.core.files.hosts import HostsEntry
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings_model import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 from tests.builders import probe_settings as settings
@@ -184,7 +190,7 @@ async def test_chat_in_by_name(ssh_client, tmp_path):
 @pytest.mark.skipif(shutil.which("nc") is None, reason="needs nc")
 async def test_chats_fall_back_to_nc_without_python3(ssh_client, tmp_path, monkeypatch):
     # no python3 on the peer: neither the round's agent nor the chats' own command finds one
-    monkeypatch.setattr(probes, "PEER_PYTHON", "no-such-python3")
+    monkeypatch.setattr(probe_agents, "PEER_PYTHON", "no-such-python3")
     out = await run("linux.chat_out", ctx(settings(peers=[ssh_client.peer()]), tmp_path,
                                           ssh_client, timeout=3.0))
     assert out.status is Status.PASS, out.evidence

@@ -15,11 +15,11 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import rosproto
 from rosnet_tui.core.checks import REGISTRY, CheckContext, checks_for, run_check
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.peer import rosproto
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 from tests.plugins.roscore import RosCore

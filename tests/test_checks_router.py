@@ -23,11 +23,16 @@ from rosnet_tui.core.checks import (
     run_checks,
 )
 from rosnet_tui.core.checks.router import port_probe_command
-from rosnet_tui.core.listener import GREETING, ListenerPool
-from rosnet_tui.core.netinfo import detect_local_net
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import (
+    ProbeSettings,
+    RosSettings,
+    Settings,
+    ThisComponent,
+)
+from rosnet_tui.core.net.listener import GREETING, ListenerPool
+from rosnet_tui.core.net.netinfo import detect_local_net
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings_model import ProbeSettings, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 
@@ -79,7 +84,7 @@ async def test_local_ip_matches_this_machine(tmp_path):
 
 async def test_local_ip_history_shows_a_new_dhcp_lease_without_local_ip_in_the_settings(tmp_path):
     """The documented settings have no local_ip: the history is what tells a new lease."""
-    from rosnet_tui.core.state import record_local_ip
+    from rosnet_tui.core.saved.state import record_local_ip
 
     net = detect_local_net()
     if not net.local_ip or not net.gateway:

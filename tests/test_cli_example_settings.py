@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core.netinfo import detect_local_net
-from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.net.netinfo import detect_local_net
+from rosnet_tui.core.saved.settings import load_settings
 
 REPO = Path(__file__).resolve().parent.parent
 

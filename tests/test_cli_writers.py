@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core import undo_journal as uj
-from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files import undo_journal as uj
+from rosnet_tui.core.saved.settings import load_settings
 from tests.builders import ROBOT_CONFIG, ros2_master
 from tests.prompts import run_answering
 
@@ -244,7 +244,7 @@ def test_when_root_is_needed_the_exact_sudo_command_is_run(box, tmp_path, monkey
 
 def test_without_sudo_the_command_is_shown_and_nothing_written(box, monkeypatch, capsys):
     from rosnet_tui.cli import main
-    from rosnet_tui.core import privilege
+    from rosnet_tui.core.files import privilege
 
     monkeypatch.setenv("HOME", str(box.home))
     monkeypatch.setattr(mf, "can_write", lambda path: False)
@@ -290,7 +290,7 @@ def _can_write_as_nobody(tmp_path: Path) -> None:
     os.chown(own_file, 65534, 65534)
     code = ("import sys; sys.path.insert(0, sys.argv[1]);"
             "import importlib.util as u;"
-            "spec = u.spec_from_file_location('mf', sys.argv[1] + '/rosnet_tui/core/managed_file.py');"
+            "spec = u.spec_from_file_location('mf', sys.argv[1] + '/rosnet_tui/core/files/managed_file.py');"
             "m = u.module_from_spec(spec); sys.modules['mf'] = m; spec.loader.exec_module(m);"
             "print(*[m.can_write(p) for p in sys.argv[2:]])")
     r = subprocess.run([shutil.which("setpriv"), "--reuid=65534", "--regid=65534",
@@ -307,9 +307,9 @@ def _can_write_as_nobody(tmp_path: Path) -> None:
 def _fleet_master(box):
     """The box as a ROS 2 master with two members (neither has an SSH user: re-pairing them
     needs no network) and its fleet CA made; the CA's key id."""
-    from rosnet_tui.core import fleet_tls
-    from rosnet_tui.core.settings import render_settings
-    from rosnet_tui.core.settings_model import Peer
+    from rosnet_tui.core.config.settings_model import Peer
+    from rosnet_tui.core.ros import fleet_tls
+    from rosnet_tui.core.saved.settings import render_settings
 
     s = ros2_master()
     s.peers = [Peer(name="sami", public_ip="198.51.100.2"),
@@ -323,7 +323,7 @@ def _fleet_master(box):
 
 def test_ros_pair_remove_previews_and_refuses_without_terminal_or_yes(box):
     """Issue 29 (section 4, row 6): `ros pair --remove` rotated the fleet CA at once."""
-    from rosnet_tui.core import fleet_tls
+    from rosnet_tui.core.ros import fleet_tls
 
     ca = _fleet_master(box)
     out = run(box, "ros", "pair", "--remove", "sami")
@@ -345,7 +345,7 @@ def test_ros_pair_remove_previews_and_refuses_without_terminal_or_yes(box):
 
 
 def test_ros_pair_remove_asks_on_a_terminal(box):
-    from rosnet_tui.core import fleet_tls
+    from rosnet_tui.core.ros import fleet_tls
 
     ca = _fleet_master(box)
     rc, out = run_tty(box, ["ros", "pair", "--remove", "sami"], ["n"])
@@ -395,7 +395,7 @@ def test_help_says_what_undo_and_ros_cover_now(box):
 def test_ros2_apply_dry_run_says_it_makes_the_ca_and_makes_nothing(box):
     """Issue 29 (section 4, row 10): on a ROS 2 master `ros apply --dry-run` did not say that the
     apply makes the fleet CA and keys; with the files already written it even made them."""
-    from rosnet_tui.core.settings import render_settings
+    from rosnet_tui.core.saved.settings import render_settings
 
     box.cfg.write_text(render_settings(ros2_master()))
     tls = box.home / ".config" / "rosnet-tui" / "tls"

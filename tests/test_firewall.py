@@ -13,12 +13,12 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import firewall as fw
-from rosnet_tui.core import netinfo
 from rosnet_tui.core.advisor import advise
+from rosnet_tui.core.config.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.exposure import firewall as fw
+from rosnet_tui.core.net import netinfo
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings import render_settings
-from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.saved.settings import render_settings
 from rosnet_tui.core.ssh import origin
 from tests.prompts import run_answering
 
@@ -392,8 +392,8 @@ def test_the_prompt_names_the_session_it_keeps(tmp_path):
 
 
 def test_settings_firewall_allow_is_read_saved_and_refused_when_bad(tmp_path):
-    from rosnet_tui.core.settings import load_settings, save_settings
-    from rosnet_tui.core.settings_model import SettingsError
+    from rosnet_tui.core.config.settings_model import SettingsError
+    from rosnet_tui.core.saved.settings import load_settings, save_settings
 
     base = render_settings(robot())
     good = base + '\n[firewall]\nallow = ["192.0.2.0/28", "2001:db8::/48", " 203.0.113.9 "]\n'

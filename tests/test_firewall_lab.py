@@ -304,7 +304,7 @@ def test_as_a_user_the_exact_sudo_command_loads_the_previewed_table(fw_lab, tmp_
     import sys
 
     from rosnet_tui.cli import main
-    from rosnet_tui.core import privilege
+    from rosnet_tui.core.files import privilege
 
     lab = fw_lab
     fake = tmp_path / "bin"

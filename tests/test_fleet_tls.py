@@ -15,10 +15,10 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import fleet_tls, ros2
-from rosnet_tui.core.fleet_tls import TlsError
-from rosnet_tui.core.settings import parse_settings, render_settings
-from rosnet_tui.core.settings_model import RosSettings, Settings
+from rosnet_tui.core.config.settings_model import RosSettings, Settings
+from rosnet_tui.core.ros import fleet_tls, ros2
+from rosnet_tui.core.ros.fleet_tls import TlsError
+from rosnet_tui.core.saved.settings import parse_settings, render_settings
 from tests.builders import ros2_master
 from tests.builders import ros2_member as member
 
@@ -61,7 +61,7 @@ def test_security_refusals():
 # --------------------------------------------------------------------------- material
 def test_master_ca_and_certificate(tmp_path):
     p = fleet_tls.tls_paths(tmp_path)
-    from rosnet_tui.core import pairing
+    from rosnet_tui.core.ros import pairing
 
     made = pairing.prepare_master(master(), p)
     assert len(made) == 2 and pairing.prepare_master(master(), p) == []
@@ -78,7 +78,7 @@ def test_master_ca_and_certificate(tmp_path):
 
 
 def test_sign_and_install_and_their_refusals(tmp_path):
-    from rosnet_tui.core import pairing
+    from rosnet_tui.core.ros import pairing
 
     mp, sp = fleet_tls.tls_paths(tmp_path / "m"), fleet_tls.tls_paths(tmp_path / "s")
     pairing.prepare_master(master(), mp)
@@ -154,7 +154,7 @@ def test_router_and_session_configs_under_mtls(tmp_path):
     assert sess["transport"]["link"]["tls"]["connect_private_key"] == str(p.node_key)
     values, bad = ros2.parse_override(ros2.client_override(member(), p))
     assert bad == [] and values["transport/link/tls/connect_certificate"] == str(p.node_crt)
-    from rosnet_tui.core import zenohproto  # a peer's lone client node dials with these keys
+    from rosnet_tui.core.peer import zenohproto  # a peer's lone client node dials with these keys
     env = {"ZENOH_CONFIG_OVERRIDE": ros2.client_override(member(), p)}
     assert zenohproto.peer_endpoint(env, "x") == ("tls/turtlebot:7447", "client")
     assert zenohproto.override_tls(env) == ros2.tls_settings(member(), p, listen=False)
@@ -183,7 +183,8 @@ def _wait_port(port: int, proc: subprocess.Popen, timeout: float = 15.0) -> None
 
 def test_a_real_router_with_the_masters_config_admits_only_the_fleet(tmp_path):
     pytest.importorskip("zenoh")
-    from rosnet_tui.core import pairing, zenohproto
+    from rosnet_tui.core.peer import zenohproto
+    from rosnet_tui.core.ros import pairing
 
     port = _free_port()
     mp = fleet_tls.tls_paths(tmp_path / "m")
@@ -232,7 +233,7 @@ def test_a_real_router_with_the_masters_config_admits_only_the_fleet(tmp_path):
 
 
 def test_the_sync_service_renews_the_masters_certificate_before_expiry(tmp_path):
-    from rosnet_tui.core import pairing
+    from rosnet_tui.core.ros import pairing
 
     p = fleet_tls.tls_paths(tmp_path)
     assert pairing.renew_due(master(), p) == ([], 6 * 3600.0)   # no CA: the service makes none

@@ -22,8 +22,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rosnet_tui.cli import build_parser
-from rosnet_tui.core import report
-from rosnet_tui.core.probe_server import ProbeLimits, ProbeServer
+from rosnet_tui.core.net.probe_server import ProbeLimits, ProbeServer
+from rosnet_tui.core.wizard import report
 from tests.hardening_tally import tally
 from tests.test_probe_server import Listener, http
 
@@ -212,7 +212,7 @@ def test_property_saved_results_make_a_report_or_a_report_error(tmp_path_factory
     path.write_text(json.dumps(doc))
     try:
         results, saved, meta = report.load_results_json(path)
-        from rosnet_tui.core.settings_model import Settings
+        from rosnet_tui.core.config.settings_model import Settings
 
         d = report.build_report(results, saved or Settings(), source="x",
                                 environment=meta.get("environment"))

@@ -6,7 +6,7 @@ file that is a FIFO hung the DNS store in ``open()`` until someone wrote to it. 
 text from a file, a peer or the network is decoded with a bounded depth (``core.jsonsafe``), or,
 in the stdlib-only programs that also run on peers, RecursionError is caught like a decode error;
 and every file a user names or the state dir holds is read without blocking, regular files only,
-bounded (``core.regular_file``).
+bounded (``core.files.regular_file``).
 """
 
 from __future__ import annotations
@@ -21,11 +21,11 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core import managed_write as mw
-from rosnet_tui.core import undo_journal as uj
-from rosnet_tui.core.cut_writes import MAGIC, journal_target
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files import managed_write as mw
+from rosnet_tui.core.files import undo_journal as uj
+from rosnet_tui.core.files.cut_writes import MAGIC, journal_target
 from tests.hardening_tally import tally
 
 REPO = Path(__file__).resolve().parents[1]
@@ -37,7 +37,7 @@ DEEP_OBJ = '{"a":' * 20_000 + "1" + "}" * 20_000
 # --------------------------------------------------------------------------- deep JSON
 @pytest.mark.parametrize("text", [DEEP, DEEP_OBJ, '{"history": ' + DEEP + "}"])
 def test_state_read_json_refuses_deep_nesting_as_damaged_state(tmp_path, text):
-    from rosnet_tui.core import state
+    from rosnet_tui.core.saved import state
 
     p = tmp_path / state.PUBLIC_IP_FILE
     p.write_text(text)
@@ -60,7 +60,7 @@ def test_sync_status_and_applied_records_survive_deep_nesting(tmp_path):
 
 
 def test_ui_state_survives_deep_nesting(tmp_path):
-    from rosnet_tui.core.ui_state import UI_FILE, UiState
+    from rosnet_tui.core.saved.ui_state import UI_FILE, UiState
 
     (tmp_path / UI_FILE).write_text(DEEP_OBJ)
     assert UiState(tmp_path).data == {}
@@ -88,9 +88,10 @@ def test_an_in_place_journal_with_a_deep_header_is_not_trusted(tmp_path):
 
 
 def test_peer_and_network_json_parsers_refuse_deep_nesting():
-    from rosnet_tui.core import ros2, rosproto, zenohproto
-    from rosnet_tui.core.checks.probes import parse_ip
+    from rosnet_tui.core.checks.probes.public_ip import parse_ip
     from rosnet_tui.core.checks.router import parse_probe_result
+    from rosnet_tui.core.peer import rosproto, zenohproto
+    from rosnet_tui.core.ros import ros2
 
     assert parse_ip('{"ip": ' + DEEP + "}") is None
     assert zenohproto.parse_report(zenohproto.REPORT_MARK + DEEP_OBJ) is None
@@ -106,8 +107,8 @@ def test_peer_and_network_json_parsers_refuse_deep_nesting():
 def test_every_json_decode_in_the_product_is_bounded():
     """Siblings: outside core.jsonsafe, json.loads appears only in the stdlib-only peer programs
     (they cannot import it), and there RecursionError is caught with the decode errors."""
-    peer_programs = ("rosnet_tui/core/rosproto.py", "rosnet_tui/core/zenohproto.py",
-                     "rosnet_tui/core/agentproto.py")
+    peer_programs = ("rosnet_tui/core/peer/rosproto.py", "rosnet_tui/core/peer/zenohproto.py",
+                     "rosnet_tui/core/peer/agentproto.py")
     allowed = {"rosnet_tui/core/jsonsafe.py", *peer_programs}
     found = []
     for p in sorted((REPO / "rosnet_tui").rglob("*.py")):
@@ -189,7 +190,7 @@ def test_a_tsig_key_file_that_is_huge_or_a_device_is_refused(tmp_path):
 
 @pytest.mark.parametrize("which", ["public_ip", "ui", "journal", "backup", "router_config"])
 def test_state_files_and_named_files_that_are_fifos_do_not_hang(tmp_path, which, monkeypatch):
-    from rosnet_tui.core import state
+    from rosnet_tui.core.saved import state
 
     if which == "public_ip":
         fifo = tmp_path / state.PUBLIC_IP_FILE
@@ -197,7 +198,7 @@ def test_state_files_and_named_files_that_are_fifos_do_not_hang(tmp_path, which,
         box = _returns_within(lambda: state.read_json(fifo), fifo)
         assert box == {"value": None}
     elif which == "ui":
-        from rosnet_tui.core.ui_state import UI_FILE, UiState
+        from rosnet_tui.core.saved.ui_state import UI_FILE, UiState
 
         fifo = tmp_path / UI_FILE
         os.mkfifo(fifo)
@@ -239,17 +240,17 @@ def test_more_files_that_are_fifos_do_not_hang(tmp_path, which):
     fifo = tmp_path / ("known_hosts" if which == "known_hosts" else ".bashrc")
     os.mkfifo(fifo)
     if which == "ros1_bashrc":
-        from rosnet_tui.core.rosproto import read_shell_exports
+        from rosnet_tui.core.peer.rosproto import read_shell_exports
 
         box = _returns_within(lambda: read_shell_exports(str(fifo), ("ROS_MASTER_URI",)), fifo)
         assert box == {"value": {}}
     elif which == "ros2_bashrc":
-        from rosnet_tui.core.zenohproto import read_exports
+        from rosnet_tui.core.peer.zenohproto import read_exports
 
         box = _returns_within(lambda: read_exports(str(fifo)), fifo)
         assert box == {"value": {}}
     elif which == "ros2_distro":
-        from rosnet_tui.core.zenohproto import ros_env
+        from rosnet_tui.core.peer.zenohproto import ros_env
 
         box = _returns_within(lambda: ros_env({}, str(fifo)), fifo)
         assert box == {"value": {}}

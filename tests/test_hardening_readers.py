@@ -30,12 +30,12 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import managed_write as mw
 from rosnet_tui.core.checks.linux import check_hosts
 from rosnet_tui.core.checks.runner import RunOptions, make_context
-from rosnet_tui.core.cut_writes import INPLACE_DIR
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.files import managed_write as mw
+from rosnet_tui.core.files.cut_writes import INPLACE_DIR
+from rosnet_tui.core.saved.settings import load_settings
 from tests.builders import ROBOT_CONFIG, random_hosts
 from tests.hardening_tally import tally
 
@@ -111,7 +111,7 @@ class Container:
         self.holder.stderr.close()
 
 
-_PAUSED = ("import sys, time\nfrom rosnet_tui.core import managed_write as mw\n"
+_PAUSED = ("import sys, time\nfrom rosnet_tui.core.files import managed_write as mw\n"
            "mw._before_truncate = lambda: time.sleep(1.0)\n"
            "from rosnet_tui.cli import main\nsys.exit(main(sys.argv[1:]))\n")
 
@@ -320,7 +320,7 @@ def test_the_checks_context_completes_a_cut_write_of_the_bashrc(tmp_path, monkey
 def test_the_hosts_preview_and_apply_complete_a_cut_write_in_their_state_dir(tmp_path,
                                                                             monkeypatch):
     """``hosts apply --state-dir X`` previews from the completed file, not from the torn one."""
-    from rosnet_tui.core.hosts import preview_hosts
+    from rosnet_tui.core.files.hosts import preview_hosts
 
     sd = tmp_path / "sd"
     target, new, cfg = _cut_journaled_in(sd, tmp_path, monkeypatch)

@@ -19,8 +19,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rosnet_tui.core.settings import load_settings, parse_settings
-from rosnet_tui.core.settings_model import MAX_SETTINGS_BYTES, SettingsError
+from rosnet_tui.core.config.settings_model import MAX_SETTINGS_BYTES, SettingsError
+from rosnet_tui.core.saved.settings import load_settings, parse_settings
 from tests.hardening_tally import tally
 
 REPO = Path(__file__).resolve().parents[1]

@@ -23,8 +23,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.settings import (
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.saved.settings import (
     render_settings,
 )
 from rosnet_tui.core.sync import FolderStore, RecordError, SyncService, parse_record

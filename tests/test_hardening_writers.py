@@ -26,9 +26,9 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core import managed_write as mw
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files import managed_write as mw
 from tests.builders import ROBOT_CONFIG, random_hosts
 from tests.hardening_tally import tally
 
@@ -43,10 +43,10 @@ BODY = [f"203.0.113.{i % 250 + 1}  peer-{i}  # a peer of the test" for i in rang
 _CHILD = textwrap.dedent("""
     import sys
     from pathlib import Path
-    from rosnet_tui.core import managed_file as mf
-    from rosnet_tui.core import managed_text as mt
-    from rosnet_tui.core import managed_write as mw
-    from rosnet_tui.core import undo_journal as uj
+    from rosnet_tui.core.files import managed_file as mf
+    from rosnet_tui.core.files import managed_text as mt
+    from rosnet_tui.core.files import managed_write as mw
+    from rosnet_tui.core.files import undo_journal as uj
     mode, dst, state, fa, fb = sys.argv[1:6]
     dst, state = Path(dst), Path(state)
     A, B = Path(fa).read_bytes(), Path(fb).read_bytes()
@@ -406,11 +406,11 @@ def test_a_journal_that_someone_else_could_have_written_is_not_trusted(tmp_path,
 _TEMP_CHILD = textwrap.dedent("""
     import sys
     from pathlib import Path
-    from rosnet_tui.core import managed_file as mf
-    from rosnet_tui.core import managed_text as mt
-    from rosnet_tui.core import managed_write as mw
-    from rosnet_tui.core import undo_journal as uj
-    from rosnet_tui.core.settings import atomic_write_text
+    from rosnet_tui.core.files import managed_file as mf
+    from rosnet_tui.core.files import managed_text as mt
+    from rosnet_tui.core.files import managed_write as mw
+    from rosnet_tui.core.files import undo_journal as uj
+    from rosnet_tui.core.saved.settings import atomic_write_text
     target, state, status = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
     big = sys.argv[4]
     write_all = mw.write_all
@@ -467,7 +467,7 @@ def test_temp_files_of_killed_writers_are_removed_by_the_next_run(tmp_path):
     cur = target.read_text()
     body = ["# z"] if "# z" not in cur else ["# w"]
     mf.apply_preview(mf.preview_block(target, body), state_dir=state)
-    from rosnet_tui.core.settings import atomic_write_text
+    from rosnet_tui.core.saved.settings import atomic_write_text
 
     atomic_write_text(status, "{}\n")
     assert _temps(tmp_path) == []

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import cut_writes
-from rosnet_tui.core import managed_write as mw
+from rosnet_tui.core.files import cut_writes
+from rosnet_tui.core.files import managed_write as mw
 from tests.builders import ROBOT_CONFIG, random_hosts
 from tests.hardening_tally import tally
 from tests.writers_support.bench import NOBODY, HostsBench, bench_problem
@@ -196,7 +196,7 @@ def test_with_nothing_pending_start_up_only_looks(tmp_path):
     """The look-ahead every command runs costs a few stats: the writer is not even imported."""
     code = ("import sys\nfrom rosnet_tui.cli.common import complete_cut_writes\n"
             "complete_cut_writes(['hosts', 'show', '--file', sys.argv[1]])\n"
-            "print('rosnet_tui.core.managed_write' in sys.modules)\n")
+            "print('rosnet_tui.core.files.managed_write' in sys.modules)\n")
     target = tmp_path / "hosts"
     target.write_bytes(OLD)
     env = dict(os.environ, HOME=str(tmp_path), XDG_STATE_HOME=str(tmp_path / "state"))

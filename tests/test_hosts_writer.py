@@ -12,9 +12,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core.hosts import (
+from rosnet_tui.core.config.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files.hosts import (
     WriterSettingsError,
     active_profile,
     apply_hosts,
@@ -23,7 +24,6 @@ from rosnet_tui.core.hosts import (
     preview_hosts,
     render_hosts_block,
 )
-from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
 
 
 def robot(**this) -> Settings:

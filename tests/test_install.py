@@ -35,7 +35,7 @@ import pytest
 import rosnet_tui
 from rosnet_tui.cli import build_parser
 from rosnet_tui.cli import sync as sync_cli
-from rosnet_tui.core import privilege
+from rosnet_tui.core.files import privilege
 from tests.builders import ROBOT_CONFIG
 
 REPO = Path(__file__).resolve().parent.parent

@@ -9,11 +9,11 @@ import dataclasses
 import pytest
 
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.exposure.router_card import build_router_card, render_router_card
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.router_card import build_router_card, render_router_card
 from rosnet_tui.core.ssh.options import SshOptions
-from rosnet_tui.core.steps import STEP_BY_ID, step_for
+from rosnet_tui.core.wizard.steps import STEP_BY_ID, step_for
 from tests.builders import ROBOT_NET as NET
 from tests.builders import card_robot as robot
 

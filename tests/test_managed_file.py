@@ -19,10 +19,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core import managed_write as mw
-from rosnet_tui.core import undo_journal as uj
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files import managed_write as mw
+from rosnet_tui.core.files import undo_journal as uj
 
 REPO = Path(__file__).resolve().parent.parent
 BODY_A = ["10.10.10.1\tturtlebot", "198.51.100.2\tsami"]
@@ -304,10 +304,10 @@ def test_temp_files_of_dead_writers_are_swept(tmp_path):
 _CHILD = textwrap.dedent("""
     import random, sys, time
     from pathlib import Path
-    from rosnet_tui.core import managed_file as mf
-    from rosnet_tui.core import managed_text as mt
-    from rosnet_tui.core import undo_journal as uj
-    from rosnet_tui.core import managed_write as mw
+    from rosnet_tui.core.files import managed_file as mf
+    from rosnet_tui.core.files import managed_text as mt
+    from rosnet_tui.core.files import undo_journal as uj
+    from rosnet_tui.core.files import managed_write as mw
     path, state, mode = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3]
     a, b = Path(sys.argv[4]).read_bytes(), Path(sys.argv[5]).read_bytes()
     def hook():

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core.netinfo import LinkFacts, link_state_of
+from rosnet_tui.core.net.netinfo import LinkFacts, link_state_of
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -56,9 +56,9 @@ SCRIPT = textwrap.dedent("""
     import asyncio, json, subprocess, sys, tempfile
     from pathlib import Path
     from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
-    from rosnet_tui.core.netinfo import link_facts, link_state
-    from rosnet_tui.core.paths import Paths
-    from rosnet_tui.core.settings_model import Settings, ThisComponent
+    from rosnet_tui.core.net.netinfo import link_facts, link_state
+    from rosnet_tui.core.config.paths import Paths
+    from rosnet_tui.core.config.settings_model import Settings, ThisComponent
 
     def ip(*lines, netns=None):
         pre = ["nsenter", "-t", str(netns), "-n"] if netns else []

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from rosnet_tui.core import fleet_tls
+from rosnet_tui.core.ros import fleet_tls
 
 pytestmark = pytest.mark.lab
 FLEET_SITES = 3

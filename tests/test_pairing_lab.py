@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from rosnet_tui.core import fleet_tls
+from rosnet_tui.core.ros import fleet_tls
 from tests.lab.ros2 import ROS2_IDS, explain
 
 pytestmark = pytest.mark.lab
@@ -27,7 +27,7 @@ def ros2(ros2):
     and the master with its own again (the plugin then makes it healthy)."""
     yield ros2
     ros2.remove_tls("laptop")
-    from rosnet_tui.core import pairing  # the master's own certificate back to its name
+    from rosnet_tui.core.ros import pairing  # the master's own certificate back to its name
     pairing.prepare_master(ros2.settings("robot"), ros2.tls_paths("robot"), renew=True)
     for h in ("robot", "laptop"):     # certificates may have changed: routers read them at start
         ros2.stop_router(h)

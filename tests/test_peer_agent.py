@@ -1,4 +1,4 @@
-"""The round's peer agent (core/agentproto.py, the master's side core/peer_agent.py): one program
+"""The round's peer agent (core/peer/agentproto.py, the master's side core/peer/peer_agent.py): one program
 per peer and round serves every probe the checks run there (issue 25, bench row 8).
 
 The program itself runs here under the distribution's ``python3 -S`` as a peer runs it (fed on
@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import agentproto, chatproto, rosproto, zenohproto
-from rosnet_tui.core.checks import probes
-from rosnet_tui.core.peer_agent import AGENT_SOURCE, AgentKind, PeerAgents, agent_run
+from rosnet_tui.core.checks.probes import agents as probe_agents
+from rosnet_tui.core.peer import agentproto, chatproto, commands, rosproto, zenohproto
+from rosnet_tui.core.peer.peer_agent import AGENT_SOURCE, AgentKind, PeerAgents, agent_run
 from rosnet_tui.core.ssh.pool import SshPool
 from rosnet_tui.core.ssh.session import ssh_run
 from tests.builders import free_port
@@ -207,7 +207,7 @@ def test_ros2_agent_on_a_peer_without_rosnet_tui_runs_on_python3_and_says_no_ins
         pytest.skip("this machine has a root-owned rosnet-tui install")
     home = tmp_path / "home"
     home.mkdir()
-    kind = probes.ZENOH_AGENT
+    kind = probe_agents.ZENOH_AGENT
     loads = b"".join(json.dumps({"load": n, "src": src.decode(), "entry": e}).encode() + b"\n"
                      for n, src, e in kind.programs)
     runs = [{"run": "zenoh", "id": 1, "argv": ["info"]},
@@ -241,7 +241,7 @@ def test_ros2_agent_on_a_peer_without_rosnet_tui_runs_on_python3_and_says_no_ins
             proc.stderr.close()
     info = zenohproto.parse_report(out[1])
     assert status[1] == 0 and info is not None and info["python"].endswith("python3"), out
-    assert status[2] == probes.NO_INSTALL_EXIT
+    assert status[2] == commands.NO_INSTALL_EXIT
     assert zenohproto.parse_report(out[2]) == {"error": "no_install",
                                                "detail": "no rosnet-tui installed"}
 
@@ -266,7 +266,7 @@ def _children(pid: int) -> list[int]:
 
 
 # --------------------------------------------------------------------------- over SSH
-KIND = AgentKind("test", lambda m: f"python3 -S -c {probes.shq(agentproto.BOOT)} {m:.0f}",
+KIND = AgentKind("test", lambda m: f"python3 -S -c {commands.shq(agentproto.BOOT)} {m:.0f}",
                  (("p", PPID, None),))
 
 
@@ -320,7 +320,7 @@ async def test_an_unreachable_peer_gives_the_same_classified_failure_as_a_lone_c
 
 
 async def test_a_peer_without_python3_gives_exit_status_127_to_every_run(ssh_client):
-    kind = AgentKind("nopy", lambda m: f"no-such-python3 -S -c {probes.shq(agentproto.BOOT)} "
+    kind = AgentKind("nopy", lambda m: f"no-such-python3 -S -c {commands.shq(agentproto.BOOT)} "
                                        f"{m:.0f}", (("p", PPID, None),))
     opts = ssh_client.opts(timeout_s=3.0, pool=SshPool())
     agents = PeerAgents()
@@ -330,7 +330,7 @@ async def test_a_peer_without_python3_gives_exit_status_127_to_every_run(ssh_cli
     finally:
         agents.close()
         opts.pool.close()
-    assert all(r.ok and r.exit_status == 127 and probes.no_python(r) for r in got), got
+    assert all(r.ok and r.exit_status == 127 and probe_agents.no_python(r) for r in got), got
 
 
 def test_a_line_that_is_no_request_is_said_and_the_agent_goes_on(local):

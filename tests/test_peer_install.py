@@ -1,7 +1,7 @@
 """The Zenoh peer program runs with the rosnet-tui installed on the peer (issue 21).
 
 The README installs rosnet-tui with pipx (or uv, or a root-owned pipx) in a virtual environment of
-its own; the peer's python3 has no eclipse-zenoh. probes.zenoh_peer_command is a POSIX sh prelude
+its own; the peer's python3 has no eclipse-zenoh. commands.zenoh_peer_command is a POSIX sh prelude
 that finds that installation's interpreter and execs it on the program fed on stdin, in the one
 SSH round trip. These tests run that very command with the real ``sh`` (dash) in throwaway homes
 laid out as pipx, uv and pip lay them out, with real virtual environments.
@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import zenohproto
-from rosnet_tui.core.checks import probes
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.checks.probes.ros2 import zenoh_peer_problem
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.peer import commands, zenohproto
 from rosnet_tui.core.ssh.connection import SshResult
 
 SRC = Path(zenohproto.__file__).read_bytes()
@@ -57,7 +57,7 @@ def test_pipx_layout_runs_the_venvs_python_not_the_path_python3(tmp_path):
     v = venv(home / ".local/share/pipx/venvs/rosnet-tui")
     (home / ".local/bin").mkdir(parents=True)
     (home / ".local/bin/rosnet-tui").symlink_to(v / "bin" / "rosnet-tui")
-    rep, rc, _ = run(probes.zenoh_peer_command("info"), home)
+    rep, rc, _ = run(commands.zenoh_peer_command("info"), home)
     assert rc == 0 and rep is not None, rep
     assert rep["python"] == f"{v}/bin/python", rep
 
@@ -74,7 +74,7 @@ def test_the_sh_launcher_pip_and_uv_write_for_long_paths(tmp_path, quote):
     launcher.write_text(f"#!/bin/sh\n'''exec' {quote}{py}{quote} \"$0\" \"$@\"\n' '''\n"
                         "import sys\n")
     launcher.chmod(0o755)
-    rep, rc, _ = run(probes.zenoh_peer_command("info"), home)
+    rep, rc, _ = run(commands.zenoh_peer_command("info"), home)
     assert rc == 0 and rep is not None and rep["python"] == py, rep
 
 
@@ -86,10 +86,10 @@ def test_a_launcher_is_also_found_on_the_path_and_in_a_login_shell(tmp_path):
     bindir.mkdir()
     (bindir / "rosnet-tui").symlink_to(v / "bin" / "rosnet-tui")
     home.mkdir()
-    rep, _, _ = run(probes.zenoh_peer_command("info"), home, PATH=f"/usr/bin:/bin:{bindir}")
+    rep, _, _ = run(commands.zenoh_peer_command("info"), home, PATH=f"/usr/bin:/bin:{bindir}")
     assert rep is not None and rep["python"] == f"{v}/bin/python", rep
     (home / ".profile").write_text(f'PATH="{bindir}:$PATH"\necho a line from .profile\n')
-    rep, _, _ = run(probes.zenoh_peer_command("info"), home)
+    rep, _, _ = run(commands.zenoh_peer_command("info"), home)
     assert rep is not None and rep["python"] == f"{v}/bin/python", rep
 
 
@@ -97,10 +97,10 @@ def test_pipx_home_and_uv_tool_dir_are_honoured(tmp_path):
     home = tmp_path / "home"
     home.mkdir()
     v = venv(tmp_path / "pipx" / "venvs" / "rosnet-tui")
-    rep, _, _ = run(probes.zenoh_peer_command("info"), home, PIPX_HOME=str(tmp_path / "pipx"))
+    rep, _, _ = run(commands.zenoh_peer_command("info"), home, PIPX_HOME=str(tmp_path / "pipx"))
     assert rep is not None and rep["python"] == f"{v}/bin/python", rep
     u = venv(home / ".local/share/uv/tools/rosnet-tui")   # uv's default
-    rep, _, _ = run(probes.zenoh_peer_command("info"), home)
+    rep, _, _ = run(commands.zenoh_peer_command("info"), home)
     assert rep is not None and rep["python"] == f"{u}/bin/python", rep
 
 
@@ -108,7 +108,7 @@ def test_the_installed_python_imports_zenoh(tmp_path):
     """The peer program gets as far as a Zenoh session: no "no eclipse-zenoh" from the venv."""
     home = tmp_path / "home"
     v = venv(home / ".local/share/pipx/venvs/rosnet-tui")
-    cmd = probes.zenoh_peer_command("graph", "--timeout", "1", "--local", "tcp/127.0.0.1:9")
+    cmd = commands.zenoh_peer_command("graph", "--timeout", "1", "--local", "tcp/127.0.0.1:9")
     rep, _, _ = run(cmd, home)
     assert rep is not None and rep.get("error") == "open" and rep["python"] == f"{v}/bin/python"
 
@@ -118,23 +118,23 @@ def test_nothing_installed_skips_naming_the_readme_line_and_never_pip(tmp_path):
     home = tmp_path / "home"
     home.mkdir()
     (home / ".profile").write_text("sleep 30\n")    # a login shell that hangs is cut short
-    rep, rc, took = run(probes.zenoh_peer_command("graph", "--timeout", "1"), home)
-    assert rc == probes.NO_INSTALL_EXIT and rep == {"error": "no_install",
+    rep, rc, took = run(commands.zenoh_peer_command("graph", "--timeout", "1"), home)
+    assert rc == commands.NO_INSTALL_EXIT and rep == {"error": "no_install",
                                                     "detail": "no rosnet-tui installed"}
     assert took < 5, took
     res = SshResult(ok=True, exit_status=rc, stdout="", stderr="", failure=None, detail="",
                     fingerprint=None)
-    why = probes.zenoh_peer_problem(res, Peer(name="turtlebot"), rep)
+    why = zenoh_peer_problem(res, Peer(name="turtlebot"), rep)
     assert why is not None and "rosnet-tui is not installed on turtlebot" in why, why
-    assert f"`{probes.README_INSTALL}`" in why and "pip install" not in why.replace("pipx", "")
+    assert f"`{commands.README_INSTALL}`" in why and "pip install" not in why.replace("pipx", "")
     # info needs the standard library only: the peer's python3 answers it
-    rep, rc, _ = run(probes.zenoh_peer_command("info", need_zenoh=False), home)
+    rep, rc, _ = run(commands.zenoh_peer_command("info", need_zenoh=False), home)
     assert rc == 0 and rep is not None and "env" in rep and rep["python"].startswith("/usr/bin/")
 
 
 def test_no_advice_anywhere_to_pip_install_into_a_python():
     """PEP 668 refuses it, and the package comes with rosnet-tui anyway."""
-    root = Path(probes.__file__).resolve().parents[2]
+    root = Path(commands.__file__).resolve().parents[3]
     bad = []
     for path in (root / "rosnet_tui").rglob("*.py"):
         for n, line in enumerate(path.read_text().splitlines(), 1):
@@ -149,7 +149,7 @@ def test_the_program_reaches_the_interpreter_whole(tmp_path):
     home = tmp_path / "home"
     venv(home / ".local/share/pipx/venvs/rosnet-tui")
     big = SRC + b"\n" + b"#" * 200_000 + b"\n"
-    r = subprocess.run(["/bin/sh", "-c", probes.zenoh_peer_command("info")], input=big,
+    r = subprocess.run(["/bin/sh", "-c", commands.zenoh_peer_command("info")], input=big,
                        capture_output=True, timeout=30,
                        env={"HOME": str(home), "PATH": "/usr/bin:/bin", "SHELL": "/bin/sh"})
     assert zenohproto.parse_report(r.stdout.decode()) is not None, r.stderr
@@ -169,7 +169,7 @@ def test_the_labs_readme_install_runs_from_any_home_even_a_long_one(tmp_path):
     r = subprocess.run([str(launcher), "--version"], capture_output=True, text=True, timeout=60,
                        env={"PATH": "/usr/bin:/bin", "HOME": str(home)})
     assert r.returncode == 0 and r.stdout.startswith("rosnet-tui "), r.stderr
-    cmd = probes.zenoh_peer_command("graph", "--timeout", "1", "--local", "tcp/127.0.0.1:9")
+    cmd = commands.zenoh_peer_command("graph", "--timeout", "1", "--local", "tcp/127.0.0.1:9")
     rep, _, _ = run(cmd, home)
     assert rep is not None and rep.get("error") == "open" and rep["python"] == venv_python, rep
     sys_py = subprocess.run(["/usr/bin/python3", "-c", "import zenoh"], capture_output=True,
@@ -186,11 +186,11 @@ def test_installed_python_command_serves_any_program_with_its_own_mark(tmp_path)
     no_root_install()
     home = tmp_path / "home"
     home.mkdir()
-    cmd = probes.installed_python_command("x", mark="ROSNET_SSHAUDIT ")
+    cmd = commands.installed_python_command("x", mark="ROSNET_SSHAUDIT ")
     r = subprocess.run(["/bin/sh", "-c", cmd], input=b"print('ran')", capture_output=True,
                        timeout=30, env={"HOME": str(home), "PATH": "/usr/bin:/bin",
                                         "SHELL": "/bin/sh"}, cwd=home)
-    assert r.returncode == probes.NO_INSTALL_EXIT, r
+    assert r.returncode == commands.NO_INSTALL_EXIT, r
     assert r.stdout.decode().startswith('ROSNET_SSHAUDIT {"error": "no_install"'), r.stdout
     v = venv(home / ".local/share/pipx/venvs/rosnet-tui")
     (home / ".local/bin").mkdir(parents=True)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core.probe_server import (
+from rosnet_tui.core.net.probe_server import (
     ProbeLimits,
     ProbeServer,
     RateLimiter,

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import report
 from rosnet_tui.core.results import Status
-from rosnet_tui.core.settings import render_settings
+from rosnet_tui.core.saved.settings import render_settings
+from rosnet_tui.core.wizard import report
 from tests.advisor_support import chat, unreachable
 from tests.builders import free_port, healthy_laptop, laptop_settings, put, t1
 

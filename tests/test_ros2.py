@@ -10,13 +10,14 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks.runner import select
-from rosnet_tui.core.forwarding import ports_to_forward, required_ports
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.settings import parse_settings, render_settings
-from rosnet_tui.core.settings_model import RosSettings, SettingsError
-from rosnet_tui.core.steps import STEP_BY_ID, step_for
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import RosSettings, SettingsError
+from rosnet_tui.core.exposure.forwarding import ports_to_forward, required_ports
+from rosnet_tui.core.peer import zenohproto
+from rosnet_tui.core.ros import ros2
+from rosnet_tui.core.saved.settings import parse_settings, render_settings
+from rosnet_tui.core.wizard.steps import STEP_BY_ID, step_for
 from tests.builders import ros2_master as master
 from tests.builders import ros2_member as member
 
@@ -159,8 +160,8 @@ def test_override_parsing_and_the_lone_node_rules():
 
 
 def test_ros_apply_writes_both_files_and_refuses_a_foreign_config(tmp_path):
-    from rosnet_tui.core import managed_file as mf
-    from rosnet_tui.core import managed_text as mt
+    from rosnet_tui.core.files import managed_file as mf
+    from rosnet_tui.core.files import managed_text as mt
 
     rc, bashrc = tmp_path / "router.json5", tmp_path / "bashrc"
     bashrc.write_text("# mine\n")
@@ -201,7 +202,7 @@ def test_steps_text_per_role():
 def test_address_sync_leaves_the_ros2_block_alone(tmp_path):
     """Sync rewrites the master's hosts line; under ROS 2 that is all (the router dials the
     master by name), and it must not put a ROS 1 ROS_MASTER_URI block over the ROS 2 one."""
-    from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core.files import managed_file as mf
     from rosnet_tui.core.sync.service import SyncService
     from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
 
@@ -235,7 +236,7 @@ def test_the_zenoh_peer_program_runs_with_the_peers_site_packages(tmp_path):
     import subprocess
     import sys
 
-    from rosnet_tui.core.checks.probes import python_stdin_command, zenoh_peer_command
+    from rosnet_tui.core.peer.commands import python_stdin_command, zenoh_peer_command
 
     cmd = zenoh_peer_command("graph", "--timeout", "1")
     assert cmd.startswith("sh -c ") and 'exec "$py" - "$@"' in cmd

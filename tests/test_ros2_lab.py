@@ -232,7 +232,7 @@ def test_the_peers_side_runs_with_the_rosnet_tui_installed_there(ros2):
 def test_a_peer_without_rosnet_tui_installed_skips_naming_the_readme_line(ros2):
     ros2.uninstall("robot")
     results = ros2.check("laptop")
-    from rosnet_tui.core.checks.probes import README_INSTALL
+    from rosnet_tui.core.peer.commands import README_INSTALL
 
     assert README_INSTALL in (REPO / "README.md").read_text()
     line = f"`{README_INSTALL}`"

@@ -12,13 +12,9 @@ from dataclasses import replace
 
 import pytest
 
-from rosnet_tui.core import rosbridge
 from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.checks import REGISTRY, CheckContext, data, load_builtin_checks, run_check
-from rosnet_tui.core.forwarding import ports_to_forward, required_ports
-from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings import parse_settings, render_settings
-from rosnet_tui.core.settings_model import (
+from rosnet_tui.core.config.settings_model import (
     Peer,
     RosbridgeSettings,
     RosSettings,
@@ -26,8 +22,12 @@ from rosnet_tui.core.settings_model import (
     SettingsError,
     ThisComponent,
 )
-from rosnet_tui.core.steps import STEP_BY_ID, step_for
+from rosnet_tui.core.exposure.forwarding import ports_to_forward, required_ports
+from rosnet_tui.core.results import CheckResult, Status
+from rosnet_tui.core.ros import rosbridge
+from rosnet_tui.core.saved.settings import parse_settings, render_settings
 from rosnet_tui.core.upnp.forwards import description, needs
+from rosnet_tui.core.wizard.steps import STEP_BY_ID, step_for
 from tests.builders import free_port
 
 
@@ -288,7 +288,7 @@ ROSBRIDGE_CASES = {
 
 def test_a_reports_settings_keep_rosbridge():
     """`rosnet-tui report --from-json` reads the settings back: the rosbridge rules need them."""
-    from rosnet_tui.core.report import ReportError, public_settings, settings_from_dict
+    from rosnet_tui.core.wizard.report import ReportError, public_settings, settings_from_dict
 
     s = master(port=9091, host="sami")
     assert settings_from_dict(public_settings(s)).rosbridge == s.rosbridge

@@ -21,7 +21,7 @@ import json, sys
 from pathlib import Path
 from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.checks.runner import RunOptions, run_now, select
-from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.saved.settings import load_settings
 s = load_settings(Path(sys.argv[1]))
 r = run_now(s, select(ids=["ros.rosbridge"]), RunOptions(upnp=False))[0]
 print(json.dumps({"status": r.status.value, "summary": r.summary, "evidence": r.evidence,

@@ -19,7 +19,7 @@ from xmlrpc.server import SimpleXMLRPCServer
 
 import pytest
 
-from rosnet_tui.core import rosproto
+from rosnet_tui.core.peer import rosproto
 from tests.builders import free_port
 from tests.plugins.roscore import ROS_PYTHON, RosCore, kill_group
 

@@ -15,7 +15,7 @@ from xmlrpc.server import SimpleXMLRPCServer
 
 import pytest
 
-from rosnet_tui.core import rosproto
+from rosnet_tui.core.peer import rosproto
 
 SOURCE = Path(rosproto.__file__).read_bytes()
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core.netinfo import LocalNet
-from rosnet_tui.core.router_card import build_router_card, render_router_card
+from rosnet_tui.core.exposure.router_card import build_router_card, render_router_card
+from rosnet_tui.core.net.netinfo import LocalNet
 from tests.builders import ROBOT_NET as NET
 from tests.builders import card_robot as robot
 
@@ -91,8 +91,8 @@ def test_mac_is_read_from_the_real_interface():
                            text=True, timeout=10)
         if r.returncode:
             pytest.skip(f"no veth interfaces here: {r.stderr.strip()}")
-        code = ("from rosnet_tui.core.router_card import build_router_card;"
-                "from rosnet_tui.core.settings_model import Settings, ThisComponent;"
+        code = ("from rosnet_tui.core.exposure.router_card import build_router_card;"
+                "from rosnet_tui.core.config.settings_model import Settings, ThisComponent;"
                 "s = Settings(this=ThisComponent(name='turtlebot', interface='dummy7'));"
                 "c = build_router_card(s); print(c.mac, c.local_ip)")
         out = subprocess.run(["ip", "netns", "exec", ns, sys.executable, "-c", code],

@@ -45,7 +45,7 @@ _RUN = r"""
 import json, sys
 from pathlib import Path
 from rosnet_tui.core.checks import runner
-from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.saved.settings import load_settings
 path, *ids = sys.argv[1:]
 out = {}
 for r in runner.run_now(load_settings(Path(path)), runner.select(ids=ids)):
@@ -81,7 +81,7 @@ def full_check(lab, host: str, config, env, state, *steps: str,
 
 def ros1_config(lab, host: str, **ros) -> str:
     """*host*'s settings file with [ros] *ros* changed (beside the default one)."""
-    from rosnet_tui.core.settings import atomic_write_text, render_settings
+    from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 
     s = lab.settings(host)
     path = lab.home(host) / ".config" / "rosnet-tui" / "config-variant.toml"
@@ -92,7 +92,7 @@ def ros1_config(lab, host: str, **ros) -> str:
 def wizard_config(lab, host: str) -> str:
     """*host*'s settings file as the set-up screen writes it: no public IP of its own (the screen
     has no field for it; isp.public_ip measures it), beside the default one."""
-    from rosnet_tui.core.settings import atomic_write_text, render_settings
+    from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 
     s = lab.settings(host)
     path = lab.home(host) / ".config" / "rosnet-tui" / "config-wizard.toml"

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import outsider
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
-from rosnet_tui.core.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.config.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.exposure import outsider
 
 ZROUTER = Path(__file__).resolve().parent / "lab" / "ros2_scripts" / "zrouter.py"
 pytest.importorskip("zenoh")
@@ -350,7 +350,7 @@ def test_every_settings_file_gets_the_security_checks_and_refusals_are_read_righ
     """[ros] security always exists (its default follows the version), so the security checks
     are in every component's Linux and ROS steps."""
     from rosnet_tui.core.checks import checks_for
-    from rosnet_tui.core.steps import step_for
+    from rosnet_tui.core.wizard.steps import step_for
 
     s = Settings(this=ThisComponent(name="sami", role="member"), ros=RosSettings(master="x"))
     assert s.ros.security == "firewall"

@@ -7,9 +7,14 @@ from __future__ import annotations
 import socket
 from dataclasses import replace
 
-from rosnet_tui.core import listener
 from rosnet_tui.core.checks import REGISTRY, load_builtin_checks, run_check
-from rosnet_tui.core.settings_model import ProbeSettings, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.config.settings_model import (
+    ProbeSettings,
+    RosSettings,
+    Settings,
+    ThisComponent,
+)
+from rosnet_tui.core.net import listener
 from tests.builders import free_port
 
 

@@ -7,14 +7,19 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core.settings import load_settings, parse_settings, render_settings, save_settings
-from rosnet_tui.core.settings_model import (
+from rosnet_tui.core.config.settings_model import (
     Peer,
     Settings,
     SettingsError,
     validate_ip,
     validate_name,
     validate_port,
+)
+from rosnet_tui.core.saved.settings import (
+    load_settings,
+    parse_settings,
+    render_settings,
+    save_settings,
 )
 
 DOC_EXAMPLE = """\
@@ -151,7 +156,7 @@ def test_validate_port(value, ok):
 
 
 def test_xdg_config_home_is_honoured(monkeypatch, tmp_path):
-    from rosnet_tui.core.paths import default_config_path
+    from rosnet_tui.core.config.paths import default_config_path
 
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
     assert default_config_path() == tmp_path / "rosnet-tui" / "config.toml"

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from rosnet_tui.core.settings_model import shown, validate_ip, validate_name
+from rosnet_tui.core.config.settings_model import shown, validate_ip, validate_name
 from tests.builders import named_settings as settings
 
 

@@ -142,8 +142,8 @@ def test_prestart_ssh_only_when_the_steps_use_the_peers(ssh_client, steps, start
 async def test_per_peer_work_runs_concurrently_bounded_and_in_order(ssh_client, sshd):
     """each_peer: every peer at once up to the bound, results in the peers' order; real SSH
     sessions on one shared connection per peer."""
-    from rosnet_tui.core.checks.probes import each_peer
-    from rosnet_tui.core.settings_model import Peer
+    from rosnet_tui.core.checks.probes.peers import each_peer
+    from rosnet_tui.core.config.settings_model import Peer
 
     running = peak = 0
 

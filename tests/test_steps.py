@@ -6,7 +6,7 @@ import re
 
 import pytest
 
-from rosnet_tui.core.steps import STEP_BY_ID, STEPS
+from rosnet_tui.core.wizard.steps import STEP_BY_ID, STEPS
 from tests.builders import seat_settings as settings
 
 
@@ -91,7 +91,7 @@ def test_each_step_lists_exactly_the_checks_the_runner_runs():
     pick for the settings: under ROS 2 the Linux step listed linux.firewall, which the runner
     never runs there."""
     from rosnet_tui.core.checks.runner import select
-    from rosnet_tui.core.steps import step_for
+    from rosnet_tui.core.wizard.steps import step_for
 
     for s in _variants():
         for step in STEPS:
@@ -105,7 +105,7 @@ def test_the_steps_declare_each_check_as_it_registers():
     """What a step says of each check (its step, ROS version, switch) is what the check
     registered: the two declarations cannot drift apart."""
     from rosnet_tui.core.checks import REGISTRY, load_builtin_checks
-    from rosnet_tui.core.steps import STEP_CHECKS
+    from rosnet_tui.core.wizard.steps import STEP_CHECKS
 
     load_builtin_checks()
     declared = {cid: (step, ros, switch) for step, checks in STEP_CHECKS.items()

@@ -192,3 +192,10 @@ def test_the_development_docs_where_things_live_table_names_files_that_exist():
             if not (base / path).exists():
                 missing.append(path)
     assert not missing, f"docs/DEVELOPMENT.md's table names what is not there: {missing}"
+
+
+def test_core_keeps_at_most_8_loose_modules():
+    """core/ is a floor plan of packages by role (issue 33); only what every floor shares is loose
+    at its top, and the layers contract in pyproject.toml states the floors' order."""
+    loose = sorted(p.name for p in (PKG / "core").glob("*.py") if p.name != "__init__.py")
+    assert len(loose) <= 8, f"put these in the package of their role: {loose}"

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.settings import atomic_write_text, load_settings, render_settings
-from rosnet_tui.core.settings_model import Peer, Settings
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Peer, Settings
+from rosnet_tui.core.saved.settings import atomic_write_text, load_settings, render_settings
 from rosnet_tui.core.sync import (
     Backoff,
     Candidate,
@@ -399,7 +399,7 @@ def test_service_follows_a_peer_change_and_keeps_the_settings_right(tmp_path):
     lines = render_status(st)
     assert any("turtlebot" in x and "203.0.113.7" in x for x in lines)
     # the journal has the write: one undo puts it back
-    from rosnet_tui.core import managed_file as mf
+    from rosnet_tui.core.files import managed_file as mf
     assert mf.last_entry(w.state).label.startswith("sync: turtlebot")
 
 

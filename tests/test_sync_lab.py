@@ -20,8 +20,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from rosnet_tui.core import managed_text as mt
 from rosnet_tui.core.checks.linux import parse_hosts
+from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.sync import FolderStore, StoreError, new_record
 from rosnet_tui.core.sync.dnsstore import DnsStore
 from rosnet_tui.core.sync.records import format_time
@@ -382,8 +382,8 @@ def test_a_slow_public_ip_lookup_does_not_hold_back_a_peers_record(rig_lab, tmp_
     changes meanwhile is applied at once all the same."""
     import random
 
-    from rosnet_tui.core.settings import atomic_write_text, render_settings
-    from rosnet_tui.core.settings_model import SyncSettings
+    from rosnet_tui.core.config.settings_model import SyncSettings
+    from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 
     lab = rig_lab
     folder = tmp_path / "shared"

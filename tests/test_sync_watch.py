@@ -23,9 +23,9 @@ from typing import Any
 
 import pytest
 
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.settings import atomic_write_text, render_settings
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 from rosnet_tui.core.sync import FolderStore, SyncService, load_status, new_record
 from rosnet_tui.core.sync import folder_watch as fw
 from rosnet_tui.core.sync.folder_watch import FolderWatch, WatchUnavailable

@@ -10,13 +10,13 @@ from textual.geometry import Region
 from textual.widgets import DataTable, Input
 
 from rosnet_tui.core.checks import CheckContext, CheckSpec
-from rosnet_tui.core.netinfo import LocalNet
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Peer, Settings
+from rosnet_tui.core.net.netinfo import LocalNet
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.session import WizardSession
-from rosnet_tui.core.settings import load_settings
-from rosnet_tui.core.settings_model import Peer, Settings
+from rosnet_tui.core.saved.settings import load_settings
 from rosnet_tui.core.ssh.options import SshOptions
+from rosnet_tui.core.wizard.session import WizardSession
 from rosnet_tui.ui.app import RosnetApp
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen

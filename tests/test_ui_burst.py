@@ -19,12 +19,12 @@ from textual.keys import _character_to_key, _get_unicode_name_from_key
 from textual.widgets import Input, Select
 
 from rosnet_tui.core.checks import CheckContext, CheckSpec
-from rosnet_tui.core.netinfo import LocalNet
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.net.netinfo import LocalNet
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.session import WizardSession
-from rosnet_tui.core.settings import load_settings
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.saved.settings import load_settings
+from rosnet_tui.core.wizard.session import WizardSession
 from rosnet_tui.ui.app import RosnetApp
 from tests.builders import complete_settings
 

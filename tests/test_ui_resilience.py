@@ -23,9 +23,15 @@ import pytest
 from bench.local_env import base_env, local_world, spawn_app
 from bench.pty_harness import PtyProcess
 from bench.rows_local import app_title
-from rosnet_tui.core.settings import atomic_write_text, load_settings, render_settings
-from rosnet_tui.core.settings_model import Peer, ProbeSettings, RosSettings, Settings, ThisComponent
-from rosnet_tui.core.ui_state import UiState
+from rosnet_tui.core.config.settings_model import (
+    Peer,
+    ProbeSettings,
+    RosSettings,
+    Settings,
+    ThisComponent,
+)
+from rosnet_tui.core.saved.settings import atomic_write_text, load_settings, render_settings
+from rosnet_tui.core.saved.ui_state import UiState
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 from textual.widgets import Select
 
 from rosnet_tui.core.checks.runner import select
-from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.saved.settings import load_settings
 from rosnet_tui.ui.widgets import CheckList
 from tests.builders import complete_settings
 from tests.test_ui import make_app

@@ -8,8 +8,8 @@ from dataclasses import replace
 from textual.widgets import Input, Select
 
 from rosnet_tui.core.checks.runner import select
-from rosnet_tui.core.settings import load_settings
-from rosnet_tui.core.settings_model import RosbridgeSettings
+from rosnet_tui.core.config.settings_model import RosbridgeSettings
+from rosnet_tui.core.saved.settings import load_settings
 from rosnet_tui.ui.widgets import CheckList
 from tests.builders import complete_settings
 from tests.test_ui import make_app

@@ -11,8 +11,8 @@ from textual.widgets import DataTable, Input
 
 from rosnet_tui.core.checks import CheckContext, CheckSpec
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings import load_settings, save_settings
-from rosnet_tui.core.ui_state import UiState
+from rosnet_tui.core.saved.settings import load_settings, save_settings
+from rosnet_tui.core.saved.ui_state import UiState
 from rosnet_tui.ui.setup_screen import SetupScreen
 from rosnet_tui.ui.step_screen import StepScreen
 from rosnet_tui.ui.widgets import SHORT_TITLES, TITLE_MAX, CheckList
@@ -242,8 +242,8 @@ async def test_results_and_draft_come_back_in_the_next_session(tmp_path):
 
 
 def test_a_damaged_state_file_is_ignored(tmp_path):
-    from rosnet_tui.core.paths import Paths
-    from rosnet_tui.core.session import WizardSession
+    from rosnet_tui.core.config.paths import Paths
+    from rosnet_tui.core.wizard.session import WizardSession
 
     (tmp_path / "state").mkdir()
     (tmp_path / "state" / "ui.json").write_text('{"results": {"x": 5}, "draft": [1], "la')
@@ -303,9 +303,9 @@ async def test_every_line_of_a_code_block_gets_the_same_indent(tmp_path, size):
 
 def _app_on(config, state, settings=None):
     """The app on settings file *config*, with the state folder *state* shared by every file."""
-    from rosnet_tui.core.paths import Paths
-    from rosnet_tui.core.session import WizardSession
-    from rosnet_tui.core.settings_model import Settings
+    from rosnet_tui.core.config.paths import Paths
+    from rosnet_tui.core.config.settings_model import Settings
+    from rosnet_tui.core.wizard.session import WizardSession
     from rosnet_tui.ui.app import RosnetApp
     from tests.test_ui import NET
 
@@ -373,7 +373,7 @@ async def test_the_write_screen_prints_the_undo_command_that_finds_the_journal(t
     """Issue 29 §4 row 10's sibling: the write screen said `rosnet-tui undo` without the
     settings file and state dir in use; that command looks in the everyday journal and finds
     nothing. It gives the exact command (the one the command line prints)."""
-    from rosnet_tui.core.privilege import rosnet_command
+    from rosnet_tui.core.files.privilege import rosnet_command
     from tests.test_ui import make_app as make_ui_app
 
     bashrc = tmp_path / "bashrc"

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from textual.widgets import Select
 
-from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.saved.settings import load_settings
 from tests.test_ui import complete_settings, make_app
 
 

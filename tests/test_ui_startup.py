@@ -12,8 +12,8 @@ import pytest
 from bench.local_env import local_world, spawn_app
 from bench.pty_harness import strip_ansi
 from bench.rows_local import app_title
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.session import WizardSession
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.wizard.session import WizardSession
 from rosnet_tui.ui.app import RosnetApp
 from rosnet_tui.ui.step_screen import StepScreen
 from tests.builders import complete_settings

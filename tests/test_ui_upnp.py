@@ -6,7 +6,7 @@ from __future__ import annotations
 from textual.app import App
 from textual.widgets import Button, Static
 
-from rosnet_tui.core.settings_model import RosSettings, Settings, ThisComponent
+from rosnet_tui.core.config.settings_model import RosSettings, Settings, ThisComponent
 from rosnet_tui.ui.map_screen import MapScreen
 
 

@@ -1,13 +1,13 @@
-"""The undo journal's handlers per kind of change (core/undo_journal): the file writer undoes
+"""The undo journal's handlers per kind of change (core/files/undo_journal): the file writer undoes
 what other modules recorded without knowing them, and never drops a change nobody can undo."""
 
 from __future__ import annotations
 
 import pytest
 
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import undo_journal as uj
-from rosnet_tui.core.managed_text import ManagedFileError
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import undo_journal as uj
+from rosnet_tui.core.files.managed_text import ManagedFileError
 
 
 def _entry_with(sd, mappings):

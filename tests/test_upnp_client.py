@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 import pytest
 
-from rosnet_tui.core import undo_journal as uj
+from rosnet_tui.core.files import undo_journal as uj
 from rosnet_tui.core.upnp import igd, pmp, wire
 from rosnet_tui.core.upnp.forwards import Wanted, explain_refusal, needs, wan_kind
 from rosnet_tui.core.upnp.modem import Modem
@@ -436,7 +436,7 @@ def test_a_refusal_with_no_public_address_is_carrier_grade_nat_in_words(protocol
 
 
 def test_needs_follow_the_settings():
-    from rosnet_tui.core.settings_model import RosSettings, Settings, ThisComponent
+    from rosnet_tui.core.config.settings_model import RosSettings, Settings, ThisComponent
 
     ros1 = Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1"))
     n = needs(ros1)
@@ -465,7 +465,7 @@ def _cli(tmp_path, settings, *args: str):
     import sys
     from pathlib import Path
 
-    from rosnet_tui.core.settings import render_settings
+    from rosnet_tui.core.saved.settings import render_settings
 
     cfg = tmp_path / "config.toml"
     cfg.write_text(render_settings(settings))
@@ -477,7 +477,7 @@ def _cli(tmp_path, settings, *args: str):
 
 
 def _master(version: int):
-    from rosnet_tui.core.settings_model import RosSettings, Settings, ThisComponent
+    from rosnet_tui.core.config.settings_model import RosSettings, Settings, ThisComponent
 
     return Settings(this=ThisComponent(name="turtlebot", role="master", local_ip="10.10.10.1",
                                        interface="lo"),
@@ -492,7 +492,7 @@ def test_router_map_refuses_ros1_in_words_without_asking_any_modem(tmp_path):
 
 
 def test_router_map_on_a_ros2_member_has_nothing_to_do(tmp_path):
-    from rosnet_tui.core.settings_model import Peer
+    from rosnet_tui.core.config.settings_model import Peer
 
     s = _master(2)
     s.this.name, s.this.role = "sami", "member"

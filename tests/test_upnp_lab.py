@@ -259,8 +259,8 @@ def test_sync_renews_our_lease_and_removes_the_forward_when_stopped_if_asked(lab
                                                                               tmp_path):
     import signal
 
-    from rosnet_tui.core.settings import atomic_write_text, render_settings
-    from rosnet_tui.core.settings_model import SyncSettings
+    from rosnet_tui.core.config.settings_model import SyncSettings
+    from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 
     w = world
     sd = tmp_path / "state"

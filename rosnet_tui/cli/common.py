@@ -63,7 +63,7 @@ def add_state_dir_option(parser: argparse.ArgumentParser, what: str) -> None:
 
 def state_dir_of(args: argparse.Namespace) -> Path:
     """The state dir named by --state-dir, absolute; the everyday one without it."""
-    from rosnet_tui.core.paths import default_state_dir
+    from rosnet_tui.core.config.paths import default_state_dir
 
     sd = getattr(args, "state_dir", None)
     return Path(sd).expanduser().absolute() if sd else default_state_dir()
@@ -77,7 +77,7 @@ def add_config_option(parser: argparse.ArgumentParser, *, top: bool = False) -> 
 
 
 def config_path(args: argparse.Namespace) -> Path:
-    from rosnet_tui.core.paths import default_config_path
+    from rosnet_tui.core.config.paths import default_config_path
 
     return Path(args.config).expanduser() if getattr(args, "config", None) else default_config_path()
 
@@ -100,13 +100,13 @@ def complete_cut_writes(argv: list[str]) -> None:
     completes it. A few stats when nothing is pending; never stops the command (its own reads
     complete or refuse again)."""
     try:
-        from rosnet_tui.core.cut_writes import pending
-        from rosnet_tui.core.paths import (
+        from rosnet_tui.core.config.paths import (
             DEFAULT_HOSTS_PATH,
             default_bashrc_path,
             default_config_path,
             default_state_dir,
         )
+        from rosnet_tui.core.files.cut_writes import pending
 
         files: list[Path | str] = [Path(f).expanduser().absolute()
                                    for f in _option_values(argv, "--file")]
@@ -121,8 +121,8 @@ def complete_cut_writes(argv: list[str]) -> None:
         found = pending(files, dirs)
         if not found:
             return
-        from rosnet_tui.core.managed_write import complete_cut_writes as complete
-        from rosnet_tui.core.privilege import format_command, sudo_argv
+        from rosnet_tui.core.files.managed_write import complete_cut_writes as complete
+        from rosnet_tui.core.files.privilege import format_command, sudo_argv
 
         configs = [Path(c).expanduser().absolute() for c in _option_values(argv, "--config")]
         config = (configs or [default_config_path()])[-1]
@@ -152,9 +152,9 @@ def load_settings_or_say(args: argparse.Namespace, *, complete: bool = False):
     With *complete*, blank local IP and interface are filled in from this machine for this run,
     and settings that are still incomplete are refused (the caller exits 2).
     """
-    from rosnet_tui.core.netinfo import with_detected
-    from rosnet_tui.core.settings import load_settings
-    from rosnet_tui.core.settings_model import SettingsError
+    from rosnet_tui.core.config.settings_model import SettingsError
+    from rosnet_tui.core.net.netinfo import with_detected
+    from rosnet_tui.core.saved.settings import load_settings
 
     path = config_path(args)
     try:

@@ -1,6 +1,6 @@
 """`rosnet-tui firewall apply|show|undo`: ROS 1, only the peers reach the forwarded ports.
 
-The table is rosnet_tui.core.firewall's (`table inet rosnet_tui`, nothing else touched). Like the
+The table is rosnet_tui.core.exposure.firewall's (`table inet rosnet_tui`, nothing else touched). Like the
 hosts writer: a preview first, then the change through sudo when this user is not root (our own
 writer re-run under this very Python, with the digest of the previewed ruleset), ONE `nft -f`
 transaction, and an undo journal entry (`rosnet-tui undo` reverses it).
@@ -36,9 +36,9 @@ from rosnet_tui.cli.writing import (
     rerun_checks,
     run_as_root,
 )
-from rosnet_tui.core import firewall as fw
-from rosnet_tui.core import privilege
-from rosnet_tui.core.settings_model import PROFILES, Settings
+from rosnet_tui.core.config.settings_model import PROFILES, Settings
+from rosnet_tui.core.exposure import firewall as fw
+from rosnet_tui.core.files import privilege
 from rosnet_tui.core.ssh import origin
 
 FIREWALL_CHECKS = ("linux.firewall",)

@@ -31,10 +31,13 @@ from rosnet_tui.cli.writing import (
     write_preview,
     yes_to_all,
 )
-from rosnet_tui.core import affected, privilege
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core import managed_write as mw
-from rosnet_tui.core.hosts import (
+from rosnet_tui.core import affected
+from rosnet_tui.core.config.paths import DEFAULT_HOSTS_PATH
+from rosnet_tui.core.config.settings_model import PROFILES, Settings, SettingsError
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files import managed_write as mw
+from rosnet_tui.core.files import privilege
+from rosnet_tui.core.files.hosts import (
     PROFILE_TITLES,
     WriterSettingsError,
     active_profile,
@@ -43,9 +46,7 @@ from rosnet_tui.core.hosts import (
     preview_hosts,
     render_hosts_text,
 )
-from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
-from rosnet_tui.core.settings import load_settings, save_settings
-from rosnet_tui.core.settings_model import PROFILES, Settings, SettingsError
+from rosnet_tui.core.saved.settings import load_settings, save_settings
 
 
 # --------------------------------------------------------------------------- hosts

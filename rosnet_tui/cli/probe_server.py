@@ -8,7 +8,12 @@ import logging
 import sys
 
 from rosnet_tui.cli.common import number_in
-from rosnet_tui.core.probe_server import DEFAULT_LISTEN, ProbeLimits, parse_listen, run_probe_server
+from rosnet_tui.core.net.probe_server import (
+    DEFAULT_LISTEN,
+    ProbeLimits,
+    parse_listen,
+    run_probe_server,
+)
 
 
 def _listen(text: str) -> tuple[str, int]:

@@ -1,5 +1,5 @@
 """`rosnet-tui report`: its arguments, running the checks or reading saved results, and printing
-the document :mod:`rosnet_tui.core.report` builds."""
+the document :mod:`rosnet_tui.core.wizard.report` builds."""
 
 from __future__ import annotations
 
@@ -10,8 +10,11 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.config.settings_model import Settings, SettingsError
 from rosnet_tui.core.procedure import STEP_IDS
-from rosnet_tui.core.report import (
+from rosnet_tui.core.results import CheckResult
+from rosnet_tui.core.saved.settings import atomic_write_text
+from rosnet_tui.core.wizard.report import (
     ReportError,
     build_report,
     load_results_json,
@@ -19,9 +22,6 @@ from rosnet_tui.core.report import (
     render_markdown,
     ros_environment,
 )
-from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.settings import atomic_write_text
-from rosnet_tui.core.settings_model import Settings, SettingsError
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
 
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _load_settings(args: argparse.Namespace, *, required: bool) -> tuple[Settings | None, Path]:
     from rosnet_tui.cli.common import config_path
-    from rosnet_tui.core.settings import load_settings
+    from rosnet_tui.core.saved.settings import load_settings
 
     path = config_path(args)
     try:
@@ -129,7 +129,7 @@ def make_report(args: argparse.Namespace) -> dict[str, Any]:
 def complete_for_run(settings: Settings, path: Path) -> Settings:
     """Fill in this machine's local IP/interface when the file leaves them out (for this run
     only, as `rosnet-tui check` does); refuse incomplete settings."""
-    from rosnet_tui.core.netinfo import with_detected
+    from rosnet_tui.core.net.netinfo import with_detected
 
     settings = with_detected(settings)
     problems = settings.problems()

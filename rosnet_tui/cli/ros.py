@@ -37,13 +37,19 @@ from rosnet_tui.cli.writing import (
     write_preview,
     yes_to_all,
 )
-from rosnet_tui.core import affected, ros2
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core import managed_write as mw
-from rosnet_tui.core.bashrc import ROS_IP_REASON, find_ros_ip_lines, preview_bashrc, shell_lines
-from rosnet_tui.core.hosts import WriterSettingsError
-from rosnet_tui.core.paths import default_bashrc_path
+from rosnet_tui.core import affected
+from rosnet_tui.core.config.paths import default_bashrc_path
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files import managed_write as mw
+from rosnet_tui.core.files.bashrc import (
+    ROS_IP_REASON,
+    find_ros_ip_lines,
+    preview_bashrc,
+    shell_lines,
+)
+from rosnet_tui.core.files.hosts import WriterSettingsError
+from rosnet_tui.core.ros import ros2
 
 HELP = "write the ROS environment for this component's role (ROS 1 or 2) into ~/.bashrc"
 
@@ -218,7 +224,7 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
 
 def _tls_plan(settings) -> str:
     """What the apply does for mutual TLS besides the files above (nothing is done here)."""
-    from rosnet_tui.core import fleet_tls, pairing
+    from rosnet_tui.core.ros import fleet_tls, pairing
 
     paths = fleet_tls.tls_paths(ros2.config_dir())
     if settings.is_master:
@@ -238,7 +244,7 @@ def _fleet_tls(settings) -> int:
     certificate signed by the master over SSH (when it has none good for 30 days more)."""
     import asyncio
 
-    from rosnet_tui.core import fleet_tls, pairing
+    from rosnet_tui.core.ros import fleet_tls, pairing
 
     paths = fleet_tls.tls_paths(ros2.config_dir())
     try:

@@ -17,9 +17,9 @@ import sys
 
 from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, say
 from rosnet_tui.cli.writing import confirm, load_settings_for
-from rosnet_tui.core import fleet_tls, pairing
-from rosnet_tui.core.fleet_tls import TlsError
-from rosnet_tui.core.ros2 import config_dir
+from rosnet_tui.core.ros import fleet_tls, pairing
+from rosnet_tui.core.ros.fleet_tls import TlsError
+from rosnet_tui.core.ros.ros2 import config_dir
 
 
 def register(rs: argparse._SubParsersAction) -> None:

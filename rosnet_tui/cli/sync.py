@@ -31,8 +31,8 @@ from rosnet_tui.cli.common import (
     state_dir_problem,
 )
 from rosnet_tui.cli.writing import confirm
-from rosnet_tui.core import privilege
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.files import privilege
 
 UNIT_NAME = "rosnet-tui-sync.service"
 
@@ -299,8 +299,8 @@ def _unit_dir(args: argparse.Namespace) -> Path:
 
 
 def run_install(args: argparse.Namespace) -> int:
-    from rosnet_tui.core.regular_file import FileRefusedError, read_regular
-    from rosnet_tui.core.settings import atomic_write_text
+    from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
+    from rosnet_tui.core.saved.settings import atomic_write_text
 
     text, notes = unit_text(args, user=args.user)
     path = _unit_dir(args) / UNIT_NAME

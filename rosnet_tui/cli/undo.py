@@ -18,12 +18,14 @@ from rosnet_tui.cli.common import (
     state_dir_problem,
 )
 from rosnet_tui.cli.writing import confirm, paths_of, rerun_checks, run_as_root
-from rosnet_tui.core import affected, firewall, privilege
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core.paths import DEFAULT_HOSTS_PATH
-from rosnet_tui.core.settings import load_settings
-from rosnet_tui.core.settings_model import Settings, SettingsError
+from rosnet_tui.core import affected
+from rosnet_tui.core.config.paths import DEFAULT_HOSTS_PATH
+from rosnet_tui.core.config.settings_model import Settings, SettingsError
+from rosnet_tui.core.exposure import firewall
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files import privilege
+from rosnet_tui.core.saved.settings import load_settings
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 
 

@@ -15,8 +15,8 @@ NO_SCREEN_TERMS = ("dumb", "unknown", "")
 
 
 def run_wizard(args: argparse.Namespace) -> int:
-    from rosnet_tui.core.settings import load_settings
-    from rosnet_tui.core.settings_model import SettingsError, new_settings
+    from rosnet_tui.core.config.settings_model import SettingsError, new_settings
+    from rosnet_tui.core.saved.settings import load_settings
 
     path = config_path(args)
     try:
@@ -47,8 +47,8 @@ def run_wizard(args: argparse.Namespace) -> int:
     try:
         import asyncio
 
-        from rosnet_tui.core.paths import Paths
-        from rosnet_tui.core.session import WizardSession
+        from rosnet_tui.core.config.paths import Paths
+        from rosnet_tui.core.wizard.session import WizardSession
         from rosnet_tui.ui.app import RosnetApp
 
         session = WizardSession(settings or new_settings(), Paths(config_path=path))

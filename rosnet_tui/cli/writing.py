@@ -22,12 +22,12 @@ from rosnet_tui.cli.common import (
     say,
     state_dir_of,
 )
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core import privilege
-from rosnet_tui.core.hosts import WriterSettingsError
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files import privilege
+from rosnet_tui.core.files.hosts import WriterSettingsError
 
 
 def ask(question: str) -> bool:
@@ -46,7 +46,7 @@ def load_settings_for(args: argparse.Namespace) -> Settings | None:
     A blank local IP (and interface) is filled in from this machine for this run, as `check`
     and the wizard do: the documented settings leave local_ip out. Nothing is saved.
     """
-    from rosnet_tui.core.netinfo import with_detected
+    from rosnet_tui.core.net.netinfo import with_detected
 
     settings = load_settings_or_say(args)
     return with_detected(settings) if settings is not None else None

@@ -16,8 +16,8 @@ from textual.widgets import DataTable, Static
 from rosnet_tui.core.advisor import Finding, all_rules
 from rosnet_tui.core.procedure import SEVERITY_WORDS as SEVERITY_WORD
 from rosnet_tui.core.procedure import step_title
-from rosnet_tui.core.session import WizardSession
-from rosnet_tui.core.steps import STEP_BY_ID
+from rosnet_tui.core.wizard.session import WizardSession
+from rosnet_tui.core.wizard.steps import STEP_BY_ID
 from rosnet_tui.ui.theme import cut
 from rosnet_tui.ui.widgets import KeyBar, PlainHeader, RowTable
 

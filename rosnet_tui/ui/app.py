@@ -1,7 +1,7 @@
 """The wizard: a thin Textual layer over rosnet_tui.core.
 
 The app only declares its screens and routes navigation; each screen is handed the
-:class:`~rosnet_tui.core.session.WizardSession` (settings, check states, findings, the door to
+:class:`~rosnet_tui.core.wizard.session.WizardSession` (settings, check states, findings, the door to
 run checks, write plans) and reports back with messages.
 """
 
@@ -14,8 +14,8 @@ from textual.app import App
 from textual.binding import Binding
 
 from rosnet_tui.core.procedure import STEP_IDS
-from rosnet_tui.core.session import WizardSession
-from rosnet_tui.core.steps import step_for
+from rosnet_tui.core.wizard.session import WizardSession
+from rosnet_tui.core.wizard.steps import step_for
 from rosnet_tui.ui import textual_compat as tc
 from rosnet_tui.ui.keys import OrderedKeys
 from rosnet_tui.ui.messages import Navigate, SettingsSaved
@@ -48,7 +48,7 @@ class RosnetApp(OrderedKeys, tc.CrashHook, App[int]):
     WIDE_AT = 110  # columns from which configuration and verification sit side by side
 
     def __init__(self, session: WizardSession, *, open_setup: bool = False) -> None:
-        """*session*: the settings, the :class:`~rosnet_tui.core.paths.Paths`, and how checks are
+        """*session*: the settings, the :class:`~rosnet_tui.core.config.paths.Paths`, and how checks are
         found and run (tests hand in their own); *open_setup*: start on the set-up screen."""
         super().__init__(driver_class=None if os.environ.get("ROSNET_TUI_FRUGAL") == "0"
                          else frugal_driver_class())

@@ -16,7 +16,7 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.widgets import Button, Static
 
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp.wire import ModemError
 from rosnet_tui.ui.dialog import SCROLL_BINDINGS, ConfirmDialog

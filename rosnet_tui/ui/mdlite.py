@@ -1,6 +1,6 @@
 """The configuration texts' Markdown, drawn as one rich renderable without a Markdown library.
 
-The step texts (rosnet_tui/core/steps.py) use a small part of Markdown: paragraphs, "- " and
+The step texts (rosnet_tui/core/wizard/steps.py) use a small part of Markdown: paragraphs, "- " and
 "1. " lists, fenced code blocks, headings, **bold**, *emphasis* and `code`. Drawing that here
 keeps the first screen light (a full Markdown parser is the heaviest import of the start-up) and
 its output plain: ASCII bullets, code indented and in the accent colour, so it reads without

@@ -13,9 +13,9 @@ from textual.screen import Screen
 from textual.validation import ValidationResult, Validator
 from textual.widgets import Button, Input, Label, Select, Static
 
-from rosnet_tui.core import settings_model as S
-from rosnet_tui.core.session import WizardSession
-from rosnet_tui.core.settings_model import default_security
+from rosnet_tui.core.config import settings_model as S
+from rosnet_tui.core.config.settings_model import default_security
+from rosnet_tui.core.wizard.session import WizardSession
 from rosnet_tui.ui.fields import OrderedInput
 from rosnet_tui.ui.messages import SettingsSaved
 from rosnet_tui.ui.theme import cut
@@ -310,7 +310,7 @@ class SetupScreen(Screen[bool]):
                                   public_ip=str(p.get("public_ip", "")),
                                   ssh_user=str(p.get("ssh_user", "")))
                     await rows.mount(self._peer_row(peer))
-        from rosnet_tui.core.ui_state import local_time
+        from rosnet_tui.core.saved.ui_state import local_time
 
         when = local_time(str(draft.get("at", "")))
         self._restored_draft = True

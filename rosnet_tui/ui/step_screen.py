@@ -14,8 +14,8 @@ from textual.screen import Screen
 from textual.widgets import Static
 
 from rosnet_tui.core import affected
-from rosnet_tui.core.session import WizardSession
-from rosnet_tui.core.steps import Step, step_for
+from rosnet_tui.core.wizard.session import WizardSession
+from rosnet_tui.core.wizard.steps import Step, step_for
 from rosnet_tui.ui.messages import Navigate
 from rosnet_tui.ui.textual_compat import installed_screens
 from rosnet_tui.ui.widgets import CheckList, KeyBar, PlainHeader, StepBar

@@ -15,8 +15,8 @@ from textual.widget import Widget
 from textual.widgets import DataTable, Static
 
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.session import NOT_RUN, RUNNING
-from rosnet_tui.core.steps import STEPS
+from rosnet_tui.core.wizard.session import NOT_RUN, RUNNING
+from rosnet_tui.core.wizard.steps import STEPS
 from rosnet_tui.ui.theme import cut
 
 # The state words of a check (the four result statuses plus the session's "not run"/"running"),

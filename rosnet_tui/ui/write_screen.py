@@ -1,6 +1,6 @@
 """Write configuration from the wizard: a diff preview first, then an atomic, undoable apply.
 
-The core does the work (rosnet_tui.core.hosts / bashrc / managed_file / privilege); this screen
+The core does the work (rosnet_tui.core.files.hosts / bashrc / managed_file / privilege); this screen
 only shows the preview, asks, and reports. A file this user may not write (``/etc/hosts``) is
 written by re-running our own writer under sudo, with the TUI suspended so sudo can ask for the
 password in the terminal; the exact command is shown first.
@@ -15,12 +15,13 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.widgets import Button, Checkbox, Static
 
-from rosnet_tui.core import firewall, privilege
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.exposure import firewall
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files import privilege
 from rosnet_tui.core.upnp.journal import describe as describe_forward
-from rosnet_tui.core.write_plans import WritePlan
+from rosnet_tui.core.wizard.write_plans import WritePlan
 from rosnet_tui.ui.dialog import SCROLL_BINDINGS, ConfirmDialog
 from rosnet_tui.ui.widgets import KeyBar
 

@@ -12,8 +12,7 @@ import json
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings_model import (
+from rosnet_tui.core.config.settings_model import (
     CheckSettings,
     Peer,
     ProbeSettings,
@@ -22,6 +21,7 @@ from rosnet_tui.core.settings_model import (
     SyncSettings,
     ThisComponent,
 )
+from rosnet_tui.core.results import CheckResult, Status
 
 
 def result_to_json(r: CheckResult) -> dict[str, Any]:

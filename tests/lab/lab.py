@@ -589,7 +589,7 @@ class Lab:
         """The rosnet-tui Settings of *host*: the master behind a telecom router, every other
         computer a member at home; its peers_of reached over SSH as root (the two-site lab:
         robot is the master turtlebot, laptop the member sami)."""
-        from rosnet_tui.core.settings_model import Peer, ThisComponent
+        from rosnet_tui.core.config.settings_model import Peer, ThisComponent
         from tests.builders import checked_settings
 
         self._computer(host)
@@ -607,7 +607,7 @@ class Lab:
     def config_path(self, host: str) -> Path:
         """(Re)write *host*'s settings file at its default place (HOME/.config/rosnet-tui/
         config.toml, found without --config) and return its path."""
-        from rosnet_tui.core.settings import atomic_write_text, render_settings
+        from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 
         path = self.home(host) / ".config" / "rosnet-tui" / "config.toml"
         atomic_write_text(path, render_settings(self.settings(host)), mode=0o644)

@@ -25,7 +25,7 @@ HOST = "outsider"
 _ZENOH = r"""
 import json, os, sys, tempfile, time
 import zenoh
-from rosnet_tui.core import outsider
+from rosnet_tui.core.exposure import outsider
 ep, t = sys.argv[1], float(sys.argv[2])
 conf = zenoh.Config()
 conf.insert_json5("mode", '"client"')

@@ -66,7 +66,7 @@ class Ros2World:
             self.start_router(h)
 
     def config_path(self, host: str, **ros: Any) -> Path:
-        from rosnet_tui.core.settings import atomic_write_text, render_settings
+        from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 
         path = self.lab.home(host) / ".config" / "rosnet-tui" / "config.toml"
         atomic_write_text(path, render_settings(self.settings(host, **ros)), mode=0o644)
@@ -77,7 +77,7 @@ class Ros2World:
 
     def tls_paths(self, host: str):
         """*host*'s fleet TLS files (~/.config/rosnet-tui/tls in its home)."""
-        from rosnet_tui.core import fleet_tls
+        from rosnet_tui.core.ros import fleet_tls
 
         return fleet_tls.tls_paths(self.lab.home(host) / ".config" / "rosnet-tui")
 
@@ -88,7 +88,7 @@ class Ros2World:
         """Mutual TLS (the default): the fleet CA and certificate on the master as `ros apply`
         makes them there; a member's key made in its home and signed by that CA, as pairing
         leaves them (tests/test_pairing_lab.py pairs over SSH for real)."""
-        from rosnet_tui.core import fleet_tls, pairing, ros2
+        from rosnet_tui.core.ros import fleet_tls, pairing, ros2
 
         s = self.settings(host)
         if not ros2.mtls(s):
@@ -108,7 +108,7 @@ class Ros2World:
         shutil.rmtree(self.tls_paths(host).dir, ignore_errors=True)
 
     def write_router_config(self, host: str, text: str | None = None) -> Path:
-        from rosnet_tui.core import ros2
+        from rosnet_tui.core.ros import ros2
 
         path = self.router_config_path(host)
         path.parent.mkdir(parents=True, exist_ok=True)

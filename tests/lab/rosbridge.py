@@ -39,7 +39,7 @@ def start_bridge(lab: Lab, *, rosapi: bool = True, port: int = ROSBRIDGE_PORT,
 
 def settings(lab: Lab, host: str, version: int = 1, **bridge):
     """*host*'s settings with [rosbridge] enabled (the master, turtlebot, runs it)."""
-    from rosnet_tui.core.settings_model import RosbridgeSettings
+    from rosnet_tui.core.config.settings_model import RosbridgeSettings
 
     s = lab.settings(host)
     return replace(s, ros=replace(s.ros, version=version),
@@ -47,7 +47,7 @@ def settings(lab: Lab, host: str, version: int = 1, **bridge):
 
 
 def config_path(lab: Lab, host: str, version: int = 1, **bridge) -> Path:
-    from rosnet_tui.core.settings import atomic_write_text, render_settings
+    from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 
     path = lab.home(host) / ".config" / "rosnet-tui" / "config.toml"
     atomic_write_text(path, render_settings(settings(lab, host, version, **bridge)), mode=0o644)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core import rosproto
+from rosnet_tui.core.peer import rosproto
 from tests.builders import free_port
 
 ROSCORE = Path("/usr/bin/roscore")

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from rosnet_tui.core.checks import CheckContext
-from rosnet_tui.core.settings_model import Peer, Settings
+from rosnet_tui.core.config.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.known_hosts import host_key_name
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port

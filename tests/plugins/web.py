@@ -10,7 +10,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import pytest
 
-from rosnet_tui.core.probe_server import ProbeServer
+from rosnet_tui.core.net.probe_server import ProbeServer
 
 
 class WebServer:

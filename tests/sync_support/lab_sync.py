@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core.settings import atomic_write_text, render_settings
-from rosnet_tui.core.settings_model import SyncSettings
+from rosnet_tui.core.config.settings_model import SyncSettings
+from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 from rosnet_tui.core.sync.status import load_status
 
 from .bind import BindServer

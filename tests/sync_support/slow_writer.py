@@ -8,7 +8,7 @@ import sys
 import time
 
 from rosnet_tui.cli import main
-from rosnet_tui.core import managed_write as mw
+from rosnet_tui.core.files import managed_write as mw
 
 MARK = "ROSNET-TEST: about to rename"
 

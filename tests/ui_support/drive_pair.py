@@ -14,11 +14,11 @@ import sys
 import time
 from pathlib import Path
 
-from rosnet_tui.core import fleet_tls
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.ros2 import config_dir
-from rosnet_tui.core.session import WizardSession
-from rosnet_tui.core.settings import load_settings
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.ros import fleet_tls
+from rosnet_tui.core.ros.ros2 import config_dir
+from rosnet_tui.core.saved.settings import load_settings
+from rosnet_tui.core.wizard.session import WizardSession
 from rosnet_tui.ui.app import RosnetApp
 from rosnet_tui.ui.widgets import CheckList
 

@@ -13,10 +13,10 @@ import sys
 import time
 from pathlib import Path
 
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.session import WizardSession
-from rosnet_tui.core.settings import load_settings
-from rosnet_tui.core.steps import STEPS
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.saved.settings import load_settings
+from rosnet_tui.core.wizard.session import WizardSession
+from rosnet_tui.core.wizard.steps import STEPS
 from rosnet_tui.ui.app import RosnetApp
 from rosnet_tui.ui.widgets import CheckList
 

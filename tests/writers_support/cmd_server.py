@@ -33,7 +33,7 @@ def _die() -> None:
 
 
 def _arm(crash: list | None) -> None:
-    from rosnet_tui.core import managed_write as mw
+    from rosnet_tui.core.files import managed_write as mw
 
     if not crash:
         return
@@ -123,9 +123,9 @@ def serve() -> None:
     import rosnet_tui.cli.check
     import rosnet_tui.cli.hosts
     import rosnet_tui.cli.undo  # noqa: F401
-    from rosnet_tui.core import undo_journal as uj
     from rosnet_tui.core.checks import load_builtin_checks
     from rosnet_tui.core.checks.runner import select
+    from rosnet_tui.core.files import undo_journal as uj
 
     load_builtin_checks()
     select(steps=["linux"])

@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 
 from rosnet_tui.core.advisor.evidence import Evidence, RuleOrderError, status_of
 from rosnet_tui.core.checks import data as check_data
+from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.procedure import SEVERITIES, STEP_IDS, step_title
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings_model import Settings
 
 __all__ = ["CATCH_ALL_IDS", "CATCH_ALL_RULES", "RULES", "Finding", "Hit", "Rule", "RuleOrderError",
            "advice_by_check", "advise", "all_rules", "first_failure", "rule", "rule_by_id", "seal"]

@@ -11,10 +11,10 @@ from collections.abc import Iterable, Mapping
 from urllib.parse import urlsplit
 
 from rosnet_tui.core.checks.data import CheckData, view
-from rosnet_tui.core.hosts import hosts_entries
+from rosnet_tui.core.config.settings_model import PORT_MAX, PORT_MIN, Settings
+from rosnet_tui.core.files.hosts import hosts_entries
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN, Settings
 
 FORWARD_RANGE = f"{PORT_MIN}-{PORT_MAX}"
 __all__ = ["FORWARD_RANGE", "Evidence", "RuleOrderError", "cgnat_text", "chat_ok",

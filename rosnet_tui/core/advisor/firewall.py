@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence, join_and
-from rosnet_tui.core.router_card import ros1_exposure
+from rosnet_tui.core.exposure.router_card import ros1_exposure
 
 TABLE = "table inet rosnet_tui"
 

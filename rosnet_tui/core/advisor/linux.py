@@ -21,7 +21,7 @@ from rosnet_tui.core.advisor.ranking import (
     peer_tcp,
     ssh_refused_first,
 )
-from rosnet_tui.core.settings_model import PORT_MAX, PORT_MIN
+from rosnet_tui.core.config.settings_model import PORT_MAX, PORT_MIN
 
 
 def _ssh_caused(ev: Evidence, name: str) -> list[str]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence, join_and
 from rosnet_tui.core.advisor.ranking import peer_tcp
-from rosnet_tui.core.ros2 import RMW_ZENOH
+from rosnet_tui.core.ros.ros2 import RMW_ZENOH
 
 
 def _on(ev: Evidence) -> bool:

@@ -7,9 +7,9 @@ round_trip); each rule below explains one hop and sends the user to the step whe
 
 from __future__ import annotations
 
-from rosnet_tui.core import rosbridge
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence, join_and
+from rosnet_tui.core.ros import rosbridge
 
 CHECK = "ros.rosbridge"
 

@@ -18,8 +18,8 @@ from rosnet_tui.core.advisor.evidence import (
     offline_ids,
 )
 from rosnet_tui.core.advisor.ranking import Cause, local_ip_moved, nat_seen, table1_causes
-from rosnet_tui.core.router_card import ros1_exposure
-from rosnet_tui.core.settings_model import PORT_MAX
+from rosnet_tui.core.config.settings_model import PORT_MAX
+from rosnet_tui.core.exposure.router_card import ros1_exposure
 
 
 # ---- link (its symptom is step 1: nothing gets out) -----------------------------------------

@@ -14,11 +14,11 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from rosnet_tui.core.checks import data as data_decl
-from rosnet_tui.core.listener import ListenerPool
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.net.listener import ListenerPool
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult, Outcome, Status
-from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.ssh.options import SshOptions
 
 
@@ -45,7 +45,7 @@ class CheckContext:
     # One SSH connection per peer for the round (an SshPool; None: one per session). The runner
     # gives every round one; run_checks closes it when the round ends.
     ssh_pool: Any = None
-    # The round's peer agents (a core.peer_agent.PeerAgents, made by the first check that needs
+    # The round's peer agents (a core.peer.peer_agent.PeerAgents, made by the first check that needs
     # one; None: none yet): one program per peer serving every probe; closed with the round.
     peer_agents: Any = None
 

@@ -32,7 +32,7 @@ def strict() -> bool:
 # :func:`view` and :func:`undeclared` follow. The comment on each key is its documentation;
 # docs/COMMANDS.md's table of the checks lists the top-level keys. Values are JSON (dict keys: str).
 
-# How a TCP connection attempt went (rosnet_tui/core/connect.py): "connected"; "refused" (something
+# How a TCP connection attempt went (rosnet_tui/core/net/connect.py): "connected"; "refused" (something
 # at the address answered with a reset: online, rejecting the port); "timeout" (nothing answered:
 # dropped); "unreachable" (an ICMP error: no route, or no machine where a modem forwards to);
 # "error" (anything else).

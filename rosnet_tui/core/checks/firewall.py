@@ -1,4 +1,4 @@
-"""``linux.firewall``: ROS 1, only the peers reach the forwarded ports (rosnet_tui.core.firewall).
+"""``linux.firewall``: ROS 1, only the peers reach the forwarded ports (rosnet_tui.core.exposure.firewall).
 
 Reads our own table (`table inet rosnet_tui`): present, its rules the ones the settings give, its
 peers' set holding exactly the peers' current addresses, and its LAN and [firewall] allow sets
@@ -13,9 +13,9 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from rosnet_tui.core import firewall as fw
-from rosnet_tui.core import netinfo
 from rosnet_tui.core.checks import CheckContext, check
+from rosnet_tui.core.exposure import firewall as fw
+from rosnet_tui.core.net import netinfo
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh import origin
 

@@ -21,12 +21,14 @@ from urllib.parse import urlsplit
 import psutil
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import budget, fetch_public_ip, http_get, parse_ip
-from rosnet_tui.core.netinfo import is_overlay
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.http import http_get
+from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, parse_ip
+from rosnet_tui.core.net.netinfo import is_overlay
 from rosnet_tui.core.procedure import is_ip
 from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.saved.state import PublicIpRecord, now_iso, record_public_ip
 from rosnet_tui.core.ssh.connection import resolve_ipv4, run_blocking
-from rosnet_tui.core.state import PublicIpRecord, now_iso, record_public_ip
 
 CGNAT_NET = ipaddress.ip_network("100.64.0.0/10")
 RFC1918 = tuple(ipaddress.ip_network(n) for n in ("10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16"))

@@ -17,19 +17,15 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
-    NO_SSH_USER,
-    budget,
-    each_peer,
-    ssh_peers,
-)
-from rosnet_tui.core.connect import tcp_failure_kind
-from rosnet_tui.core.hosts import HostsEntry, hosts_entries
-from rosnet_tui.core.managed_text import ManagedFileError
-from rosnet_tui.core.managed_write import read_text
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.peers import NO_SSH_USER, each_peer, ssh_peers
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.files.hosts import HostsEntry, hosts_entries
+from rosnet_tui.core.files.managed_text import ManagedFileError
+from rosnet_tui.core.files.managed_write import read_text
+from rosnet_tui.core.net.connect import tcp_failure_kind
 from rosnet_tui.core.procedure import is_ip, is_loopback
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import resolve_ipv4
 from rosnet_tui.core.ssh.session import ssh_run
 
@@ -239,7 +235,7 @@ async def ping_name(name: str, timeout: float) -> tuple[bool | None, str]:
 
 
 async def tcp_connect(host: str, port: int, timeout: float) -> tuple[str, str]:
-    """(kind, what was seen) of a TCP connection to *host*:*port*; kind as in core.connect."""
+    """(kind, what was seen) of a TCP connection to *host*:*port*; kind as in core.net.connect."""
     writer = None
     try:
         _r, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)

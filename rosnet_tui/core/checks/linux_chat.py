@@ -1,7 +1,7 @@
 """Step 3, Linux: the TCP chat by name, both ways (linux.chat_out, linux.chat_in); under ROS 2
 the one connection that crosses the modems, from each member to the master's router port.
 
-The peer's side (:mod:`rosnet_tui.core.chatproto`, stdlib only: nothing to install on the peer)
+The peer's side (:mod:`rosnet_tui.core.peer.chatproto`, stdlib only: nothing to install on the peer)
 runs over SSH by the round's peer agent there, with ``nc`` as the fallback when the peer has no
 python3.
 """
@@ -16,27 +16,24 @@ import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
 
-from rosnet_tui.core.chatproto import CHAT
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
+from rosnet_tui.core.checks.probes.agents import (
     CHAT_SOURCE,
-    NO_SSH_USER,
-    budget,
     chat_agent,
-    each_peer,
     no_python,
     peer_python,
     peer_run,
     peer_session,
-    python_command,
-    shq,
-    ssh_peers,
 )
-from rosnet_tui.core.connect import kind_from_text, tcp_failure_kind
-from rosnet_tui.core.listener import ECHO, GREETING
-from rosnet_tui.core.peer_agent import AgentCall
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.peers import NO_SSH_USER, each_peer, ssh_peers
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.net.connect import kind_from_text, tcp_failure_kind
+from rosnet_tui.core.net.listener import ECHO, GREETING
+from rosnet_tui.core.peer.chatproto import CHAT
+from rosnet_tui.core.peer.commands import python_command, shq
+from rosnet_tui.core.peer.peer_agent import AgentCall
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer
 from rosnet_tui.core.ssh.connection import SshResult, resolve_ipv4, run_blocking
 from rosnet_tui.core.ssh.session import SshSession, ssh_run, ssh_session
 
@@ -373,7 +370,7 @@ async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
 
 
 async def _tcp_connect(host: str, port: int, timeout: float) -> tuple[bool, str, str]:
-    """(connected, the line saying how, core.connect's kind of the attempt)."""
+    """(connected, the line saying how, core.net.connect's kind of the attempt)."""
     writer = None
     try:
         _r, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)

@@ -1,6 +1,6 @@
 """Step 4 checks: the ROS environment, the master, the nodes' addresses and live publish/subscribe.
 
-The probes are ROS nodes of our own (:mod:`rosnet_tui.core.rosproto`), advertised the way any node
+The probes are ROS nodes of our own (:mod:`rosnet_tui.core.peer.rosproto`), advertised the way any node
 started here would be, so a wrong ``ROS_IP`` or hostname shows up exactly as it does for the user's
 nodes. The peer's side runs the same module over SSH (``python3 -`` fed its source): no ROS and no
 rosnet-tui are needed there.
@@ -13,21 +13,20 @@ import time
 from typing import Any
 from urllib.parse import urlparse
 
-from rosnet_tui.core import rosproto
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
+from rosnet_tui.core.checks.probes.agents import (
     ROS_AGENT,
-    each_peer,
     peer_program_problem,
     peer_run,
     peer_session,
-    ssh_peers,
     stderr_tail,
 )
-from rosnet_tui.core.hosts import own_ip
+from rosnet_tui.core.checks.probes.peers import each_peer, ssh_peers
+from rosnet_tui.core.config.settings_model import Peer, Settings
+from rosnet_tui.core.files.hosts import own_ip
+from rosnet_tui.core.peer import rosproto
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.connection import SshResult, run_blocking
 
 READY_MARK = '"rosnet_probe_ready"'

@@ -2,8 +2,8 @@
 (ros2.router). The graph and live publish/subscribe are in :mod:`.ros2_graph`.
 
 Every probe is a real Zenoh session (eclipse-zenoh) that behaves as an rmw_zenoh node does on the
-wire (:mod:`rosnet_tui.core.zenohproto`). Questions to a peer run the same module over SSH, on
-the interpreter of the rosnet-tui installed there, by the round's peer agent (probes.ZENOH_AGENT).
+wire (:mod:`rosnet_tui.core.peer.zenohproto`). Questions to a peer run the same module over SSH, on
+the interpreter of the rosnet-tui installed there, by the round's peer agent (probes.agents.ZENOH_AGENT).
 """
 
 from __future__ import annotations
@@ -16,26 +16,26 @@ from typing import Any
 
 import psutil
 
-from rosnet_tui.core import fleet_tls, ros2, tls_handshake, zenohproto
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
-    ZENOH_AGENT,
-    budget,
+from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_run
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.peers import each_peer
+from rosnet_tui.core.checks.probes.ros2 import (
     close_zenoh,
-    each_peer,
     node_endpoint,
     open_zenoh,
-    peer_run,
     ros2_peers,
     router_links,
     zenoh_env,
     zenoh_peer_problem,
 )
-from rosnet_tui.core.managed_text import ManagedFileError
-from rosnet_tui.core.managed_write import read_text
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.files.managed_text import ManagedFileError
+from rosnet_tui.core.files.managed_write import read_text
+from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.ros import fleet_tls, ros2, tls_handshake
 from rosnet_tui.core.ssh.connection import resolve_ipv4, run_blocking
 
 FACTOR_ROUTER = 1.0

@@ -1,9 +1,9 @@
 """Step 4 for ROS 2 over rmw_zenoh: the graph (ros2.graph) and live publish/subscribe both ways
 (ros2.pubsub_out, ros2.pubsub_in), each through the routers as a real node's data goes.
 
-Our side is a probe node here (:class:`rosnet_tui.core.zenohproto.ProbeNode`: liveliness tokens,
+Our side is a probe node here (:class:`rosnet_tui.core.peer.zenohproto.ProbeNode`: liveliness tokens,
 rmw_zenoh's data key, CDR payload, 33-byte attachment); the peer's side is the same module run
-over SSH, by the round's peer agent there (core/peer_agent.py). A failure names the hop where the
+over SSH, by the round's peer agent there (core/peer/peer_agent.py). A failure names the hop where the
 message was lost.
 """
 
@@ -14,25 +14,24 @@ import secrets
 import time
 from typing import Any
 
-from rosnet_tui.core import ros2, zenohproto
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
-    ZENOH_AGENT,
-    budget,
+from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_run, peer_session
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.peers import each_peer
+from rosnet_tui.core.checks.probes.ros2 import (
     close_zenoh,
-    each_peer,
     node_domain,
     node_endpoint,
     open_zenoh,
-    peer_run,
-    peer_session,
     ros2_peers,
     router_links,
     zenoh_peer_problem,
 )
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.ros import ros2
 from rosnet_tui.core.ssh.connection import run_blocking
 
 FACTOR_GRAPH, FACTOR_PUBSUB = 2.0, 4.0
@@ -104,7 +103,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     peers = ros2_peers(ctx)
     theirs = {p.name: zenohproto.probe_name() for p in peers}
     remote_t = max(0.5, t * 0.55)
-    # One task for every peer's side (probes.each_peer: bounded, one SSH connection per peer).
+    # One task for every peer's side (probes.peers.each_peer: bounded, one SSH connection per peer).
     tasks = [asyncio.ensure_future(each_peer(peers, lambda p: peer_run(
         ctx, p, ZENOH_AGENT, "zenoh", ["graph", "--expect", ours, "--name", theirs[p.name],
                                        "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)],

@@ -20,12 +20,14 @@ import socket
 import time
 from typing import Any
 
-from rosnet_tui.core import jsonsafe, rosbridge, rosproto
+from rosnet_tui.core import jsonsafe
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import budget
-from rosnet_tui.core.connect import tcp_failure_kind
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.net.connect import tcp_failure_kind
+from rosnet_tui.core.peer import rosproto
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.ros import rosbridge
 from rosnet_tui.core.ssh.connection import resolve_ipv4
 
 MAX_TOPICS = 200          # topics kept in the data (a big robot lists hundreds)

@@ -1,7 +1,7 @@
 """Step 2, Router/modem: local address, the test port, our listener, and forwarding from outside.
 
 ``router.port_open`` is the procedure's "start ``nc -l PORT``, ask a port checker" loop: our own
-listener (:mod:`rosnet_tui.core.listener`) answers on each port we probe, and the outside view
+listener (:mod:`rosnet_tui.core.net.listener`) answers on each port we probe, and the outside view
 comes from the peer over SSH (it connects to our public IP and must read our listener's greeting,
 so a port forwarded to the wrong machine is caught) or from the echoip service in the settings.
 """
@@ -17,29 +17,26 @@ from typing import Any, Literal
 import psutil
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
-    budget,
-    fetch_public_ip,
-    http_get,
-    python_command,
-    round_public_ip,
-    ssh_peers,
-)
-from rosnet_tui.core.connect import kind_from_text
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.http import http_get
+from rosnet_tui.core.checks.probes.peers import ssh_peers
+from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, round_public_ip
+from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.jsonsafe import loads_bounded
-from rosnet_tui.core.listener import GREETING, TestListener
-from rosnet_tui.core.netinfo import (
+from rosnet_tui.core.net.connect import kind_from_text
+from rosnet_tui.core.net.listener import GREETING, TestListener
+from rosnet_tui.core.net.netinfo import (
     LinkState,
     LocalNet,
     detect_local_net,
     interface_ipv4,
     link_state,
 )
+from rosnet_tui.core.peer.commands import python_command
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.saved.state import record_local_ip
 from rosnet_tui.core.ssh.connection import run_blocking
 from rosnet_tui.core.ssh.session import ssh_run
-from rosnet_tui.core.state import record_local_ip
 
 
 # --------------------------------------------------------------------------- router.local_ip

@@ -16,7 +16,7 @@ import time
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import budget
+from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.connection import run_blocking
 from rosnet_tui.core.upnp import forwards as fw

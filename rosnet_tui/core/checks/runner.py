@@ -20,10 +20,10 @@ from rosnet_tui.core.checks import (
     load_builtin_checks,
     run_checks,
 )
-from rosnet_tui.core.managed_write import settle
-from rosnet_tui.core.paths import Paths
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.files.managed_write import settle
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.settings_model import Settings
 from rosnet_tui.core.ssh.options import SshOptions
 from rosnet_tui.core.ssh.pool import SshPool
 

@@ -13,7 +13,7 @@
   port checker (not a peer) must find the master's port and a port of the range closed, and a
   peer must still connect to both, at the public IP the internet sees (isp.public_ip's, or the
   settings' when none is measured).
-The programs and their reading are in core/outsider.py.
+The programs and their reading are in core/exposure/outsider.py.
 """
 
 from __future__ import annotations
@@ -24,22 +24,17 @@ import getpass
 import sys
 from typing import Any
 
-from rosnet_tui.core import outsider
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes import (
-    budget,
-    each_peer,
-    fetch_public_ip,
-    http_get,
-    installed_python_command,
-    peer_program_problem,
-    python_command,
-    ssh_peers,
-    stderr_tail,
-)
+from rosnet_tui.core.checks.probes.agents import peer_program_problem, stderr_tail
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.http import http_get
+from rosnet_tui.core.checks.probes.peers import each_peer, ssh_peers
+from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip
+from rosnet_tui.core.config.settings_model import Peer, Settings
+from rosnet_tui.core.exposure import outsider
 from rosnet_tui.core.jsonsafe import loads_bounded
+from rosnet_tui.core.peer.commands import installed_python_command, python_command
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.settings_model import Peer, Settings
 from rosnet_tui.core.ssh.session import ssh_run
 
 SSH_PORT = 22
@@ -178,7 +173,7 @@ async def _judge_not_reached(s: Settings, target: str, users: list[str],
                              audits: list[tuple[Peer, outsider.SshAudit, dict[str, Any]]],
                              ev: list[str], data: dict[str, Any], timeout: float) -> Outcome:
     """The verdict when no peer reached anything at *target*:22 (refused, dropped, no route):
-    nothing there is offered to strangers. Port 22 is optional in every role (core/forwarding.py:
+    nothing there is offered to strangers. Port 22 is optional in every role (core/exposure/forwarding.py:
     peers that SSH here are told by their own linux.ssh). A peer alone may be shut out (a ban)
     while strangers are not, so this machine's own sshd is asked too: if it offers a password,
     a warning with the fix."""

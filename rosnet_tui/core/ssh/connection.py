@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from rosnet_tui.core.connect import tcp_failure_kind
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.net.connect import tcp_failure_kind
 from rosnet_tui.core.ssh.known_hosts import host_key_name, known_host_keys, verify_commands
 from rosnet_tui.core.ssh.options import SshOptions, known_hosts_files, ssh_dir
 
@@ -49,7 +49,7 @@ class SshResult:
     fingerprint: str | None  # SHA256:... of the server's host key when seen
     host_key: str | None = None  # "<type> <base64>" of the server's key, for trust_host_key()
     address: str | None = None   # the address the peer's name resolved to here
-    tcp: str | None = None       # TCP to the SSH port: core.connect's kind (None: not tried)
+    tcp: str | None = None       # TCP to the SSH port: core.net.connect's kind (None: not tried)
 
 
 # --------------------------------------------------------------------------- blocking helpers

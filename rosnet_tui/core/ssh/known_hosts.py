@@ -19,7 +19,7 @@ import stat
 from dataclasses import dataclass
 from pathlib import Path
 
-from rosnet_tui.core.regular_file import read_regular
+from rosnet_tui.core.files.regular_file import read_regular
 from rosnet_tui.core.ssh.options import SshOptions, ssh_dir
 
 

@@ -23,7 +23,7 @@ import time
 from collections.abc import Iterable
 from typing import Any
 
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.ssh.connection import Conn, Holder, connect_blocking, failed
 from rosnet_tui.core.ssh.options import SshOptions
 

@@ -25,7 +25,7 @@ import time
 from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING
 
-from rosnet_tui.core.settings_model import Peer
+from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.ssh.connection import Conn, SshResult, connect, run_blocking
 from rosnet_tui.core.ssh.options import SshOptions
 

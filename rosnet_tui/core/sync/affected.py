@@ -8,10 +8,10 @@ import os
 from typing import Any
 
 from rosnet_tui.core import affected
-from rosnet_tui.core.bashrc import master_uri
-from rosnet_tui.core.hosts import WriterSettingsError
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.files.bashrc import master_uri
+from rosnet_tui.core.files.hosts import WriterSettingsError
 
 
 def run_affected_checks(settings: Settings, paths: Paths,

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core.state import read_json, write_json
+from rosnet_tui.core.saved.state import read_json, write_json
 
 from .records import Record, RecordError, parse_record
 from .status import state_owner, sync_dir

@@ -12,18 +12,18 @@ import os
 import time
 from typing import Any
 
-from rosnet_tui.core import managed_file as mf
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core import managed_write as mw
-from rosnet_tui.core.bashrc import preview_bashrc
-from rosnet_tui.core.firewall import follow_for_sync
-from rosnet_tui.core.hosts import (
+from rosnet_tui.core.config.settings_model import SettingsError
+from rosnet_tui.core.exposure.firewall import follow_for_sync
+from rosnet_tui.core.files import managed_file as mf
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files import managed_write as mw
+from rosnet_tui.core.files.bashrc import preview_bashrc
+from rosnet_tui.core.files.hosts import (
     PROFILE_TITLES,
     WriterSettingsError,
     find_hosts_conflicts,
 )
-from rosnet_tui.core.settings import load_settings, save_settings
-from rosnet_tui.core.settings_model import SettingsError
+from rosnet_tui.core.saved.settings import load_settings, save_settings
 
 from .affected import run_affected_checks
 from .plan import Plan, PlanError, check_complete, plan_hosts

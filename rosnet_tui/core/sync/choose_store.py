@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.config.settings_model import Settings
 
 from .store import RecordStore, StoreConfigError
 

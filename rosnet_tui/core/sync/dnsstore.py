@@ -33,7 +33,7 @@ import dns.rdtypes.ANY.TXT
 import dns.tsig
 import dns.update
 
-from rosnet_tui.core.regular_file import FileRefusedError, read_regular
+from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
 
 from .records import Candidate, Record, RecordError, parse_record
 from .store import FetchResult, Refusal, StoreConfigError, StoreError

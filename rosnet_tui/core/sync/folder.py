@@ -17,8 +17,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from rosnet_tui.core.regular_file import FileRefusedError, read_regular
-from rosnet_tui.core.settings import atomic_write_text
+from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
+from rosnet_tui.core.saved.settings import atomic_write_text
 
 from .records import MAX_RECORD_BYTES, Candidate, Record, RecordError, parse_record
 from .store import FetchResult, Refusal, StoreError

@@ -13,7 +13,7 @@ import signal
 import time
 from typing import Any, Protocol
 
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.upnp.forwards import Renewer
 
 from .applier import Applier

@@ -13,9 +13,9 @@ import copy
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core.hosts import HostsEntry, hosts_entries, render_hosts_block
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files.hosts import HostsEntry, hosts_entries, render_hosts_block
 
 from .records import Record
 

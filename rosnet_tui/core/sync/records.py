@@ -23,8 +23,8 @@ from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from typing import Any
 
+from rosnet_tui.core.config.settings_model import ROLES, validate_ip, validate_name
 from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
-from rosnet_tui.core.settings_model import ROLES, validate_ip, validate_name
 
 RECORD_VERSION = 1
 MAX_RECORD_BYTES = 4096

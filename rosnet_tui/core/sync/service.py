@@ -24,10 +24,10 @@ import os
 import time
 from collections.abc import Callable
 
-from rosnet_tui.core.pairing import CertRenewer
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.settings import load_settings
-from rosnet_tui.core.settings_model import Settings, SettingsError
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Settings, SettingsError
+from rosnet_tui.core.ros.pairing import CertRenewer
+from rosnet_tui.core.saved.settings import load_settings
 from rosnet_tui.core.upnp.forwards import Renewer
 
 from .applied import applied_path, load_applied, save_applied

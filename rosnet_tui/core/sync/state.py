@@ -12,8 +12,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from rosnet_tui.core.paths import Paths
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import Settings
 
 from .backoff import Backoff, backoff_cap
 from .plan import Plan

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core.state import read_json, write_json
+from rosnet_tui.core.saved.state import read_json, write_json
 
 from .records import format_time
 

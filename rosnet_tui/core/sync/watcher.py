@@ -11,8 +11,8 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 
-from rosnet_tui.core.netinfo import default_gateway, detect_local_net, interface_ipv4
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.net.netinfo import default_gateway, detect_local_net, interface_ipv4
 
 # rtnetlink multicast groups and message types (linux/rtnetlink.h)
 RTMGRP_LINK = 0x1
@@ -111,7 +111,7 @@ class PublicLookup:
 async def _lookup(settings: Settings, state_dir: Path, timeout_s: float) -> PublicLookup:
     from rosnet_tui.core.checks import run_check
     from rosnet_tui.core.checks.runner import RunOptions, make_context, select
-    from rosnet_tui.core.paths import Paths
+    from rosnet_tui.core.config.paths import Paths
 
     ctx = make_context(settings, RunOptions(timeout_s=timeout_s, paths=Paths(state_dir=state_dir),
                                             upnp=False))

@@ -1,6 +1,6 @@
 """The forwards this component needs, made on its modem with consent, recorded, renewed, undone.
 
-What is needed comes from :func:`rosnet_tui.core.forwarding.required_ports` (the one answer for
+What is needed comes from :func:`rosnet_tui.core.exposure.forwarding.required_ports` (the one answer for
 the Router step): under ROS 2 the master's ``zenoh_port`` (one TCP port), plus the test port for a
 short while so the checks can prove the path; a ROS 2 member needs nothing; ROS 1 needs the whole
 range 1024-65000, which no protocol can map (each request maps one port), so it is refused with
@@ -18,8 +18,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rosnet_tui.core.forwarding import required_ports
-from rosnet_tui.core.settings_model import Settings
+from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.exposure.forwarding import required_ports
 from rosnet_tui.core.upnp import journal
 from rosnet_tui.core.upnp.modem import LEASE_MAX_S, LEASE_MIN_S, Forward, Modem
 from rosnet_tui.core.upnp.wire import ModemError, Refused, label

@@ -4,7 +4,7 @@ A forward is recorded in a journal entry of its own (``mappings``, no files) *be
 asked, with the modem's identity (gateway address, MAC, UPnP device id) and, for PCP, the nonce
 that alone can renew or delete it. ``rosnet-tui undo`` (and the wizard's ``u``) removes the last
 entry's forwards through the undo handler this module registers with
-:mod:`rosnet_tui.core.undo_journal`; ``router unmap`` removes every live one; the sync
+:mod:`rosnet_tui.core.files.undo_journal`; ``router unmap`` removes every live one; the sync
 service renews them. Only recorded forwards are ever removed, and only on the modem they were
 made on.
 """
@@ -15,8 +15,8 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from rosnet_tui.core import undo_journal as uj
-from rosnet_tui.core.managed_text import ManagedFileError
+from rosnet_tui.core.files import undo_journal as uj
+from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.upnp.wire import ModemError
 
 KIND = "port_mapping"

@@ -221,7 +221,7 @@ def find_modem(timeout: float, *, gateway: str | None = None,
     start = time.monotonic()
     deadline = start + timeout
     if gateway is None:
-        from rosnet_tui.core.netinfo import default_gateway
+        from rosnet_tui.core.net.netinfo import default_gateway
 
         gateway = default_gateway()[0]
     if not gateway:

@@ -1,0 +1,111 @@
+"""The round's peer agents on the master's side: which agent runs which program (ROS 1's on
+the peer's python3, ROS 2's on the interpreter of the rosnet-tui installed there), and running
+a program on one."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Sequence
+from pathlib import Path
+
+from rosnet_tui.core.checks import CheckContext
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.peer import agentproto, chatproto, rosproto, zenohproto
+from rosnet_tui.core.peer.commands import (
+    NO_INSTALL_EXIT,
+    NO_INSTALL_REPORT,
+    installed_python_command,
+    shq,
+)
+from rosnet_tui.core.peer.peer_agent import (
+    AgentCall,
+    AgentKind,
+    PeerAgents,
+    agent_run,
+    agent_session,
+)
+from rosnet_tui.core.ssh.connection import SshResult
+
+# One program per peer and round runs every probe the round's checks ask of that peer (see
+# core/peer/peer_agent.py): ROS 1's on the peer's python3 without site (stdlib only), ROS 2's on the
+# interpreter of the rosnet-tui installed there (eclipse-zenoh).
+# Both serve the Linux chats' peer side (core/peer/chatproto.py, stdlib). A peer without rosnet-tui
+# gets ROS 2's agent on its python3 (the finder's fallback): what needs the install (the Zenoh
+# probes: needs_install) answers with the finder's no_install report, as a lone command did.
+ROSPROTO_SOURCE = Path(rosproto.__file__).read_bytes()   # the ROS 1 probe program
+ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()    # the ROS 2 (Zenoh) probe program
+CHAT_SOURCE = Path(chatproto.__file__).read_bytes()      # the chats' peer side
+PEER_PYTHON = "python3"   # the peer's python the ROS 1 agent and the chats run with
+
+
+def peer_python() -> str:
+    """The peer's python (the name, looked up on the peer's PATH)."""
+    return PEER_PYTHON
+
+
+ROS_AGENT = AgentKind(
+    "ros1", lambda max_s: f"{peer_python()} -S -c {shq(agentproto.BOOT)} {max_s:.0f}",
+    (("ros", ROSPROTO_SOURCE, "main"), ("chat", CHAT_SOURCE, "main")))
+ZENOH_AGENT = AgentKind(
+    "ros2", lambda max_s: installed_python_command(f"{max_s:.0f}", mark=zenohproto.REPORT_MARK,
+                                                   fallback=True, boot=agentproto.BOOT),
+    (("zenoh", ZENOH_SOURCE, "run_program"), ("chat", CHAT_SOURCE, "main")),
+    (f"{zenohproto.REPORT_MARK}{NO_INSTALL_REPORT}\n", NO_INSTALL_EXIT))
+
+
+def chat_agent(ctx: CheckContext) -> AgentKind:
+    """The agent that runs the chats' peer side in this round (its ROS version's)."""
+    return ZENOH_AGENT if ctx.settings.ros2 else ROS_AGENT
+
+
+def no_python(call: AgentCall | SshResult) -> bool:
+    """The agent could not start for want of a python3 on the peer (exit status 127)."""
+    return call.exit_status == 127 and not call.stdout
+
+
+def _agents(ctx: CheckContext) -> PeerAgents:
+    """The round's peer agents (run_checks closes them with the round)."""
+    if ctx.peer_agents is None:
+        ctx.peer_agents = PeerAgents()
+    return ctx.peer_agents
+
+
+def agent_life(ctx: CheckContext) -> float:
+    """Seconds a peer agent may live at most (longer than any check of the round)."""
+    return 60.0 + 10.0 * ctx.timeout_s
+
+
+async def peer_run(ctx: CheckContext, peer: Peer, kind: AgentKind, program: str,
+                   argv: Sequence[str], *, timeout: float, connect_timeout: float | None = None,
+                   tcp_timeout: float | None = None, needs_install: bool = False) -> SshResult:
+    """Run *program* (one of *kind*'s) with *argv* on *peer*'s agent of the round, as
+    ``ssh_run`` would run it alone: the same bounds, the same result."""
+    return await agent_run(_agents(ctx), ctx.ssh, peer, kind, program, argv, timeout=timeout,
+                           connect_timeout=connect_timeout, tcp_timeout=tcp_timeout,
+                           max_s=agent_life(ctx), needs_install=needs_install)
+
+
+def peer_session(ctx: CheckContext, peer: Peer, kind: AgentKind, program: str,
+                 argv: Sequence[str], *, timeout: float, tcp_timeout: float | None = None,
+                 needs_install: bool = False
+                 ) -> contextlib.AbstractAsyncContextManager[AgentCall]:
+    """*program* running on *peer*'s agent for an ``async with`` block, read as ``ssh_session``'s
+    session is (``ok``, ``result``, ``read_until``, ``wait``)."""
+    return agent_session(_agents(ctx), ctx.ssh, peer, kind, program, argv, timeout=timeout,
+                         tcp_timeout=tcp_timeout, max_s=agent_life(ctx),
+                         needs_install=needs_install)
+
+
+def peer_program_problem(res: SshResult, peer: Peer) -> str | None:
+    """Why a program could not run on *peer* over SSH (None when it ran)."""
+    if res.failure:
+        return f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
+    if res.exit_status == 127:
+        return f"{peer.name} has no python3 to run the probe (exit status 127)"
+    return None
+
+
+def stderr_tail(res: SshResult) -> str:
+    """The last lines the peer's program wrote on stderr, on one line."""
+    tail = (res.stderr or "").strip().splitlines()[-3:]
+    return " | ".join(tail)

@@ -1,0 +1,46 @@
+"""This component's public IP: read from this round's isp.public_ip, or asked of a service."""
+
+from __future__ import annotations
+
+import contextlib
+import ipaddress
+
+from rosnet_tui.core.checks import CheckContext
+from rosnet_tui.core.checks.data import view
+from rosnet_tui.core.checks.probes.http import http_get
+
+
+def parse_ip(text: str) -> str | None:
+    """The IPv4 address a what-is-my-IP service answered (plain text, or JSON with "ip")."""
+    t = text.strip()
+    if t.startswith("{"):
+        from rosnet_tui.core.jsonsafe import loads_bounded
+
+        with contextlib.suppress(ValueError, AttributeError):   # JsonInputError is a ValueError
+            t = str(loads_bounded(t, unique_keys=False).get("ip", ""))
+    t = t.split()[0] if t.split() else ""
+    try:
+        a = ipaddress.ip_address(t)
+    except ValueError:
+        return None
+    return str(a) if a.version == 4 else None
+
+
+def round_public_ip(ctx: CheckContext) -> str | None:
+    """The public IP isp.public_ip found in this round (None: it did not run, or found none)."""
+    res = ctx.results.get("isp.public_ip")
+    if res is None:
+        return None
+    return view("isp.public_ip", res.data).get("public_ip")
+
+
+async def fetch_public_ip(ctx: CheckContext, timeout: float) -> str | None:
+    """This component's public IP: from this round's isp.public_ip if it ran, else one quick ask."""
+    found = round_public_ip(ctx)
+    if found:
+        return str(found)
+    for url in ctx.settings.probe.public_ip_urls[:1]:
+        ans = await http_get(url, timeout)
+        if ans.ok:
+            return parse_ip(ans.text)
+    return None

@@ -1,0 +1,98 @@
+"""What the ros2.* checks share (checks/ros2.py and checks/ros2_graph.py): the ROS 2
+variables a node started here gets, Zenoh sessions, and reading a peer's Zenoh program."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import sys
+from typing import Any
+
+from rosnet_tui.core.checks import CheckContext
+from rosnet_tui.core.checks.probes.agents import stderr_tail
+from rosnet_tui.core.checks.probes.peers import ssh_peers
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.peer import zenohproto
+from rosnet_tui.core.peer.commands import PEER_INSTALL_PLACES, README_INSTALL
+from rosnet_tui.core.ros import fleet_tls, ros2
+from rosnet_tui.core.ssh.connection import SshResult, run_blocking
+
+
+def zenoh_env(ctx: CheckContext) -> dict[str, str]:
+    """The ROS 2 variables nodes started here get (environment, then ~/.bashrc)."""
+    return zenohproto.ros_env(ctx.env, str(ctx.paths.bashrc_path))
+
+
+def node_domain(ctx: CheckContext) -> int:
+    """The ROS_DOMAIN_ID nodes started here use (unset: 0); ros2.env compares it with the settings."""
+    value = zenoh_env(ctx).get("ROS_DOMAIN_ID", "").strip() or "0"
+    return int(value) if value.isdigit() else ctx.settings.ros.domain_id
+
+
+def node_endpoint(ctx: CheckContext) -> tuple[str, str]:
+    """(endpoint, 'router'|'client'): where a ROS 2 node started here connects."""
+    return zenohproto.peer_endpoint(zenoh_env(ctx), ros2.local_endpoint())
+
+
+def client_tls() -> dict[str, Any]:
+    """How a check dials a ``tls/`` endpoint: with this component's fleet key and certificate,
+    trusting the fleet CA, the name in the locator verified (ROS 2 mutual TLS)."""
+    p = fleet_tls.tls_paths(ros2.config_dir())
+    return {"root_ca_certificate": str(p.ca_crt), "connect_private_key": str(p.node_key),
+            "connect_certificate": str(p.node_crt), "enable_mtls": True,
+            "verify_name_on_connect": True}
+
+
+async def open_zenoh(endpoint: str, t: float, how: str = "client"
+                     ) -> tuple[Any | None, str | None]:
+    """A Zenoh session on *endpoint* within *t* s: (session, None) or (None, why not). *how* is
+    node_endpoint()'s answer (a node's way in: a peer of a router, or client), or "client".
+    A ``tls/`` endpoint is dialled with this component's fleet certificate (client_tls)."""
+    mode = zenohproto.session_mode(how)
+    tls = client_tls() if endpoint.startswith("tls/") else None
+    try:
+        return await run_blocking(zenohproto.open_client, endpoint, t, mode, tls,
+                                  timeout=t + 0.4), None
+    except asyncio.TimeoutError:
+        return None, f"no Zenoh session within {t + 0.4:.1f} s"
+    except zenohproto.ZenohMissing:
+        return None, (f"eclipse-zenoh is not installed for this Python ({sys.executable}); it "
+                      f"comes with rosnet-tui: reinstall it as the README says (`{README_INSTALL}`)")
+    except zenohproto.OpenFailed as exc:
+        return None, str(exc)
+
+
+async def close_zenoh(session: Any) -> None:
+    if session is not None:
+        with contextlib.suppress(Exception):
+            await run_blocking(session.close, timeout=1.0)
+
+
+def ros2_peers(ctx: CheckContext) -> list[Peer]:
+    """Peers to run the other side on (those with an SSH user), the master first."""
+    s = ctx.settings
+    return sorted(ssh_peers(s), key=lambda p: p.name != s.master_name)
+
+
+def zenoh_peer_problem(res: SshResult, peer: Peer, rep: dict | None) -> str | None:
+    """Why the peer's zenoh program gave no usable report (None: it did)."""
+    if res.failure and res.failure != "timeout" and rep is None:
+        return f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
+    if rep is not None and rep.get("error") == "no_install":
+        return (f"rosnet-tui is not installed on {peer.name} (looked in {PEER_INSTALL_PLACES}): "
+                f"install it there as the README says, in a checkout: `{README_INSTALL}`")
+    if res.exit_status == 127:
+        return f"{peer.name} has no sh or python3 to run the probe (exit status 127)"
+    if rep is not None and rep.get("error") == "no_zenoh":
+        return (f"the rosnet-tui on {peer.name} ({rep.get('python') or 'its Python'}) has no "
+                f"eclipse-zenoh: reinstall it there as the README says, in a checkout: "
+                f"`{README_INSTALL}`")
+    if rep is None:
+        return (f"the probe on {peer.name} gave no report "
+                f"({stderr_tail(res) or res.detail or 'no output'})")
+    return None
+
+
+def router_links(info: dict) -> list[str]:
+    """Ids of the routers a router (its admin space *info*) has sessions with."""
+    return [x["zid"] for x in info.get("sessions") or [] if x.get("whatami") == "router"]

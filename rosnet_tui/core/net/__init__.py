@@ -1,0 +1,1 @@
+"""Network primitives: TCP connects, listeners, local interfaces and networks, the probe server."""
