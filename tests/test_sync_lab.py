@@ -21,7 +21,7 @@ from types import SimpleNamespace
 import pytest
 
 from rosnet_tui.core import managed_text as mt
-from rosnet_tui.core.checks.linux import parse_hosts
+from rosnet_tui.core.hosts import parse_hosts
 from rosnet_tui.core.sync import FolderStore, StoreError, new_record
 from rosnet_tui.core.sync.dnsstore import DnsStore
 from rosnet_tui.core.sync.records import format_time

@@ -20,12 +20,12 @@ from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes import (
     budget,
     fetch_public_ip,
-    http_get,
     python_command,
     round_public_ip,
     ssh_peers,
 )
 from rosnet_tui.core.connect import kind_from_text
+from rosnet_tui.core.http import http_get
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.listener import GREETING, TestListener
 from rosnet_tui.core.netinfo import (

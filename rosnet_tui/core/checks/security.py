@@ -30,13 +30,13 @@ from rosnet_tui.core.checks.probes import (
     budget,
     each_peer,
     fetch_public_ip,
-    http_get,
     installed_python_command,
     peer_program_problem,
     python_command,
     ssh_peers,
     stderr_tail,
 )
+from rosnet_tui.core.http import http_get
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.settings_model import Peer, Settings

@@ -21,6 +21,7 @@ from rosnet_tui.core.hosts import (
     PROFILE_TITLES,
     WriterSettingsError,
     find_hosts_conflicts,
+    parse_hosts,
 )
 from rosnet_tui.core.settings import load_settings, save_settings
 from rosnet_tui.core.settings_model import SettingsError
@@ -129,8 +130,6 @@ class Applier:
         return True
 
     def _summary(self, plan: Plan, old_text: str | None) -> str:
-        from rosnet_tui.core.checks.linux import parse_hosts
-
         try:
             body = mt.extract_block(old_text) or []
         except mt.DamagedBlockError:

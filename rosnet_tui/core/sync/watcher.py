@@ -1,6 +1,7 @@
 """Watching this component's own addresses: local IP and default route (at once, through the
-kernel's netlink notifications), and the public IP (polled, through the isp.public_ip check's
-lookup, which also keeps the public-IP history in the state dir)."""
+kernel's netlink notifications), and the public IP (polled, through
+:func:`rosnet_tui.core.public_ip.find_public_ip`, which also keeps the public-IP history in the
+state dir)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rosnet_tui.core.netinfo import default_gateway, detect_local_net, interface_ipv4
+from rosnet_tui.core.public_ip import find_public_ip
 from rosnet_tui.core.settings_model import Settings
 
 # rtnetlink multicast groups and message types (linux/rtnetlink.h)
@@ -105,22 +107,12 @@ class NetlinkMonitor:
 @dataclass(frozen=True)
 class PublicLookup:
     ip: str | None
-    summary: str          # what the lookup said (the check's summary)
-
-
-async def _lookup(settings: Settings, state_dir: Path, timeout_s: float) -> PublicLookup:
-    from rosnet_tui.core.checks import run_check
-    from rosnet_tui.core.checks.runner import RunOptions, make_context, select
-    from rosnet_tui.core.paths import Paths
-
-    ctx = make_context(settings, RunOptions(timeout_s=timeout_s, paths=Paths(state_dir=state_dir),
-                                            upnp=False))
-    res = await run_check(select(ids=["isp.public_ip"])[0], ctx)
-    ip = res.data.get("public_ip") if isinstance(res.data, dict) else None
-    return PublicLookup(str(ip) if ip else None, res.summary)
+    summary: str          # what the lookup said (why there is no address)
 
 
 def lookup_public_ip(settings: Settings, state_dir: Path, timeout_s: float) -> PublicLookup:
     """This component's public IP as the settings' what-is-my-IP services see it (bounded by
-    the check's timeout); ``ip`` None when they do not answer or disagree."""
-    return asyncio.run(_lookup(settings, state_dir, timeout_s))
+    *timeout_s*); ``ip`` None when they do not answer or disagree."""
+    found = asyncio.run(find_public_ip(settings.probe.public_ip_urls, state_dir, timeout_s))
+    ip = found.ip
+    return PublicLookup(ip, found.problem() or f"public IP {ip}")
