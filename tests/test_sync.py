@@ -365,6 +365,43 @@ class World:
         return parse_record((self.folder / "sami.json").read_text())
 
 
+def test_service_parts_share_no_mutable_state(tmp_path):
+    """Each part of the service owns its state (issue 33): no dict, list, set or object is held
+    by two of them; what they share is the Report (written through its methods), the frozen
+    configuration and the service that hands each what it needs."""
+    w = World(tmp_path)
+    w.robot.publish(new_record("turtlebot", local_ip="192.168.1.20", public_ip="203.0.113.9",
+                               role="master", seq=1))
+    assert w.round().ok
+    svc = w.svc
+    parts = {"watch": svc.watch, "publisher": svc.publisher, "applier": svc.applier,
+             "loop": svc.loop}
+    declared = {id(svc.report), id(svc.config), id(svc)}
+    immutable = (str, int, float, bool, bytes, tuple, frozenset, type(None))
+
+    def held(obj) -> dict[int, str]:
+        out = {}
+        for name, value in vars(obj).items():
+            if id(value) in declared or isinstance(value, immutable) or callable(value):
+                continue
+            out[id(value)] = name
+            for inner in (value.values() if isinstance(value, dict) else
+                          value if isinstance(value, (list, set)) else ()):
+                if not isinstance(inner, immutable):
+                    out[id(inner)] = f"{name}[...]"
+        return out
+
+    seen: dict[int, str] = {}
+    shared = []
+    for part, obj in parts.items():
+        for key, name in held(obj).items():
+            if key in seen and not seen[key].startswith(part + "."):
+                shared.append(f"{seen[key]} is {part}.{name}")
+            seen.setdefault(key, f"{part}.{name}")
+    assert not shared, shared
+    assert not hasattr(svc, "state")
+
+
 def test_service_first_round_publishes_and_writes_the_block(tmp_path):
     w = World(tmp_path)
     res = w.round()
