@@ -8,9 +8,9 @@ from pathlib import Path
 
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
 from rosnet_tui.core.checks.isp import Hop, judge_path, judge_wan, ttl_probe
-from rosnet_tui.core.checks.probes.public_ip import parse_ip
 from rosnet_tui.core.config.paths import Paths
 from rosnet_tui.core.config.settings_model import ProbeSettings, Settings, ThisComponent
+from rosnet_tui.core.exposure.public_ip import parse_ip
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.saved.state import public_ip_history, record_public_ip
 from rosnet_tui.core.ssh.options import SshOptions

@@ -88,8 +88,8 @@ def test_an_in_place_journal_with_a_deep_header_is_not_trusted(tmp_path):
 
 
 def test_peer_and_network_json_parsers_refuse_deep_nesting():
-    from rosnet_tui.core.checks.probes.public_ip import parse_ip
     from rosnet_tui.core.checks.router import parse_probe_result
+    from rosnet_tui.core.exposure.public_ip import parse_ip
     from rosnet_tui.core.peer import rosproto, zenohproto
     from rosnet_tui.core.ros import ros2
 

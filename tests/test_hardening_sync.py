@@ -234,7 +234,7 @@ class Two:
 
     def round(self):
         s = self.svc
-        s.state.next_fetch = s.state.next_publish = s.state.next_apply = 0.0
+        s.publisher.next_fetch = s.publisher.next_publish = s.applier.next_apply = 0.0
         return s.round()
 
     def entry(self, name: str) -> str | None:
@@ -283,7 +283,7 @@ def test_the_running_service_keeps_applying_other_peers_while_a_bad_file_sits_th
                                 seq=3 + i).to_text())
         res = w.round()
         assert w.entry("rover") == f"198.51.100.{40 + i}", res.errors
-    assert "round" not in w.svc.state.status["errors"]
+    assert "round" not in w.svc.report.errors()
     tally(AREA, 3, 3, "service rounds")
 
 

@@ -1,4 +1,4 @@
-"""probes.http_get on requests (the user's stack; issue 23): answers, redirects, errors in words,
+"""core.http.http_get on requests (the user's stack; issue 23): answers, redirects, errors in words,
 bounded size and time. requests is imported where a GET is made, never on the start-up path
 (issue 14: its import costs a tenth of a second). Real sockets on 127.0.0.1 only."""
 
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from rosnet_tui.core.checks.probes.http import MAX_BODY, http_get
+from rosnet_tui.core.net.http import MAX_BODY, http_get
 
 
 class RawServer:
@@ -140,7 +140,7 @@ def test_help_does_not_import_requests(argv):
 def test_a_get_imports_requests(server):
     """The same helper sees the import once a GET is made (so the test above can fail)."""
     s = server(response("200 OK", b"203.0.113.9"))
-    code = ("import asyncio, sys\nfrom rosnet_tui.core.checks.probes.http import http_get\n"
+    code = ("import asyncio, sys\nfrom rosnet_tui.core.net.http import http_get\n"
             f"print(asyncio.run(http_get({s.url()!r}, 2.0)).ok, 'requests' in sys.modules)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.split() == ["True", "True"], out.stderr

@@ -221,7 +221,7 @@ def test_address_sync_leaves_the_ros2_block_alone(tmp_path):
                       local_source=lambda _s: LocalAddress("eth0", "192.168.1.10", "192.168.1.1"),
                       public_source=lambda _s: PublicLookup("198.51.100.2", "test"),
                       netlink=False, run_checks=False)
-    svc.state.next_fetch = svc.state.next_publish = svc.state.next_apply = 0.0
+    svc.publisher.next_fetch = svc.publisher.next_publish = svc.applier.next_apply = 0.0
     res = svc.round()
     assert res.ok and res.applied
     assert "203.0.113.2\tturtlebot" in hosts.read_text().replace(" ", "\t") or \

@@ -12,7 +12,8 @@ import time
 
 import pytest
 
-from rosnet_tui.core.ssh.connection import SshResult, run_blocking
+from rosnet_tui.core.net.blocking import run_blocking
+from rosnet_tui.core.ssh.connection import SshResult
 from rosnet_tui.core.ssh.known_hosts import trust_host_key
 from rosnet_tui.core.ssh.session import ssh_run, ssh_session
 from tests.builders import free_port

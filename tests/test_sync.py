@@ -351,7 +351,7 @@ class World:
 
     def round(self):
         s = self.svc
-        s.state.next_fetch = s.state.next_publish = s.state.next_apply = 0.0  # no waiting in unit tests
+        s.publisher.next_fetch = s.publisher.next_publish = s.applier.next_apply = 0.0  # no waiting in unit tests
         return s.round()
 
     def entry(self, name: str) -> str | None:
@@ -363,6 +363,43 @@ class World:
 
     def own_record(self):
         return parse_record((self.folder / "sami.json").read_text())
+
+
+def test_service_parts_share_no_mutable_state(tmp_path):
+    """Each part of the service owns its state (issue 33): no dict, list, set or object is held
+    by two of them; what they share is the Report (written through its methods), the frozen
+    configuration and the service that hands each what it needs."""
+    w = World(tmp_path)
+    w.robot.publish(new_record("turtlebot", local_ip="192.168.1.20", public_ip="203.0.113.9",
+                               role="master", seq=1))
+    assert w.round().ok
+    svc = w.svc
+    parts = {"watch": svc.watch, "publisher": svc.publisher, "applier": svc.applier,
+             "loop": svc.loop}
+    declared = {id(svc.report), id(svc.config), id(svc)}
+    immutable = (str, int, float, bool, bytes, tuple, frozenset, type(None))
+
+    def held(obj) -> dict[int, str]:
+        out = {}
+        for name, value in vars(obj).items():
+            if id(value) in declared or isinstance(value, immutable) or callable(value):
+                continue
+            out[id(value)] = name
+            for inner in (value.values() if isinstance(value, dict) else
+                          value if isinstance(value, (list, set)) else ()):
+                if not isinstance(inner, immutable):
+                    out[id(inner)] = f"{name}[...]"
+        return out
+
+    seen: dict[int, str] = {}
+    shared = []
+    for part, obj in parts.items():
+        for key, name in held(obj).items():
+            if key in seen and not seen[key].startswith(part + "."):
+                shared.append(f"{seen[key]} is {part}.{name}")
+            seen.setdefault(key, f"{part}.{name}")
+    assert not shared, shared
+    assert not hasattr(svc, "state")
 
 
 def test_service_first_round_publishes_and_writes_the_block(tmp_path):
@@ -440,12 +477,12 @@ def test_service_keeps_the_last_good_state_when_things_fail_and_recovers(tmp_pat
     w.public = None
     with caplog.at_level("WARNING", logger="rosnet_tui.sync"):
         res = w.round()
-        w.svc.state.next_public = 0
+        w.svc.watch.next_public = 0
         res = w.round()
     assert not res.ok and set(res.errors) == {"store", "public_ip"}
     assert "does not exist" in res.errors["store"] and "keeping" in res.errors["public_ip"]
     assert w.hosts.read_bytes() == good
-    assert w.svc.state.backoff["store"].failures == 2
+    assert w.svc.publisher.backoff.failures == 2
     assert sum("store:" in r.getMessage() for r in caplog.records) == 1   # logged once
     st = load_status(w.state)
     assert set(st["errors"]) == {"store", "public_ip"}
@@ -453,9 +490,9 @@ def test_service_keeps_the_last_good_state_when_things_fail_and_recovers(tmp_pat
     # Everything comes back: the service recovers by itself.
     hidden.rename(w.folder)
     w.public = "198.51.100.2"
-    w.svc.state.next_public = 0
+    w.svc.watch.next_public = 0
     res = w.round()
-    assert res.ok and not w.svc.state.backoff["store"].failing
+    assert res.ok and not w.svc.publisher.backoff.failing
     assert load_status(w.state)["errors"] == {}
 
 
@@ -466,7 +503,7 @@ def test_service_own_address_changes_are_published_and_continue_the_seq(tmp_path
     w.round()
     assert w.own_record().seq == 41                         # same content: not republished
     w.public = "198.51.100.9"
-    w.svc.state.next_public = 0
+    w.svc.watch.next_public = 0
     w.round()
     assert (w.own_record().seq, w.own_record().public_ip) == (42, "198.51.100.9")
     w.local = LocalAddress("eth0", "192.168.1.77", "192.168.1.254")
@@ -528,7 +565,7 @@ def test_a_failing_write_backs_off_without_spinning(tmp_path):
     assert 2 <= len(rounds) <= 12, len(rounds)
     st = load_status(w.state)
     assert "is a folder" in st["errors"]["apply"]["message"]
-    assert w.svc.state.backoff["apply"].failures >= 1
+    assert w.svc.applier.backoff.failures >= 1
 
 
 def test_a_second_service_on_the_same_state_dir_is_refused(tmp_path):

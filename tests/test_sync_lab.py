@@ -20,8 +20,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from rosnet_tui.core.checks.linux import parse_hosts
 from rosnet_tui.core.files import managed_text as mt
+from rosnet_tui.core.files.hosts import parse_hosts
 from rosnet_tui.core.sync import FolderStore, StoreError, new_record
 from rosnet_tui.core.sync.dnsstore import DnsStore
 from rosnet_tui.core.sync.records import format_time

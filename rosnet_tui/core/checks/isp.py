@@ -13,7 +13,6 @@ import ipaddress
 import socket
 import struct
 import time
-from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlsplit
@@ -22,13 +21,14 @@ import psutil
 
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.budget import budget
-from rosnet_tui.core.checks.probes.http import http_get
-from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, parse_ip
+from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip
+from rosnet_tui.core.exposure.public_ip import find_public_ip
+from rosnet_tui.core.net.blocking import run_blocking
+from rosnet_tui.core.net.http import http_get
 from rosnet_tui.core.net.netinfo import is_overlay
 from rosnet_tui.core.procedure import is_ip
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.saved.state import PublicIpRecord, now_iso, record_public_ip
-from rosnet_tui.core.ssh.connection import resolve_ipv4, run_blocking
+from rosnet_tui.core.ssh.connection import resolve_ipv4
 
 CGNAT_NET = ipaddress.ip_network("100.64.0.0/10")
 RFC1918 = tuple(ipaddress.ip_network(n) for n in ("10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16"))
@@ -125,47 +125,24 @@ async def check_internet(ctx: CheckContext) -> Outcome:
 @check("isp.public_ip", "isp", "Public IP: what the internet sees, and whether it changes", 1.0)
 async def check_public_ip(ctx: CheckContext) -> Outcome:
     s = ctx.settings
-    urls = list(dict.fromkeys(s.probe.public_ip_urls))
     settings_ip = s.this.public_ip
     base: dict[str, Any] = {"public_ip": None, "sources": {}, "agree": False,
                             "settings_ip": settings_ip, "matches_settings": None,
                             "previous_ip": None, "changed": False, "history": []}
-    if not urls:
-        return Outcome(Status.SKIP, "no what-is-my-IP service configured (probe.public_ip_urls)",
-                       data=base)
-    answers = await asyncio.gather(*(http_get(u, budget(ctx, "isp.public_ip") * 0.85) for u in urls))
-    sources: dict[str, str] = {}
-    evidence: list[str] = []
-    for a in answers:
-        ip = parse_ip(a.text) if a.ok else None
-        if ip:
-            sources[a.url] = ip
-            evidence.append(f"GET {a.url} -> {ip}")
-        else:
-            why = a.error or f"not an IPv4 address: {a.text.strip()[:60]!r}"
-            sources[a.url] = f"error: {why}"
-            evidence.append(f"GET {a.url} -> {why}")
-    ips = [v for v in sources.values() if not v.startswith("error:")]
-    data = dict(base, sources=sources)
-    if not ips:
-        return Outcome(Status.FAIL, "no what-is-my-IP service answered, so the public IP is unknown",
-                       evidence, data)
-    counts = Counter(ips)
-    if len(counts) > 1:
-        listing = ", ".join(f"{u} says {v}" for u, v in sources.items() if not v.startswith("error:"))
-        data.update(agree=False, public_ip=None)
-        return Outcome(Status.FAIL, f"the services disagree about the public IP ({listing}): "
-                                    "several exits (a proxy, VPN or load-balancing modem)",
-                       evidence, data)
-    public_ip = ips[0]
-    errors = len(ips) < len(urls)
-    try:
-        rec = record_public_ip(ctx.paths.state_dir, public_ip)
-    except OSError as exc:  # an unwritable state folder must not hide the address
-        now = now_iso()
-        rec = PublicIpRecord(public_ip, None, False, [{"ip": public_ip, "first_seen": now,
-                                                       "last_seen": now}])
-        evidence.append(f"could not record the address in {ctx.paths.state_dir}: {exc.strerror or exc}")
+    found = await find_public_ip(s.probe.public_ip_urls, ctx.paths.state_dir,
+                                 budget(ctx, "isp.public_ip"))
+    problem = found.problem()
+    if not found.asked:
+        return Outcome(Status.SKIP, problem or "", data=base)
+    evidence = list(found.evidence)
+    data = dict(base, sources=found.sources)
+    if problem is not None:
+        return Outcome(Status.FAIL, problem, evidence, data)
+    public_ip, rec, ips = found.ip, found.record, found.ips
+    assert public_ip is not None and rec is not None
+    errors = len(ips) < found.asked
+    if found.record_error:
+        evidence.append(found.record_error)
     matches = None if not settings_ip else settings_ip == public_ip
     data.update(public_ip=public_ip, agree=not errors, matches_settings=matches,
                 previous_ip=rec.previous_ip, changed=rec.changed, history=rec.history)
@@ -181,7 +158,7 @@ async def check_public_ip(ctx: CheckContext) -> Outcome:
         notes.append(f"{public_ip} is not a public address (is the service on your own network?)")
     if errors:
         status = Status.WARN
-        notes.append(f"{len(urls) - len(ips)} of {len(urls)} services did not answer")
+        notes.append(f"{found.asked - len(ips)} of {found.asked} services did not answer")
     if rec.changed:
         status = Status.WARN
         notes.append(f"it changed since the last run (was {rec.previous_ip}): this connection's "

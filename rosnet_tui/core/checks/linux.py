@@ -20,7 +20,7 @@ from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import NO_SSH_USER, each_peer, ssh_peers
 from rosnet_tui.core.config.settings_model import Peer
-from rosnet_tui.core.files.hosts import HostsEntry, hosts_entries
+from rosnet_tui.core.files.hosts import HostsEntry, hosts_entries, parse_hosts
 from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import read_text
 from rosnet_tui.core.net.connect import tcp_failure_kind
@@ -28,6 +28,7 @@ from rosnet_tui.core.procedure import is_ip, is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.connection import resolve_ipv4
 from rosnet_tui.core.ssh.session import ssh_run
+from rosnet_tui.core.sync.applied import load_applied
 
 
 def _is_loopback_ip(ip: str) -> bool:
@@ -40,16 +41,6 @@ def _plural(n: int, word: str) -> str:
 
 
 # --------------------------------------------------------------------------- linux.hosts
-def parse_hosts(text: str) -> list[tuple[int, str, list[str]]]:
-    """(line number, address, names) for every entry of a hosts file."""
-    out = []
-    for n, line in enumerate(text.splitlines(), 1):
-        fields = line.split("#", 1)[0].split()
-        if len(fields) >= 2:
-            out.append((n, fields[0], fields[1:]))
-    return out
-
-
 def audit_hosts(text: str, expected: list[HostsEntry]) -> dict[str, Any]:
     """Compare a hosts file's text with the entries this component needs (see linux.hosts data)."""
     entries = parse_hosts(text)
@@ -133,8 +124,6 @@ def address_dates(ctx: CheckContext, expected: list[HostsEntry]) -> dict[str, li
     records: dict[str, Any] = {}
     if s.this.profile == "remote":
         try:
-            from rosnet_tui.core.sync.applied import load_applied  # lazy: the sync package is big
-
             records = load_applied(ctx.paths.state_dir)
         except Exception:   # dating is a bonus: never let it cost the verdict
             records = {}

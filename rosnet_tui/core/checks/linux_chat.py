@@ -28,13 +28,14 @@ from rosnet_tui.core.checks.probes.agents import (
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import NO_SSH_USER, each_peer, ssh_peers
 from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.connect import kind_from_text, tcp_failure_kind
 from rosnet_tui.core.net.listener import ECHO, GREETING
 from rosnet_tui.core.peer.chatproto import CHAT
 from rosnet_tui.core.peer.commands import python_command, shq
 from rosnet_tui.core.peer.peer_agent import AgentCall
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.ssh.connection import SshResult, resolve_ipv4, run_blocking
+from rosnet_tui.core.ssh.connection import SshResult, resolve_ipv4
 from rosnet_tui.core.ssh.session import SshSession, ssh_run, ssh_session
 
 # --------------------------------------------------------------------------- chats

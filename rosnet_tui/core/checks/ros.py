@@ -24,10 +24,11 @@ from rosnet_tui.core.checks.probes.agents import (
 from rosnet_tui.core.checks.probes.peers import each_peer, ssh_peers
 from rosnet_tui.core.config.settings_model import Peer, Settings
 from rosnet_tui.core.files.hosts import own_ip
+from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import rosproto
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.ssh.connection import SshResult, run_blocking
+from rosnet_tui.core.ssh.connection import SshResult
 
 READY_MARK = '"rosnet_probe_ready"'
 FACTOR_NODE_URIS = 3.0

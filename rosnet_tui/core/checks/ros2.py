@@ -32,11 +32,12 @@ from rosnet_tui.core.checks.probes.ros2 import (
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import read_text
+from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ros import fleet_tls, ros2, tls_handshake
-from rosnet_tui.core.ssh.connection import resolve_ipv4, run_blocking
+from rosnet_tui.core.ssh.connection import resolve_ipv4
 
 FACTOR_ROUTER = 1.0
 DDS_VARS = ("CYCLONEDDS_URI", "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",

@@ -28,11 +28,11 @@ from rosnet_tui.core.checks.probes.ros2 import (
     zenoh_peer_problem,
 )
 from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ros import ros2
-from rosnet_tui.core.ssh.connection import run_blocking
 
 FACTOR_GRAPH, FACTOR_PUBSUB = 2.0, 4.0
 

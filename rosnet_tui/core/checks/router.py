@@ -18,12 +18,13 @@ import psutil
 
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.budget import budget
-from rosnet_tui.core.checks.probes.http import http_get
 from rosnet_tui.core.checks.probes.peers import ssh_peers
 from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, round_public_ip
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.jsonsafe import loads_bounded
+from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.connect import kind_from_text
+from rosnet_tui.core.net.http import http_get
 from rosnet_tui.core.net.listener import GREETING, TestListener
 from rosnet_tui.core.net.netinfo import (
     LinkState,
@@ -35,7 +36,6 @@ from rosnet_tui.core.net.netinfo import (
 from rosnet_tui.core.peer.commands import python_command
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.saved.state import record_local_ip
-from rosnet_tui.core.ssh.connection import run_blocking
 from rosnet_tui.core.ssh.session import ssh_run
 
 

@@ -17,8 +17,8 @@ from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.ssh.connection import run_blocking
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp.modem import Modem, find_modem
 from rosnet_tui.core.upnp.wire import ModemError, label

@@ -27,12 +27,12 @@ from typing import Any
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import peer_program_problem, stderr_tail
 from rosnet_tui.core.checks.probes.budget import budget
-from rosnet_tui.core.checks.probes.http import http_get
 from rosnet_tui.core.checks.probes.peers import each_peer, ssh_peers
 from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip
 from rosnet_tui.core.config.settings_model import Peer, Settings
 from rosnet_tui.core.exposure import outsider
 from rosnet_tui.core.jsonsafe import loads_bounded
+from rosnet_tui.core.net.http import http_get
 from rosnet_tui.core.peer.commands import installed_python_command, python_command
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.session import ssh_run

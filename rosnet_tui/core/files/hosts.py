@@ -169,6 +169,16 @@ def active_profile(text: str | None) -> str | None:
     return None
 
 
+def parse_hosts(text: str) -> list[tuple[int, str, list[str]]]:
+    """(line number, address, names) for every entry of a hosts file."""
+    out = []
+    for n, line in enumerate(text.splitlines(), 1):
+        fields = line.split("#", 1)[0].split()
+        if len(fields) >= 2:
+            out.append((n, fields[0], fields[1:]))
+    return out
+
+
 def _parse_hosts_line(content: str) -> tuple[str, list[str], str] | None:
     """(address, names, comment) of a hosts line, or None for blank and comment lines."""
     data, sep, comment = content.partition("#")

@@ -13,14 +13,13 @@ import errno
 import logging
 import os
 import socket
-import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.connect import tcp_failure_kind
 from rosnet_tui.core.ssh.known_hosts import host_key_name, known_host_keys, verify_commands
 from rosnet_tui.core.ssh.options import SshOptions, known_hosts_files, ssh_dir
@@ -53,35 +52,6 @@ class SshResult:
 
 
 # --------------------------------------------------------------------------- blocking helpers
-async def run_blocking(func: Callable[..., T], *args: Any, timeout: float | None = None) -> T:
-    """Run blocking *func* in a daemon thread and await it (raises asyncio.TimeoutError).
-
-    Unlike ``asyncio.to_thread`` a stuck call (a resolver waiting on a dead DNS server) never
-    holds up the interpreter's exit: the thread is a daemon and nobody joins it.
-    """
-    loop = asyncio.get_running_loop()
-    fut: asyncio.Future[T] = loop.create_future()
-
-    def deliver(setter: Callable[[Any], None], value: Any) -> None:
-        if not fut.done():
-            setter(value)
-
-    def target() -> None:
-        try:
-            value = func(*args)
-        except BaseException as exc:  # noqa: BLE001 - handed to the awaiting task
-            with contextlib.suppress(RuntimeError):  # loop already closed
-                loop.call_soon_threadsafe(deliver, fut.set_exception, exc)
-        else:
-            with contextlib.suppress(RuntimeError):
-                loop.call_soon_threadsafe(deliver, fut.set_result, value)
-
-    threading.Thread(target=target, daemon=True, name=f"rosnet-{getattr(func, '__name__', 'io')}").start()
-    if timeout is None:
-        return await fut
-    return await asyncio.wait_for(fut, max(timeout, 0.001))
-
-
 def _getaddrinfo_v4(name: str, port: int | None) -> list[str]:
     infos = socket.getaddrinfo(name, port, socket.AF_INET, socket.SOCK_STREAM)
     out: list[str] = []

@@ -26,7 +26,8 @@ from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING
 
 from rosnet_tui.core.config.settings_model import Peer
-from rosnet_tui.core.ssh.connection import Conn, SshResult, connect, run_blocking
+from rosnet_tui.core.net.blocking import run_blocking
+from rosnet_tui.core.ssh.connection import Conn, SshResult, connect
 from rosnet_tui.core.ssh.options import SshOptions
 
 if TYPE_CHECKING:

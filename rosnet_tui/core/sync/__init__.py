@@ -5,8 +5,10 @@ peer's hosts entry and ROS_MASTER_URI follow without anyone touching them.
 - :mod:`.folder`, :mod:`.dnsstore`: the stores (a shared folder; RFC 2136 + TSIG on DNS);
 - :mod:`.watcher`: this component's own addresses (netlink, public-IP polling);
 - :mod:`.plan`: the hosts set by evidence (same public IP -> on this LAN);
-- :mod:`.service`: the service (its rounds), with :mod:`.applier` (the safe writer, the affected
-  checks), :mod:`.loop` (wake-ups, stop) and :mod:`.state` (what it knows);
+- :mod:`.service`: the service (the settings, its rounds), with its parts, each owning its state:
+  :class:`.watcher.AddressWatch` (our addresses), :mod:`.publisher` (the store, the records),
+  :mod:`.applier` (the safe writer, the affected checks), :mod:`.loop` (wake-ups, stop) and
+  :class:`.state.Report` (the status document, the messages);
 - :mod:`.status`: what ``rosnet-tui sync status`` shows.
 """
 

@@ -8,6 +8,7 @@ import os
 from typing import Any
 
 from rosnet_tui.core import affected
+from rosnet_tui.core.checks.runner import RunOptions, run_now, select
 from rosnet_tui.core.config.paths import Paths
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.files.bashrc import master_uri
@@ -18,8 +19,6 @@ def run_affected_checks(settings: Settings, paths: Paths,
                         ids: tuple[str, ...] = affected.SYNC) -> list[dict[str, Any]]:
     """Run the checks a hosts/ROS change affects (concurrently, each under its timeout):
     [{"id", "status", "summary"}] in *ids* order."""
-    from rosnet_tui.core.checks.runner import RunOptions, run_now, select
-
     if settings.ros2:  # the ROS 2 counterparts of the ROS 1 checks a new address affects
         ids = tuple(dict.fromkeys("ros2.router" if i.startswith("ros.") else i for i in ids))
     specs = select(ids=ids)

@@ -1,7 +1,8 @@
 """The service's apply side: plan the hosts set and the ROS block from the records, write them
-through the safe writer, remember what was learned, run and re-run the affected checks, save
-the status. The service's :class:`Applier`; the state it works on is the service's
-:class:`~rosnet_tui.core.sync.state.SyncState`."""
+through the safe writer, remember what was learned, run and re-run the affected checks. The
+service's :class:`Applier` owns what it planned and wrote, when to write and check again, and
+whether something changed since (:meth:`Applier.mark_changed`); it is handed the addresses and
+the records in an :class:`ApplyInput`."""
 
 from __future__ import annotations
 
@@ -10,9 +11,11 @@ import copy
 import logging
 import os
 import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
-from rosnet_tui.core.config.settings_model import SettingsError
+from rosnet_tui.core.config.settings_model import Settings, SettingsError
 from rosnet_tui.core.exposure.firewall import follow_for_sync
 from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
@@ -22,41 +25,76 @@ from rosnet_tui.core.files.hosts import (
     PROFILE_TITLES,
     WriterSettingsError,
     find_hosts_conflicts,
+    parse_hosts,
 )
 from rosnet_tui.core.saved.settings import load_settings, save_settings
 
 from .affected import run_affected_checks
+from .backoff import Backoff
 from .plan import Plan, PlanError, check_complete, plan_hosts
-from .state import SyncConfig, SyncState
-from .status import (
-    ALIVE_EVERY_S,
-    save_status,
-)
+from .records import Record
+from .state import Report, SyncConfig
 from .timing import RECHECK_AFTER_S, VERIFY_EVERY_S
+from .worker import Worker
 
 log = logging.getLogger("rosnet_tui.sync")
 
 
+@dataclass(frozen=True)
+class ApplyInput:
+    """What the applier is handed for one apply: the settings, this component's addresses known
+    now, and the last good record of each peer."""
+    settings: Settings
+    local_ip: str
+    public_ip: str
+    records: Mapping[str, Record]
+    interval_s: float
+
+
 class Applier:
-    """Plan, write, check; reads and changes the service's :class:`SyncState`."""
+    """See the module docstring. Times named ``next_*`` and ``recheck_at`` are monotonic.
+    *settings_saved* is told the settings it wrote (learned addresses) and the file's key."""
 
-    def __init__(self, state: SyncState, config: SyncConfig) -> None:
-        self.state = state
+    def __init__(self, report: Report, config: SyncConfig,
+                 settings_saved: Callable[[Settings, Any], None]) -> None:
+        self.report = report
         self.config = config
+        self.settings_saved = settings_saved
+        self.changed = True                    # something changed since the last apply
+        now = time.monotonic()
+        self.next_apply = now
+        self.next_verify = now
+        self.recheck_at: float | None = None
+        self.recheck_left: list[float] = []
+        self.last_plan: Plan | None = None
+        self.checks: Worker | None = None      # the checks' thread while the loop runs
+        self.backoff = Backoff()
 
-    def _plan(self) -> Plan:
-        assert self.state.settings is not None
-        st = self.state
-        return plan_hosts(st.settings, local_ip=st.local.local_ip if st.local else "",
-                          public_ip=st.known_public(),
-                          records={n: c.record for n, c in st.peers.items()})
+    def mark_changed(self) -> None:
+        """An address, a record or the settings changed: apply at the next chance."""
+        self.changed = True
 
-    def apply(self, mono: float) -> bool:
+    def hold(self, until: float) -> None:
+        """No apply before *until* (monotonic; after an unexpected error in a round)."""
+        self.next_apply = until
+
+    def due(self, mono: float) -> bool:
+        return (self.changed or mono >= self.next_verify) and mono >= self.next_apply
+
+    def wake_at(self) -> float:
+        """When an apply is due (changed: as soon as allowed; else the next verification)."""
+        return self.next_apply if self.changed else max(self.next_apply, self.next_verify)
+
+    def _plan(self, given: ApplyInput) -> Plan:
+        return plan_hosts(given.settings, local_ip=given.local_ip, public_ip=given.public_ip,
+                          records=dict(given.records))
+
+    def apply(self, mono: float, given: ApplyInput) -> bool:
         """Write the hosts set (and the ROS block) when they differ from the files; True if
         something was written."""
-        self.state.next_verify = mono + VERIFY_EVERY_S
-        plan = self._plan()
-        self.state.last_plan = plan
+        self.next_verify = mono + VERIFY_EVERY_S
+        plan = self._plan(given)
+        self.last_plan = plan
         try:
             old = mw.read_bytes(self.config.paths.hosts_path, state_dir=self.config.paths.state_dir)
             text = mt.decode(old) if old is not None else None
@@ -68,11 +106,12 @@ class Applier:
                                          label=f"hosts: {plan.profile} set", notes=notes,
                                          new_mode=0o644, current=old, use_current=True)]
         except (PlanError, WriterSettingsError, mt.ManagedFileError) as exc:
-            self.state.next_apply = self.state.fail(
-                "apply", f"{exc}; the hosts file is left as it is", mono)
+            self.next_apply = self.report.fail(
+                "apply", self.backoff, f"{exc}; the hosts file is left as it is", mono,
+                given.interval_s)
             return False
         for n in notes:
-            self.state.once(("conflict", n), logging.WARNING, "%s: %s (rosnet-tui hosts apply "
+            self.report.once(("conflict", n), logging.WARNING, "%s: %s (rosnet-tui hosts apply "
                             "--comment-conflicts fixes it, with your consent)",
                             self.config.paths.hosts_path, n)
         if self.config.write_bashrc and not plan.settings.ros2:
@@ -81,15 +120,15 @@ class Applier:
                 previews.append(preview_bashrc(plan.settings, self.config.paths.bashrc_path,
                                                state_dir=self.config.paths.state_dir))
             except (WriterSettingsError, mt.ManagedFileError) as exc:
-                self.state.once(("bashrc", str(exc)), logging.WARNING,
+                self.report.once(("bashrc", str(exc)), logging.WARNING,
                                 "%s is left as it is: %s", self.config.paths.bashrc_path, exc)
         self._update_peer_status(plan)
         follow_for_sync(plan.settings, [c.address for c in plan.choices], log)  # ROS 1 firewall
         changed = [p for p in previews if p.changed]
         if not changed:
-            self.state.dirty = False
-            self.state.backoff["apply"].succeed()
-            self.state.clear_error("apply")
+            self.changed = False
+            self.backoff.succeed()
+            self.report.clear_error("apply")
             return False
         summary = self._summary(plan, text)
         diff = "".join(p.diff() for p in changed)
@@ -99,38 +138,37 @@ class Applier:
                                        label=f"sync: {summary}")
         except mt.StalePreviewError as exc:
             log.info("%s; trying again", exc)
-            self.state.next_apply = mono + 0.2
+            self.next_apply = mono + 0.2
             return False
         except mt.PermissionNeededError as exc:
-            self.state.next_apply = self.state.fail(
-                "apply", f"{exc} (run the sync service as root: rosnet-tui sync install-service)",
-                mono)
+            self.next_apply = self.report.fail(
+                "apply", self.backoff,
+                f"{exc} (run the sync service as root: rosnet-tui sync install-service)",
+                mono, given.interval_s)
             return False
         except mt.ManagedFileError as exc:
-            self.state.next_apply = self.state.fail(
-                "apply", f"{exc}; the files are left as they were", mono)
+            self.next_apply = self.report.fail(
+                "apply", self.backoff, f"{exc}; the files are left as they were", mono,
+                given.interval_s)
             return False
-        self.state.dirty = False
-        self.state.backoff["apply"].succeed()
-        self.state.clear_error("apply", "writing works again")
+        self.changed = False
+        self.backoff.succeed()
+        self.report.clear_error("apply", "writing works again")
         backups = ", ".join(str(b) for b in result.backups) or "none (new file)"
         log.info("wrote %s (journal #%s, backup %s; 'rosnet-tui undo' puts it back)",
                  ", ".join(str(p.path) for p in changed), result.entry_id, backups)
-        self.state.status["profile"] = plan.profile
-        self.state.status["last_change"] = {"at": time.time(), "summary": summary, "diff": diff,
-                                      "journal": result.entry_id, "checks": []}
-        self.state.status_dirty = True
-        self._save_learned(plan)
-        self.save_status()
+        self.report.set(profile=plan.profile,
+                        last_change={"at": time.time(), "summary": summary, "diff": diff,
+                                     "journal": result.entry_id, "checks": []})
+        self._save_learned(plan, given)
+        self.report.save(self.config.paths.state_dir)
         if self.config.run_checks:
-            self.state.recheck_left = list(RECHECK_AFTER_S)
-            self.state.recheck_at = None
+            self.recheck_left = list(RECHECK_AFTER_S)
+            self.recheck_at = None
             self._run_checks(plan)
         return True
 
     def _summary(self, plan: Plan, old_text: str | None) -> str:
-        from rosnet_tui.core.checks.linux import parse_hosts
-
         try:
             body = mt.extract_block(old_text) or []
         except mt.DamagedBlockError:
@@ -151,14 +189,13 @@ class Applier:
         return f"{'; '.join(parts)} [{PROFILE_TITLES[plan.profile].split(' (')[0]} set]"
 
     def _update_peer_status(self, plan: Plan) -> None:
-        self.state.status["profile"] = plan.profile
+        self.report.set(dirty=False, profile=plan.profile)
         for c in plan.choices:
-            p = self.state.status["peers"].setdefault(c.name, {})
+            p = self.report.peer(c.name)
             if p.get("address") != c.address or p.get("where") != c.where:
-                p.update(address=c.address, where=c.where, why=c.why)
-                self.state.status_dirty = True
+                self.report.update_peer(c.name, address=c.address, where=c.where, why=c.why)
 
-    def _save_learned(self, plan: Plan) -> None:
+    def _save_learned(self, plan: Plan, given: ApplyInput) -> None:
         """Keep the observed addresses in the settings file too, so `check`, `hosts apply` and
         the wizard agree with the hosts file (comments and layout kept)."""
         if not self.config.save_learned:
@@ -166,8 +203,8 @@ class Applier:
         try:
             fresh = load_settings(self.config.paths.config_path)
         except SettingsError as exc:
-            self.state.once(("learned", str(exc)), logging.WARNING,
-                            "the settings file was not updated: %s", exc)
+            self.report.once(("learned", str(exc)), logging.WARNING,
+                             "the settings file was not updated: %s", exc)
             return
         if fresh is None:
             return
@@ -180,7 +217,7 @@ class Applier:
                 setattr(fresh.this, key, new)
         for p in fresh.peers:
             lp = next((x for x in learned.peers if x.name == p.name), None)
-            if lp is None or p.name not in self.state.peers:
+            if lp is None or p.name not in given.records:
                 continue
             for key in ("local_ip", "public_ip"):
                 new = getattr(lp, key)
@@ -197,11 +234,10 @@ class Applier:
                     os.chown(self.config.paths.config_path, st.st_uid, st.st_gid)
             with contextlib.suppress(OSError):
                 st2 = os.stat(self.config.paths.config_path)
-                self.state.settings_key = (st2.st_mtime_ns, st2.st_size, st2.st_ino)
-                self.state.settings = fresh
+                self.settings_saved(fresh, (st2.st_mtime_ns, st2.st_size, st2.st_ino))
         except (SettingsError, OSError) as exc:
-            self.state.once(("learned", str(exc)), logging.WARNING,
-                            "the settings file was not updated: %s", exc)
+            self.report.once(("learned", str(exc)), logging.WARNING,
+                             "the settings file was not updated: %s", exc)
             return
         log.info("settings updated (%s): %s", self.config.paths.config_path, "; ".join(changes))
 
@@ -209,9 +245,9 @@ class Applier:
     def _run_checks(self, plan: Plan) -> None:
         """The affected checks for *plan*: on the checks thread while the service runs (records
         are read and applied meanwhile), here and now otherwise (--once, tests)."""
-        tag = (self.state.status.get("last_change") or {}).get("journal")
-        if self.state.checks is not None:
-            self.state.checks.submit(tag, copy.deepcopy(plan))
+        tag = (self.report.get("last_change") or {}).get("journal")
+        if self.checks is not None:
+            self.checks.submit(tag, copy.deepcopy(plan))
             return
         self.take_checks(tag, self.affected_checks(plan))
 
@@ -221,7 +257,7 @@ class Applier:
     def take_checks(self, tag: Any, results: list[dict[str, Any]] | None) -> None:
         """Keep the verdicts of the checks run for the change *tag* (its journal entry), unless
         a newer change came meanwhile (its own checks follow); then plan the re-checks."""
-        change = self.state.status.get("last_change")
+        change = self.report.get("last_change")
         if results is None:
             return
         if change is not None and change.get("journal") != tag:
@@ -232,39 +268,26 @@ class Applier:
             level = logging.WARNING if r["status"] == "fail" else logging.INFO
             log.log(level, "check %-4s %s: %s", r["status"].upper(), r["id"], r["summary"])
         if change is not None:
-            change["checks"] = results
-            change["checked_at"] = time.time()
+            self.report.update_last_change(checks=results, checked_at=time.time())
+        else:
+            self.report.set()
         if not bad:
-            self.state.recheck_left = []
-        self.state.status_dirty = True
+            self.recheck_left = []
         self._schedule_recheck()
 
     def _schedule_recheck(self) -> None:
-        changes = self.state.status.get("last_change") or {}
+        changes = self.report.get("last_change") or {}
         failing = any(c["status"] == "fail" for c in changes.get("checks") or [])
-        if failing and self.state.recheck_left:
-            self.state.recheck_at = time.monotonic() + self.state.recheck_left.pop(0)
+        if failing and self.recheck_left:
+            self.recheck_at = time.monotonic() + self.recheck_left.pop(0)
         else:
-            self.state.recheck_at = None
+            self.recheck_at = None
 
-    def recheck(self) -> None:
-        self.state.recheck_at = None
-        if self.state.last_plan is None:
+    def recheck_if_due(self) -> None:
+        if self.recheck_at is None or time.monotonic() < self.recheck_at:
+            return
+        self.recheck_at = None
+        if self.last_plan is None:
             return
         log.info("running the failing checks again")
-        self._run_checks(self.state.last_plan)
-
-    # ------------------------------------------------------------------ status
-    def save_status(self, force: bool = False) -> None:
-        now = time.time()
-        if not (force or self.state.status_dirty or now - self.state.alive_saved > ALIVE_EVERY_S):
-            return
-        self.state.status["alive_at"] = now
-        try:
-            save_status(self.config.paths.state_dir, self.state.status)
-        except OSError as exc:
-            self.state.once(("status", str(exc)), logging.WARNING,
-                            "cannot save the status: %s", exc)
-            return
-        self.state.status_dirty = False
-        self.state.alive_saved = now
+        self._run_checks(self.last_plan)

@@ -1,7 +1,7 @@
 """Picking the record store the settings' [sync] table names (folder or DNS).
 
 Each store module imports :mod:`.store` (the protocol, results and errors); this module imports
-the stores, lazily, so a folder user never loads the DNS library.
+the stores (the DNS store lazily, so a folder user never loads the DNS library).
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ from pathlib import Path
 
 from rosnet_tui.core.config.settings_model import Settings
 
+from .folder import FolderStore
 from .store import RecordStore, StoreConfigError
 
 
@@ -18,14 +19,12 @@ def make_store(settings: Settings, *, timeout_s: float | None = None) -> RecordS
     y = settings.sync
     timeout = timeout_s if timeout_s is not None else max(1.0, float(settings.checks.timeout_s))
     if y.store == "folder":
-        from .folder import FolderStore
-
         if not y.folder:
             raise StoreConfigError("the folder store needs sync.folder (the shared folder) in "
                                    "the settings")
         return FolderStore(Path(y.folder).expanduser())
     if y.store == "dns":
-        from .dnsstore import DnsStore
+        from .dnsstore import DnsStore  # start-up cost: dnspython
 
         missing = [k for k in ("dns_server", "zone") if not getattr(y, k)]
         if missing:

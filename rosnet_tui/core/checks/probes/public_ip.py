@@ -2,28 +2,10 @@
 
 from __future__ import annotations
 
-import contextlib
-import ipaddress
-
 from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.checks.data import view
-from rosnet_tui.core.checks.probes.http import http_get
-
-
-def parse_ip(text: str) -> str | None:
-    """The IPv4 address a what-is-my-IP service answered (plain text, or JSON with "ip")."""
-    t = text.strip()
-    if t.startswith("{"):
-        from rosnet_tui.core.jsonsafe import loads_bounded
-
-        with contextlib.suppress(ValueError, AttributeError):   # JsonInputError is a ValueError
-            t = str(loads_bounded(t, unique_keys=False).get("ip", ""))
-    t = t.split()[0] if t.split() else ""
-    try:
-        a = ipaddress.ip_address(t)
-    except ValueError:
-        return None
-    return str(a) if a.version == 4 else None
+from rosnet_tui.core.exposure.public_ip import parse_ip
+from rosnet_tui.core.net.http import http_get
 
 
 def round_public_ip(ctx: CheckContext) -> str | None:

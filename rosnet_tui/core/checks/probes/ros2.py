@@ -12,10 +12,11 @@ from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.checks.probes.agents import stderr_tail
 from rosnet_tui.core.checks.probes.peers import ssh_peers
 from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.peer.commands import PEER_INSTALL_PLACES, README_INSTALL
 from rosnet_tui.core.ros import fleet_tls, ros2
-from rosnet_tui.core.ssh.connection import SshResult, run_blocking
+from rosnet_tui.core.ssh.connection import SshResult
 
 
 def zenoh_env(ctx: CheckContext) -> dict[str, str]:

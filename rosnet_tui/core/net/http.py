@@ -1,6 +1,7 @@
-"""HTTP to the configured services (what-is-my-IP, the outsider's view): one GET, bounded
-in time and size, that never raises for network trouble. Proxy variables are ignored: a proxy
-would answer with its own address."""
+"""HTTP GET to the services the settings name (what-is-my-IP, the port checker): bounded, never
+raising for network trouble, answers and failures in a few words. HTTP ignores proxy variables: a
+proxy would answer with its own address. requests is imported when a GET is made (start-up cost).
+"""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from pathlib import Path
 from urllib.parse import urljoin, urlsplit
 
 from rosnet_tui import __version__
-from rosnet_tui.core.ssh.connection import run_blocking
+from rosnet_tui.core.net.blocking import run_blocking
 
 MAX_BODY = 64 * 1024
 
