@@ -55,6 +55,9 @@ class TsigKey:
         return dns.tsig.Key(self.name, self.secret, self.algorithm)
 
 
+# A quoted string (kept whole: base64 secrets hold "//"), else a comment: # or // to the end of
+# the line, or /* ... */.
+_BIND_COMMENT = re.compile(r'("[^"\n]*")|#[^\n]*|//[^\n]*|/\*.*?\*/', re.S)
 _BIND_KEY = re.compile(r'key\s+"?([A-Za-z0-9._-]+)"?\s*\{(.*?)\}\s*;', re.S)
 _BIND_ALG = re.compile(r'algorithm\s+"?([A-Za-z0-9.-]+)"?\s*;')
 _BIND_SECRET = re.compile(r'secret\s+"([^"]*)"\s*;')
@@ -64,7 +67,7 @@ _Y_FORM = re.compile(r"^(?:([A-Za-z0-9.-]+):)?([A-Za-z0-9._-]+):([A-Za-z0-9+/=]+
 def parse_tsig_key(text: str) -> TsigKey:
     """A TSIG key from a BIND-style key file (what ``tsig-keygen NAME`` prints), or from the
     one-line ``[algorithm:]name:secret`` form of ``nsupdate -y``. Raises StoreConfigError."""
-    text = re.sub(r"(#|//)[^\n]*", "", text)
+    text = _BIND_COMMENT.sub(lambda m: m.group(1) or " ", text)
     m = _BIND_KEY.search(text)
     if m:
         name, body = m.group(1), m.group(2)
