@@ -133,16 +133,24 @@ _IFLA_IFNAME, _IFLA_OPERSTATE, _IFLA_CARRIER = 3, 16, 33
 _LINK_DUMP_LIMIT = 4096   # messages read at most (a bounded loop)
 
 
-def _netlink_links() -> dict[str, tuple[int, int, str | None, bool | None]] | None:
-    """{name: (flags, type, operstate, carrier)} from the kernel's rtnetlink (the namespace this
-    thread is in, which /sys may not show), or None where rtnetlink is not available."""
+def route_netlink() -> socket.socket | None:
+    """A raw rtnetlink socket (links, addresses, routes), or None where netlink is not available
+    (not Linux, no permission)."""
     family = getattr(socket, "AF_NETLINK", None)
     if family is None:
         return None
     try:
-        sock = socket.socket(family, socket.SOCK_RAW | socket.SOCK_CLOEXEC,
+        return socket.socket(family, socket.SOCK_RAW | socket.SOCK_CLOEXEC,
                              getattr(socket, "NETLINK_ROUTE", 0))
     except OSError:
+        return None
+
+
+def _netlink_links() -> dict[str, tuple[int, int, str | None, bool | None]] | None:
+    """{name: (flags, type, operstate, carrier)} from the kernel's rtnetlink (the namespace this
+    thread is in, which /sys may not show), or None where rtnetlink is not available."""
+    sock = route_netlink()
+    if sock is None:
         return None
     links: dict[str, tuple[int, int, str | None, bool | None]] = {}
     with sock:

@@ -19,7 +19,12 @@ from pathlib import Path
 
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.exposure.public_ip import find_public_ip
-from rosnet_tui.core.net.netinfo import default_gateway, detect_local_net, interface_ipv4
+from rosnet_tui.core.net.netinfo import (
+    default_gateway,
+    detect_local_net,
+    interface_ipv4,
+    route_netlink,
+)
 
 from .backoff import Backoff
 from .state import Report
@@ -71,15 +76,14 @@ class NetlinkMonitor:
     @classmethod
     def open(cls) -> NetlinkMonitor | None:
         """The monitor, or None where netlink is not available (not Linux, no permission)."""
-        family = getattr(socket, "AF_NETLINK", None)
-        if family is None:
+        s = route_netlink()
+        if s is None:
             return None
         try:
-            s = socket.socket(family, socket.SOCK_RAW | socket.SOCK_CLOEXEC,
-                              getattr(socket, "NETLINK_ROUTE", 0))
             s.bind((0, RTMGRP_LINK | RTMGRP_IPV4_IFADDR | RTMGRP_IPV4_ROUTE))
             s.setblocking(False)
         except OSError:
+            s.close()
             return None
         return cls(s)
 
