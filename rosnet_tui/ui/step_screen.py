@@ -133,12 +133,7 @@ class StepScreen(Screen):
         pane = self.query_one("#config-pane")
         width = pane.scrollable_content_region.width or 76
         text = self.session.router_card_text(width - 3)
-        _state, upnp = self.session.check_state("router.upnp")  # the modem's own word, if asked
-        said: list[str] = []
-        if upnp is not None:
-            from rosnet_tui.core.upnp.forwards import card_lines
-
-            said = card_lines(upnp.data)
+        said = self.session.modem_said()  # the modem's own word, if asked
         self.query_one("#router-card", Static).update(("\n".join(said) + "\n\n" if said else "")
                                                       + text)
 
@@ -249,23 +244,16 @@ class StepScreen(Screen):
                                          place=(index + 1, len(plans)),
                                          next_title="" if last else plans[index + 1].title), done)
 
-    def unknown_host_keys(self) -> list[tuple[str, dict]]:
-        """Peers whose SSH host key linux.ssh met but nobody has trusted yet."""
-        _state, result = self.session.check_state("linux.ssh")
-        peers = (result.data.get("peers") or {}) if result is not None else {}
-        return [(name, d) for name, d in peers.items()
-                if isinstance(d, dict) and d.get("failure") == "host_key_unknown"
-                and d.get("host_key")]
-
     def action_trust_key(self) -> None:
         from rosnet_tui.ui.trust_screen import TrustKeyScreen
 
-        pending = self.unknown_host_keys()
+        pending = self.session.unknown_host_keys()
         if not pending:
             self.notify("No unknown SSH host key to review (run the Linux checks first).",
                         timeout=4)
             return
-        name, d = pending[0]
+        key = pending[0]
+        name = key.peer
         peer = self.session.settings.peer(name)
         port = peer.ssh_port if peer else 22
 
@@ -274,15 +262,15 @@ class StepScreen(Screen):
                 self.notify(f"Not trusted: SSH checks to {name} stay refused.", timeout=5)
                 return
             try:
-                path = self.session.trust_host_key(name, port, d["host_key"])
+                path = self.session.trust_host_key(name, port, key.host_key)
             except (ValueError, OSError) as exc:
                 self.notify(f"Not written: {exc}", severity="error", timeout=8)
                 return
             self.notify(f"Trusted {name}'s key ({path}).", timeout=5)
             self.run_specs([s for s in self.specs if s.id.startswith("linux.")])
 
-        self.app.push_screen(TrustKeyScreen(name, port, d["host_key"], d.get("fingerprint") or "?",
-                                            d.get("address") or "", peer.ssh_user if peer else ""),
+        self.app.push_screen(TrustKeyScreen(name, port, key.host_key, key.fingerprint,
+                                            key.address, peer.ssh_user if peer else ""),
                              done)
 
     def action_undo(self) -> None:
@@ -347,6 +335,6 @@ class StepScreen(Screen):
                         self._render_card()
         finally:
             self._sync_results()
-        for name, _d in self.unknown_host_keys():
-            self.notify(f"{name} has an SSH host key this machine does not know yet. Press k "
+        for key in self.session.unknown_host_keys():
+            self.notify(f"{key.peer} has an SSH host key this machine does not know yet. Press k "
                         "to compare its fingerprint and decide.", severity="warning", timeout=12)

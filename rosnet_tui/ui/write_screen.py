@@ -21,7 +21,7 @@ from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files import privilege
 from rosnet_tui.core.upnp.journal import describe as describe_forward
-from rosnet_tui.core.wizard.write_plans import WritePlan
+from rosnet_tui.core.wizard.write_plans import Severity, WritePlan
 from rosnet_tui.ui.dialog import SCROLL_BINDINGS, ConfirmDialog
 from rosnet_tui.ui.widgets import KeyBar
 
@@ -39,6 +39,9 @@ def diff_text(diff: str) -> Text:
         out.append(line + "\n", style=style)
     return out
 
+
+# How each severity the core hands is shown (Textual's notification severities).
+SEVERITY = {Severity.INFO: "information", Severity.ERROR: "error"}
 
 # What a write screen dismisses with: the write was made, the user went on to the next preview of
 # the sequence without writing (nothing to write here), or None (backed out: the sequence ends).
@@ -185,10 +188,8 @@ class WriteScreen(ConfirmDialog[str | None]):
         self.notify(f"Wrote {p.path}. `{self.undo}` reverts it.", timeout=5)
         if self.plan.after_write is not None:   # ROS 2 mutual TLS: CA or pairing (<= 5 s)
             said = await self.plan.after_write()
-            if said:
-                self.notify(said, severity="error" if said.startswith(("Pairing failed",
-                                                                        "Mutual TLS")) else
-                            "information", timeout=10)
+            if said is not None:
+                self.notify(said.text, severity=SEVERITY[said.severity], timeout=10)
         self.dismiss(WRITTEN)
 
 

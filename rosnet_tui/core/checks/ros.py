@@ -124,6 +124,7 @@ async def check_env(ctx: CheckContext) -> Outcome:
     fails: list[str] = []
     warns: list[str] = []
     oks = 0
+    doubtful = False   # a URI that is set but judged only a warning
     for label, uri in (("the environment", env_uri), (f"{ctx.paths.bashrc_path}", bashrc_uri)):
         if uri is None:
             evidence.append(f"{label}: ROS_MASTER_URI not set")
@@ -135,6 +136,7 @@ async def check_env(ctx: CheckContext) -> Outcome:
         if verdict == "ok":
             oks += 1
         elif verdict == "warn":
+            doubtful = True
             warns.append(f"ROS_MASTER_URI in {label}: {why}")
         else:
             fails.append(f"ROS_MASTER_URI={uri} in {label}: {why}")
@@ -171,7 +173,7 @@ async def check_env(ctx: CheckContext) -> Outcome:
             evidence.append(f"{name} is fine on the {s.this.profile} LAN profile, but remove it "
                             "before using the remote network")
 
-    uri_ok = not fails and oks > 0 and not any(w.startswith("ROS_MASTER_URI in") for w in warns)
+    uri_ok = not fails and oks > 0 and not doubtful
     data = {"env_uri": env_uri, "bashrc_uri": bashrc_uri, "expected_uri": expected,
             "uri_ok": uri_ok, "ros_ip": overrides["ROS_IP"],
             "ros_hostname": overrides["ROS_HOSTNAME"]}

@@ -39,10 +39,12 @@ MARGIN_S = 0.25           # the exchange ends this long before the check's budge
 class HopFailed(Exception):
     """The exchange broke at *hop*; the message says what was seen."""
 
-    def __init__(self, hop: str, words: str, tcp: str | None = None) -> None:
+    def __init__(self, hop: str, words: str, tcp: str | None = None, *,
+                 quotes_bridge: bool = False) -> None:
         super().__init__(words)
         self.hop = hop
         self.tcp = tcp                   # how the TCP connection went, when it was the hop
+        self.quotes_bridge = quotes_bridge  # the words already quote the bridge's last status
 
 
 async def _tcp(addr: str, port: int, t: float) -> tuple[socket.socket | None, str, str]:
@@ -112,7 +114,8 @@ class _Browser:
             left = deadline - loop.time()
             if left <= 0:
                 seen = f"; the bridge said: {self.status[-1]}" if self.status else ""
-                raise HopFailed(hop, f"no {waiting} before the timeout{seen}")
+                raise HopFailed(hop, f"no {waiting} before the timeout{seen}",
+                                quotes_bridge=bool(self.status))
             try:
                 raw = await asyncio.wait_for(self.ws.recv(), left)
             except asyncio.TimeoutError:
@@ -190,7 +193,7 @@ async def _round_trip(sub: _Browser, pub: _Browser, topic: str, type_: str, dead
     except HopFailed as exc:
         said = [*sub.status, *pub.status]
         raise HopFailed("round_trip", str(exc) + (f" (bridge status: {said[-1]})"
-                                                  if said and "said" not in str(exc) else "")
+                                                  if said and not exc.quotes_bridge else "")
                         ) from None
     except BaseException:
         got.cancel()

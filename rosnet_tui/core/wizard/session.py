@@ -7,7 +7,7 @@ layer that shows it, and tests can build one without an app.
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Callable, Iterable
+from collections.abc import AsyncIterator, Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -28,6 +28,17 @@ if TYPE_CHECKING:
 
 # A check's state in the wizard: the four result statuses plus two of the wizard's own.
 NOT_RUN, RUNNING = "not run", "running"
+
+
+@dataclass(frozen=True)
+class UnknownHostKey:
+    """A peer's SSH host key that linux.ssh met and nobody has trusted yet (its declared data,
+    read for the screen that asks)."""
+
+    peer: str
+    host_key: str      # "<type> <base64>"
+    fingerprint: str   # SHA256:... ("?" when linux.ssh did not see it)
+    address: str       # where the peer's name resolved here ("" when unknown)
 
 
 def aggregate(states: list[str]) -> str:
@@ -202,6 +213,32 @@ class WizardSession:
 
     def findings_for(self, check_id: str) -> list[Finding]:
         return [f for f in self.findings if check_id in f.check_ids]
+
+    def unknown_host_keys(self) -> list[UnknownHostKey]:
+        """Peers whose SSH host key linux.ssh met but nobody has trusted yet, read through the
+        check's declared data (rosnet_tui.core.checks.data)."""
+        _state, result = self.check_state("linux.ssh")
+        if result is None:
+            return []
+        from rosnet_tui.core.checks.data import view
+
+        peers = view("linux.ssh", result.data).get("peers") or {}
+        return [UnknownHostKey(name, d["host_key"], d.get("fingerprint") or "?",
+                               d.get("address") or "")
+                for name, d in peers.items()
+                if isinstance(d, Mapping) and d.get("failure") == "host_key_unknown"
+                and d.get("host_key")]
+
+    def modem_said(self) -> list[str]:
+        """The Router step's lines for what the modem itself said (router.upnp's declared data;
+        nothing before that check ran)."""
+        _state, upnp = self.check_state("router.upnp")
+        if upnp is None:
+            return []
+        from rosnet_tui.core.checks.data import view
+        from rosnet_tui.core.upnp.forwards import card_lines
+
+        return card_lines(view("router.upnp", upnp.data))
 
     def step_states(self) -> dict[str, str]:
         out = {}

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,22 @@ from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files.managed_write import read_text
+
+
+class Severity(str, Enum):
+    """How a line said after a write is shown: news, or a failure the user must act on."""
+
+    INFO = "info"
+    ERROR = "error"
+
+
+@dataclass(frozen=True)
+class Said:
+    """A line for the user after a write, with its severity (the UI shows it; it never reads
+    the words to guess)."""
+
+    text: str
+    severity: Severity = Severity.INFO
 
 
 @dataclass
@@ -42,8 +59,8 @@ class WritePlan:
     # The write offered next on the same step, once this one is closed (None: none).
     then: Callable[[], WritePlan | None] | None = None
     # Run after a successful write (ROS 2 mutual TLS: make the CA, or pair with the master);
-    # returns a line for the user ("": nothing to say).
-    after_write: Callable[[], Awaitable[str]] | None = None
+    # returns a line for the user (None: nothing to say).
+    after_write: Callable[[], Awaitable[Said | None]] | None = None
 
 
 def _read(path: Path, state_dir: Path) -> str | None:
@@ -119,7 +136,7 @@ def firewall_plan(settings: Settings, paths: Paths) -> WritePlan | None:
 def ros2_plan(settings: Settings, paths: Paths) -> WritePlan:
     """ROS 2: the ~/.bashrc block and the Zenoh router's config file, in one apply; under
     mutual TLS then the fleet CA (master) or pairing with the master over SSH (member)."""
-    from rosnet_tui.core.ros import pairing, ros2
+    from rosnet_tui.core.ros import ros2
 
     def make(client: bool) -> list[mf.Preview]:
         return ros2.previews(settings, paths.bashrc_path, client=client,
@@ -135,9 +152,33 @@ def ros2_plan(settings: Settings, paths: Paths) -> WritePlan:
         option_label=("no router on this machine: its nodes connect to the master's router in "
                       "client mode") if member else "",
         after=affected.ros2_write(ros2.mtls(settings)),
-        after_write=lambda: pairing.after_apply(settings),
+        after_write=lambda: after_ros2_write(settings),
         footnote="Then start the router: ros2 run rmw_zenoh_cpp rmw_zenohd (the master's first). "
                  "For the shell you are in now: " + "; ".join(ros2.shell_lines(settings)))
+
+
+async def after_ros2_write(settings: Settings, opts: Any = None) -> Said | None:
+    """What the wizard's ``w`` on the ROS step does after writing under mutual TLS (as
+    ``ros apply``): the CA and certificate on the master; on a member, pairing over SSH when
+    needed. None when nothing was needed."""
+    from rosnet_tui.core.ros import fleet_tls, pairing, ros2
+
+    if not ros2.mtls(settings):
+        return None
+    paths = fleet_tls.tls_paths(ros2.config_dir())
+    try:
+        if settings.is_master:
+            made = pairing.prepare_master(settings, paths)
+            return Said("Made " + "; ".join(made) + ".") if made else None
+        if pairing.needs_pairing(settings, paths) is None:
+            return None
+        res = await pairing.pair_over_ssh(settings, paths, opts)
+    except (fleet_tls.TlsError, OSError) as exc:
+        return Said(f"Mutual TLS: {exc}", Severity.ERROR)
+    if res.ok:
+        return Said(f"{res.detail[:1].upper()}{res.detail[1:]} ({res.seconds:.1f} s).")
+    return Said(f"Pairing failed: {res.detail}. Without SSH to the master: `rosnet-tui ros pair "
+                "--print-request` here, `--sign` there, `--install` here.", Severity.ERROR)
 
 
 def ros_plan(settings: Settings, paths: Paths) -> WritePlan:
