@@ -98,3 +98,50 @@ async def test_after_a_ros2_write_the_core_says_how_bad_it_is(tmp_path, monkeypa
     assert said.text.startswith("Pairing failed: no SSH user for the master turtlebot")
     said = await after_ros2_write(ros2_master(security="mtls"))   # the CA made: news
     assert said is not None and said.severity is Severity.INFO and said.text.startswith("Made ")
+
+
+# --------------------------------------------------------------------------- the set-up form
+SETTINGS_KEY = re.compile(r"^(this|peer|ros|probe|checks|sync|rosbridge|firewall)\.[a-z_]+$")
+
+
+def test_the_ui_names_no_settings_key_the_form_table_holds_them():
+    """A field's settings key, label, check and choices live in core/wizard/setup_form.py; the
+    screen renders the table (a key written in the UI is a second home). Check ids such as
+    ros.master look the same and are left out."""
+    from rosnet_tui.core.checks.data import DATA
+
+    found = [f"{rel}:{node.lineno} {node.value!r}" for rel, tree in _trees()
+             if rel.startswith("rosnet_tui/ui/") for node in ast.walk(tree)
+             if isinstance(node, ast.Constant) and isinstance(node.value, str)
+             and SETTINGS_KEY.match(node.value) and node.value not in DATA]
+    assert found == [], "settings keys in the UI: " + ", ".join(found)
+
+
+def test_each_form_field_is_a_documented_settings_key_with_its_own_widget():
+    from rosnet_tui.core.config.settings_model import Peer, Settings
+    from rosnet_tui.core.wizard.setup_form import FIELDS, PEER_FIELDS
+
+    doc = (ROOT / "docs" / "SETTINGS.md").read_text(encoding="utf-8")
+    assert len({f.id for f in FIELDS}) == len({f.key for f in FIELDS}) == len(FIELDS)
+    for f in FIELDS:
+        table, attr = f.key.split(".")
+        assert hasattr(getattr(Settings(), table), attr), f.key
+        assert re.search(rf"^\[{table}\][^\[]*^{attr} = ", doc, re.M | re.S), f.key
+    for c in PEER_FIELDS:
+        assert hasattr(Peer(name="x"), c.attr)
+        assert re.search(rf"^\[\[peer\]\][^\[]*^{c.attr} = ", doc, re.M | re.S), c.attr
+
+
+def test_the_form_gives_back_the_settings_it_shows_and_puts_each_problem_on_its_field():
+    from rosnet_tui.core.wizard.setup_form import FIELDS, field_for_key, settings_from_form
+
+    for settings in (complete_settings(), ros2_member(), ros2_master(security="none")):
+        values = {f.id: f.value(settings) for f in FIELDS}
+        back, problems = settings_from_form(settings, values, settings.peers, "10.10.10.1")
+        assert problems == [] and back == settings
+    settings = ros2_member()
+    values = {f.id: f.value(settings) for f in FIELDS}
+    for f in FIELDS:
+        if f.kind == "number" and f.id != "rosbridge-port":
+            _back, problems = settings_from_form(settings, {**values, f.id: "x"}, settings.peers)
+            assert problems and field_for_key(problems[0][0]) is f

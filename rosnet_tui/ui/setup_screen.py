@@ -14,7 +14,7 @@ from textual.validation import ValidationResult, Validator
 from textual.widgets import Button, Input, Label, Select, Static
 
 from rosnet_tui.core.config import settings_model as S
-from rosnet_tui.core.config.settings_model import default_security
+from rosnet_tui.core.wizard import setup_form as form
 from rosnet_tui.core.wizard.session import WizardSession
 from rosnet_tui.ui.fields import OrderedInput
 from rosnet_tui.ui.messages import SettingsSaved
@@ -32,6 +32,19 @@ class CoreValidator(Validator):
 
     def validate(self, value: str) -> ValidationResult:
         why = self.func(value.strip(), **self.kwargs)
+        return self.failure(why) if why else self.success()
+
+
+class FieldValidator(Validator):
+    """A field of the core's table, checked as it is typed."""
+
+    def __init__(self, field: form.FormField, detected: str) -> None:
+        super().__init__()
+        self.field = field
+        self.detected = detected
+
+    def validate(self, value: str) -> ValidationResult:
+        why = self.field.why(value.strip(), self.detected)
         return self.failure(why) if why else self.success()
 
 
@@ -57,25 +70,8 @@ class PeerNameValidator(Validator):
         return self.failure(why) if why else self.success()
 
 
-CONNECTION_OPTIONS = [("Telecom (mobile hotspot)", "telecom"), ("Home", "home"),
-                      ("Corporate / university", "corporate")]
-ROLE_OPTIONS = [("ROS master (roscore / the Zenoh hub)", "master"), ("Member", "member")]
-ROS_VERSION_OPTIONS = [("ROS 2 (rmw_zenoh: one forwarded port)", 2), ("ROS 1 (roscore)", 1)]
-PROFILE_OPTIONS = [("Remote (peers by public IP)", "remote"), ("Office LAN", "office"),
-                   ("Portable hotspot LAN", "portable")]
-# On: ROS 2, mutual TLS (only fleet certificates); ROS 1, a firewall admitting only the peers.
-SECURITY_OPTIONS = [("On: only the fleet gets in", "on"),
-                    ("Off: open to anyone at the ports", "none")]
-ROSBRIDGE_OPTIONS = [("Off (no web clients)", False),
-                     ("On: check browsers' path (rosbridge)", True)]
-SELECT_OPTIONS = {"this-role": ROLE_OPTIONS, "this-connection": CONNECTION_OPTIONS,
-                  "this-profile": PROFILE_OPTIONS, "ros-version": ROS_VERSION_OPTIONS,
-                  "rosbridge-enabled": ROSBRIDGE_OPTIONS, "ros-security": SECURITY_OPTIONS}
-
-
-def validate_optional_name(value: str) -> str | None:
-    """A name, or nothing (the default applies)."""
-    return S.validate_name(value) if value else None
+# The choices of each select, by its id (a draft keeps them as text).
+SELECT_OPTIONS = {f.id: list(f.options) for f in form.FIELDS if f.kind == "choice"}
 
 
 class PeerRow(Horizontal):
@@ -95,14 +91,11 @@ class PeerRow(Horizontal):
 
     def compose(self) -> ComposeResult:
         i, p = self.index, self.peer
-        yield OrderedInput(p.name, placeholder="name", id=f"peer-{i}-name", compact=True,
-                           validators=[PeerNameValidator(self)], classes="peer-name")
-        yield OrderedInput(p.local_ip, placeholder="local IP", id=f"peer-{i}-local", compact=True,
-                    validators=[CoreValidator(S.validate_ip, required=False)])
-        yield OrderedInput(p.public_ip, placeholder="public IP", id=f"peer-{i}-public", compact=True,
-                    validators=[CoreValidator(S.validate_ip, required=False)])
-        yield OrderedInput(p.ssh_user, placeholder="ssh user", id=f"peer-{i}-user", compact=True,
-                    validators=[CoreValidator(S.validate_ssh_user)], classes="peer-user")
+        for c in form.PEER_FIELDS:
+            check = PeerNameValidator(self) if c.check is None else CoreValidator(c.check)
+            yield OrderedInput(getattr(p, c.attr), placeholder=c.placeholder,
+                               id=f"peer-{i}-{c.suffix}", compact=True, validators=[check],
+                               classes=c.classes or None)
         yield Button(Text("[del]"), id=f"peer-{i}-remove", compact=True, classes="peer-remove",
                      tooltip="Remove this peer")
 
@@ -110,9 +103,8 @@ class PeerRow(Horizontal):
         """The peer as typed so far (its own values until its fields are mounted)."""
         i, p = self.index, self.peer
         typed = {w.id: w.value.strip() for w in self.query(Input)}
-        val = lambda suffix, default: typed.get(f"peer-{i}-{suffix}", default)  # noqa: E731
-        return replace(p, name=val("name", p.name), local_ip=val("local", p.local_ip),
-                       public_ip=val("public", p.public_ip), ssh_user=val("user", p.ssh_user))
+        return replace(p, **{c.attr: typed.get(f"peer-{i}-{c.suffix}", getattr(p, c.attr))
+                             for c in form.PEER_FIELDS})
 
 
 class SetupScreen(Screen[bool]):
@@ -136,85 +128,14 @@ class SetupScreen(Screen[bool]):
 
     def compose(self) -> ComposeResult:
         s = self.session.settings
-        t = s.this
-        # First run: the detected address, ready to keep. Saved settings keep their blank (the
-        # address is then detected at each run), so saving them unchanged changes nothing.
-        local_ip = t.local_ip or ("" if s.complete else self.detected.local_ip)
         yield PlainHeader()
         with VerticalScroll(id="setup-form"):
             yield Static("Describe this machine and the components it must reach. Tab moves "
                          "between fields; Ctrl+S saves; Esc or F10 goes back without saving.",
                          id="setup-intro")
             yield Static("This component", classes="section")
-            with Horizontal(classes="field"):
-                yield Label("Name", classes="field-label")
-                yield OrderedInput(t.name, placeholder="e.g. turtlebot", id="this-name", compact=True,
-                            validators=[CoreValidator(S.validate_name)])
-            yield Label("", id="this-name-error", classes="field-error")
-            with Horizontal(classes="field"):
-                yield Label("Role", classes="field-label")
-                yield Select(ROLE_OPTIONS, value=t.role, allow_blank=False, id="this-role",
-                             compact=True)
-            with Horizontal(classes="field"):
-                yield Label("Connection", classes="field-label")
-                yield Select(CONNECTION_OPTIONS, value=t.connection, allow_blank=False,
-                             id="this-connection", compact=True)
-            with Horizontal(classes="field"):
-                yield Label("Network", classes="field-label")
-                yield Select(PROFILE_OPTIONS, value=t.profile, allow_blank=False,
-                             id="this-profile", compact=True)
-            with Horizontal(classes="field"):
-                yield Label("Local IP", classes="field-label")
-                yield OrderedInput(local_ip, placeholder=self.detected.local_ip or "e.g. 10.10.10.1",
-                                   id="this-local-ip", compact=True,
-                                   validators=[CoreValidator(
-                                       S.validate_ip, required=not self.detected.local_ip)])
-            yield Label(self._local_ip_hint(), id="this-local-ip-error", classes="field-hint")
-            with Horizontal(classes="field"):
-                yield Label("Test port", classes="field-label")
-                yield OrderedInput(str(s.probe.port), id="probe-port", compact=True, type="integer",
-                            validators=[CoreValidator(S.validate_port)])
-            yield Label("", id="probe-port-error", classes="field-error")
-            with Horizontal(classes="field"):
-                yield Label("ROS", classes="field-label")
-                yield Select(ROS_VERSION_OPTIONS, value=s.ros.version if s.ros.version in (1, 2)
-                             else 1, allow_blank=False, id="ros-version", compact=True)
-            with Horizontal(classes="field", id="zenoh-field"):
-                yield Label("Zenoh port", classes="field-label")
-                yield OrderedInput(str(s.ros.zenoh_port), id="ros-zenoh-port", compact=True,
-                                   type="integer", validators=[CoreValidator(S.validate_port)])
-            yield Label("", id="ros-zenoh-port-error", classes="field-error")
-            with Horizontal(classes="field", id="domain-field"):
-                yield Label("Domain id", classes="field-label")
-                yield OrderedInput(str(s.ros.domain_id), id="ros-domain-id", compact=True,
-                                   type="integer", validators=[CoreValidator(S.validate_domain_id)])
-            yield Label("", id="ros-domain-id-error", classes="field-error")
-            with Horizontal(classes="field", id="master-field"):
-                yield Label("ROS master", classes="field-label")
-                yield OrderedInput(s.ros.master if t.role == "member" else "",
-                            placeholder="name of the peer that runs roscore", id="ros-master",
-                            compact=True, validators=[CoreValidator(S.validate_name)])
-            yield Label("", id="ros-master-error", classes="field-error")
-            with Horizontal(classes="field"):
-                yield Label("rosbridge", classes="field-label")
-                yield Select(ROSBRIDGE_OPTIONS, value=s.rosbridge.enabled is True,
-                             allow_blank=False, id="rosbridge-enabled", compact=True)
-            with Horizontal(classes="field", id="rosbridge-port-field"):
-                yield Label("Bridge port", classes="field-label")
-                yield OrderedInput(str(s.rosbridge.port), id="rosbridge-port", compact=True,
-                                   type="integer",
-                                   validators=[CoreValidator(S.validate_port, lo=1, hi=65535)])
-            yield Label("", id="rosbridge-port-error", classes="field-error")
-            with Horizontal(classes="field", id="rosbridge-host-field"):
-                yield Label("Bridge host", classes="field-label")
-                yield OrderedInput(s.rosbridge.host, placeholder="default: the ROS master",
-                                   id="rosbridge-host", compact=True,
-                                   validators=[CoreValidator(validate_optional_name)])
-            yield Label("", id="rosbridge-host-error", classes="field-error")
-            with Horizontal(classes="field"):
-                yield Label("Security", classes="field-label")
-                yield Select(SECURITY_OPTIONS, value="none" if s.ros.security == "none" else "on",
-                             allow_blank=False, id="ros-security", compact=True)
+            for f in form.FIELDS:
+                yield from self._field(f, s)
             yield Static("Peers  (name · local IP · public IP · SSH user, optional)",
                          classes="section")
             with Vertical(id="peer-rows"):
@@ -226,6 +147,25 @@ class SetupScreen(Screen[bool]):
                 yield Button(Text("[Save]"), id="save", variant="primary", compact=True)
                 yield Button(Text("[Cancel]"), id="cancel", compact=True)
         yield KeyBar()
+
+    def _field(self, f: form.FormField, s: S.Settings) -> ComposeResult:
+        """One field of the core's table: its row, and the line under it for its reason."""
+        detected = self.detected.local_ip
+        with Horizontal(classes="field", id=f.box or None):
+            yield Label(f.label, classes="field-label")
+            value = f.value(s, detected)
+            if f.kind == "choice":
+                yield Select(list(f.options), value=value, allow_blank=False, id=f.id,
+                             compact=True)
+            else:
+                placeholder = (detected or f.placeholder) if f.detected else f.placeholder
+                yield OrderedInput(value, placeholder=placeholder, id=f.id, compact=True,
+                                   type="integer" if f.kind == "number" else "text",
+                                   validators=[FieldValidator(f, detected)])
+        if f.detected:
+            yield Label(self._local_ip_hint(), id=f"{f.id}-error", classes="field-hint")
+        elif f.kind != "choice":
+            yield Label("", id=f"{f.id}-error", classes="field-error")
 
     def _local_ip_hint(self) -> str:
         d = self.detected
@@ -342,18 +282,18 @@ class SetupScreen(Screen[bool]):
     def _select_changed(self) -> None:
         self._draft_soon()
 
+    def _choices(self) -> dict[str, object]:
+        return {sel.id: sel.value for sel in self.query(Select) if sel.id}
+
     def _update_role(self) -> None:
-        is_member = self.query_one("#this-role", Select).value == "member"
-        self.query_one("#master-field").display = is_member
-        self.query_one("#ros-master-error").display = is_member
-        ros2 = self.query_one("#ros-version", Select).value == 2  # only what the version needs
-        for wid in ("#zenoh-field", "#ros-zenoh-port-error", "#domain-field",
-                    "#ros-domain-id-error"):
-            self.query_one(wid).display = ros2
-        bridge = self.query_one("#rosbridge-enabled", Select).value is True
-        for wid in ("#rosbridge-port-field", "#rosbridge-port-error", "#rosbridge-host-field",
-                    "#rosbridge-host-error"):
-            self.query_one(wid).display = bridge
+        """Show only the fields the choices call for (the master's name on a member, what the
+        ROS version needs, rosbridge's when it is on)."""
+        choices = self._choices()
+        for f in form.FIELDS:
+            if f.box:
+                shown = form.shown(f, choices)
+                self.query_one(f"#{f.box}").display = shown
+                self.query_one(f"#{f.id}-error").display = shown
 
     @on(Input.Changed)
     def _input_changed(self, event: Input.Changed) -> None:
@@ -363,7 +303,8 @@ class SetupScreen(Screen[bool]):
             if label is not None:
                 ok = event.validation_result.is_valid
                 msg = "" if ok else "; ".join(event.validation_result.failure_descriptions)
-                if event.input.id == "this-local-ip" and ok:
+                field = form.FIELD_BY_ID.get(event.input.id)
+                if ok and field is not None and field.detected:
                     msg = self._local_ip_hint()
                 label.update(cut(msg, max(20, self.size.width - 16)))
                 label.set_class(not ok, "-shown")
@@ -420,76 +361,27 @@ class SetupScreen(Screen[bool]):
 
     # ------------------------------------------------------------------ form -> settings
     def read_form(self) -> tuple[S.Settings, list[tuple[str, str]]]:
-        old = self.session.settings
-        val = lambda wid: self.query_one(f"#{wid}", Input).value.strip()  # noqa: E731
-        role = str(self.query_one("#this-role", Select).value)
-        this = replace(old.this, name=val("this-name"), role=role,
-                       connection=str(self.query_one("#this-connection", Select).value),
-                       profile=str(self.query_one("#this-profile", Select).value),
-                       local_ip=val("this-local-ip"),
-                       interface=old.this.interface)
-        peers = [row.read() for row in self.query(PeerRow)]
-        master = this.name if role == "master" else val("ros-master")
-        problems: list[tuple[str, str]] = []
-        port_text = val("probe-port")
-        why = S.validate_port(port_text)
-        port = int(port_text) if why is None else old.probe.port
-        if why:
-            problems.append(("probe.port", why))
-        version = int(self.query_one("#ros-version", Select).value or 1)
-        ros = replace(old.ros, master=master, version=version)
-        if self.query_one("#ros-security", Select).value == "none":
-            ros.security = "none"
-        elif ros.security == "none" or ros.security_chosen():
-            ros.security = default_security(version)   # on: what this version does
-        if version == 2:
-            for key, wid, check in (("zenoh_port", "ros-zenoh-port", S.validate_port),
-                                    ("domain_id", "ros-domain-id", S.validate_domain_id)):
-                text = val(wid)
-                why = check(text)
-                if why:
-                    problems.append((f"ros.{key}", why))
-                else:
-                    ros = replace(ros, **{key: int(text)})
-        bridge = replace(old.rosbridge,
-                         enabled=self.query_one("#rosbridge-enabled", Select).value is True)
-        if bridge.enabled:
-            text = val("rosbridge-port")
-            why = S.validate_port(text, lo=1, hi=65535)
-            if why:
-                problems.append(("rosbridge.port", why))
-            else:
-                bridge = replace(bridge, port=int(text))
-            bridge = replace(bridge, host=val("rosbridge-host"))
-        settings = replace(old, this=this, peers=peers, ros=ros,
-                           probe=replace(old.probe, port=port), rosbridge=bridge)
-        problems += settings.problems()
-        # Blank is fine when this machine's address can be detected at each run.
-        why = S.validate_ip(this.local_ip, required=not self.detected.local_ip)
-        if why:
-            problems.insert(0, ("this.local_ip", why))
-        return settings, problems
+        values: dict[str, object] = self._choices()
+        values.update({w.id: w.value.strip() for w in self.query(Input)
+                       if w.id and not w.id.startswith("peer-")})
+        return form.settings_from_form(self.session.settings, values,
+                                       [row.read() for row in self.query(PeerRow)],
+                                       self.detected.local_ip)
 
     def _show_problem(self, key: str, why: str) -> None:
         """Put the reason beside the field at fault, and the cursor in it."""
         target, label_id = None, None
-        if key.startswith("peer["):
-            idx = int(key[5:key.index("]")]) - 1
+        in_row = form.peer_field_for_key(key)
+        if in_row is not None:
+            idx, column = in_row
             rows = list(self.query(PeerRow))
-            field = key.rsplit(".", 1)[-1]
-            suffix = {"name": "name", "local_ip": "local", "public_ip": "public",
-                      "ssh_user": "user"}.get(field, "name")
             if 0 <= idx < len(rows):
-                target = f"#peer-{rows[idx].index}-{suffix}"
+                target = f"#peer-{rows[idx].index}-{column.suffix}"
             label_id = "#peer-error"
             why = f"peer {idx + 1}: {why}"
         else:
-            target = {"this.name": "#this-name", "this.local_ip": "#this-local-ip",
-                      "probe.port": "#probe-port", "ros.master": "#ros-master",
-                      "ros.zenoh_port": "#ros-zenoh-port",
-                      "ros.domain_id": "#ros-domain-id",
-                      "rosbridge.port": "#rosbridge-port",
-                      "rosbridge.host": "#rosbridge-host"}.get(key)
+            field = form.field_for_key(key)
+            target = f"#{field.id}" if field is not None else None
             label_id = f"{target}-error" if target else None
         if label_id:
             label = self.query_one(label_id, Label)
