@@ -11,6 +11,7 @@ import re
 import sys
 import unicodedata
 from dataclasses import dataclass, field
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -318,6 +319,13 @@ class SyncSettings:
     tsig_key_file: str = ""          # dns store: BIND-style TSIG key file
 
 
+class Gap(str, Enum):
+    """A problem that is a value not given yet, rather than a wrong one."""
+
+    BLANK = "blank"            # a name the wizard asks for is empty (this one's, a peer's, the master's)
+    NO_ADDRESS = "no_address"  # a peer with neither a local nor a public IP
+
+
 @dataclass
 class Settings:
     this: ThisComponent = field(default_factory=ThisComponent)
@@ -364,14 +372,22 @@ class Settings:
 
     def problems(self) -> list[tuple[str, str]]:
         """Everything that keeps these settings from being complete: (key, reason) pairs."""
-        out: list[tuple[str, str]] = []
+        return [(key, why) for key, why, _gap in self._checked()]
 
-        def add(key: str, why: str | None) -> None:
+    def errors(self, *, allow: tuple[Gap, ...] = ()) -> list[tuple[str, str]]:
+        """The problems but the gaps in *allow*: what is wrong, not merely not filled in yet
+        (a loader accepts a file the wizard will complete)."""
+        return [(key, why) for key, why, gap in self._checked() if gap not in allow]
+
+    def _checked(self) -> list[tuple[str, str, Gap | None]]:
+        out: list[tuple[str, str, Gap | None]] = []
+
+        def add(key: str, why: str | None, gap: Gap | None = None) -> None:
             if why:
-                out.append((key, why))
+                out.append((key, why, gap))
 
         t = self.this
-        add("this.name", validate_name(t.name))
+        add("this.name", validate_name(t.name), None if t.name else Gap.BLANK)
         add("this.role", None if t.role in ROLES else f"must be one of {', '.join(ROLES)}")
         add("this.connection", None if t.connection in CONNECTIONS
             else f"must be one of {', '.join(CONNECTIONS)}")
@@ -385,7 +401,7 @@ class Settings:
         seen = {t.name.lower()}           # host names do not differ by case
         for i, p in enumerate(self.peers):
             k = f"peer[{i + 1}]"
-            add(f"{k}.name", validate_name(p.name))
+            add(f"{k}.name", validate_name(p.name), None if p.name else Gap.BLANK)
             if p.name.lower() == t.name.lower():
                 add(f"{k}.name", f"the name '{shown(p.name)}' is this component's own name "
                                  "(used twice; names ignore case)")
@@ -398,7 +414,8 @@ class Settings:
             add(f"{k}.office_ip", validate_ip(p.office_ip, required=False))
             add(f"{k}.portable_ip", validate_ip(p.portable_ip, required=False))
             if not p.local_ip and not p.public_ip:
-                add(f"{k}.public_ip", "give the peer a local IP, a public IP, or both")
+                add(f"{k}.public_ip", "give the peer a local IP, a public IP, or both",
+                    Gap.NO_ADDRESS)
             add(f"{k}.ssh_user", validate_ssh_user(p.ssh_user))
             add(f"{k}.ssh_port", validate_port(p.ssh_port, lo=1, hi=65535))
         if self.ros.master:
@@ -410,7 +427,7 @@ class Settings:
             elif t.role == "member" and self.ros.master == t.name:
                 add("ros.master", "this component is a member, so ros.master must name a peer")
         elif t.role == "member":
-            add("ros.master", "a member needs the name of the master")
+            add("ros.master", "a member needs the name of the master", Gap.BLANK)
         add("ros.port", validate_port(self.ros.port, lo=1, hi=65535))
         add("ros.version", validate_ros_version(self.ros.version))
         add("ros.zenoh_port", validate_port(self.ros.zenoh_port))
@@ -441,7 +458,8 @@ class Settings:
             add("sync.dns_server", validate_ip(y.dns_server))
         if y.zone:
             zone = y.zone.rstrip(".")
-            add("sync.zone", validate_name(zone) if zone else "a zone name is required")
+            add("sync.zone", validate_name(zone) if zone else "a zone name is required",
+                None if zone else Gap.BLANK)
         return out
 
     @property

@@ -19,6 +19,7 @@ from rosnet_tui.core.config.settings_model import (
     MAX_SETTINGS_BYTES,
     ZENOH_PORT_DEFAULT,
     FirewallSettings,
+    Gap,
     Peer,
     RosbridgeSettings,
     Settings,
@@ -255,10 +256,7 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
         _check_table(text, path, "firewall", raw["firewall"])
         s.firewall = replace(s.firewall, **raw["firewall"])
 
-    for key, why in s.problems():
-        # Incomplete is fine (the wizard fills it in); wrong is not.
-        if why.endswith("is required") or why.startswith("a member needs"):
-            continue
+    for key, why in s.errors(allow=(Gap.BLANK,)):   # incomplete is fine (the wizard fills it in)
         table, _, rest = key.partition(".")
         index = 0
         m = re.match(r"peer\[(\d+)\]", table)

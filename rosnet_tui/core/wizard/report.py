@@ -24,6 +24,7 @@ from rosnet_tui import __version__
 from rosnet_tui.core.advisor import advice_by_check, advise
 from rosnet_tui.core.config.settings_model import (
     CheckSettings,
+    Gap,
     Peer,
     ProbeSettings,
     RosbridgeSettings,
@@ -153,10 +154,8 @@ def settings_from_dict(d: dict[str, Any]) -> Settings:
                  probe=pick(ProbeSettings, d.get("probe"), "probe"),
                  checks=pick(CheckSettings, d.get("checks"), "checks"),
                  rosbridge=pick(RosbridgeSettings, d.get("rosbridge"), "rosbridge"))
-    for key, why in s.problems():
-        # incomplete is fine (the advice then knows fewer names); wrong is not
-        if why.endswith("is required") or why.startswith(("a member needs", "give the peer")):
-            continue
+    # incomplete is fine (the advice then knows fewer names); wrong is not
+    for key, why in s.errors(allow=(Gap.BLANK, Gap.NO_ADDRESS)):
         raise ReportError(f"settings: {key}: {why}")
     return s
 
