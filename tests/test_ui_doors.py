@@ -26,9 +26,10 @@ def _trees():
 def test_the_ui_and_the_cli_never_read_a_check_results_raw_data():
     """A check's data is read through the session's typed accessors (which read it through its
     declaration, rosnet_tui.core.checks.data), so a renamed key fails a test instead of silently
-    emptying a screen."""
+    emptying a screen. The same for an undo entry's changes outside files (JournalEntry.made(),
+    .kinds(): not `m.get("state") == "made"` in each screen)."""
     pokes = [f"{rel}:{node.lineno}" for rel, tree in _trees() for node in ast.walk(tree)
-             if isinstance(node, ast.Attribute) and node.attr == "data"]
+             if isinstance(node, ast.Attribute) and node.attr in ("data", "mappings")]
     assert pokes == [], "raw check data read by the UI or the CLI: " + ", ".join(pokes)
 
 

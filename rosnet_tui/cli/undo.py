@@ -81,9 +81,9 @@ def run(args: argparse.Namespace) -> int:
     for f in e.files:
         what = "put back as it was" if f.existed else "removed (rosnet-tui created it)"
         print(f"  {f.path}: {what}")
-    forwards = [m for m in e.mappings if m.get("state") == "made"]
-    for m in forwards:
-        print(f"  {firewall.describe(m)}" if m.get("kind") == firewall.KIND else
+    forwards = e.made()
+    for kind, m in forwards:
+        print(f"  {firewall.describe(m)}" if kind == firewall.KIND else
               f"  the forward {describe_forward(m)}: removed from the modem")
     diff = plan.diff()
     if diff:
@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_OK
     if diff or forwards:
         stop = confirm(args, "Restore these files?" if diff else
-                       "Put the firewall back?" if e.mappings[0].get("kind") == firewall.KIND
+                       "Put the firewall back?" if e.kinds()[:1] == [firewall.KIND]
                        else "Remove these forwards?")
         if stop is not None:
             return stop
@@ -119,9 +119,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"Restored: {', '.join(str(p) for p in result.files)}")
         for line in result.forwards:
             print(line)
-    if not args.no_checks and any(m.get("kind") == firewall.KIND for m in e.mappings):
+    if not args.no_checks and firewall.KIND in e.kinds():
         rerun_checks(affected.FIREWALL, _settings_quietly(args), paths_of(args))
-    elif not args.no_checks and e.mappings:
+    elif not args.no_checks and e.kinds():
         rerun_checks(affected.FORWARD, _settings_quietly(args), paths_of(args))
     elif not args.no_checks:
         settings = _settings_quietly(args)

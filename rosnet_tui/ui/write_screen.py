@@ -226,9 +226,9 @@ class UndoScreen(ConfirmDialog[bool]):
             self.set_confirm(False)
             return
         diff = self.plan.diff()
-        forwards = [(firewall.describe(m) if m.get("kind") == firewall.KIND else
+        forwards = [(firewall.describe(m) if kind == firewall.KIND else
                      f"Remove the forward {describe_forward(m)}")
-                    for m in self.plan.entry.mappings if m.get("state") == "made"]
+                    for kind, m in self.plan.entry.made()]
         self.query_one("#write-diff", Static).update(diff_text(diff) if diff else
                                                      Text("\n".join(forwards)))
         notes = [f"Changed since by someone else: {c}" for c in self.plan.conflicts]
@@ -269,10 +269,9 @@ class UndoScreen(ConfirmDialog[bool]):
         except mt.ManagedFileError as exc:
             self.notify(f"Not undone: {exc}", severity="error", timeout=10)
             return
-        kinds = {m.get("kind") for m in self.plan.entry.mappings}
         self.notify("Put the firewall back as it was before the last change."
-                    if firewall.KIND in kinds else
+                    if firewall.KIND in self.plan.entry.kinds() else
                     "Removed the forwards of the last change from the modem."
-                    if self.plan.entry.mappings else "Restored the files of the last write.",
+                    if self.plan.entry.kinds() else "Restored the files of the last write.",
                     timeout=5)
         self.dismiss(True)

@@ -322,8 +322,8 @@ class UndoPlan:
 
     @property
     def needs_privilege(self) -> bool:
-        nft = any(m.get("kind") == "nft_table" and m.get("state") == "made"
-                  for m in self.entry.mappings)
+        # "nft_table": firewall.KIND (core/exposure, a floor above: not imported here)
+        nft = any(kind == "nft_table" for kind, _change in self.entry.made())
         return any(p.needs_privilege for p in self.previews) or (nft and os.geteuid() != 0)
 
     def diff(self) -> str:

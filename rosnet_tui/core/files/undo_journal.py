@@ -58,6 +58,16 @@ class JournalEntry:
     # each a dict with a "kind"; undone by the handler registered for that kind.
     mappings: list[dict] = field(default_factory=list)
 
+    def kinds(self) -> list[str]:
+        """The kinds of its changes outside files, in the order they were recorded."""
+        return list(dict.fromkeys(str(m.get("kind")) for m in self.mappings))
+
+    def made(self) -> list[tuple[str, dict]]:
+        """Its changes outside files still in effect, each with its kind, in recorded order:
+        each kind's handler marks a change "made" when it makes it and moves it on when it is
+        undone or lost."""
+        return [(str(m.get("kind")), m) for m in self.mappings if m.get("state") == "made"]
+
     def to_json(self) -> dict:
         d = {"version": self.version, "id": self.id, "created": self.created,
              "label": self.label, "undone": self.undone,
