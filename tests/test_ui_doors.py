@@ -208,3 +208,35 @@ def test_a_settings_gap_is_told_apart_from_a_wrong_value_by_its_kind():
                                                            "peer[1].public_ip"]
     assert [k for k, _ in s.errors(allow=(Gap.BLANK, Gap.NO_ADDRESS))] == ["peer[1].name"]
     assert parse_settings('[this]\nrole = "member"\n').this.role == "member"
+
+
+# --------------------------------------------------------------------------- other raw dicts
+# Raw dicts the core still hands the UI and the CLI, read by string key, each where the core's
+# owner of the dict lives in a room this sweep did not touch (issue 33's closing note). The
+# environment is not the core's. A new poke fails: hand a typed value instead.
+STILL_RAW = {
+    "rosnet_tui/ui/map_screen.py": {"port"},                      # core/upnp: result.made
+    "rosnet_tui/cli/router.py": {"protocol", "port", "internal_client", "via", "lease_s",
+                                 "renewed_at"},                   # core/upnp: recorded forwards
+    "rosnet_tui/cli/ros_pair.py": {"cn", "not_after"},            # core/ros: fleet_tls.install
+    "rosnet_tui/cli/report.py": {"summary", "fail", "generated", "environment", "report"},
+    "rosnet_tui/cli/sync.py": {"errors"},                         # core/sync: the status file
+}
+
+
+def test_the_ui_and_the_cli_read_no_new_raw_dict_of_the_core():
+    found: dict[str, set[str]] = {}
+    for rel, tree in _trees():
+        for node in ast.walk(tree):
+            key = None
+            if isinstance(node, ast.Subscript) and isinstance(node.ctx, ast.Load) \
+                    and isinstance(node.slice, ast.Constant):
+                key = node.slice.value
+            elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) \
+                    and node.func.attr == "get" and node.args \
+                    and isinstance(node.args[0], ast.Constant) \
+                    and ast.unparse(node.func.value) != "os.environ":
+                key = node.args[0].value
+            if isinstance(key, str):
+                found.setdefault(rel, set()).add(key)
+    assert found == STILL_RAW

@@ -197,8 +197,7 @@ class SetupScreen(Screen[bool]):
         for sel in self.query(Select):
             if sel.id and sel.value is not Select.BLANK:
                 fields[sel.id] = str(sel.value)
-        peers = [{"name": p.name, "local_ip": p.local_ip, "public_ip": p.public_ip,
-                  "ssh_user": p.ssh_user} for p in (row.read() for row in self.query(PeerRow))]
+        peers = [form.peer_row(row.read()) for row in self.query(PeerRow)]
         return fields, peers
 
     def keep_draft(self) -> None:
@@ -226,7 +225,7 @@ class SetupScreen(Screen[bool]):
         draft = self.session.draft()
         if not draft:
             return
-        for wid, value in draft["fields"].items():
+        for wid, value in draft.fields.items():
             try:
                 widget = self.query_one(f"#{wid}")
             except Exception:
@@ -240,19 +239,14 @@ class SetupScreen(Screen[bool]):
                                         value)
             except Exception:
                 continue  # a value the field refuses: it keeps the saved one
-        peers = draft.get("peers")
-        if isinstance(peers, list):
+        if draft.peers is not None:
             rows = self.query_one("#peer-rows")
             await rows.remove_children()
-            for p in peers:
-                if isinstance(p, dict):
-                    peer = S.Peer(name=str(p.get("name", "")), local_ip=str(p.get("local_ip", "")),
-                                  public_ip=str(p.get("public_ip", "")),
-                                  ssh_user=str(p.get("ssh_user", "")))
-                    await rows.mount(self._peer_row(peer))
+            for peer in draft.peers:
+                await rows.mount(self._peer_row(peer))
         from rosnet_tui.core.saved.ui_state import local_time
 
-        when = local_time(str(draft.get("at", "")))
+        when = local_time(draft.at)
         self._restored_draft = True
         self.notify(f"Back where you were: the set-up typed {when or 'earlier'} and not saved "
                     "yet. Ctrl+S saves it, Esc discards it.", timeout=8)

@@ -18,6 +18,7 @@ from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult
 from rosnet_tui.core.saved.settings import save_settings
 from rosnet_tui.core.saved.ui_state import UiState, local_time
+from rosnet_tui.core.wizard.setup_form import Draft, draft_from
 from rosnet_tui.core.wizard.steps import STEP_BY_ID, step_for
 
 if TYPE_CHECKING:
@@ -303,12 +304,13 @@ class WizardSession:
         self.ui_state.set_last_step(step)  # a convenience: never a reason to fail
 
     # ------------------------------------------------------------------ the set-up draft
-    def draft(self) -> dict | None:
+    def draft(self) -> Draft | None:
         """The set-up form of this settings file being filled in and not saved yet, from this or
         an earlier session (never one typed for another file)."""
-        return self.ui_state.draft(self.paths.config_path)
+        return draft_from(self.ui_state.draft(self.paths.config_path))
 
     def save_draft(self, fields: dict[str, str], peers: list[dict[str, str]]) -> None:
+        """Keep the form as typed: *fields* by field id, *peers* as setup_form.peer_row gives."""
         self.ui_state.set_draft(self.paths.config_path, fields, peers)
 
     def clear_draft(self) -> None:

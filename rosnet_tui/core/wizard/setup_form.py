@@ -135,6 +135,31 @@ PEER_FIELDS: tuple[PeerField, ...] = (
 )
 
 
+@dataclass(frozen=True)
+class Draft:
+    """A set-up form typed and not saved yet (kept in the state dir between sessions)."""
+
+    fields: dict[str, str]   # by field id, as typed (choices as text)
+    peers: list[S.Peer] | None   # the peers' rows (None: the draft kept none)
+    at: str                  # when it was kept (ISO 8601, UTC; "" when unknown)
+
+
+def peer_row(peer: S.Peer) -> dict[str, str]:
+    """A peer's row as a draft keeps it (its columns by settings attribute)."""
+    return {c.attr: getattr(peer, c.attr) for c in PEER_FIELDS}
+
+
+def draft_from(saved: Mapping[str, Any] | None) -> Draft | None:
+    """The draft kept as *saved* (what the state file holds), or None; rows or values of
+    another shape are left out."""
+    if not saved or not isinstance(saved.get("fields"), dict):
+        return None
+    rows = saved.get("peers")
+    peers = [S.Peer(**{c.attr: str(row.get(c.attr, "")) for c in PEER_FIELDS})
+             for row in rows if isinstance(row, dict)] if isinstance(rows, list) else None
+    return Draft(dict(saved["fields"]), peers, str(saved.get("at", "")))
+
+
 def shown(field: FormField, values: Mapping[str, Any]) -> bool:
     """Whether *field* shows, given the form's choices (*values* by field id)."""
     if field.shows == "member":
