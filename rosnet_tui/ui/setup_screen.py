@@ -25,13 +25,12 @@ from rosnet_tui.ui.widgets import KeyBar, PlainHeader
 class CoreValidator(Validator):
     """Wrap a core validator (value -> reason or None) for Textual's Input."""
 
-    def __init__(self, func, **kwargs) -> None:
+    def __init__(self, func) -> None:
         super().__init__()
         self.func = func
-        self.kwargs = kwargs
 
     def validate(self, value: str) -> ValidationResult:
-        why = self.func(value.strip(), **self.kwargs)
+        why = self.func(value.strip())
         return self.failure(why) if why else self.success()
 
 
