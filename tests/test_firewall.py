@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from rosnet_tui.core.addresses import is_lan_network
 from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.config.settings_model import Peer, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.exposure import firewall as fw
@@ -161,10 +162,10 @@ def test_only_private_link_local_and_unique_local_networks_count_as_lan():
            "fd12:3456::/64")
     public = ("203.0.113.0/24", "198.51.100.0/24", "100.64.0.0/10", "100.64.1.0/24",
               "2001:db8::/64", "10.0.0.0/7", "172.32.0.0/16")
-    assert all(netinfo.is_lan(ipaddress.ip_network(n)) for n in lan)
-    assert not any(netinfo.is_lan(ipaddress.ip_network(n)) for n in public)
+    assert all(is_lan_network(ipaddress.ip_network(n)) for n in lan)
+    assert not any(is_lan_network(ipaddress.ip_network(n)) for n in public)
     got = netinfo.lan_networks()                       # this machine's own, whatever it has
-    assert all(netinfo.is_lan(ipaddress.ip_network(n)) for n in got), got
+    assert all(is_lan_network(ipaddress.ip_network(n)) for n in got), got
     assert not any(ipaddress.ip_network(n).network_address.is_loopback for n in got)
 
 

@@ -16,6 +16,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
+from rosnet_tui.core.addresses import KIND_WORDS, address_kind
 from rosnet_tui.core.upnp import igd as igd_mod
 from rosnet_tui.core.upnp import pmp
 from rosnet_tui.core.upnp.wire import HostileAnswer, ModemError, NoAnswer, Refused, label
@@ -142,7 +143,7 @@ class Modem:
                                 nonce, deadline, notes=self.notes)
                 raise _taken("pcp", port, ans.external_port)
             if ans.external_ip:
-                self.external_ip = ans.external_ip
+                self.external_ip = wan_address(ans.external_ip, "pcp", self.notes)
             return {"via": "pcp", "lease_s": ans.lifetime, "nonce": nonce.hex()}
         if via == "natpmp":
             eport, life = pmp.natpmp_map(self.gateway, protocol, port, port, lease_s, deadline,
@@ -180,6 +181,24 @@ class Modem:
                            source_ip=self.local_ip, notes=self.notes)
             return f"{protocol} {port}: removed from the modem (NAT-PMP)"
         raise ValueError(f"unknown protocol {via!r}")
+
+
+# What a modem's external address may be: the internet's, or a carrier's or a LAN's in front of it.
+WAN_KINDS = ("public", "documentation", "shared", "private")
+
+
+def wan_address(reported: str, protocol: str, notes: list[str]) -> str:
+    """The modem's external address as it reported it, or "" (none) when what it reported cannot
+    be one: 0.0.0.0 (usual when the modem has no WAN address), loopback, link-local, multicast,
+    broadcast, reserved. Said in *notes*."""
+    if not reported:
+        return ""
+    kind = address_kind(reported)
+    if kind in WAN_KINDS:
+        return reported
+    notes.append(f"{label(protocol)}: the modem reports {reported} as its external address, "
+                 f"{KIND_WORDS[kind]}: read as no public address")
+    return ""
 
 
 def _taken(protocol: str, port: int, offered: int) -> Refused:
@@ -280,14 +299,15 @@ def find_modem(timeout: float, *, gateway: str | None = None,
     if isinstance(got_igd, igd_mod.Igd):
         modem.igd = got_igd
         try:
-            modem.external_ip = igd_mod.external_ip(got_igd, max(deadline, time.monotonic() + 1))
+            modem.external_ip = wan_address(
+                igd_mod.external_ip(got_igd, max(deadline, time.monotonic() + 1)), "upnp", notes)
         except ModemError as exc:
             notes.append(f"UPnP IGD: external address: {exc}")
     elif "upnp" in modem.protocols:
         modem.protocols.remove("upnp")
     nat = answered.get("natpmp")
     if modem.external_ip is None and isinstance(nat, str):
-        modem.external_ip = "" if nat == "0.0.0.0" else nat
+        modem.external_ip = wan_address(nat, "natpmp", notes)
     elif modem.external_ip is None and isinstance(nat, Refused) and nat.code == 3:
         modem.external_ip = ""   # NAT-PMP "network failure": the modem has no public address
     if not modem.protocols:
