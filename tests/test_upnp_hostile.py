@@ -367,3 +367,36 @@ def test_row9_a_confirmed_natpmp_delete_is_a_removal(udp):
     udp(lambda req: [struct.pack("!BBHIHHI", 0, 130, 0, 5, 7447, 0, 0)])
     m = Modem(HOST, HOST, ["natpmp"])
     assert "removed" in m.remove({"protocol": "TCP", "port": 7447, "via": "natpmp"}, soon())
+
+
+# --------------------------------------------------------------------------- issue 32: the pace
+def test_with_no_modem_discovery_ends_when_the_gateway_says_closed(monkeypatch):
+    """A gateway that speaks none of the three answers "port unreachable" to each: the search
+    ends then (and a short last look), not at the end of the SSDP window."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind((HOST, 0))
+    closed = s.getsockname()[1]
+    s.close()
+    monkeypatch.setattr(pmp, "PORT", closed)
+    monkeypatch.setattr(wire, "SSDP_ADDR", ("239.255.255.250", closed))
+    notes: list[str] = []
+    t = time.monotonic()
+    got = ends(lambda: find_modem(4.0, gateway=HOST, notes=notes))
+    took = time.monotonic() - t
+    assert got == {"ok": None}, got
+    assert any("does not listen for UPnP searches" in n for n in notes), notes
+    assert took < 0.8, took    # the SSDP window (0.8 s) was not waited out
+
+
+# --------------------------------------------------------------------------- the siblings
+def test_a_peers_http_with_non_ascii_digits_is_refused_in_words():
+    """The ROS XML-RPC reader (what a peer's master or node sends) holds to the same rule."""
+    import io
+
+    from rosnet_tui.core.net.probe_server import parse_listen
+    from rosnet_tui.core.peer.rosproto import XmlRpcError, read_http
+
+    with pytest.raises(XmlRpcError, match="bad Content-Length"):
+        read_http(io.BytesIO(b"HTTP/1.0 200 OK\r\nContent-Length: 1\xb9\r\n\r\nxx"), True)
+    with pytest.raises(ValueError, match="not ADDR:PORT"):
+        parse_listen("80\u00b9")

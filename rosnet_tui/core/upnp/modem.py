@@ -258,8 +258,7 @@ def find_modem(timeout: float, *, gateway: str | None = None,
 
         found = ssdp_search(ssdp_window, gateway=gateway, source_ip=local_ip, notes=notes)
         if found is None:
-            notes.append(f"UPnP IGD: no answer to SSDP from {gateway} within "
-                         f"{ssdp_window:.1f} s")
+            notes.append(f"UPnP IGD: no answer to SSDP from {gateway}")
             return None
         return igd_mod.describe(found.location, gateway, deadline, source_ip=local_ip)
 

@@ -8,6 +8,7 @@ control URL) must point at the modem that answered, never at another host.
 
 from __future__ import annotations
 
+import select
 import socket
 import time
 import xml.etree.ElementTree as ET
@@ -344,48 +345,68 @@ def parse_ssdp(data: bytes, sender: str) -> SsdpAnswer:
                       clean_text(fields.get("server"), "SERVER"))
 
 
+SSDP_CLOSED_GRACE_S = 0.15   # after the gateway's SSDP port said "closed": a last look
+
+
 def ssdp_search(timeout: float, *, gateway: str, source_ip: str | None = None,
                 notes: list[str] | None = None) -> SsdpAnswer | None:
     """M-SEARCH for an internet gateway; the first valid answer from *gateway* (others noted and
-    ignored: a forward only helps on the modem traffic leaves through)."""
+    ignored: a forward only helps on the modem traffic leaves through).
+
+    The unicast search to the gateway goes from a socket of its own, connected: when the gateway
+    answers it with "port unreachable" (a modem without UPnP, the usual case), the search ends
+    after a short last look instead of waiting out the window (issue 32)."""
     bad = BadAnswers(notes if notes is not None else [], "SSDP")
     deadline = time.monotonic() + timeout
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    uni = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 2)
         if source_ip:
             s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(source_ip))
             s.bind((source_ip, 0))
+            uni.bind((source_ip, 0))
         for st in IGD_TYPES:
             msg = (f"M-SEARCH * HTTP/1.1\r\nHOST: {SSDP_ADDR[0]}:{SSDP_ADDR[1]}\r\n"
                    f"MAN: \"ssdp:discover\"\r\nMX: 1\r\nST: {st}\r\n\r\n")
             s.sendto(msg.encode(), SSDP_ADDR)
         # Unicast to the gateway too: it answers even where multicast routing is missing.
-        s.sendto((f"M-SEARCH * HTTP/1.1\r\nHOST: {SSDP_ADDR[0]}:{SSDP_ADDR[1]}\r\n"
-                  f"MAN: \"ssdp:discover\"\r\nMX: 1\r\nST: {IGD_TYPES[1]}\r\n\r\n").encode(),
-                 (gateway, SSDP_ADDR[1]))
+        uni.connect((gateway, SSDP_ADDR[1]))
+        uni.send((f"M-SEARCH * HTTP/1.1\r\nHOST: {SSDP_ADDR[0]}:{SSDP_ADDR[1]}\r\n"
+                  f"MAN: \"ssdp:discover\"\r\nMX: 1\r\nST: {IGD_TYPES[1]}\r\n\r\n").encode())
+        waiting = [s, uni]
         while True:
             left = deadline - time.monotonic()
             if left <= 0:
                 return None
-            s.settimeout(left)
-            try:
-                data, (ip, _port) = s.recvfrom(MAX_DATAGRAM + 1)
-            except TimeoutError:
+            ready, _w, _x = select.select(waiting, [], [], left)
+            if not ready:
                 return None
-            try:
-                answer = parse_ssdp(data, ip)
-            except HostileAnswer as exc:
-                bad.add(str(exc))
-                continue
-            if ip != gateway:
-                bad.add(f"{ip} answered too, but it is not the default gateway ({gateway}): "
-                        "ignored")
-                continue
-            return answer
+            for sock in ready:
+                try:
+                    data, (ip, _port) = sock.recvfrom(MAX_DATAGRAM + 1)
+                except ConnectionRefusedError:   # the gateway: nothing listens on its SSDP port
+                    waiting.remove(uni)
+                    bad.notes.append(f"SSDP: {gateway} does not listen for UPnP searches (port "
+                                     f"{SSDP_ADDR[1]} closed)")
+                    deadline = min(deadline, time.monotonic() + SSDP_CLOSED_GRACE_S)
+                    continue
+                except BlockingIOError:
+                    continue
+                try:
+                    answer = parse_ssdp(data, ip)
+                except HostileAnswer as exc:
+                    bad.add(str(exc))
+                    continue
+                if ip != gateway:
+                    bad.add(f"{ip} answered too, but it is not the default gateway ({gateway}): "
+                            "ignored")
+                    continue
+                return answer
     except OSError as exc:
         bad.notes.append(f"SSDP: cannot search the LAN ({exc.strerror or exc})")
         return None
     finally:
         s.close()
+        uni.close()
         bad.close()
