@@ -400,3 +400,40 @@ def test_a_peers_http_with_non_ascii_digits_is_refused_in_words():
         read_http(io.BytesIO(b"HTTP/1.0 200 OK\r\nContent-Length: 1\xb9\r\n\r\nxx"), True)
     with pytest.raises(ValueError, match="not ADDR:PORT"):
         parse_listen("80\u00b9")
+
+
+def test_row1_the_renewal_with_a_hostile_modem_ends_and_the_next_round_is_planned(serve, tmp_path):
+    """The sync service's renewal of a forward made two days ago, on a modem whose answer to
+    AddPortMapping has a negative chunk size: it ends, says why, and names the next look."""
+    def reply(req: bytes) -> bytes:
+        if req.startswith(b"GET"):
+            return http(description())
+        return chunked(b"5\r\n<root\r\n", b"-6\r\nxxxxxx\r\n", b"0\r\n\r\n")
+
+    s = serve(reply)
+    m = Modem(HOST, HOST, ["upnp"], igd=igd_at(s), external_ip="203.0.113.2")
+    two_days_ago = time.time() - 2 * 86400
+    journal.new_entry("forward TCP 7447", [{
+        "protocol": "TCP", "port": 7447, "internal_client": HOST, "via": "upnp",
+        "lease_s": 86400, "temporary": False, "description": "rosnet-tui turtlebot Zenoh router",
+        "modem": m.identity("upnp"), "state": "made", "made_at": two_days_ago,
+        "renewed_at": two_days_ago}], tmp_path)
+    from tests.test_upnp_client import _master
+
+    got = ends(lambda: fw.renew_due(_master(2), state_dir=tmp_path, timeout=2.0, modem=m))
+    said, next_in = got["ok"]
+    assert any("could not renew TCP 7447" in line and "chunk" in line for line in said), said
+    assert next_in is not None and next_in > 0
+    assert [r["state"] for _e, r in journal.live(tmp_path)] == ["made"]
+
+
+def test_an_offer_of_another_port_not_given_back_is_said(udp):
+    """NAT-PMP maps another external port; giving it back is answered by a late copy: the
+    refusal says that port may still be forwarded here, instead of "given back"."""
+    udp(lambda req: [struct.pack("!BBHIHHI", 0, 130, 0, 5, 7447, 40000, 3600)])
+    m = Modem(HOST, HOST, ["natpmp"])
+    got = ends(lambda: m.add("TCP", 7447, 3600, "x", soon(1.0), via="natpmp"))
+    err = got.get("err")
+    assert isinstance(err, wire.Refused) and err.name == "PortTaken", got
+    assert "not confirmed" in err.words and "40000" in err.words and "given back" not in \
+        err.words.replace("giving the offer back", "")

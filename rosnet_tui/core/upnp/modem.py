@@ -10,7 +10,6 @@ below 1024, or without a bounded lease.
 
 from __future__ import annotations
 
-import contextlib
 import socket
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -138,10 +137,13 @@ class Modem:
             ans = pmp.pcp_map(self.gateway, self.local_ip, protocol, port, port, lease_s, nonce,
                               deadline, notes=self.notes)
             if ans.external_port != port:
-                with contextlib.suppress(ModemError):
+                given_back = True
+                try:
                     pmp.pcp_map(self.gateway, self.local_ip, protocol, port, ans.external_port, 0,
                                 nonce, deadline, notes=self.notes)
-                raise _taken("pcp", port, ans.external_port)
+                except ModemError:
+                    given_back = False
+                raise _taken("pcp", port, ans.external_port, ans.lifetime, given_back)
             if ans.external_ip:
                 self.external_ip = wan_address(ans.external_ip, "pcp", self.notes)
             return {"via": "pcp", "lease_s": ans.lifetime, "nonce": nonce.hex()}
@@ -149,10 +151,13 @@ class Modem:
             eport, life = pmp.natpmp_map(self.gateway, protocol, port, port, lease_s, deadline,
                                          source_ip=self.local_ip, notes=self.notes)
             if eport != port:
-                with contextlib.suppress(ModemError):
+                given_back = True
+                try:
                     pmp.natpmp_map(self.gateway, protocol, port, 0, 0, deadline,
                                    source_ip=self.local_ip, notes=self.notes)
-                raise _taken("natpmp", port, eport)
+                except ModemError:
+                    given_back = False
+                raise _taken("natpmp", port, eport, life, given_back)
             return {"via": "natpmp", "lease_s": life}
         raise ValueError(f"unknown protocol {via!r}")
 
@@ -201,10 +206,14 @@ def wan_address(reported: str, protocol: str, notes: list[str]) -> str:
     return ""
 
 
-def _taken(protocol: str, port: int, offered: int) -> Refused:
+def _taken(protocol: str, port: int, offered: int, lease_s: int = 0,
+           given_back: bool = True) -> Refused:
+    back = "the offer was given back" if given_back else (
+        f"giving the offer back was not confirmed: the modem may forward its port {offered} to "
+        f"this machine for up to {lease_s} s, until its lease ends")
     return Refused(protocol, -1, "PortTaken",
                    f"the modem offered external port {offered} instead of {port}: port {port} is "
-                   "already forwarded to another machine (the offer was given back)")
+                   f"already forwarded to another machine ({back})")
 
 
 # --------------------------------------------------------------------------- finding it
