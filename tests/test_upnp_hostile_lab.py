@@ -73,3 +73,13 @@ def test_router_mappings_and_the_router_checks_hold_against_a_hostile_modem(lab,
         upnp = checks["router.upnp"]
         assert "unexpectedly" not in upnp["summary"], upnp
         assert len(json.dumps(upnp)) < 4_000, len(json.dumps(upnp))
+
+
+@pytest.mark.parametrize("wan", ["0.0.0.0", "224.0.0.1", "127.0.0.1"])
+def test_isp_cgnat_never_passes_on_a_modems_external_address_that_is_not_public(lab, world, wan):
+    with HostileModem(lab, f"wan:{wan}"):
+        p = rosnet(lab, world, "check", "--json", "--step", "isp", timeout=60)
+        checks = {c["id"]: c for c in assert_sound(p, limit=40_000)["checks"]}
+        cgnat = checks["isp.cgnat"]
+        assert cgnat["status"] != "pass", cgnat
+        assert "unexpectedly" not in cgnat["summary"], cgnat

@@ -6,7 +6,8 @@ serves a device description and SOAP answers (TCP 5000), broken the way MODE say
 - digits:  the mapping list carries a port written with a superscript digit;
 - snowman: the control URL is /ctl/<U+2603>;
 - c1:      C1 control characters in the friendly name and a forward's description;
-- flood:   2000 junk datagrams answer each SSDP search, before the real answer.
+- flood:   2000 junk datagrams answer each SSDP search, before the real answer;
+- wan:IP:  GetExternalIPAddress answers IP (0.0.0.0, 224.0.0.1, ...), otherwise a good modem.
 
 Standard library only. Stops on SIGTERM."""
 
@@ -58,7 +59,8 @@ def answer(req: bytes) -> bytes:
         if MODE == "chunk":
             return (b"HTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\n"
                     b"5\r\n<root\r\n-6\r\nxxxxxx\r\n0\r\n\r\n")
-        return http(soap("GetExternalIPAddress", NewExternalIPAddress="192.0.2.1"))
+        wan = MODE[4:] if MODE.startswith("wan:") else "192.0.2.1"
+        return http(soap("GetExternalIPAddress", NewExternalIPAddress=wan))
     if b"#GetGenericPortMappingEntry" in req:
         if b"<NewPortMappingIndex>0<" not in req:
             return http(fault(713), "500 Internal Server Error")
