@@ -198,6 +198,15 @@ def test_bad_or_missing_addresses_are_refused_with_the_key():
         fw.allowed_addresses(s)
 
 
+@pytest.mark.parametrize("ip", ["0.0.0.0", "224.0.0.1", "255.255.255.255", "127.0.0.1"])
+def test_a_special_address_is_never_a_peer_the_firewall_lets_in(ip):
+    s = robot()
+    s.peers[0].public_ip = ip
+    with pytest.raises(fw.FirewallSettingsError) as e:
+        fw.allowed_addresses(s)
+    assert [k for k, _ in e.value.problems] == ["peers[0] (sami)"]
+
+
 def test_one_transaction_texts():
     t = fw.transaction_text("table inet rosnet_tui {\n}\n")
     assert t.splitlines()[:2] == ["table inet rosnet_tui", "delete table inet rosnet_tui"]
