@@ -183,7 +183,7 @@ def admitted(adm: Admission, address: str, port: int = SSH_PORT) -> str:
         a = ipaddress.ip_address(address)
     except ValueError:
         return ""
-    if a.is_loopback:
+    if address_kind(str(a)) == "loopback":
         return "loopback"
     if str(a) in adm.peers:
         return "a peer"
