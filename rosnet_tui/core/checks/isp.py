@@ -19,6 +19,7 @@ from urllib.parse import urlsplit
 import psutil
 
 from rosnet_tui.core.addresses import (
+    KIND_WORDS,
     address_kind,
     is_ip,
     is_loopback_ip,
@@ -411,7 +412,7 @@ def judge_wan(wan_ip: str, public_ip: str | None) -> tuple[Status, str, dict]:
                 {"double_nat": True, "hop": wan_ip})
     if not is_public_v4(wan_ip):   # 0.0.0.0, loopback, multicast...: never "no carrier NAT"
         return (Status.WARN, f"cannot tell: the modem reports {wan_ip} as its internet-side "
-                             f"address, {address_kind(wan_ip)}, not a public one",
+                             f"address, {KIND_WORDS[address_kind(wan_ip)]}, not a public one",
                 {"hop": wan_ip})
     if public_ip and public_ip != wan_ip:
         return (Status.WARN, f"NAT beyond the modem: its WAN address is {wan_ip} but the internet "
