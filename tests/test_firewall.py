@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from rosnet_tui.core.addresses import is_lan_network
 from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.config.settings_model import Peer, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.exposure import firewall as fw
@@ -161,10 +162,10 @@ def test_only_private_link_local_and_unique_local_networks_count_as_lan():
            "fd12:3456::/64")
     public = ("203.0.113.0/24", "198.51.100.0/24", "100.64.0.0/10", "100.64.1.0/24",
               "2001:db8::/64", "10.0.0.0/7", "172.32.0.0/16")
-    assert all(netinfo.is_lan(ipaddress.ip_network(n)) for n in lan)
-    assert not any(netinfo.is_lan(ipaddress.ip_network(n)) for n in public)
+    assert all(is_lan_network(ipaddress.ip_network(n)) for n in lan)
+    assert not any(is_lan_network(ipaddress.ip_network(n)) for n in public)
     got = netinfo.lan_networks()                       # this machine's own, whatever it has
-    assert all(netinfo.is_lan(ipaddress.ip_network(n)) for n in got), got
+    assert all(is_lan_network(ipaddress.ip_network(n)) for n in got), got
     assert not any(ipaddress.ip_network(n).network_address.is_loopback for n in got)
 
 
@@ -195,6 +196,15 @@ def test_bad_or_missing_addresses_are_refused_with_the_key():
     s.peers = []
     with pytest.raises(fw.FirewallSettingsError):
         fw.allowed_addresses(s)
+
+
+@pytest.mark.parametrize("ip", ["0.0.0.0", "224.0.0.1", "255.255.255.255", "127.0.0.1"])
+def test_a_special_address_is_never_a_peer_the_firewall_lets_in(ip):
+    s = robot()
+    s.peers[0].public_ip = ip
+    with pytest.raises(fw.FirewallSettingsError) as e:
+        fw.allowed_addresses(s)
+    assert [k for k, _ in e.value.problems] == ["peers[0] (sami)"]
 
 
 def test_one_transaction_texts():

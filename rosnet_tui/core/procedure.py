@@ -6,8 +6,6 @@ module, so the order and the words cannot drift apart.
 
 from __future__ import annotations
 
-import ipaddress
-
 # The four steps, in the order the procedure does them.
 STEP_IDS: tuple[str, ...] = ("isp", "router", "linux", "ros")
 # Short titles (the step bar, the report's headings, the advisor's "back to" column).
@@ -38,20 +36,3 @@ def step_title(step: str | None) -> str:
     return f"step {step_number(step)} ({STEP_TITLES[step]})"
 
 
-def is_loopback(host: str) -> bool:
-    """True for loopback names and addresses (localhost, 127.0.0.0/8, ::1)."""
-    if host in ("localhost", "ip6-localhost", "ip6-loopback"):
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-def is_ip(host: str) -> bool:
-    """True when *host* is an IPv4 or IPv6 address, not a name."""
-    try:
-        ipaddress.ip_address(host)
-        return True
-    except ValueError:
-        return False

@@ -10,10 +10,10 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from urllib.parse import urlsplit
 
+from rosnet_tui.core.addresses import is_loopback
 from rosnet_tui.core.checks.data import CheckData, view
 from rosnet_tui.core.config.settings_model import PORT_MAX, PORT_MIN, Settings
 from rosnet_tui.core.files.hosts import hosts_entries
-from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import CheckResult, Status
 
 FORWARD_RANGE = f"{PORT_MIN}-{PORT_MAX}"

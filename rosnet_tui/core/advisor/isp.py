@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from rosnet_tui.core.addresses import is_ip
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import (
     Evidence,
@@ -16,7 +17,6 @@ from rosnet_tui.core.advisor.evidence import (
     offline_ids,
     uri_host,
 )
-from rosnet_tui.core.procedure import is_ip
 
 
 def _url_host(url: str) -> str:

@@ -22,10 +22,10 @@ quote them. :data:`EVIDENCE` is the same list for docs/TROUBLESHOOTING.md.
 
 from __future__ import annotations
 
-import ipaddress
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from rosnet_tui.core.addresses import is_private, is_shared
 from rosnet_tui.core.advisor.evidence import Evidence, does_not_resolve
 from rosnet_tui.core.results import Status
 
@@ -109,22 +109,6 @@ def tie_order(ev: Evidence, keys: list[str]) -> list[str]:
 
 
 # --------------------------------------------------------------------------- NAT on the way out
-def _in(ip: str, *nets: str) -> bool:
-    try:
-        a = ipaddress.ip_address(ip)
-    except ValueError:
-        return False
-    return any(a in ipaddress.ip_network(n) for n in nets)
-
-
-def is_private_ip(ip: str) -> bool:
-    return _in(ip, "10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16")
-
-
-def is_cgnat_ip(ip: str) -> bool:
-    return _in(ip, "100.64.0.0/10")
-
-
 @dataclass(frozen=True)
 class Nat:
     """What isp.cgnat saw: kind is "cgnat", "inner" (a private router right behind this
@@ -146,9 +130,9 @@ def nat_seen(ev: Evidence) -> Nat:
         return Nat("cgnat", hop or wan, wan)
     if d.get("double_nat"):
         hops = list(d.get("hops") or [])
-        if wan and is_private_ip(wan):
+        if wan and is_private(wan):
             return Nat("inner", hop or wan, wan)
-        if hop and hop in hops and hops.index(hop) == 1 and not is_cgnat_ip(hop):
+        if hop and hop in hops and hops.index(hop) == 1 and not is_shared(hop):
             return Nat("inner", hop, wan)
         return Nat("far", hop or wan, wan)
     if d.get("method") == "upnp" and wan:

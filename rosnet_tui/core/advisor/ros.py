@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from urllib.parse import urlsplit
 
+from rosnet_tui.core.addresses import is_ip
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import (
     FORWARD_RANGE,
@@ -15,7 +16,6 @@ from rosnet_tui.core.advisor.evidence import (
     uri_host,
 )
 from rosnet_tui.core.advisor.ranking import master_causes
-from rosnet_tui.core.procedure import is_ip
 from rosnet_tui.core.results import Status
 
 

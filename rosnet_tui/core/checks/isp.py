@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import ipaddress
 import socket
 import struct
 import time
@@ -19,6 +18,15 @@ from urllib.parse import urlsplit
 
 import psutil
 
+from rosnet_tui.core.addresses import (
+    KIND_WORDS,
+    address_kind,
+    is_ip,
+    is_loopback_ip,
+    is_private,
+    is_public_v4,
+    is_shared,
+)
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip
@@ -26,37 +34,8 @@ from rosnet_tui.core.exposure.public_ip import find_public_ip
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.http import http_get
 from rosnet_tui.core.net.netinfo import is_overlay
-from rosnet_tui.core.procedure import is_ip
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.connection import resolve_ipv4
-
-CGNAT_NET = ipaddress.ip_network("100.64.0.0/10")
-RFC1918 = tuple(ipaddress.ip_network(n) for n in ("10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16"))
-
-
-def is_cgnat(ip: str) -> bool:
-    try:
-        return ipaddress.ip_address(ip) in CGNAT_NET
-    except ValueError:
-        return False
-
-
-def is_rfc1918(ip: str) -> bool:
-    """A home/office LAN address (10/8, 172.16/12, 192.168/16); documentation ranges are not."""
-    try:
-        a = ipaddress.ip_address(ip)
-    except ValueError:
-        return False
-    return any(a in n for n in RFC1918)
-
-
-def is_public_v4(ip: str) -> bool:
-    try:
-        a = ipaddress.ip_address(ip)
-    except ValueError:
-        return False
-    return (a.version == 4 and not is_rfc1918(ip) and not is_cgnat(ip) and not a.is_loopback
-            and not a.is_link_local and not a.is_unspecified and not a.is_multicast)
 
 
 # --------------------------------------------------------------------------- isp.internet
@@ -329,7 +308,7 @@ async def check_cgnat(ctx: CheckContext) -> Outcome:
         except (OSError, asyncio.TimeoutError) as exc:
             evidence.append(f"no route towards {target}: {exc}")
             return None
-        if ifname == "lo" or ipaddress.ip_address(target).is_loopback:
+        if ifname == "lo" or is_loopback_ip(target):
             evidence.append(f"{target} is this machine itself; there is no path to probe")
             return None
         if ifname and is_overlay(ifname):
@@ -423,14 +402,18 @@ def _public_beyond_modem(hops: list[Hop], target: str | None) -> bool:
 
 def judge_wan(wan_ip: str, public_ip: str | None) -> tuple[Status, str, dict]:
     """Verdict from the modem's own WAN address (UPnP) and the address the internet sees."""
-    if is_cgnat(wan_ip):
+    if is_shared(wan_ip):
         return (Status.WARN, f"carrier-grade NAT: the modem's internet-side address is {wan_ip} "
                              "(the carriers' shared 100.64.0.0/10); port forwarding on this modem "
                              "cannot be reached from the internet", {"cgnat": True, "hop": wan_ip})
-    if is_rfc1918(wan_ip):
+    if is_private(wan_ip):
         return (Status.WARN, f"double NAT: the modem's internet-side address {wan_ip} is private; "
                              "the router in front of it must forward too",
                 {"double_nat": True, "hop": wan_ip})
+    if not is_public_v4(wan_ip):   # 0.0.0.0, loopback, multicast...: never "no carrier NAT"
+        return (Status.WARN, f"cannot tell: the modem reports {wan_ip} as its internet-side "
+                             f"address, {KIND_WORDS[address_kind(wan_ip)]}, not a public one",
+                {"hop": wan_ip})
     if public_ip and public_ip != wan_ip:
         return (Status.WARN, f"NAT beyond the modem: its WAN address is {wan_ip} but the internet "
                              f"sees {public_ip}", {"double_nat": True, "hop": wan_ip})
@@ -451,17 +434,17 @@ def judge_no_wan(path: dict) -> tuple[Status, str, dict]:
 
 def judge_path(hops: list[Hop], target: str, source: str | None) -> tuple[Status, str, dict]:
     """Verdict from the routers on the way out (hop 1 is our own modem, so it is not judged)."""
-    if source and is_cgnat(source):
+    if source and is_shared(source):
         return (Status.WARN, f"carrier-grade NAT: this machine's own address {source} is in the "
                              "carriers' range 100.64.0.0/10", {"cgnat": True, "hop": source})
     for h in hops[1:]:
-        if h.ip and h.ip != target and is_cgnat(h.ip):
+        if h.ip and h.ip != target and is_shared(h.ip):
             return (Status.WARN, f"carrier-grade NAT: hop {h.ttl} on the way out is {h.ip} "
                                  "(100.64.0.0/10, the carriers' shared range); forwarding on the "
                                  "modem cannot be reached from the internet",
                     {"cgnat": True, "hop": h.ip})
     for h in hops[1:]:
-        if h.ip and h.ip != target and is_rfc1918(h.ip):
+        if h.ip and h.ip != target and is_private(h.ip):
             return (Status.WARN, f"double NAT: hop {h.ttl} on the way out is the private address "
                                  f"{h.ip}; the router there must forward too",
                     {"double_nat": True, "hop": h.ip})

@@ -16,6 +16,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.addresses import is_loopback_ip
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import NO_SSH_USER, each_peer, ssh_peers
@@ -24,16 +25,10 @@ from rosnet_tui.core.files.hosts import HostsEntry, hosts_entries, parse_hosts
 from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import read_text
 from rosnet_tui.core.net.connect import tcp_failure_kind
-from rosnet_tui.core.procedure import is_ip, is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.connection import resolve_ipv4
 from rosnet_tui.core.ssh.session import ssh_run
 from rosnet_tui.core.sync.applied import load_applied
-
-
-def _is_loopback_ip(ip: str) -> bool:
-    """A loopback IP address (names such as localhost do not count: hosts files hold addresses)."""
-    return is_ip(ip) and is_loopback(ip)
 
 
 def _plural(n: int, word: str) -> str:
@@ -60,9 +55,9 @@ def audit_hosts(text: str, expected: list[HostsEntry]) -> dict[str, Any]:
         if len(distinct) > 1:
             # The resolver may return any of them (glibc even sorts 127.0.1.1 first).
             duplicates.append(e.name)
-        if any(_is_loopback_ip(ip) for ip in distinct) and not _is_loopback_ip(e.ip):
+        if any(is_loopback_ip(ip) for ip in distinct) and not is_loopback_ip(e.ip):
             loopback.append(e.name)
-        other = next((ip for ip in distinct if ip != e.ip and not _is_loopback_ip(ip)), None)
+        other = next((ip for ip in distinct if ip != e.ip and not is_loopback_ip(ip)), None)
         if other is not None:
             wrong.append({"name": e.name, "found": other, "expected": e.ip})
     return {"missing": missing, "wrong": wrong, "duplicates": duplicates, "loopback": loopback,
@@ -164,7 +159,7 @@ async def check_resolve(ctx: CheckContext) -> Outcome:
             evidence.append(f"{e.name}: {err} (expected {e.ip})")
             continue
         evidence.append(f"{e.name} -> {', '.join(addrs)} (expected {e.ip})")
-        if _is_loopback_ip(resolved) and not _is_loopback_ip(e.ip):
+        if is_loopback_ip(resolved) and not is_loopback_ip(e.ip):
             data["loopback"].append(e.name)
         elif resolved != e.ip:
             data["wrong"].append(e.name)

@@ -13,6 +13,7 @@ import time
 from typing import Any
 from urllib.parse import urlparse
 
+from rosnet_tui.core.addresses import is_loopback
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import (
     ROS_AGENT,
@@ -26,7 +27,6 @@ from rosnet_tui.core.config.settings_model import Peer, Settings
 from rosnet_tui.core.files.hosts import own_ip
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import rosproto
-from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.connection import SshResult
 

@@ -16,6 +16,7 @@ from typing import Any
 
 import psutil
 
+from rosnet_tui.core.addresses import is_loopback
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_run
 from rosnet_tui.core.checks.probes.budget import budget
@@ -34,7 +35,6 @@ from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import read_text
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import zenohproto
-from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ros import fleet_tls, ros2, tls_handshake
 from rosnet_tui.core.ssh.connection import resolve_ipv4

@@ -14,6 +14,7 @@ import secrets
 import time
 from typing import Any
 
+from rosnet_tui.core.addresses import is_loopback
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_run, peer_session
 from rosnet_tui.core.checks.probes.budget import budget
@@ -30,7 +31,6 @@ from rosnet_tui.core.checks.probes.ros2 import (
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import zenohproto
-from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ros import ros2
 

@@ -15,6 +15,8 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.addresses import KIND_WORDS, address_kind, is_ipv4
+
 if sys.version_info >= (3, 11):
     pass
 else:  # pragma: no cover
@@ -113,15 +115,14 @@ def validate_ip(value: str, *, required: bool = True) -> str | None:
     """Return why *value* is not an IPv4 address, or None when it is (or is empty and optional)."""
     if not value:
         return "an IP address is required" if required else None
-    try:
-        addr = ipaddress.ip_address(value)
-    except ValueError:
+    kind = address_kind(value)
+    if kind == "invalid":
         return (f"'{echoed(value)}' is not an IP address (expected four "
                 "numbers like 192.168.1.10)")
-    if addr.version != 4:
+    if not is_ipv4(value):
         return "use an IPv4 address: the procedure's port forwarding is for IPv4"
-    if addr.is_unspecified or addr.is_multicast or str(addr) == "255.255.255.255":
-        return f"{value} cannot be a component's address"
+    if kind in ("unspecified", "multicast", "broadcast"):
+        return f"{value} cannot be a component's address ({KIND_WORDS[kind]})"
     return None
 
 

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rosnet_tui.core import jsonsafe
+from rosnet_tui.core.addresses import KIND_WORDS, address_kind, parse_ip
 from rosnet_tui.core.config.settings_model import PORT_MAX, PORT_MIN, Settings
 from rosnet_tui.core.files import undo_journal as uj
 from rosnet_tui.core.net.netinfo import collapse, lan_networks
@@ -126,16 +127,17 @@ def allowed_addresses(settings: Settings, profile: str | None = None) -> list[st
             problems.append((f"peers[{i}] ({p.name})", "no address known for the "
                              f"{profile or settings.this.profile} profile"))
             continue
-        try:
-            a = ipaddress.ip_address(ip)
-        except ValueError:
+        kind = address_kind(ip)
+        if kind == "invalid":
             problems.append((f"peers[{i}] ({p.name})", f"'{ip[:40]}' is not an IP address"))
             continue
-        if a.is_unspecified or a.is_multicast or a.is_loopback:
-            problems.append((f"peers[{i}] ({p.name})", f"{ip} cannot be a peer's address"))
+        if kind in ("unspecified", "multicast", "broadcast", "loopback"):
+            problems.append((f"peers[{i}] ({p.name})", f"{ip} cannot be a peer's address "
+                             f"({KIND_WORDS[kind]})"))
             continue
-        if str(a) not in out:
-            out.append(str(a))
+        a = str(parse_ip(ip))
+        if a not in out:
+            out.append(a)
     if not settings.peers:
         problems.append(("peers", "no peers: the table would shut everyone out"))
     if problems:
@@ -181,7 +183,7 @@ def admitted(adm: Admission, address: str, port: int = SSH_PORT) -> str:
         a = ipaddress.ip_address(address)
     except ValueError:
         return ""
-    if a.is_loopback:
+    if address_kind(str(a)) == "loopback":
         return "loopback"
     if str(a) in adm.peers:
         return "a peer"

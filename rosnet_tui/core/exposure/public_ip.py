@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import ipaddress
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rosnet_tui.core.addresses import is_ipv4
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.net.http import http_get
 from rosnet_tui.core.saved.state import PublicIpRecord, now_iso, record_public_ip
@@ -27,11 +27,7 @@ def parse_ip(text: str) -> str | None:
         with contextlib.suppress(ValueError, AttributeError):   # JsonInputError is a ValueError
             t = str(loads_bounded(t, unique_keys=False).get("ip", ""))
     t = t.split()[0] if t.split() else ""
-    try:
-        a = ipaddress.ip_address(t)
-    except ValueError:
-        return None
-    return str(a) if a.version == 4 else None
+    return t if is_ipv4(t) else None
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from rosnet_tui.core.addresses import is_loopback_ip
 from rosnet_tui.core.config.paths import DEFAULT_HOSTS_PATH
 from rosnet_tui.core.config.settings_model import (
     PROFILES,
@@ -92,7 +93,7 @@ class WriterSettingsError(SettingsError):
 
 def _ip_problem(value: str) -> str | None:
     why = validate_ip(value, required=True)
-    if why is None and ipaddress.ip_address(value).is_loopback:
+    if why is None and is_loopback_ip(value):
         why = f"{value} is a loopback address; use the address on the network instead"
     return why
 

@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING
 import netifaces
 import psutil
 
+from rosnet_tui.core.addresses import is_lan_network
+
 if TYPE_CHECKING:
     from rosnet_tui.core.config.settings_model import Settings
 
@@ -272,12 +274,6 @@ def with_detected(settings: Settings, net: LocalNet | None = None) -> Settings:
 
 
 # --------------------------------------------------------------------------- this machine's LAN
-# Only these blocks count as a LAN (private, link-local, unique local): an interface on a public
-# block, or on the carrier's shared 100.64.0.0/10, has the internet or strangers as neighbours.
-LAN_BLOCKS = tuple(ipaddress.ip_network(n) for n in (
-    "10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16", "169.254.0.0/16", "fe80::/10", "fc00::/7"))
-
-
 def _net_text(net: ipaddress.IPv4Network | ipaddress.IPv6Network) -> str:
     """A network as nft lists it: one address without its /32 or /128."""
     return str(net.network_address) if net.num_addresses == 1 else str(net)
@@ -294,12 +290,6 @@ def collapse(entries: list[str]) -> list[str]:
     return out
 
 
-def is_lan(net: ipaddress.IPv4Network | ipaddress.IPv6Network) -> bool:
-    """True when *net* lies inside a private, link-local or unique-local block."""
-    return any(net.version == b.version and net.subnet_of(b)  # type: ignore[arg-type]
-               for b in LAN_BLOCKS)
-
-
 def _prefix_len(netmask: str) -> int | None:
     try:
         return bin(int(ipaddress.ip_address(netmask.split("/")[0]))).count("1")
@@ -308,7 +298,9 @@ def _prefix_len(netmask: str) -> int | None:
 
 
 def lan_networks() -> list[str]:
-    """The networks of this machine's interface addresses that are a LAN (see LAN_BLOCKS):
+    """The networks of this machine's interface addresses that are a LAN (addresses.is_lan_network:
+    private, link-local or unique-local; a public block or the carriers' shared 100.64.0.0/10
+    has the internet or strangers as neighbours):
     loopback and point-to-point links (ppp, wwan in raw-IP mode, VPN tunnels) left out, and so
     are networks of one address. Merged, IPv4 first."""
     import psutil
@@ -334,6 +326,6 @@ def lan_networks() -> list[str]:
                 continue
             if net.num_addresses == 1 or net.network_address.is_loopback:
                 continue
-            if is_lan(net):
+            if is_lan_network(net):
                 nets.append(str(net))
     return collapse(nets)

@@ -82,7 +82,7 @@ def parse_listen(text: str) -> tuple[str, int]:
     m = re.fullmatch(r"\[([0-9A-Fa-f:.]+)\]:(\d+)", text)
     if m:
         host, port_s = m.group(1), m.group(2)
-    elif text.isdigit():
+    elif text.isascii() and text.isdigit():
         host, port_s = "0.0.0.0", text
     else:
         host, sep, port_s = text.rpartition(":")

@@ -218,7 +218,7 @@ class PeerAgent:
         end = text.rfind("\n") + 1
         for line in text[self.offset:end].splitlines():
             body, _, seq = line.rpartition("#")
-            if seq.isdigit():
+            if seq.isascii() and seq.isdigit():   # ASCII: int() refuses '¹'
                 self.seq = int(seq) + 1
             try:
                 msg = loads_bounded(body, unique_keys=False)

@@ -523,7 +523,7 @@ def read_http(rfile: Any, response: bool) -> Tuple[List[str], Dict[str, str], by
         raise XmlRpcError("too many HTTP header lines")
     length = headers.get("content-length")
     if length is not None:
-        if not length.isdigit() or int(length) > MAX_XMLRPC:
+        if not (length.isascii() and length.isdigit()) or int(length) > MAX_XMLRPC:
             raise XmlRpcError(f"bad Content-Length {length!r}")
         body = rfile.read(int(length))
         if len(body) < int(length):
@@ -557,7 +557,7 @@ def xmlrpc_call(uri: str, method: str, *args: Any, timeout: float = 3.0) -> Any:
     finally:
         sock.close()
     if first[1] != "200":
-        raise HttpError(int(first[1]) if first[1].isdigit() else 0,
+        raise HttpError(int(first[1]) if first[1].isascii() and first[1].isdigit() else 0,
                         first[2] if len(first) > 2 else "")
     _, params, fault = load_xmlrpc(answer)
     if fault:

@@ -14,7 +14,6 @@ already applied (a lower seq is an old copy, unless a verified counter restart).
 from __future__ import annotations
 
 import contextlib
-import ipaddress
 import json
 import math
 import time
@@ -23,6 +22,7 @@ from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from typing import Any
 
+from rosnet_tui.core.addresses import KIND_WORDS, address_kind
 from rosnet_tui.core.config.settings_model import ROLES, validate_ip, validate_name
 from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
 
@@ -34,10 +34,6 @@ MAX_FUTURE_GUESS = 4102444800.0   # 2100-01-01: the span in which a number in an
 MIN_TIMESTAMP = 946684800.0       # 2000-01-01: anything older is not a real clock
 MAX_TIMESTAMP = 253402300799.0    # 9999-12-31T23:59:59Z: the last second datetime can show
 MAX_DEPTH = 16                    # arrays/objects inside each other (a record needs 1)
-# Never a component's public address: private (RFC 1918) and carrier-grade NAT (RFC 6598) space.
-# The documentation ranges (192.0.2.0/24, 198.51.100.0/24, 203.0.113.0/24) stay valid: labs use them.
-NOT_PUBLIC = tuple(ipaddress.ip_network(n) for n in
-                   ("10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16", "100.64.0.0/10"))
 _FIELDS = ("version", "name", "role", "local_ip", "public_ip", "seq", "timestamp")
 
 
@@ -179,16 +175,12 @@ def address_problem(value: str, *, public: bool = False) -> str | None:
     why = validate_ip(value, required=True)
     if why:
         return why
-    a = ipaddress.ip_address(value)
-    if public and any(a in net for net in NOT_PUBLIC):
-        kind = "carrier-grade NAT" if a in NOT_PUBLIC[3] else "private (LAN)"
-        return f"{value} is a {kind} address, never a public one"
-    if a.is_loopback:
-        return f"{value} is a loopback address"
-    if a.is_link_local:
-        return f"{value} is a link-local address"
-    if a.is_reserved:
-        return f"{value} is a reserved address"
+    # The documentation ranges stay valid as public addresses: labs use them (see addresses).
+    kind = address_kind(value)
+    if public and kind in ("private", "shared"):
+        return f"{value} is {KIND_WORDS[kind]}, never a public one"
+    if kind in ("loopback", "link-local", "reserved"):
+        return f"{value} is {KIND_WORDS[kind]}"
     return None
 
 

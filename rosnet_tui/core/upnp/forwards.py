@@ -12,12 +12,12 @@ from __future__ import annotations
 import contextlib
 import copy
 import functools
-import ipaddress
 import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rosnet_tui.core.addresses import KIND_WORDS, PUBLIC_KINDS, address_kind
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.exposure.forwarding import required_ports
 from rosnet_tui.core.upnp import journal
@@ -27,10 +27,6 @@ from rosnet_tui.core.upnp.wire import ModemError, Refused, label
 LEASE_S = 24 * 3600        # a forward we make lasts a day unless renewed (the sync service does)
 TEST_LEASE_S = 15 * 60     # the test port: only while the checks run
 DESCRIPTION = "rosnet-tui"
-CGNAT_NET = ipaddress.ip_network("100.64.0.0/10")
-# A home or office LAN's ranges (documentation ranges count as public: the lab's internet).
-PRIVATE_NETS = tuple(ipaddress.ip_network(n) for n in ("10.0.0.0/8", "172.16.0.0/12",
-                                                        "192.168.0.0/16"))
 
 
 @dataclass(frozen=True)
@@ -104,21 +100,21 @@ def wan_kind(external_ip: str | None) -> str:
     """'none', 'shared', 'private', 'public' or 'unknown' (None: the modem was not asked)."""
     if external_ip is None:
         return "unknown"
-    if not external_ip or external_ip == "0.0.0.0":
+    if not external_ip:
         return "none"
-    try:
-        a = ipaddress.ip_address(external_ip)
-    except ValueError:
-        return "unknown"
-    if a in CGNAT_NET:
-        return "shared"
-    if any(a in n for n in PRIVATE_NETS):
-        return "private"
-    return "none" if a.is_unspecified or a.is_link_local or a.is_loopback else "public"
+    kind = address_kind(external_ip)
+    if kind in PUBLIC_KINDS:
+        return "public"
+    if kind in ("shared", "private"):
+        return kind
+    return "unknown" if kind == "invalid" else "none"   # 0.0.0.0, loopback, multicast, ...
 
 
 def wan_words(external_ip: str | None) -> str:
-    return {"none": "reports no public address of its own",
+    none = "reports no public address of its own"
+    if external_ip and wan_kind(external_ip) == "none":
+        none = f"reports {external_ip} ({KIND_WORDS[address_kind(external_ip)]}): no public address"
+    return {"none": none,
             "shared": f"reports {external_ip}, an address of the carriers' shared range "
                       "100.64.0.0/10, as its own",
             "private": f"reports the private address {external_ip} as its internet side"
@@ -172,6 +168,20 @@ class MapRefused(Exception):
     def __init__(self, kind: str, words: str) -> None:
         self.kind, self.words = kind, words
         super().__init__(words)
+
+
+class MapUnconfirmed(MapRefused):
+    """A forward failed and the roll-back of those made before it was not confirmed by the
+    modem: they may still be in place. Their journal entry is kept (``entry_id``); the words say
+    what may still be forwarded and how to remove it."""
+
+    def __init__(self, cause: str, left: list[str], entry_id: str) -> None:
+        self.left, self.entry_id = left, entry_id
+        super().__init__("unconfirmed", (
+            f"{cause}. Taking back what was already forwarded was not confirmed by the modem, so "
+            f"it may still forward: {'; '.join(left)}. It stays recorded: remove it with "
+            "`rosnet-tui router unmap` (or `rosnet-tui undo`), or in the modem's page; its "
+            "lease ends it in any case"))
 
 
 # --------------------------------------------------------------------------- mapping
@@ -251,19 +261,36 @@ def map_forwards(settings: Settings, modem: Modem, wanted: list[Wanted], *,
                 made.append(target)
                 if entry is not None:  # at once: a crash now still leaves it undoable
                     journal.save(entry, state_dir)
-    except BaseException:
-        if entry is not None:
-            for m in made:
-                with contextlib.suppress(ModemError, ValueError):
-                    modem.remove(m, time.monotonic() + 2.0)
-                    m["state"] = "removed"
+    except BaseException as exc:
+        if entry is None:
+            raise
+        left = roll_back(modem, made)
+        if not left:
             journal.close(entry, "rolled back: the modem refused a forward", state_dir)
+            raise
+        journal.save(entry, state_dir)   # the entry stays: undo and unmap still find them
+        if isinstance(exc, (MapRefused, ModemError)):
+            raise MapUnconfirmed(str(exc), left, entry.id) from exc
         raise
     if entry is not None:
         journal.save(entry, state_dir)
     if refreshed:
         _save_refreshed(ours.values(), state_dir)
     return MapResult(made, entry.id if entry else None, refreshed, warnings)
+
+
+def roll_back(modem: Modem, made: list[dict]) -> list[str]:
+    """Take back the forwards *made*; what the modem did not confirm it removed, in words (their
+    records stay "made")."""
+    left = []
+    for m in made:
+        try:
+            modem.remove(m, time.monotonic() + 2.0)
+        except (ModemError, ValueError) as exc:
+            left.append(f"{journal.describe(m)} (the modem: {exc})")
+            continue
+        m["state"] = "removed"
+    return left
 
 
 def _save_refreshed(records, state_dir: Path | None) -> None:

@@ -81,16 +81,15 @@ class IgdMapping:
 # --------------------------------------------------------------------------- typed values
 def as_port(value: str | None, what: str, *, zero: bool = False) -> int:
     v = (value or "").strip()
-    if not v.isdigit() or len(v) > 5 or not (0 if zero else 1) <= int(v) <= 65535:
-        raise HostileAnswer(f"the modem's {what} is not a port number ({v[:20]!r})")
+    if not v.isascii() or not v.isdigit() or len(v) > 5 or \
+            not (0 if zero else 1) <= int(v) <= 65535:
+        raise HostileAnswer(f"the modem's {what} is not a port number ({wire.shown(v, 20)!r})")
     return int(v)
 
 
 def as_seconds(value: str | None, what: str) -> int:
-    v = (value or "0").strip() or "0"
-    if not v.isdigit() or len(v) > 10:
-        raise HostileAnswer(f"the modem's {what} is not a number of seconds ({v[:20]!r})")
-    return int(v)
+    """A lease in whole seconds, ASCII digits only ("" is 0: no expiry)."""
+    return wire.ascii_number((value or "0").strip() or "0", f"{what} (in seconds)")
 
 
 def as_ipv4(value: str | None, what: str, *, empty: bool = False) -> str:
@@ -99,14 +98,16 @@ def as_ipv4(value: str | None, what: str, *, empty: bool = False) -> str:
         return ""
     ip = wire.lan_ipv4(v)
     if ip is None:
-        raise HostileAnswer(f"the modem's {what} is not an IPv4 address ({v[:40]!r})")
+        raise HostileAnswer(f"the modem's {what} is not an IPv4 address "
+                            f"({wire.shown(v, 40)!r})")
     return ip
 
 
 def as_bool(value: str | None, what: str) -> bool:
     v = (value or "").strip().lower()
     if v not in ("0", "1", "true", "false", "yes", "no"):
-        raise HostileAnswer(f"the modem's {what} is not a yes/no value ({v[:20]!r})")
+        raise HostileAnswer(f"the modem's {what} is not a yes/no value "
+                            f"({wire.shown(v, 20)!r})")
     return v in ("1", "true", "yes")
 
 
@@ -179,10 +180,11 @@ def _fault(body: bytes, action: str) -> ModemError:
     if err is None:
         return HostileAnswer(f"{action} failed with a SOAP fault that is not a UPnP error")
     code_text = (wire.child_text(err, "errorCode") or "").strip()
-    if not code_text.isdigit() or len(code_text) > 4:
+    try:
+        code = wire.ascii_number(code_text, "UPnP error code", digits=4)
+    except HostileAnswer:
         return HostileAnswer(f"{action} failed with a malformed UPnP error code "
-                             f"({code_text[:20]!r})")
-    code = int(code_text)
+                             f"({wire.shown(code_text, 20)!r})")
     desc = wire.clean_text(wire.child_text(err, "errorDescription"), "errorDescription")
     name, words = UPNP_ERRORS.get(code, (desc or "unknown", f"the modem said {desc or 'no more'}"))
     return Refused("upnp", code, desc or name, words)
@@ -233,7 +235,8 @@ def list_mappings(igd: Igd, deadline: float) -> list[IgdMapping]:
             raise
         proto = got.get("NewProtocol", "").upper()
         if proto not in ("TCP", "UDP"):
-            raise HostileAnswer(f"the modem lists a forward with protocol {proto[:10]!r}")
+            raise HostileAnswer(f"the modem lists a forward with protocol "
+                            f"{wire.shown(proto, 10)!r}")
         out.append(_mapping(got, proto, as_port(got.get("NewExternalPort"), "external port")))
     return out
 

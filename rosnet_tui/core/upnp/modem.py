@@ -10,12 +10,12 @@ below 1024, or without a bounded lease.
 
 from __future__ import annotations
 
-import contextlib
 import socket
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
+from rosnet_tui.core.addresses import KIND_WORDS, address_kind
 from rosnet_tui.core.upnp import igd as igd_mod
 from rosnet_tui.core.upnp import pmp
 from rosnet_tui.core.upnp.wire import HostileAnswer, ModemError, NoAnswer, Refused, label
@@ -137,21 +137,27 @@ class Modem:
             ans = pmp.pcp_map(self.gateway, self.local_ip, protocol, port, port, lease_s, nonce,
                               deadline, notes=self.notes)
             if ans.external_port != port:
-                with contextlib.suppress(ModemError):
+                given_back = True
+                try:
                     pmp.pcp_map(self.gateway, self.local_ip, protocol, port, ans.external_port, 0,
                                 nonce, deadline, notes=self.notes)
-                raise _taken("pcp", port, ans.external_port)
+                except ModemError:
+                    given_back = False
+                raise _taken("pcp", port, ans.external_port, ans.lifetime, given_back)
             if ans.external_ip:
-                self.external_ip = ans.external_ip
+                self.external_ip = wan_address(ans.external_ip, "pcp", self.notes)
             return {"via": "pcp", "lease_s": ans.lifetime, "nonce": nonce.hex()}
         if via == "natpmp":
             eport, life = pmp.natpmp_map(self.gateway, protocol, port, port, lease_s, deadline,
                                          source_ip=self.local_ip, notes=self.notes)
             if eport != port:
-                with contextlib.suppress(ModemError):
+                given_back = True
+                try:
                     pmp.natpmp_map(self.gateway, protocol, port, 0, 0, deadline,
                                    source_ip=self.local_ip, notes=self.notes)
-                raise _taken("natpmp", port, eport)
+                except ModemError:
+                    given_back = False
+                raise _taken("natpmp", port, eport, life, given_back)
             return {"via": "natpmp", "lease_s": life}
         raise ValueError(f"unknown protocol {via!r}")
 
@@ -182,10 +188,32 @@ class Modem:
         raise ValueError(f"unknown protocol {via!r}")
 
 
-def _taken(protocol: str, port: int, offered: int) -> Refused:
+# What a modem's external address may be: the internet's, or a carrier's or a LAN's in front of it.
+WAN_KINDS = ("public", "documentation", "shared", "private")
+
+
+def wan_address(reported: str, protocol: str, notes: list[str]) -> str:
+    """The modem's external address as it reported it, or "" (none) when what it reported cannot
+    be one: 0.0.0.0 (usual when the modem has no WAN address), loopback, link-local, multicast,
+    broadcast, reserved. Said in *notes*."""
+    if not reported:
+        return ""
+    kind = address_kind(reported)
+    if kind in WAN_KINDS:
+        return reported
+    notes.append(f"{label(protocol)}: the modem reports {reported} as its external address, "
+                 f"{KIND_WORDS[kind]}: read as no public address")
+    return ""
+
+
+def _taken(protocol: str, port: int, offered: int, lease_s: int = 0,
+           given_back: bool = True) -> Refused:
+    back = "the offer was given back" if given_back else (
+        f"giving the offer back was not confirmed: the modem may forward its port {offered} to "
+        f"this machine for up to {lease_s} s, until its lease ends")
     return Refused(protocol, -1, "PortTaken",
                    f"the modem offered external port {offered} instead of {port}: port {port} is "
-                   "already forwarded to another machine (the offer was given back)")
+                   f"already forwarded to another machine ({back})")
 
 
 # --------------------------------------------------------------------------- finding it
@@ -239,8 +267,7 @@ def find_modem(timeout: float, *, gateway: str | None = None,
 
         found = ssdp_search(ssdp_window, gateway=gateway, source_ip=local_ip, notes=notes)
         if found is None:
-            notes.append(f"UPnP IGD: no answer to SSDP from {gateway} within "
-                         f"{ssdp_window:.1f} s")
+            notes.append(f"UPnP IGD: no answer to SSDP from {gateway}")
             return None
         return igd_mod.describe(found.location, gateway, deadline, source_ip=local_ip)
 
@@ -280,14 +307,15 @@ def find_modem(timeout: float, *, gateway: str | None = None,
     if isinstance(got_igd, igd_mod.Igd):
         modem.igd = got_igd
         try:
-            modem.external_ip = igd_mod.external_ip(got_igd, max(deadline, time.monotonic() + 1))
+            modem.external_ip = wan_address(
+                igd_mod.external_ip(got_igd, max(deadline, time.monotonic() + 1)), "upnp", notes)
         except ModemError as exc:
             notes.append(f"UPnP IGD: external address: {exc}")
     elif "upnp" in modem.protocols:
         modem.protocols.remove("upnp")
     nat = answered.get("natpmp")
     if modem.external_ip is None and isinstance(nat, str):
-        modem.external_ip = "" if nat == "0.0.0.0" else nat
+        modem.external_ip = wan_address(nat, "natpmp", notes)
     elif modem.external_ip is None and isinstance(nat, Refused) and nat.code == 3:
         modem.external_ip = ""   # NAT-PMP "network failure": the modem has no public address
     if not modem.protocols:

@@ -15,7 +15,7 @@ import struct
 import time
 from dataclasses import dataclass
 
-from rosnet_tui.core.upnp.wire import HostileAnswer, NoAnswer, Refused
+from rosnet_tui.core.upnp.wire import BadAnswers, HostileAnswer, NoAnswer, Refused
 
 PORT = 5351
 PROTO_NUM = {"TCP": 6, "UDP": 17}
@@ -51,7 +51,9 @@ PCP_RESULTS = {
 
 def _exchange(gateway: str, request: bytes, deadline: float, accept, source_ip: str | None,
               notes: list[str], what: str):
-    """Send *request* to the gateway until *accept(answer)* returns non-None or time runs out."""
+    """Send *request* to the gateway until *accept(answer)* returns non-None or time runs out.
+    Answers refused are noted (capped); at the deadline the last refusal is said."""
+    bad = BadAnswers(notes, what)
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         if source_ip:
@@ -61,6 +63,9 @@ def _exchange(gateway: str, request: bytes, deadline: float, accept, source_ip: 
         while True:
             left = deadline - time.monotonic()
             if left <= 0:
+                if bad.last:
+                    raise NoAnswer(f"no usable answer from {gateway}:{PORT} (the last one: "
+                                   f"{bad.last})")
                 raise NoAnswer(f"no answer from {gateway}:{PORT}")
             s.send(request)
             until = time.monotonic() + min(wait, left)
@@ -77,7 +82,7 @@ def _exchange(gateway: str, request: bytes, deadline: float, accept, source_ip: 
                 try:
                     got = accept(data)
                 except HostileAnswer as exc:
-                    notes.append(f"{what}: {exc}; ignored")
+                    bad.add(f"{exc}; ignored")
                     continue
                 if got is not None:
                     return got
@@ -87,11 +92,23 @@ def _exchange(gateway: str, request: bytes, deadline: float, accept, source_ip: 
         raise NoAnswer(f"{gateway}:{PORT}: {exc.strerror or exc}") from None
     finally:
         s.close()
+        bad.close()
 
 
 def _refused(protocol: str, table: dict, code: int) -> Refused:
     name, words = table.get(code, ("unknown", f"the modem refused with code {code}"))
     return Refused(protocol, code, name, words)
+
+
+def _confirms(asked_s: int, given_s: int, what: str) -> None:
+    """A success answers the request only when its lifetime says the same thing: 0 for a
+    delete (a late copy of the mapping's own answer, lifetime > 0, is not a confirmation), more
+    than 0 for a forward (lifetime 0 is no forward at all)."""
+    if asked_s == 0 and given_s != 0:
+        raise HostileAnswer(f"a {what} answer to a delete with a lifetime of {given_s} s (a late "
+                            "answer to the forward, not the delete)")
+    if asked_s and not given_s:
+        raise HostileAnswer(f"a {what} 'success' with a lifetime of 0 s: no forward was made")
 
 
 # --------------------------------------------------------------------------- NAT-PMP
@@ -129,6 +146,7 @@ def natpmp_map(gateway: str, protocol: str, internal_port: int, external_port: i
             raise _refused("natpmp", NATPMP_RESULTS, result)
         if iport != internal_port:
             raise HostileAnswer(f"a NAT-PMP answer for port {iport}, not {internal_port}")
+        _confirms(lease_s, life, "NAT-PMP")
         return eport, life
 
     return _exchange(gateway, req, deadline, accept, source_ip,
@@ -206,6 +224,7 @@ def pcp_map(gateway: str, client_ip: str, protocol: str, internal_port: int,
             raise HostileAnswer("a PCP answer for another protocol or port")
         if result:
             raise _refused("pcp", PCP_RESULTS, result)
+        _confirms(lease_s, life, "PCP")
         return PcpAnswer(life, epoch, _from_v6(d[44:60]), eport)
 
     return _exchange(gateway, req, deadline, accept, client_ip,
