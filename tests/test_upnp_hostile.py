@@ -206,6 +206,8 @@ def test_row4_an_unconfirmed_roll_back_keeps_the_journal_entry_and_says_so(serve
     assert exc.value.kind == "unconfirmed", exc.value.words
     words = exc.value.words
     assert "TCP 7447" in words and "may still forward" in words and "router unmap" in words
+    assert "nothing was changed" not in exc.value.told()     # what the CLI and map screen say
+    assert "nothing was changed" in fw.MapRefused("refused", "no").told()
     live = journal.live(tmp_path)
     assert [(r["protocol"], r["port"], r["state"]) for _e, r in live] == [("TCP", 7447, "made")]
     assert held[7447]

@@ -210,11 +210,8 @@ def run_map(args: argparse.Namespace) -> int:
     try:
         result = fw.map_forwards(settings, modem, plan.need.forwards, state_dir=sd, via=via,
                                  timeout=max(timeout * 2, 5.0))
-    except fw.MapUnconfirmed as exc:
-        say(f"rosnet-tui: {exc.words}")
-        return EXIT_FAIL
     except fw.MapRefused as exc:
-        say(f"rosnet-tui: refused, nothing was changed: {exc.words}")
+        say(f"rosnet-tui: {exc.told()}")
         return EXIT_FAIL
     except ModemError as exc:
         say(f"rosnet-tui: the modem did not give a usable answer, nothing was changed: {exc}")

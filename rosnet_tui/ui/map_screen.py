@@ -93,7 +93,8 @@ class MapScreen(ConfirmDialog[bool]):
                                      state_dir=self.state_dir, via=plan.via,
                                      timeout=max(self.timeout * 2, 5.0))
         except fw.MapRefused as exc:
-            self.app.call_from_thread(self._refused, f"Refused, nothing was changed: {exc.words}")
+            told = exc.told()
+            self.app.call_from_thread(self._refused, told[:1].upper() + told[1:])
             return
         except (ModemError, OSError) as exc:
             self.app.call_from_thread(self._refused, f"The modem did not give a usable answer, "

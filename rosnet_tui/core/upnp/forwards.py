@@ -169,6 +169,10 @@ class MapRefused(Exception):
         self.kind, self.words = kind, words
         super().__init__(words)
 
+    def told(self) -> str:
+        """The sentence a person is shown (the CLI and the map screen say the same)."""
+        return f"refused, nothing was changed: {self.words}"
+
 
 class MapUnconfirmed(MapRefused):
     """A forward failed and the roll-back of those made before it was not confirmed by the
@@ -182,6 +186,9 @@ class MapUnconfirmed(MapRefused):
             f"it may still forward: {'; '.join(left)}. It stays recorded: remove it with "
             "`rosnet-tui router unmap` (or `rosnet-tui undo`), or in the modem's page; its "
             "lease ends it in any case"))
+
+    def told(self) -> str:
+        return self.words            # something may still be forwarded: never "nothing changed"
 
 
 # --------------------------------------------------------------------------- mapping
