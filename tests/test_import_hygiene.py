@@ -250,7 +250,7 @@ def test_the_allow_lists_hold_no_stale_entry():
 
 def test_sync_and_checks_import_each_other_at_module_level_only():
     """The sync <-> checks loop is gone: the watcher asks core.public_ip, the applier reads hosts
-    lines with core.hosts, linux.resolve reads sync's applied records at module level."""
+    lines with core.hosts, linux.resolve reads the applied records from saved.sync_applied."""
     found = _function_level_imports()
     crossing = sorted((f, m) for f, m in found
                       if (f.startswith("rosnet_tui/core/sync/") and "core.checks" in m)

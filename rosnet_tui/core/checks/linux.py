@@ -26,9 +26,9 @@ from rosnet_tui.core.files.managed_write import read_text
 from rosnet_tui.core.net.connect import tcp_failure_kind
 from rosnet_tui.core.procedure import is_ip, is_loopback
 from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.saved.sync_applied import load_applied
 from rosnet_tui.core.ssh.connection import resolve_ipv4
 from rosnet_tui.core.ssh.session import ssh_run
-from rosnet_tui.core.sync.applied import load_applied
 
 
 def _is_loopback_ip(ip: str) -> bool:

@@ -16,8 +16,7 @@ from dataclasses import dataclass, field
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files.hosts import HostsEntry, hosts_entries, render_hosts_block
-
-from .records import Record
+from rosnet_tui.core.saved.sync_records import Record
 
 LAN_WHY = "peer, on this LAN (same public IP as us)"
 
