@@ -29,6 +29,7 @@ from rosnet_tui.core.checks.probes.ros2 import (
     zenoh_env,
     zenoh_peer_problem,
 )
+from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import read_text
@@ -245,7 +246,7 @@ async def check_router(ctx: CheckContext) -> Outcome:
     data: dict[str, Any] = {"role": role, "endpoint": endpoint, "reachable": False,
                             "address": None, "failure": None, "ipv6": ipv6, "remote_peers": [],
                             "security": str(s.ros.security)}
-    tls_paths = fleet_tls.tls_paths(ros2.config_dir())
+    tls_paths = fleet_tls.tls_paths(default_config_dir())
     if ros2.mtls(s):
         data["tls"] = tls_handshake.local_state(s, tls_paths)
     if not name:

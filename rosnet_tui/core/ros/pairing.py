@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.ros import fleet_tls
 from rosnet_tui.core.ros.fleet_tls import TlsError, TlsPaths
@@ -225,10 +226,8 @@ class CertRenewer:
         s = copy.deepcopy(settings)
 
         def work() -> None:
-            from rosnet_tui.core.ros.ros2 import config_dir
-
             try:
-                said, nxt = renew_due(s, fleet_tls.tls_paths(config_dir()))
+                said, nxt = renew_due(s, fleet_tls.tls_paths(default_config_dir()))
             except Exception as exc:  # noqa: BLE001 - a renewal's trouble must not stop the sync
                 said, nxt = [f"TLS: renewing the certificate failed: {exc}"], 600.0
             for line in said:
@@ -246,11 +245,11 @@ async def after_apply(s: Settings, opts: Any = None) -> str:
     """What the wizard's ``w`` on the ROS step does after writing under mTLS (as ``ros apply``):
     the CA and certificate on the master; on a member, pairing over SSH when needed. A line for
     the user ("" when nothing was needed)."""
-    from rosnet_tui.core.ros.ros2 import config_dir, mtls
+    from rosnet_tui.core.ros.ros2 import mtls
 
     if not mtls(s):
         return ""
-    paths = fleet_tls.tls_paths(config_dir())
+    paths = fleet_tls.tls_paths(default_config_dir())
     try:
         if s.is_master:
             made = prepare_master(s, paths)
