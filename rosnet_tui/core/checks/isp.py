@@ -29,6 +29,7 @@ from rosnet_tui.core.net.netinfo import is_overlay
 from rosnet_tui.core.procedure import is_ip
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.connection import resolve_ipv4
+from rosnet_tui.core.upnp.modem import find_modem
 
 CGNAT_NET = ipaddress.ip_network("100.64.0.0/10")
 RFC1918 = tuple(ipaddress.ip_network(n) for n in ("10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16"))
@@ -260,8 +261,6 @@ async def ttl_probe(target: str, max_hops: int, timeout: float) -> list[Hop]:
 
 def _ask_modem(timeout: float, notes: list[str]):
     """The modem's own word on its external address (UPnP IGD, NAT-PMP or PCP), or None."""
-    from rosnet_tui.core.upnp.modem import find_modem
-
     return find_modem(timeout, notes=notes)
 
 
