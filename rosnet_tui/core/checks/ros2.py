@@ -9,7 +9,6 @@ the interpreter of the rosnet-tui installed there, by the round's peer agent (pr
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import time
 from pathlib import Path
 from typing import Any
@@ -34,6 +33,7 @@ from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import read_text
 from rosnet_tui.core.net.blocking import run_blocking
+from rosnet_tui.core.net.connect import close_writer
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.procedure import is_loopback
 from rosnet_tui.core.results import Outcome, Status
@@ -206,9 +206,7 @@ async def _tcp(host: str, port: int, t: float) -> tuple[str | None, str]:
         return kind, exc.strerror or str(exc)
     finally:
         if writer is not None:
-            writer.close()
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer.wait_closed(), 0.3)
+            await close_writer(writer, 0.3)
 
 
 def _listening(port: int) -> list[str]:
