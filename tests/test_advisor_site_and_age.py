@@ -175,8 +175,8 @@ def test_linux_resolve_dates_a_peer_by_the_settings_file_and_the_sync_record(tmp
     here, so no name leaves the machine): a settings file saved now, and a sync record of
     turtlebot's applied two hours ago."""
     from rosnet_tui.core.checks.linux import address_dates
-    from rosnet_tui.core.sync.applied import save_applied
-    from rosnet_tui.core.sync.records import new_record
+    from rosnet_tui.core.saved.sync_applied import save_applied
+    from rosnet_tui.core.saved.sync_records import new_record
 
     path = tmp_path / "config.toml"
     s = laptop_settings()

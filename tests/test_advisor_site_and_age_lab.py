@@ -113,8 +113,8 @@ def silent_robot_seen_from_the_laptop(lab, tmp_path, *, settings_age_s: float = 
         os.utime(cfg, (then, then))
     state = tmp_path / "state"
     if sync_age_s is not None:
-        from rosnet_tui.core.sync.applied import save_applied
-        from rosnet_tui.core.sync.records import new_record
+        from rosnet_tui.core.saved.sync_applied import save_applied
+        from rosnet_tui.core.saved.sync_records import new_record
         save_applied(state / "rosnet-tui", {"turtlebot": new_record(
             "turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip=ADDR.ROBOT_PUBLIC, role="master",
             now=time.time() - sync_age_s)})

@@ -91,6 +91,18 @@ def test_audit_reports_the_lines():
     assert a["lines"]["sami"] == ["line 3: 198.51.100.2"]
 
 
+def test_audit_reads_the_hosts_file_as_the_resolver_and_the_writer_do():
+    """Issue 33: hosts-file parsing had two homes with two rules. The audit counted a line whose
+    first field is no address ('turtlebot-old sami') as an entry for sami, found at
+    'turtlebot-old'; the resolver (glibc) skips such a line, and so did the conflict finder."""
+    from rosnet_tui.core.files.hosts import parse_hosts
+
+    text = "127.0.0.1 localhost\nturtlebot-old sami\n198.51.100.2 sami # peer\n"
+    assert [(n, ip) for n, ip, _ in parse_hosts(text)] == [(1, "127.0.0.1"), (3, "198.51.100.2")]
+    a = linux.audit_hosts(text, [HostsEntry("198.51.100.2", "sami", "peer")])
+    assert a["wrong"] == [] and a["lines"]["sami"] == ["line 3: 198.51.100.2"]
+
+
 # --------------------------------------------------------------------------- linux.resolve
 async def test_resolve_flags_a_name_on_loopback(tmp_path):
     s = settings(name="localhost", local_ip="10.1.2.3", peers=[])

@@ -246,6 +246,19 @@ def test_the_sync_service_renews_the_masters_certificate_before_expiry(tmp_path)
     assert pairing.renew_due(master(security="none"), p) == ([], 6 * 3600.0)
 
 
+def test_the_program_s_own_config_folder_is_the_product_s(tmp_path, monkeypatch):
+    """fleet_tls, fed to a peer's interpreter, restates the config folder's rule instead of
+    importing it (the installed rosnet-tui there may be of another version): held equal here."""
+    from rosnet_tui.core.config.paths import default_config_dir
+
+    for xdg in (str(tmp_path / "xdg"), ""):
+        monkeypatch.setenv("HOME", str(tmp_path / "home"))
+        monkeypatch.setenv("XDG_CONFIG_HOME", xdg)
+        assert fleet_tls.tls_paths().dir == default_config_dir() / "tls"
+    monkeypatch.delenv("XDG_CONFIG_HOME")
+    assert fleet_tls.tls_paths().dir == tmp_path / "home" / ".config" / "rosnet-tui" / "tls"
+
+
 def test_ros_apply_on_the_master_makes_the_ca_and_writes_the_tls_config(tmp_path):
     home = tmp_path / "m"
     (home / "rosnet-tui").mkdir(parents=True)

@@ -49,7 +49,8 @@ def test_state_read_json_refuses_deep_nesting_as_damaged_state(tmp_path, text):
 
 
 def test_sync_status_and_applied_records_survive_deep_nesting(tmp_path):
-    from rosnet_tui.core.sync import applied, status
+    from rosnet_tui.core.saved import sync_applied as applied
+    from rosnet_tui.core.sync import status
 
     for p in (status.status_path(tmp_path), applied.applied_path(tmp_path)):
         p.parent.mkdir(parents=True, exist_ok=True)

@@ -27,9 +27,15 @@ from rosnet_tui.core.config.paths import Paths
 from rosnet_tui.core.saved.settings import (
     render_settings,
 )
-from rosnet_tui.core.sync import FolderStore, RecordError, SyncService, parse_record
+from rosnet_tui.core.saved.sync_records import (
+    MAX_RECORD_BYTES,
+    RecordError,
+    format_time,
+    new_record,
+    parse_record,
+)
+from rosnet_tui.core.sync import FolderStore, SyncService
 from rosnet_tui.core.sync.dnsstore import TXT_TAG, record_from_txt
-from rosnet_tui.core.sync.records import MAX_RECORD_BYTES, format_time, new_record
 from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
 from tests.builders import folder_sync_settings
 from tests.hardening_tally import tally

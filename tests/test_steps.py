@@ -111,3 +111,18 @@ def test_the_steps_declare_each_check_as_it_registers():
     declared = {cid: (step, ros, switch) for step, checks in STEP_CHECKS.items()
                 for cid, ros, switch in checks}
     assert declared == {c.id: (c.step, c.ros, c.switch) for c in REGISTRY.values()}
+
+
+def test_the_affected_tables_name_registered_checks_of_the_right_ros():
+    """core/affected.py is the one table of which checks a write affects: every id it names is
+    a registered check, and the sync service's ROS 2 row names ROS 2 checks only."""
+    from rosnet_tui.core import affected
+    from rosnet_tui.core.checks import REGISTRY, load_builtin_checks
+
+    load_builtin_checks()
+    rows = (affected.HOSTS, affected.ROS_ENV, affected.ROS2_ENV, affected.ROS2_TLS,
+            affected.FORWARD, affected.FIREWALL, affected.UNDO, affected.SYNC,
+            affected.SYNC_ROS2, affected.ros2_write(True), affected.ros2_write(False))
+    assert {i for row in rows for i in row} <= set(REGISTRY)
+    assert all(REGISTRY[i].ros != 1 for i in affected.SYNC_ROS2)
+    assert affected.SYNC_ROS2 == ("linux.hosts", "linux.resolve", "linux.ssh", "ros2.router")

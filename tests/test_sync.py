@@ -17,26 +17,29 @@ import pytest
 from rosnet_tui.core.config.paths import Paths
 from rosnet_tui.core.config.settings_model import Peer, Settings
 from rosnet_tui.core.saved.settings import atomic_write_text, load_settings, render_settings
+from rosnet_tui.core.saved.sync_records import (
+    MAX_RECORD_BYTES,
+    Candidate,
+    RecordError,
+    choose_best,
+    format_time,
+    new_record,
+    parse_record,
+)
 from rosnet_tui.core.sync import (
     Backoff,
-    Candidate,
     FolderStore,
     PlanError,
-    RecordError,
     StoreError,
     SyncService,
     backoff_cap,
-    choose_best,
     load_status,
-    new_record,
-    parse_record,
     plan_hosts,
     render_status,
 )
 from rosnet_tui.core.sync.dnsstore import parse_tsig_key, record_from_txt, record_to_txt
 from rosnet_tui.core.sync.folder import copy_owner
 from rosnet_tui.core.sync.plan import LAN_WHY, check_complete
-from rosnet_tui.core.sync.records import MAX_RECORD_BYTES, format_time
 from rosnet_tui.core.sync.store import StoreConfigError
 from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
 from tests.builders import sync_laptop_settings as laptop_settings

@@ -22,9 +22,9 @@ import pytest
 
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files.hosts import parse_hosts
-from rosnet_tui.core.sync import FolderStore, StoreError, new_record
+from rosnet_tui.core.saved.sync_records import format_time, new_record
+from rosnet_tui.core.sync import FolderStore, StoreError
 from rosnet_tui.core.sync.dnsstore import DnsStore
-from rosnet_tui.core.sync.records import format_time
 from rosnet_tui.core.sync.watcher import NetlinkMonitor
 from tests.lab import ADDR
 from tests.sync_support.bench import measure_change_latency, summarize

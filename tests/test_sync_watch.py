@@ -26,7 +26,8 @@ import pytest
 from rosnet_tui.core.config.paths import Paths
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
-from rosnet_tui.core.sync import FolderStore, SyncService, load_status, new_record
+from rosnet_tui.core.saved.sync_records import new_record
+from rosnet_tui.core.sync import FolderStore, SyncService, load_status
 from rosnet_tui.core.sync import folder_watch as fw
 from rosnet_tui.core.sync.folder_watch import FolderWatch, WatchUnavailable
 from rosnet_tui.core.sync.timing import read_period

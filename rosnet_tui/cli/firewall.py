@@ -36,12 +36,11 @@ from rosnet_tui.cli.writing import (
     rerun_checks,
     run_as_root,
 )
+from rosnet_tui.core import affected
 from rosnet_tui.core.config.settings_model import PROFILES, Settings
 from rosnet_tui.core.exposure import firewall as fw
 from rosnet_tui.core.files import privilege
 from rosnet_tui.core.ssh import origin
-
-FIREWALL_CHECKS = ("linux.firewall",)
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -196,7 +195,7 @@ def run_apply(args: argparse.Namespace) -> int:
             print(f"Loaded the table {fw.TABLE} (journal #{entry}). Undo with: "
                   f"{command_line(args, 'undo')}")
     if rc == EXIT_OK and not args.no_checks:
-        rerun_checks(FIREWALL_CHECKS, settings, paths_of(args))
+        rerun_checks(affected.FIREWALL, settings, paths_of(args))
     return rc
 
 
@@ -275,5 +274,5 @@ def run_undo(args: argparse.Namespace) -> int:
         print(f"Removed the table {fw.TABLE}" + (f" (journal #{entry}; `{command_line(args, 'undo')}` "
                                                  "loads it again)." if entry else "."))
     if rc == EXIT_OK and not args.no_checks:
-        rerun_checks(FIREWALL_CHECKS, settings, paths_of(args))
+        rerun_checks(affected.FIREWALL, settings, paths_of(args))
     return rc

@@ -38,7 +38,7 @@ from rosnet_tui.cli.writing import (
     yes_to_all,
 )
 from rosnet_tui.core import affected
-from rosnet_tui.core.config.paths import default_bashrc_path
+from rosnet_tui.core.config.paths import default_bashrc_path, default_config_dir
 from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files import managed_write as mw
@@ -226,7 +226,7 @@ def _tls_plan(settings) -> str:
     """What the apply does for mutual TLS besides the files above (nothing is done here)."""
     from rosnet_tui.core.ros import fleet_tls, pairing
 
-    paths = fleet_tls.tls_paths(ros2.config_dir())
+    paths = fleet_tls.tls_paths(default_config_dir())
     if settings.is_master:
         plan = pairing.master_plan(settings, paths)
         return ("Mutual TLS: this apply also makes " + "; ".join(plan) + ". `rosnet-tui undo` "
@@ -246,7 +246,7 @@ def _fleet_tls(settings) -> int:
 
     from rosnet_tui.core.ros import fleet_tls, pairing
 
-    paths = fleet_tls.tls_paths(ros2.config_dir())
+    paths = fleet_tls.tls_paths(default_config_dir())
     try:
         if settings.is_master:
             for what in pairing.prepare_master(settings, paths):

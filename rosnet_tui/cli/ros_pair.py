@@ -17,9 +17,9 @@ import sys
 
 from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, say
 from rosnet_tui.cli.writing import confirm, load_settings_for
+from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.ros import fleet_tls, pairing
 from rosnet_tui.core.ros.fleet_tls import TlsError
-from rosnet_tui.core.ros.ros2 import config_dir
 
 
 def register(rs: argparse._SubParsersAction) -> None:
@@ -67,7 +67,7 @@ def run_pair(args: argparse.Namespace) -> int:
         say("rosnet-tui: --dry-run goes with --remove (the other pairing actions show nothing "
             "first)")
         return EXIT_USAGE
-    paths = fleet_tls.tls_paths(config_dir())
+    paths = fleet_tls.tls_paths(default_config_dir())
     try:
         if args.sign:
             if not settings.is_master:

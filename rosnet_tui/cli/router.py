@@ -24,6 +24,7 @@ from rosnet_tui.cli.common import (
 )
 from rosnet_tui.cli.writing import command_line, confirm, paths_of, rerun_checks
 from rosnet_tui.core import affected
+from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.upnp import forwards as fw
 from rosnet_tui.core.upnp import journal
 from rosnet_tui.core.upnp.modem import LEASE_MAX_S, LEASE_MIN_S, Modem, find_modem
@@ -84,12 +85,19 @@ def _common(p: argparse.ArgumentParser) -> None:
     add_state_dir_option(p, "where the undo journal lives")
 
 
-def _timeout(args: argparse.Namespace, settings) -> float | None:
+def _timeout(args: argparse.Namespace, settings: Settings) -> float | None:
     t = args.timeout if args.timeout is not None else float(settings.checks.timeout_s)
     if not 0.5 <= t <= 60:
         say("rosnet-tui router: --timeout must be between 0.5 and 60 seconds")
         return None
     return t
+
+
+def _settings_and_timeout(args: argparse.Namespace) -> tuple[Settings, float] | None:
+    """The settings and the modem's timeout, or None when either is refused (said on stderr)."""
+    settings = load_settings_or_say(args)
+    timeout = None if settings is None else _timeout(args, settings)
+    return None if settings is None or timeout is None else (settings, timeout)
 
 
 def _find(timeout: float) -> tuple[Modem | None, list[str]]:
@@ -118,12 +126,10 @@ def _say_modem(modem: Modem) -> None:
 
 # --------------------------------------------------------------------------- mappings
 def run_mappings(args: argparse.Namespace) -> int:
-    settings = load_settings_or_say(args)
-    if settings is None:
+    got = _settings_and_timeout(args)
+    if got is None:
         return EXIT_USAGE
-    timeout = _timeout(args, settings)
-    if timeout is None:
-        return EXIT_USAGE
+    settings, timeout = got
     modem, notes = _find(timeout)
     sd = state_dir_of(args)
     if modem is None:
@@ -234,12 +240,10 @@ def run_map(args: argparse.Namespace) -> int:
 
 # --------------------------------------------------------------------------- unmap
 def run_unmap(args: argparse.Namespace) -> int:
-    settings = load_settings_or_say(args)
-    if settings is None:
+    got = _settings_and_timeout(args)
+    if got is None:
         return EXIT_USAGE
-    timeout = _timeout(args, settings)
-    if timeout is None:
-        return EXIT_USAGE
+    settings, timeout = got
     sd = state_dir_of(args)
     live = journal.live(sd)
     if not live:

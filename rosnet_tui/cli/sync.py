@@ -11,7 +11,6 @@ import argparse
 import difflib
 import json
 import logging
-import os
 import pwd
 import sys
 import time
@@ -31,7 +30,7 @@ from rosnet_tui.cli.common import (
     state_dir_problem,
 )
 from rosnet_tui.cli.writing import confirm
-from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.paths import Paths, xdg_config_home
 from rosnet_tui.core.files import privilege
 
 UNIT_NAME = "rosnet-tui-sync.service"
@@ -293,8 +292,7 @@ def _unit_dir(args: argparse.Namespace) -> Path:
     if args.unit_dir:
         return Path(args.unit_dir).expanduser().absolute()
     if args.user:
-        base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-        return Path(base) / "systemd" / "user"
+        return xdg_config_home() / "systemd" / "user"
     return Path("/etc/systemd/system")
 
 

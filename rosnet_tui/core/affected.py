@@ -12,6 +12,7 @@ FIREWALL = ("linux.firewall",)                    # our nftables table (ROS 1's 
 UNDO = (*HOSTS, *ROS_ENV, *ROS2_ENV, "router.upnp", *FIREWALL)   # an undo in the wizard: any of
                                                                    # the above
 SYNC = (*HOSTS, "linux.ssh", "ros.master")        # the sync service: a peer's new address
+SYNC_ROS2 = (*HOSTS, "linux.ssh", "ros2.router")  # the same under ROS 2 (the master's router)
 
 
 def ros2_write(mtls: bool) -> tuple[str, ...]:

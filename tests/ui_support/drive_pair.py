@@ -14,9 +14,8 @@ import sys
 import time
 from pathlib import Path
 
-from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.paths import Paths, default_config_dir
 from rosnet_tui.core.ros import fleet_tls
-from rosnet_tui.core.ros.ros2 import config_dir
 from rosnet_tui.core.saved.settings import load_settings
 from rosnet_tui.core.wizard.session import WizardSession
 from rosnet_tui.ui.app import RosnetApp
@@ -30,7 +29,7 @@ async def drive(config: Path, state_dir: Path, bashrc: Path) -> dict:
     assert settings is not None, f"no settings at {config}"
     paths = Paths(config_path=config, state_dir=state_dir, bashrc_path=bashrc)
     app = RosnetApp(WizardSession(settings, paths))
-    crt = fleet_tls.tls_paths(config_dir()).node_crt
+    crt = fleet_tls.tls_paths(default_config_dir()).node_crt
     out: dict = {"paired_s": None}
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.pause()

@@ -470,20 +470,7 @@ _MASTER_RULES = ("ros.master.unreachable", "ros.master.peer_cannot_register")
       "side whose node is unreachable.",
       "ros", "fail", after=_MASTER_RULES)
 def _pubsub_out(ev: Evidence) -> list[Hit]:
-    o, i = ev.data("ros.pubsub_out"), ev.data("ros.pubsub_in")
-    if o.get("failed_hop") == "registration" and ev.fired_any(*_MASTER_RULES):
-        return []
-    if o.get("ok") is not False or i.get("ok") is not True:
-        return []
-    peer = _pubsub_peer(ev)
-    hop = _HOP_WORDS.get(o.get("failed_hop") or "", "an unknown hop")
-    return [Hit(f"Messages published on {peer} reach {ev.me}, but messages published on {ev.me} "
-                f"do not reach {peer}; the failing hop is {hop}"
-                + (f" ({o.get('node')} at {o.get('uri')})." if o.get("uri") else "."),
-                _hop_actions(ev, "ros.pubsub_out", ev.me, peer),
-                check_ids=["ros.pubsub_out", "ros.pubsub_in"],
-                evidence=[f"ros.pubsub_out: failed at {o.get('failed_hop')}",
-                          "ros.pubsub_in: ok"])]
+    return _one_way(ev, "ros.pubsub_out")
 
 
 @rule("ros.pubsub.in_fails", "ros", ("ros.pubsub_out", "ros.pubsub_in"),
@@ -494,20 +481,27 @@ def _pubsub_out(ev: Evidence) -> list[Hit]:
       "side whose node is unreachable.",
       "ros", "fail", after=_MASTER_RULES)
 def _pubsub_in(ev: Evidence) -> list[Hit]:
-    o, i = ev.data("ros.pubsub_out"), ev.data("ros.pubsub_in")
-    if i.get("failed_hop") == "registration" and ev.fired_any(*_MASTER_RULES):
+    return _one_way(ev, "ros.pubsub_in")
+
+
+def _one_way(ev: Evidence, failed: str) -> list[Hit]:
+    """pub/sub fails the way *failed* checks (ros.pubsub_out: from us) and works the other."""
+    works = "ros.pubsub_in" if failed == "ros.pubsub_out" else "ros.pubsub_out"
+    f, w = ev.data(failed), ev.data(works)
+    if f.get("failed_hop") == "registration" and ev.fired_any(*_MASTER_RULES):
         return []
-    if i.get("ok") is not False or o.get("ok") is not True:
+    if f.get("ok") is not False or w.get("ok") is not True:
         return []
     peer = _pubsub_peer(ev)
-    hop = _HOP_WORDS.get(i.get("failed_hop") or "", "an unknown hop")
-    return [Hit(f"Messages published on {ev.me} reach {peer}, but messages published on {peer} "
-                f"do not reach {ev.me}; the failing hop is {hop}"
-                + (f" ({i.get('node')} at {i.get('uri')})." if i.get("uri") else "."),
-                _hop_actions(ev, "ros.pubsub_in", peer, ev.me),
+    src, dst = (ev.me, peer) if failed == "ros.pubsub_out" else (peer, ev.me)
+    hop = _HOP_WORDS.get(f.get("failed_hop") or "", "an unknown hop")
+    said = {failed: f"{failed}: failed at {f.get('failed_hop')}", works: f"{works}: ok"}
+    return [Hit(f"Messages published on {dst} reach {src}, but messages published on {src} "
+                f"do not reach {dst}; the failing hop is {hop}"
+                + (f" ({f.get('node')} at {f.get('uri')})." if f.get("uri") else "."),
+                _hop_actions(ev, failed, src, dst),
                 check_ids=["ros.pubsub_out", "ros.pubsub_in"],
-                evidence=["ros.pubsub_out: ok",
-                          f"ros.pubsub_in: failed at {i.get('failed_hop')}"])]
+                evidence=[said["ros.pubsub_out"], said["ros.pubsub_in"]])]
 
 
 @rule("ros.pubsub.both_fail", "ros", ("ros.pubsub_out", "ros.pubsub_in"),

@@ -36,6 +36,7 @@ from rosnet_tui.core.net.http import http_get
 from rosnet_tui.core.net.netinfo import is_overlay
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.connection import resolve_ipv4
+from rosnet_tui.core.upnp.modem import find_modem
 
 
 # --------------------------------------------------------------------------- isp.internet
@@ -239,8 +240,6 @@ async def ttl_probe(target: str, max_hops: int, timeout: float) -> list[Hop]:
 
 def _ask_modem(timeout: float, notes: list[str]):
     """The modem's own word on its external address (UPnP IGD, NAT-PMP or PCP), or None."""
-    from rosnet_tui.core.upnp.modem import find_modem
-
     return find_modem(timeout, notes=notes)
 
 

@@ -24,11 +24,11 @@ from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.files.hosts import HostsEntry, hosts_entries, parse_hosts
 from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import read_text
-from rosnet_tui.core.net.connect import tcp_failure_kind
+from rosnet_tui.core.net.connect import close_writer, tcp_failure_kind
 from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.saved.sync_applied import load_applied
 from rosnet_tui.core.ssh.connection import resolve_ipv4
 from rosnet_tui.core.ssh.session import ssh_run
-from rosnet_tui.core.sync.applied import load_applied
 
 
 def _plural(n: int, word: str) -> str:
@@ -235,9 +235,7 @@ async def tcp_connect(host: str, port: int, timeout: float) -> tuple[str, str]:
             " (something there answers and rejects the port)" if kind == "refused" else "")
     finally:
         if writer is not None:
-            writer.close()
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer.wait_closed(), 0.5)
+            await close_writer(writer)
 
 
 @check("linux.ping", "linux", "Peers answer ping by name", 1.0)

@@ -29,7 +29,7 @@ from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import NO_SSH_USER, each_peer, ssh_peers
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.net.blocking import run_blocking
-from rosnet_tui.core.net.connect import kind_from_text, tcp_failure_kind
+from rosnet_tui.core.net.connect import close_writer, kind_from_text, tcp_failure_kind
 from rosnet_tui.core.net.listener import ECHO, GREETING
 from rosnet_tui.core.peer.chatproto import CHAT
 from rosnet_tui.core.peer.commands import python_command, shq
@@ -201,9 +201,7 @@ async def check_chat_out(ctx: CheckContext) -> Outcome:
                 hello = b""
                 ev.append(f"exchange with {peer.name}: {exc or 'timed out'}")
             finally:
-                writer.close()
-                with contextlib.suppress(Exception):
-                    await asyncio.wait_for(writer.wait_closed(), 0.5)
+                await close_writer(writer)
             hello_text = hello.decode(errors="replace").strip()
             ev.append(f"connect {peer.name} ({addrs[0]}):{rport}: connected, read {hello_text!r}")
             res = await sess.wait(left())
@@ -382,6 +380,4 @@ async def _tcp_connect(host: str, port: int, timeout: float) -> tuple[bool, str,
         return False, f"TCP {host}:{port}: {exc.strerror or exc}", tcp_failure_kind(exc)
     finally:
         if writer is not None:
-            writer.close()
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer.wait_closed(), 0.5)
+            await close_writer(writer)

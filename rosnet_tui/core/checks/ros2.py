@@ -9,7 +9,6 @@ the interpreter of the rosnet-tui installed there, by the round's peer agent (pr
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import time
 from pathlib import Path
 from typing import Any
@@ -30,10 +29,12 @@ from rosnet_tui.core.checks.probes.ros2 import (
     zenoh_env,
     zenoh_peer_problem,
 )
+from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import read_text
 from rosnet_tui.core.net.blocking import run_blocking
+from rosnet_tui.core.net.connect import close_writer
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ros import fleet_tls, ros2, tls_handshake
@@ -205,9 +206,7 @@ async def _tcp(host: str, port: int, t: float) -> tuple[str | None, str]:
         return kind, exc.strerror or str(exc)
     finally:
         if writer is not None:
-            writer.close()
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer.wait_closed(), 0.3)
+            await close_writer(writer, 0.3)
 
 
 def _listening(port: int) -> list[str]:
@@ -245,7 +244,7 @@ async def check_router(ctx: CheckContext) -> Outcome:
     data: dict[str, Any] = {"role": role, "endpoint": endpoint, "reachable": False,
                             "address": None, "failure": None, "ipv6": ipv6, "remote_peers": [],
                             "security": str(s.ros.security)}
-    tls_paths = fleet_tls.tls_paths(ros2.config_dir())
+    tls_paths = fleet_tls.tls_paths(default_config_dir())
     if ros2.mtls(s):
         data["tls"] = tls_handshake.local_state(s, tls_paths)
     if not name:

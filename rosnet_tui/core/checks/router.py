@@ -12,6 +12,7 @@ import asyncio
 import contextlib
 import os
 import socket
+from collections.abc import Callable
 from typing import Any, Literal
 
 import psutil
@@ -23,7 +24,7 @@ from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, round_publi
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.net.blocking import run_blocking
-from rosnet_tui.core.net.connect import kind_from_text
+from rosnet_tui.core.net.connect import close_writer, kind_from_text
 from rosnet_tui.core.net.http import http_get
 from rosnet_tui.core.net.listener import GREETING, TestListener
 from rosnet_tui.core.net.netinfo import (
@@ -168,9 +169,7 @@ async def _talk_to(ip: str, port: int, timeout: float) -> tuple[bool, str]:
         return False, str(exc) or type(exc).__name__
     finally:
         if writer is not None:
-            writer.close()
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer.wait_closed(), 0.5)
+            await close_writer(writer)
 
 
 @check("router.listener", "router", "Our listener is up on the test port", 1.0)
@@ -312,14 +311,16 @@ def _what_answered(how: PortTalk, text: str) -> str:
 
 
 async def _probe_from_peer(ctx: CheckContext, peer: Peer, public_ip: str,
-                           ports: dict[int, PortTalk], t_connect: float, total: float,
-                           patience: float
+                           ports: dict[int, PortTalk], left: Callable[[], float]
                            ) -> tuple[dict[int, tuple[str, str]] | None, bool | None, str]:
-    """The peer's view of *ports* at *public_ip*, whether it answers ping, and why not.
+    """The peer's view of *ports* at *public_ip*, whether it answers ping, and why not, within
+    the time *left* says remains of the check's budget.
 
-    *patience* bounds the wait for the SSH connection: an unreachable peer leaves the rest of
-    the budget to the port checker.
+    The wait for the SSH connection is bounded (patience): an unreachable peer leaves the rest
+    of the budget to the port checker.
     """
+    t_connect, total = min(max(left() * 0.35, 0.5), 3.0), left() * 0.9
+    patience = max(ctx.timeout_s * 0.6, 0.3)
     cmd = port_probe_command(public_ip, t_connect, ports)
     res = await ssh_run(ctx.ssh, peer, cmd, timeout=total, connect_timeout=min(patience, total),
                         tcp_timeout=patience)
@@ -458,9 +459,7 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
                 evidence.append("the public IP is unknown, so the peer cannot be asked")
             else:
                 talk = {p: _talk(p, ours.get(p), s.ros.port or 11311) for p in ports}
-                raw, ping, why = await _probe_from_peer(
-                    ctx, peer, public_ip, talk, t_connect=min(max(left() * 0.35, 0.5), 3.0),
-                    total=left() * 0.9, patience=max(ctx.timeout_s * 0.6, 0.3))
+                raw, ping, why = await _probe_from_peer(ctx, peer, public_ip, talk, left)
                 if ping is not None:
                     evidence.append(f"{peer.name} -> ping {public_ip}: "
                                     + ("reply (the address is online)" if ping else "no reply"))
@@ -586,9 +585,8 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
             # The verdict needs zenoh_port only: the test port is not waited for much longer.
             talk: dict[int, PortTalk] = {zport: _talk(zport, ours.get(zport), 0)}
             talk[test_port] = "line?" if test_port in ours else "accept?"
-            raw, data["public_ip_ping"], why = await _probe_from_peer(
-                ctx, peer, public_ip, talk, t_connect=min(max(left() * 0.35, 0.5), 3.0),
-                total=left() * 0.9, patience=max(ctx.timeout_s * 0.6, 0.3))
+            raw, data["public_ip_ping"], why = await _probe_from_peer(ctx, peer, public_ip,
+                                                                        talk, left)
             if raw is None:
                 evidence.append(why + "; asking the port checker instead")
             else:

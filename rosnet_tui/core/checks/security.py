@@ -32,6 +32,7 @@ from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip
 from rosnet_tui.core.config.settings_model import Peer, Settings
 from rosnet_tui.core.exposure import outsider
 from rosnet_tui.core.jsonsafe import loads_bounded
+from rosnet_tui.core.net.connect import close_writer
 from rosnet_tui.core.net.http import http_get
 from rosnet_tui.core.peer.commands import installed_python_command, python_command
 from rosnet_tui.core.results import Outcome, Status
@@ -321,9 +322,7 @@ async def _listens_here(port: int) -> bool:
         _r, w = await asyncio.wait_for(asyncio.open_connection("127.0.0.1", port), 0.5)
     except (OSError, asyncio.TimeoutError):
         return False
-    w.close()
-    with contextlib.suppress(Exception):
-        await asyncio.wait_for(w.wait_closed(), 0.5)
+    await close_writer(w)
     return True
 
 

@@ -1,5 +1,5 @@
-"""Where rosnet-tui's files are: the settings file, the state dir (undo journal, backups,
-status), the hosts file and the shell rc file it writes.
+"""Where rosnet-tui's files are: the config folder and the settings file in it, the state dir
+(undo journal, backups, status), the hosts file and the shell rc file it writes.
 
 The defaults are declared here once. A :class:`Paths` value carries one set of places; the CLI
 or the app builds one and hands the same value to the session, the write plans and the check
@@ -15,9 +15,19 @@ from pathlib import Path
 DEFAULT_HOSTS_PATH = Path("/etc/hosts")
 
 
+def xdg_config_home() -> Path:
+    """This user's config base: $XDG_CONFIG_HOME, or ~/.config."""
+    return Path(os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config"))
+
+
+def default_config_dir() -> Path:
+    """rosnet-tui's config folder: the settings file, the Zenoh configs, the fleet's TLS files.
+    (``fleet_tls``, a program fed to peers, keeps its own copy; a test holds the two equal.)"""
+    return xdg_config_home() / "rosnet-tui"
+
+
 def default_config_path() -> Path:
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "rosnet-tui" / "config.toml"
+    return default_config_dir() / "config.toml"
 
 
 def default_state_dir() -> Path:

@@ -46,8 +46,10 @@ from pathlib import Path
 
 from rosnet_tui.core import jsonsafe
 from rosnet_tui.core.addresses import KIND_WORDS, address_kind, parse_ip
-from rosnet_tui.core.config.settings_model import PORT_MAX, PORT_MIN, Settings
+from rosnet_tui.core.config.settings_model import PORT_MAX, PORT_MIN, Settings, validate_network
+from rosnet_tui.core.files import privilege
 from rosnet_tui.core.files import undo_journal as uj
+from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.net.netinfo import collapse, lan_networks
 from rosnet_tui.core.ssh.origin import SSH_PORT, Session, SessionError, detect_session
 
@@ -148,8 +150,6 @@ def allowed_addresses(settings: Settings, profile: str | None = None) -> list[st
 def allow_networks(settings: Settings) -> list[str]:
     """[firewall] allow, merged; refuses (FirewallSettingsError) an entry that is no address or
     network (the settings loader refuses those already; settings made in code may hold one)."""
-    from rosnet_tui.core.config.settings_model import validate_network
-
     problems = [(f"firewall.allow[{i}]", why) for i, e in enumerate(settings.firewall.allow)
                 if (why := validate_network(e))]
     if problems:
@@ -482,8 +482,6 @@ def session_args(session: Session | None) -> list[str]:
 def apply_command(*, config: Path, profile: str, digest: str, state_dir: Path,
                   session: Session | None) -> list[str]:
     """The exact sudo command that loads the previewed table (and nothing else)."""
-    from rosnet_tui.core.files import privilege
-
     def ab(p: Path) -> str:
         return str(Path(p).expanduser().absolute())
     return privilege.sudo_argv(["--config", ab(config), "firewall", "apply", "--profile", profile,
@@ -524,8 +522,6 @@ def only_our_table(text: str) -> bool:
 
 def undo_records(records: list[dict], force: bool = False) -> list[str]:
     """Reverse recorded firewall changes (the undo journal's handler for KIND)."""
-    from rosnet_tui.core.files.managed_text import ManagedFileError
-
     said = []
     for rec in records:
         if rec.get("kind") == KIND and rec.get("state") == "made":

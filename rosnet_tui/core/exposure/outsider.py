@@ -24,6 +24,8 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
+from rosnet_tui.core.jsonsafe import loads_bounded
+
 SSH_MARK = "ROSNET_SSHAUDIT "
 TLS_MARK = "ROSNET_OUTSIDER "
 PASSWORD_METHODS = ("password", "keyboard-interactive")
@@ -224,8 +226,6 @@ def tls_probe_program() -> bytes:
 
 def parse_marked(stdout: str, mark: str) -> dict[str, Any] | None:
     """The JSON report after *mark* on a line of a peer program's output (None: none)."""
-    from rosnet_tui.core.jsonsafe import loads_bounded
-
     for line in stdout.splitlines():
         if line.startswith(mark):
             try:

@@ -12,8 +12,11 @@ import textwrap
 from dataclasses import dataclass, field
 
 from rosnet_tui.core.config.settings_model import PORT_MAX, PORT_MIN, Settings
+from rosnet_tui.core.exposure import firewall
+from rosnet_tui.core.exposure.forwarding import ports_to_forward
 from rosnet_tui.core.net import netinfo
 from rosnet_tui.core.net.netinfo import LocalNet
+from rosnet_tui.core.ros.rosbridge import forward_needed
 
 PORT_RANGE = f"{PORT_MIN}-{PORT_MAX}"
 
@@ -91,8 +94,6 @@ def _connection_notes(conn: str, ip: str, mac: str, page: str) -> list[str]:
 def _exposure(settings: Settings) -> list[str]:
     """What the forwards expose, and to whom, for the settings in force: ROS 2 with or without
     mutual TLS, master or member; ROS 1 with or without the peers-only firewall."""
-    from rosnet_tui.core.ros.rosbridge import forward_needed
-
     ssh = "- SSH, when port 22 is forwarded: keys only (PasswordAuthentication no)."
     off = "- Remove the forwarding when the robot is not in use."
     bp = settings.rosbridge.port
@@ -115,7 +116,6 @@ def _exposure(settings: Settings) -> list[str]:
                     "robot. Turn security back on (set-up: Security on, mutual TLS), or at least "
                     "restrict the forward to your members' public IPs if the modem can.")
         return [head, *bridge, ssh, off]
-    from rosnet_tui.core.exposure import firewall
 
     sources = [f"{p.public_ip} ({p.name})" for p in settings.peers if p.public_ip]
     allow = (f"allow only the peers' public IPs: {', '.join(sources)}" if sources
@@ -137,8 +137,6 @@ def _exposure(settings: Settings) -> list[str]:
 def ros1_exposure(settings: Settings) -> str:
     """Who can command a ROS 1 component through its forwards, for the settings in force: the
     one sentence of the router card, the Router step and the advisor."""
-    from rosnet_tui.core.exposure import firewall
-
     head = (f"ROS 1 has no authentication: the ROS master ({settings.ros.port}) and every node "
             "obey anyone who reaches them.")
     if firewall.wanted(settings):
@@ -173,7 +171,6 @@ def build_router_card(settings: Settings, net: LocalNet | None = None) -> Router
                        "'default via' address in 'ip route'.")
     page = f"http://{net.gateway}/" if net.gateway else ""
     to = ip or "(local IP)"
-    from rosnet_tui.core.exposure.forwarding import ports_to_forward
 
     forwards = [ForwardRule(f.protocol, f.ports, to, f.ports, f.required, f.why)
                 for f in ports_to_forward(settings)]

@@ -174,14 +174,16 @@ def parse_hosts(text: str) -> list[tuple[int, str, list[str]]]:
     """(line number, address, names) for every entry of a hosts file."""
     out = []
     for n, line in enumerate(text.splitlines(), 1):
-        fields = line.split("#", 1)[0].split()
-        if len(fields) >= 2:
-            out.append((n, fields[0], fields[1:]))
+        parsed = parse_hosts_line(line)
+        if parsed is not None:
+            out.append((n, parsed[0], parsed[1]))
     return out
 
 
-def _parse_hosts_line(content: str) -> tuple[str, list[str], str] | None:
-    """(address, names, comment) of a hosts line, or None for blank and comment lines."""
+def parse_hosts_line(content: str) -> tuple[str, list[str], str] | None:
+    """(address, names, comment) of a hosts line; None where the resolver reads no entry: a
+    blank or comment line, one field alone, a first field that is no address (glibc skips it).
+    The one reading of a hosts line: the checks, the conflict finder and the sync service's."""
     data, sep, comment = content.partition("#")
     fields = data.split()
     if len(fields) < 2:
@@ -216,7 +218,7 @@ def find_hosts_conflicts(text: str | None, settings: Settings,
         if span and span[0] <= i <= span[1]:
             continue
         content = mt.line_content(line)
-        parsed = _parse_hosts_line(content)
+        parsed = parse_hosts_line(content)
         if parsed is None:
             continue
         ip, names, comment = parsed

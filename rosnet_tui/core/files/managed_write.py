@@ -30,6 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from rosnet_tui.core.config.paths import DEFAULT_HOSTS_PATH, default_state_dir
 from rosnet_tui.core.files import tempfiles
 from rosnet_tui.core.files.cut_writes import INPLACE_DIR, MAGIC, journal_name
 from rosnet_tui.core.files.managed_text import ManagedFileError, PermissionNeededError, decode
@@ -66,8 +67,6 @@ def completion_args(path: Path, journal_dir: Path | None = None,
                     config: Path | None = None) -> list[str]:
     """rosnet-tui's arguments for a run that completes a cut write of *path* (run as root): any
     run does that first; a read-only one, told where the journal is and which settings to use."""
-    from rosnet_tui.core.config.paths import DEFAULT_HOSTS_PATH
-
     args = ["hosts", "show"]
     if Path(path) != DEFAULT_HOSTS_PATH:
         args += ["--file", str(path)]
@@ -323,8 +322,6 @@ def journal_dirs(journal_dir: Path | None = None) -> list[Path]:
     """Where the journal of a file whose folder may not be written can be: *journal_dir* (the
     writer's state dir), then the default state dir's in-place folder (so that a reader that is
     not told the writer's state dir, such as ``check``, still finds it)."""
-    from rosnet_tui.core.config.paths import default_state_dir
-
     out = [Path(journal_dir)] if journal_dir else []
     with contextlib.suppress(RuntimeError, KeyError):   # no home folder: only the given one
         default = default_state_dir().expanduser().absolute() / INPLACE_DIR

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
+from rosnet_tui.core.config.paths import default_state_dir
 from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import LOCK_TIMEOUT_S, MAX_FILE_BYTES, atomic_write
 from rosnet_tui.core.files.regular_file import read_regular
@@ -87,8 +88,6 @@ class JournalEntry:
 
 def state_dir_path(state_dir: Path | None) -> Path:
     if state_dir is None:
-        from rosnet_tui.core.config.paths import default_state_dir
-
         state_dir = default_state_dir()
     return Path(state_dir).expanduser().absolute()
 

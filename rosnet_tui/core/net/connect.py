@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import errno
 import socket
 
@@ -41,3 +42,11 @@ def kind_from_text(text: str) -> str:
     if "no route" in low or "unreachable" in low or "host is down" in low:
         return "unreachable"
     return "error"
+
+
+async def close_writer(writer: asyncio.StreamWriter, wait_s: float = 0.5) -> None:
+    """Close a stream, waiting at most *wait_s* for the far end (one that never acknowledges
+    does not hold a check); whatever the closing raises is no news."""
+    writer.close()
+    with contextlib.suppress(Exception):
+        await asyncio.wait_for(writer.wait_closed(), wait_s)

@@ -22,6 +22,7 @@ from collections.abc import AsyncIterator, Iterable
 from dataclasses import dataclass
 
 from rosnet_tui.core.config.settings_model import PORT_MAX, PORT_MIN
+from rosnet_tui.core.net.connect import close_writer
 
 GREETING = "ROSNET-TUI HELLO"
 ECHO = "ROSNET-TUI ECHO"
@@ -106,9 +107,7 @@ class TestListener:
         finally:
             self.seen.append(Seen(str(peer[0]), line, time.monotonic()))
             self._changed.set()
-            writer.close()
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer.wait_closed(), 1.0)
+            await close_writer(writer, 1.0)
             if task is not None:
                 self._tasks.discard(task)
 

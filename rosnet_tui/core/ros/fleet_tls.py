@@ -47,14 +47,14 @@ class TlsPaths:
     node_crt: Path
 
 
-def default_config_dir() -> Path:
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "rosnet-tui"
-
-
 def tls_paths(config_dir: Path | str | None = None) -> TlsPaths:
-    """Where this component's TLS files live (under *config_dir*/tls)."""
-    d = Path(config_dir if config_dir is not None else default_config_dir()) / "tls"
+    """Where this component's TLS files live (under *config_dir*/tls). The product passes
+    :func:`rosnet_tui.core.config.paths.default_config_dir`; the default serves this file and
+    the outsider probe as programs on a peer, where the installed rosnet-tui may be of another
+    version: the same rule, restated here so that the program imports nothing of rosnet-tui
+    (tests/test_fleet_tls.py holds the two equal)."""
+    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
+    d = Path(config_dir if config_dir is not None else Path(base) / "rosnet-tui") / "tls"
     return TlsPaths(d, d / "ca.crt", d / "ca.key", d / "node.key", d / "node.crt")
 
 

@@ -20,9 +20,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
+from rosnet_tui.core.peer.commands import zenoh_peer_command
 from rosnet_tui.core.ros import fleet_tls
 from rosnet_tui.core.ros.fleet_tls import TlsError, TlsPaths
+from rosnet_tui.core.ros.ros2 import mtls
+from rosnet_tui.core.ssh.session import ssh_run
 
 PAIR_TIMEOUT_S = 5.0
 FLEET_TLS_SOURCE = Path(fleet_tls.__file__).read_bytes()
@@ -93,14 +98,10 @@ def master_peer(s: Settings) -> Any:
 
 def tls_command(*args: str) -> str:
     """The command running fleet_tls.py (fed on stdin) with the peer's installed interpreter."""
-    from rosnet_tui.core.peer.commands import zenoh_peer_command
-
     return zenoh_peer_command(*args)
 
 
 async def _remote(opts: Any, peer: Any, timeout: float, *args: str) -> dict[str, Any]:
-    from rosnet_tui.core.ssh.session import ssh_run
-
     res = await ssh_run(opts, peer, tls_command(*args), stdin=FLEET_TLS_SOURCE, timeout=timeout)
     if res.failure:
         return {"error": f"SSH to {peer.name} failed ({res.failure}): {res.detail}"}
@@ -169,8 +170,6 @@ async def pair_over_ssh(s: Settings, paths: TlsPaths, opts: Any = None,
 
 def report_of(text: str) -> dict[str, Any] | None:
     """The ``ROSNET_TLS`` line of the master's answer (the last one), or None."""
-    from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
-
     for line in reversed((text or "").splitlines()):
         if line.startswith(fleet_tls.REPORT_PREFIX):
             try:
@@ -188,8 +187,6 @@ def renew_due(s: Settings, paths: TlsPaths, opts: Any = None) -> tuple[list[str]
     days (on a member over SSH, as ``ros pair --renew``). (lines to log, seconds to the next
     look: 6 h, or 10 min after a failure)."""
     import asyncio
-
-    from rosnet_tui.core.ros.ros2 import mtls
 
     if not mtls(s):
         return [], 6 * 3600.0
@@ -225,10 +222,8 @@ class CertRenewer:
         s = copy.deepcopy(settings)
 
         def work() -> None:
-            from rosnet_tui.core.ros.ros2 import config_dir
-
             try:
-                said, nxt = renew_due(s, fleet_tls.tls_paths(config_dir()))
+                said, nxt = renew_due(s, fleet_tls.tls_paths(default_config_dir()))
             except Exception as exc:  # noqa: BLE001 - a renewal's trouble must not stop the sync
                 said, nxt = [f"TLS: renewing the certificate failed: {exc}"], 600.0
             for line in said:
@@ -246,11 +241,9 @@ async def after_apply(s: Settings, opts: Any = None) -> str:
     """What the wizard's ``w`` on the ROS step does after writing under mTLS (as ``ros apply``):
     the CA and certificate on the master; on a member, pairing over SSH when needed. A line for
     the user ("" when nothing was needed)."""
-    from rosnet_tui.core.ros.ros2 import config_dir, mtls
-
     if not mtls(s):
         return ""
-    paths = fleet_tls.tls_paths(config_dir())
+    paths = fleet_tls.tls_paths(default_config_dir())
     try:
         if s.is_master:
             made = prepare_master(s, paths)

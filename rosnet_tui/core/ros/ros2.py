@@ -18,6 +18,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
 from rosnet_tui.core.ros.fleet_tls import TlsPaths, tls_paths
@@ -88,7 +89,7 @@ def tls_settings(s: Settings, tls: TlsPaths | None = None, *, listen: bool) -> d
     component's key and certificate to listen with (*listen*, the master) or connect with."""
     if not mtls(s):
         return {}
-    p = tls or tls_paths(config_dir())
+    p = tls or tls_paths(default_config_dir())
     out: dict[str, Any] = {"root_ca_certificate": str(p.ca_crt)}
     if listen:
         out.update(listen_private_key=str(p.node_key), listen_certificate=str(p.node_crt),
@@ -101,19 +102,14 @@ def tls_settings(s: Settings, tls: TlsPaths | None = None, *, listen: bool) -> d
 
 
 # --------------------------------------------------------------------------- files and paths
-def config_dir() -> Path:
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "rosnet-tui"
-
-
 def default_router_config_path() -> Path:
     """Where ``ros apply`` writes the router's config (ZENOH_ROUTER_CONFIG_URI points to it)."""
-    return config_dir() / "zenoh-router.json5"
+    return default_config_dir() / "zenoh-router.json5"
 
 
 def default_session_config_path() -> Path:
     """A lone node's session config on Humble, which has no ZENOH_CONFIG_OVERRIDE before 0.1.2."""
-    return config_dir() / "zenoh-session.json5"
+    return default_config_dir() / "zenoh-session.json5"
 
 
 def router_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:

@@ -76,6 +76,22 @@ def write_json(path: Path, data: Any) -> None:
     atomic_write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n", mode=0o600)
 
 
+def sync_dir(state_dir: Path) -> Path:
+    """The sync service's folder in the state dir (its status, lock, applied records)."""
+    return Path(state_dir) / "sync"
+
+
+def state_owner(state_dir: Path) -> tuple[int, int] | None:
+    """Root writing a user's state dir (the system service) hands its files to that user."""
+    if os.geteuid() != 0:
+        return None
+    try:
+        st = os.stat(state_dir)
+    except OSError:
+        return None
+    return (st.st_uid, st.st_gid) if st.st_uid != 0 else None
+
+
 def now_iso() -> str:
     return datetime.now(timezone.utc).replace(microsecond=0).isoformat()
 

@@ -1,7 +1,9 @@
 """Address sync between components (issue 7): when a modem restart changes a public IP, every
 peer's hosts entry and ROS_MASTER_URI follow without anyone touching them.
 
-- :mod:`.records`: the record each component publishes, its validation, choosing among copies;
+- the record each component publishes, its validation, choosing among copies, and the record of
+  each peer last applied here live a floor below, in :mod:`rosnet_tui.core.saved.sync_records`
+  and :mod:`rosnet_tui.core.saved.sync_applied` (the checks read them too);
 - :mod:`.folder`, :mod:`.dnsstore`: the stores (a shared folder; RFC 2136 + TSIG on DNS);
 - :mod:`.watcher`: this component's own addresses (netlink, public-IP polling);
 - :mod:`.plan`: the hosts set by evidence (same public IP -> on this LAN);
@@ -20,15 +22,12 @@ from .choose_store import make_store
 from .folder import FolderStore
 from .outcome import RoundResult, SyncError
 from .plan import Plan, PlanError, plan_hosts
-from .records import Candidate, Record, RecordError, choose_best, new_record, parse_record
 from .service import SyncService
 from .status import load_status, render_status, status_path
 from .store import FetchResult, Refusal, StoreConfigError, StoreError
 
 __all__ = [
-    "Backoff", "Candidate", "FetchResult", "FolderStore", "Plan", "PlanError",
-    "Record", "RecordError", "Refusal", "RoundResult", "StoreConfigError", "StoreError",
-    "SyncError", "SyncService", "backoff_cap", "choose_best", "load_status", "make_store",
-    "new_record", "parse_record", "plan_hosts", "render_status", "run_affected_checks",
-    "status_path",
+    "Backoff", "FetchResult", "FolderStore", "Plan", "PlanError", "Refusal", "RoundResult",
+    "StoreConfigError", "StoreError", "SyncError", "SyncService", "backoff_cap", "load_status",
+    "make_store", "plan_hosts", "render_status", "run_affected_checks", "status_path",
 ]

@@ -15,13 +15,10 @@ from rosnet_tui.core.files.bashrc import master_uri
 from rosnet_tui.core.files.hosts import WriterSettingsError
 
 
-def run_affected_checks(settings: Settings, paths: Paths,
-                        ids: tuple[str, ...] = affected.SYNC) -> list[dict[str, Any]]:
-    """Run the checks a hosts/ROS change affects (concurrently, each under its timeout):
-    [{"id", "status", "summary"}] in *ids* order."""
-    if settings.ros2:  # the ROS 2 counterparts of the ROS 1 checks a new address affects
-        ids = tuple(dict.fromkeys("ros2.router" if i.startswith("ros.") else i for i in ids))
-    specs = select(ids=ids)
+def run_affected_checks(settings: Settings, paths: Paths) -> list[dict[str, Any]]:
+    """Run the checks a peer's new address affects (:data:`affected.SYNC`, concurrently, each
+    under its timeout): [{"id", "status", "summary"}] in that order."""
+    specs = select(ids=affected.SYNC_ROS2 if settings.ros2 else affected.SYNC)
     env = dict(os.environ)
     with contextlib.suppress(WriterSettingsError):
         env["ROS_MASTER_URI"] = master_uri(settings)

@@ -28,11 +28,11 @@ from rosnet_tui.core.files.hosts import (
     parse_hosts,
 )
 from rosnet_tui.core.saved.settings import load_settings, save_settings
+from rosnet_tui.core.saved.sync_records import Record
 
 from .affected import run_affected_checks
 from .backoff import Backoff
 from .plan import Plan, PlanError, check_complete, plan_hosts
-from .records import Record
 from .state import Report, SyncConfig
 from .timing import RECHECK_AFTER_S, VERIFY_EVERY_S
 from .worker import Worker

@@ -34,8 +34,8 @@ import dns.tsig
 import dns.update
 
 from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
+from rosnet_tui.core.saved.sync_records import Candidate, Record, RecordError, parse_record
 
-from .records import Candidate, Record, RecordError, parse_record
 from .store import FetchResult, Refusal, StoreConfigError, StoreError
 
 TXT_TAG = b"rosnet-tui"

@@ -19,8 +19,14 @@ from pathlib import Path
 
 from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
 from rosnet_tui.core.saved.settings import atomic_write_text
+from rosnet_tui.core.saved.sync_records import (
+    MAX_RECORD_BYTES,
+    Candidate,
+    Record,
+    RecordError,
+    parse_record,
+)
 
-from .records import MAX_RECORD_BYTES, Candidate, Record, RecordError, parse_record
 from .store import FetchResult, Refusal, StoreError
 
 MAX_FILES = 2000        # entries of the folder looked at (a shared folder may hold other things)

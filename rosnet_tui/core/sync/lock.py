@@ -7,8 +7,9 @@ import fcntl
 import os
 from pathlib import Path
 
+from rosnet_tui.core.saved.state import state_owner, sync_dir
+
 from .outcome import SyncError
-from .status import state_owner, sync_dir
 
 
 class ServiceLock:

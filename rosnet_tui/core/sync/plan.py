@@ -15,9 +15,14 @@ from dataclasses import dataclass, field
 
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.files import managed_text as mt
-from rosnet_tui.core.files.hosts import HostsEntry, hosts_entries, render_hosts_block
-
-from .records import Record
+from rosnet_tui.core.files.hosts import (
+    HostsEntry,
+    hosts_entries,
+    parse_hosts,
+    parse_hosts_line,
+    render_hosts_block,
+)
+from rosnet_tui.core.saved.sync_records import Record
 
 LAN_WHY = "peer, on this LAN (same public IP as us)"
 
@@ -57,8 +62,9 @@ class Plan:
         for line in lines:
             if line.startswith("# Inactive set"):
                 active = False
-            fields = line.split("#", 1)[0].split()
-            if active and len(fields) == 2 and fields[1] in lan and "  # " in line:
+            parsed = parse_hosts_line(line)
+            if active and parsed and len(parsed[1]) == 1 and parsed[1][0] in lan \
+                    and "  # " in line:
                 line = line.split("  # ", 1)[0] + "  # " + LAN_WHY
             out.append(line)
         return out
@@ -133,12 +139,7 @@ def block_names(text: str | None) -> set[str]:
         body = mt.extract_block(text)
     except mt.DamagedBlockError:
         return set()
-    names: set[str] = set()
-    for line in body or ():
-        fields = line.split("#", 1)[0].split()
-        if len(fields) >= 2:
-            names.update(x.lower() for x in fields[1:])
-    return names
+    return {x.lower() for _, _, names in parse_hosts("\n".join(body or ())) for x in names}
 
 
 def check_complete(plan: Plan, current_text: str | None) -> None:

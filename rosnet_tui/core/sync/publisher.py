@@ -12,13 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.config.settings_model import Settings
-
-from .applied import applied_path, load_applied, save_applied
-from .backoff import Backoff
-from .choose_store import make_store
-from .folder_watch import StoreWatch
-from .outcome import SyncError
-from .records import (
+from rosnet_tui.core.saved.sync_applied import applied_path, load_applied, save_applied
+from rosnet_tui.core.saved.sync_records import (
     Candidate,
     Record,
     RecordError,
@@ -28,6 +23,11 @@ from .records import (
     parse_record,
     successor_problem,
 )
+
+from .backoff import Backoff
+from .choose_store import make_store
+from .folder_watch import StoreWatch
+from .outcome import SyncError
 from .state import Report
 from .status import MAX_REFUSED
 from .store import RecordStore, StoreConfigError, StoreError

@@ -9,17 +9,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core.saved.state import read_json, write_json
-
-from .records import format_time
+from rosnet_tui.core.saved.state import read_json, state_owner, sync_dir, write_json
+from rosnet_tui.core.saved.sync_records import format_time
 
 STATUS_VERSION = 1
 MAX_REFUSED = 20
 ALIVE_EVERY_S = 15.0   # the running service refreshes alive_at at least this often
-
-
-def sync_dir(state_dir: Path) -> Path:
-    return Path(state_dir) / "sync"
 
 
 def status_path(state_dir: Path) -> Path:
@@ -41,17 +36,6 @@ def load_status(state_dir: Path) -> dict[str, Any] | None:
     out = empty_status()
     out.update(data)
     return out
-
-
-def state_owner(state_dir: Path) -> tuple[int, int] | None:
-    """Root writing a user's state dir (the system service) hands its files to that user."""
-    if os.geteuid() != 0:
-        return None
-    try:
-        st = os.stat(state_dir)
-    except OSError:
-        return None
-    return (st.st_uid, st.st_gid) if st.st_uid != 0 else None
 
 
 def save_status(state_dir: Path, status: dict[str, Any]) -> None:

@@ -9,7 +9,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from .records import Candidate, Record, choose_best
+from rosnet_tui.core.saved.sync_records import Candidate, Record, choose_best
 
 
 class StoreError(Exception):

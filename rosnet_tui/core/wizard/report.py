@@ -32,6 +32,8 @@ from rosnet_tui.core.config.settings_model import (
     Settings,
     ThisComponent,
 )
+from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
+from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
 from rosnet_tui.core.procedure import STEP_IDS, STEP_TITLES, step_title
 from rosnet_tui.core.results import CheckResult, ResultFormatError, Status
 
@@ -49,8 +51,6 @@ class ReportError(Exception):
 # --------------------------------------------------------------------------- reading saved results
 def load_results_json(path: Path) -> tuple[list[CheckResult], Settings | None, dict[str, Any]]:
     """Results from `check --json` output or a JSON report; also its settings and header."""
-    from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
-
     text = _read_input(path)
     try:
         obj = loads_bounded(text, max_depth=MAX_INPUT_DEPTH, unique_keys=False)
@@ -81,8 +81,6 @@ def load_results_json(path: Path) -> tuple[list[CheckResult], Settings | None, d
 def _read_input(path: Path) -> str:
     """The text of *path* ('-': standard input), bounded: a regular file (or stdin) of at most
     MAX_INPUT_BYTES; a FIFO, a device or a folder is refused without reading."""
-    from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
-
     too_big = ReportError(f"{path} is too big (over {MAX_INPUT_BYTES} bytes) for saved results")
     if str(path) == "-":
         data = sys.stdin.buffer.read(MAX_INPUT_BYTES + 1)

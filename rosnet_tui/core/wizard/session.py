@@ -13,10 +13,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from rosnet_tui.core.config.paths import Paths
-from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.config.settings_model import Settings, SettingsError
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.saved.settings import save_settings
+from rosnet_tui.core.saved.settings import load_settings, save_settings
 from rosnet_tui.core.saved.ui_state import UiState, local_time
 from rosnet_tui.core.wizard.setup_form import Draft, draft_from
 from rosnet_tui.core.wizard.steps import STEP_BY_ID, step_for
@@ -122,9 +122,6 @@ class WizardSession:
     def save_settings(self, settings: Settings) -> None:
         """Save *settings*; a file that already says the same is left untouched (not a byte,
         not its time)."""
-        from rosnet_tui.core.config.settings_model import SettingsError
-        from rosnet_tui.core.saved.settings import load_settings
-
         try:
             path = self.paths.config_path
             saved = load_settings(path) if path.exists() else None

@@ -14,11 +14,14 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core import affected
-from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.paths import Paths, default_config_dir
 from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.exposure import firewall as fw
+from rosnet_tui.core.files import bashrc, hosts, privilege
 from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files.managed_write import read_text
+from rosnet_tui.core.ros import fleet_tls, pairing, ros2
 
 
 class Severity(str, Enum):
@@ -74,8 +77,6 @@ def _read(path: Path, state_dir: Path) -> str | None:
 
 def hosts_plan(settings: Settings, paths: Paths) -> WritePlan:
     """Write this component's active hosts set (the Linux step)."""
-    from rosnet_tui.core.files import hosts, privilege
-
     profile = settings.this.profile
 
     def conflicts() -> int:
@@ -100,8 +101,6 @@ def hosts_plan(settings: Settings, paths: Paths) -> WritePlan:
 def firewall_plan(settings: Settings, paths: Paths) -> WritePlan | None:
     """ROS 1 with [ros] security = "firewall": the peers-only nftables table (Linux step, after
     the hosts set). None when the settings do not ask for it."""
-    from rosnet_tui.core.exposure import firewall as fw
-
     if not fw.wanted(settings):
         return None
     profile = settings.this.profile
@@ -136,8 +135,6 @@ def firewall_plan(settings: Settings, paths: Paths) -> WritePlan | None:
 def ros2_plan(settings: Settings, paths: Paths) -> WritePlan:
     """ROS 2: the ~/.bashrc block and the Zenoh router's config file, in one apply; under
     mutual TLS then the fleet CA (master) or pairing with the master over SSH (member)."""
-    from rosnet_tui.core.ros import ros2
-
     def make(client: bool) -> list[mf.Preview]:
         return ros2.previews(settings, paths.bashrc_path, client=client,
                              state_dir=paths.state_dir)
@@ -161,11 +158,9 @@ async def after_ros2_write(settings: Settings, opts: Any = None) -> Said | None:
     """What the wizard's ``w`` on the ROS step does after writing under mutual TLS (as
     ``ros apply``): the CA and certificate on the master; on a member, pairing over SSH when
     needed. None when nothing was needed."""
-    from rosnet_tui.core.ros import fleet_tls, pairing, ros2
-
     if not ros2.mtls(settings):
         return None
-    paths = fleet_tls.tls_paths(ros2.config_dir())
+    paths = fleet_tls.tls_paths(default_config_dir())
     try:
         if settings.is_master:
             made = pairing.prepare_master(settings, paths)
@@ -185,7 +180,6 @@ def ros_plan(settings: Settings, paths: Paths) -> WritePlan:
     """Write the ROS environment block of ~/.bashrc (the ROS step)."""
     if settings.ros2:
         return ros2_plan(settings, paths)
-    from rosnet_tui.core.files import bashrc
 
     def ros_ip_lines() -> int:
         return len(bashrc.find_ros_ip_lines(_read(paths.bashrc_path, paths.state_dir)))

@@ -11,6 +11,7 @@ from typing import Any
 from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.checks.probes.agents import stderr_tail
 from rosnet_tui.core.checks.probes.peers import ssh_peers
+from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import zenohproto
@@ -38,7 +39,7 @@ def node_endpoint(ctx: CheckContext) -> tuple[str, str]:
 def client_tls() -> dict[str, Any]:
     """How a check dials a ``tls/`` endpoint: with this component's fleet key and certificate,
     trusting the fleet CA, the name in the locator verified (ROS 2 mutual TLS)."""
-    p = fleet_tls.tls_paths(ros2.config_dir())
+    p = fleet_tls.tls_paths(default_config_dir())
     return {"root_ca_certificate": str(p.ca_crt), "connect_private_key": str(p.node_key),
             "connect_certificate": str(p.node_crt), "enable_mtls": True,
             "verify_name_on_connect": True}

@@ -3,7 +3,7 @@
 Both ``sync --once`` and the service read it at start and write it whenever they take a peer's
 record, so an old copy that comes back (a sync tool restoring a file, a stale DNS answer, a
 replay) is refused even after a restart: a record is taken only when
-:func:`records.successor_problem` finds nothing against it.
+:func:`sync_records.successor_problem` finds nothing against it.
 """
 
 from __future__ import annotations
@@ -14,10 +14,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core.saved.state import read_json, write_json
-
-from .records import Record, RecordError, parse_record
-from .status import state_owner, sync_dir
+from rosnet_tui.core.saved.state import read_json, state_owner, sync_dir, write_json
+from rosnet_tui.core.saved.sync_records import Record, RecordError, parse_record
 
 APPLIED_VERSION = 1
 MAX_PEERS = 1000
