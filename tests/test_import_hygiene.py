@@ -170,6 +170,7 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/core/wizard/session.py", "rosnet_tui.core.net.netinfo"): "start-up cost: psutil and netifaces load when the local network is first read",
     ("rosnet_tui/core/wizard/session.py", "rosnet_tui.core.ssh.known_hosts"): "start-up cost: hashlib, hmac and base64 load when a host key is trusted",
     ("rosnet_tui/core/wizard/session.py", "rosnet_tui.core.sync.status"): "start-up cost: the sync package (its stores, dnspython) loads when its text is shown",
+    ("rosnet_tui/core/upnp/modem.py", "rosnet_tui.core.net.netinfo"): "start-up cost: netifaces and psutil load when the modem is searched for, not when the Router step is drawn",
     ("rosnet_tui/core/wizard/session.py", "rosnet_tui.core.wizard.write_plans"): "start-up cost: the write plans and their writers load when `w` is pressed",
     ("rosnet_tui/core/wizard/steps.py", "rosnet_tui.core.exposure"): "start-up cost: the firewall (psutil, netifaces, the writers: 60 modules) loads for the Linux step's text, not the first screen's",
     ("rosnet_tui/core/wizard/steps.py", "rosnet_tui.core.exposure.router_card"): "start-up cost: the router card (psutil, netifaces, the writers: 62 modules) loads for the Router step's text",
@@ -180,17 +181,6 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/screenshots.py", "rosnet_tui.ui.app"): "start-up cost: textual and the UI, loaded when screenshots are taken",
 }
 
-# Core modules importing other core modules inside functions with no start-up reason stated yet
-# (issue 33): core/upnp/'s own, left to the change that owns core/upnp/ (forwards and modem
-# already import modem and wire at the top, so those two are free to hoist; journal -> modem and
-# modem -> netinfo (psutil) are to be measured there).
-# This list may only shrink; when it is empty, remove it.
-NOT_YET_SORTED: set[tuple[str, str]] = {
-    ("rosnet_tui/core/upnp/forwards.py", "rosnet_tui.core.upnp.modem"),
-    ("rosnet_tui/core/upnp/journal.py", "rosnet_tui.core.upnp.modem"),
-    ("rosnet_tui/core/upnp/modem.py", "rosnet_tui.core.net.netinfo"),
-    ("rosnet_tui/core/upnp/modem.py", "rosnet_tui.core.upnp.wire"),
-}
 
 
 def _function_level_imports() -> set[tuple[str, str]]:
@@ -216,17 +206,16 @@ def _function_level_imports() -> set[tuple[str, str]]:
 
 def test_every_function_level_import_has_a_start_up_reason():
     found = _function_level_imports()
-    unlisted = sorted(found - set(FUNCTION_LEVEL_IMPORTS) - NOT_YET_SORTED)
+    unlisted = sorted(found - set(FUNCTION_LEVEL_IMPORTS))
     assert not unlisted, ("imports inside a function, not in FUNCTION_LEVEL_IMPORTS with their "
                           "start-up reason (an import circle is removed, not dodged): "
                           + ", ".join(f"{f}: {m}" for f, m in unlisted))
     assert all(why.startswith("start-up cost") for why in FUNCTION_LEVEL_IMPORTS.values())
-    assert not set(FUNCTION_LEVEL_IMPORTS) & NOT_YET_SORTED
 
 
 def test_the_allow_lists_hold_no_stale_entry():
     found = _function_level_imports()
-    stale = sorted((set(FUNCTION_LEVEL_IMPORTS) | NOT_YET_SORTED) - found)
+    stale = sorted(set(FUNCTION_LEVEL_IMPORTS) - found)
     assert not stale, f"listed but gone (remove them from the lists): {stale}"
 
 

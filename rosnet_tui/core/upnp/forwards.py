@@ -21,7 +21,7 @@ from rosnet_tui.core.addresses import KIND_WORDS, PUBLIC_KINDS, address_kind
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.exposure.forwarding import required_ports
 from rosnet_tui.core.upnp import journal
-from rosnet_tui.core.upnp.modem import LEASE_MAX_S, LEASE_MIN_S, Forward, Modem
+from rosnet_tui.core.upnp.modem import LEASE_MAX_S, LEASE_MIN_S, Forward, Modem, find_modem
 from rosnet_tui.core.upnp.wire import ModemError, Refused, label
 
 LEASE_S = 24 * 3600        # a forward we make lasts a day unless renewed (the sync service does)
@@ -333,8 +333,6 @@ def renew_due(settings: Settings, *, state_dir: Path | None = None, now: float |
               timeout: float = 4.0, modem: Modem | None = None) -> tuple[list[str], float | None]:
     """Renew our lasting forwards whose lease is half gone; (what was done, seconds until the
     next renewal is due, None when nothing is recorded)."""
-    from rosnet_tui.core.upnp.modem import find_modem
-
     now = time.time() if now is None else now
     lasting = [(e, m) for e, m in journal.live(state_dir) if not m.get("temporary")]
     if not lasting:
@@ -408,8 +406,6 @@ def modem_lines(modem: Modem) -> list[str]:
 def preview(settings: Settings, *, state_dir: Path | None = None, timeout: float = 3.0,
             lease_s: int = LEASE_S, test_port: bool = True, via: str = "auto") -> MapPreview:
     """Find the modem and say what would be asked of it (nothing is asked yet)."""
-    from rosnet_tui.core.upnp.modem import find_modem
-
     out = MapPreview(needs(settings, lease_s=lease_s, test_port=test_port))
     if out.need.refusal:
         out.blocked = out.need.refusal

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from rosnet_tui.core.files import undo_journal as uj
 from rosnet_tui.core.files.managed_text import ManagedFileError
+from rosnet_tui.core.upnp.modem import find_modem
 from rosnet_tui.core.upnp.wire import ModemError
 
 KIND = "port_mapping"
@@ -76,8 +77,6 @@ def remove_recorded(mappings: Iterable[dict], *, force: bool = False,
 
     Refuses (ForwardUndoError) when the modem does not answer or is another one; with *force*
     such forwards are forgotten instead (their lease ends them)."""
-    from rosnet_tui.core.upnp.modem import find_modem
-
     todo = [m for m in mappings if isinstance(m, dict) and m.get("kind") == KIND
             and m.get("state") == "made"]
     if not todo:

@@ -18,7 +18,14 @@ from dataclasses import dataclass, field
 from rosnet_tui.core.addresses import KIND_WORDS, address_kind
 from rosnet_tui.core.upnp import igd as igd_mod
 from rosnet_tui.core.upnp import pmp
-from rosnet_tui.core.upnp.wire import HostileAnswer, ModemError, NoAnswer, Refused, label
+from rosnet_tui.core.upnp.wire import (
+    HostileAnswer,
+    ModemError,
+    NoAnswer,
+    Refused,
+    label,
+    ssdp_search,
+)
 
 PROTOCOLS = ("upnp", "pcp", "natpmp")      # preference order
 LOWEST_PORT = 1024
@@ -263,8 +270,6 @@ def find_modem(timeout: float, *, gateway: str | None = None,
     ssdp_window = min(0.8, timeout * 0.5)
 
     def ask_upnp() -> igd_mod.Igd | None:
-        from rosnet_tui.core.upnp.wire import ssdp_search
-
         found = ssdp_search(ssdp_window, gateway=gateway, source_ip=local_ip, notes=notes)
         if found is None:
             notes.append(f"UPnP IGD: no answer to SSDP from {gateway}")
