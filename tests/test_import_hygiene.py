@@ -182,7 +182,6 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
 }
 
 
-
 def _function_level_imports() -> set[tuple[str, str]]:
     import ast
 
