@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from rosnet_tui.core.addresses import is_private, is_shared
 from rosnet_tui.core.advisor.evidence import Evidence, does_not_resolve
 from rosnet_tui.core.results import Status
+from rosnet_tui.core.words import age
 
 # (observation, what it makes more or less likely): the docs' table, strongest first.
 EVIDENCE: tuple[tuple[str, str], ...] = (
@@ -291,18 +292,6 @@ DAY_S = 86400.0        # within a day: still unlikely; older: public addresses d
 _DATED_BY = {"settings": "settings saved", "sync": "{name}'s own sync record"}
 
 
-def ago(seconds: float) -> str:
-    """An age in words: "40 s", "3 min", "5 h", "12 days"."""
-    s = max(float(seconds), 0.0)
-    if s < 90:
-        return f"{int(s)} s"
-    if s < 90 * 60:
-        return f"{round(s / 60)} min"
-    if s < 36 * 3600:
-        return f"{round(s / 3600)} h"
-    return f"{round(s / 86400)} days"
-
-
 def address_dates(ev: Evidence, name: str, ip: str) -> tuple[Mapping | None, Mapping | None]:
     """(the newest confirmation of *ip* as *name*'s address, a newer source that gives another
     address), from linux.resolve's ``dated``; None where there is none."""
@@ -318,26 +307,26 @@ def address_dates(ev: Evidence, name: str, ip: str) -> tuple[Mapping | None, Map
 def dated_words(ev: Evidence, name: str, row: Mapping) -> str:
     """"203.0.113.2 was confirmed 3 min ago (settings saved)"."""
     by = _DATED_BY.get(str(row.get("by")), str(row.get("by"))).format(name=name)
-    return f"{row['ip']} was confirmed {ago(row['age_s'])} ago ({by})"
+    return f"{row['ip']} was confirmed {age(row['age_s'])} ago ({by})"
 
 
 def _date_address(ev: Evidence, name: str, ip: str, addr: Cause, fwd: Cause) -> None:
     """Rank "the address is stale" against "the modem drops it" by the age of *ip*."""
     same, other = address_dates(ev, name, ip)
     if other is not None and other.get("by") == "sync":
-        addr.up(50, f"{name}'s own sync record of {ago(other['age_s'])} ago gives "
+        addr.up(50, f"{name}'s own sync record of {age(other['age_s'])} ago gives "
                     f"{other['ip']}, not {ip}")
         return
     if same is None:
         addr.up(0, f"nothing here says when {ip} was last confirmed (no sync record of {name}, "
                    "no time for the settings)")
         return
-    said, age = dated_words(ev, name, same), float(same["age_s"])
-    if age < FRESH_S:
+    said, age_s = dated_words(ev, name, same), float(same["age_s"])
+    if age_s < FRESH_S:
         addr.down(30, said)
         fwd.up(30, f"{said}, so the address is most likely right: {name}'s modem is there and "
                    "drops what comes in (no forwarding, or its firewall)")
-    elif age < DAY_S:
+    elif age_s < DAY_S:
         addr.down(10, said)
         fwd.up(15, f"{said}: a modem that drops what comes in looks the same")
     else:

@@ -11,6 +11,7 @@ from typing import Any
 
 from rosnet_tui.core.saved.state import read_json, state_owner, sync_dir, write_json
 from rosnet_tui.core.saved.sync_records import format_time
+from rosnet_tui.core.words import age
 
 STATUS_VERSION = 1
 MAX_REFUSED = 20
@@ -73,22 +74,10 @@ def service_state(status: dict[str, Any], now: float | None = None) -> str:
     return "gone"
 
 
-def age(seconds: float) -> str:
-    """A short human age: 4 s, 3 min, 2 h, 5 d."""
-    s = max(0.0, seconds)
-    if s < 90:
-        return f"{s:.0f} s"
-    if s < 90 * 60:
-        return f"{s / 60:.0f} min"
-    if s < 36 * 3600:
-        return f"{s / 3600:.0f} h"
-    return f"{s / 86400:.0f} d"
-
-
 def _ago(ts: Any, now: float) -> str:
     if not isinstance(ts, (int, float)):
         return "never"
-    return f"{age(now - ts)} ago ({format_time(ts)})"
+    return f"{age(now - ts, day='d')} ago ({format_time(ts)})"
 
 
 def _record_line(rec: dict[str, Any] | None) -> str:
@@ -142,7 +131,7 @@ def render_status(status: dict[str, Any], now: float | None = None) -> list[str]
         lines.append(f"  {name}: {_record_line(p.get('record'))}")
         if p.get("record"):
             lines.append(f"    from {p.get('source')}; record age "
-                         f"{age(now - p['record_time']) if isinstance(p.get('record_time'), (int, float)) else '?'}"
+                         f"{age(now - p['record_time'], day='d') if isinstance(p.get('record_time'), (int, float)) else '?'}"
                          f", last changed {_ago(p.get('changed_at'), now)}, read {_ago(p.get('seen_at'), now)}")
         if p.get("address"):
             lines.append(f"    hosts entry: {p['address']} {name} ({p.get('why', '')})")
