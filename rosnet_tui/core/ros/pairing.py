@@ -5,12 +5,14 @@ member, :func:`pair_over_ssh` makes the member's key and request here, has the m
 request over the SSH the checks already use (host keys verified as for every check), and
 installs the CA certificate and the member's certificate: one SSH round trip.
 
-The master's side is ``core/ros/fleet_tls.py`` itself, fed on stdin to the interpreter of the
-rosnet-tui installed on the master (found by the same shell prelude that runs the Zenoh peer
-program, ``peer.commands.zenoh_peer_command``). A program on stdin rather than a sub-command of the
-master's ``rosnet-tui``: it needs only that installation's ``cryptography``, so a member pairs
-with a master running an older rosnet-tui, and no command name has to be found on the master's
-PATH (pipx puts it where a non-login SSH shell often does not look).
+The master's side is the master's own ``rosnet-tui ros pair --serve NAME`` (:func:`serve`), run
+by the interpreter of the rosnet-tui installed there (found by the prelude the Zenoh peer program
+uses, ``peer.commands.installed_python_command``), the request on stdin. It reads the master's
+own settings: the master's name, the members it signs for. A member whose operators get no shell
+on the master pairs through a forced command in the master's ``authorized_keys``
+(``ros pair --admit NAME``, :mod:`.pair_access`) that runs only that: sshd ignores what the
+member asks for. (The master re-pairing its members still feeds ``fleet_tls.py`` on stdin to
+each member: ``request`` and ``install``, code of the master's own.)
 """
 
 from __future__ import annotations
@@ -130,7 +132,8 @@ async def repair_members(s: Settings, paths: TlsPaths, peers: list[Any], opts: A
         if "csr" not in rep:
             return (peer.name, False, str(rep.get("error")))
         try:
-            ca, cert = fleet_tls.sign_request(paths, str(rep["csr"]), master=s.this.name)
+            ca, cert = fleet_tls.sign_request(paths, str(rep["csr"]), master=s.this.name,
+                                              members=member_names(s))
         except TlsError as exc:
             return (peer.name, False, str(exc))
         rep = await _remote(opts, peer, timeout, "install", ca, cert)
@@ -141,9 +144,51 @@ async def repair_members(s: Settings, paths: TlsPaths, peers: list[Any], opts: A
     return list(await asyncio.gather(*(one(p) for p in peers)))
 
 
+def member_names(s: Settings) -> list[str]:
+    """The names the fleet CA signs for: the peers in the master's own settings."""
+    return [p.name for p in s.peers]
+
+
+# Run by the master's installed interpreter (found as for the Zenoh program): its own
+# `rosnet-tui ros pair --serve NAME`, the current folder off the path.
+SERVE_BOOT = ("import sys,runpy;sys.path[:]=[p for p in sys.path if p not in ('','.')];"
+              "sys.argv=['rosnet-tui',*sys.argv[1:]];runpy.run_module('rosnet_tui',"
+              "run_name='__main__')")
+
+
+def serve_command(name: str) -> str:
+    """What a member asks the master to run: its `ros pair --serve NAME` (under a forced
+    command in the master's authorized_keys, sshd runs that one whatever is asked)."""
+    from rosnet_tui.core.peer.commands import installed_python_command
+
+    return installed_python_command("ros", "pair", "--serve", name,
+                                    mark=fleet_tls.REPORT_PREFIX, boot=SERVE_BOOT)
+
+
+def serve(s: Settings, paths: TlsPaths, name: str, csr_pem: str) -> dict[str, Any]:
+    """On the master (`ros pair --serve NAME`, a member's forced command): sign the request on
+    stdin when it names *name*, a member in these settings. The answer as one ROSNET_TLS
+    line's JSON."""
+    if not s.is_master:
+        return {"error": f"{s.this.name} is not the master in its settings"}
+    try:
+        prepare_master(s, paths)
+        req = fleet_tls.read_request(csr_pem, master=s.this.name, members=member_names(s),
+                                     removed=fleet_tls.removed_members(paths))
+        if req.name != name.lower():
+            raise TlsError(f"this way in signs only for {name}; the request names {req.name}")
+        ca, cert = fleet_tls.sign_checked(paths, req)
+    except (TlsError, OSError) as exc:
+        return {"error": str(exc)}
+    return {"ca": ca, "cert": cert}
+
+
 async def pair_over_ssh(s: Settings, paths: TlsPaths, opts: Any = None,
                         timeout: float = PAIR_TIMEOUT_S) -> PairResult:
-    """Have the master sign this member's request over SSH and install the result."""
+    """Have the master sign this member's request over SSH (its `ros pair --serve`) and install
+    the result."""
+    from rosnet_tui.core.ssh.session import ssh_run
+
     t0 = time.monotonic()
     peer = master_peer(s)
     if s.is_master:
@@ -153,8 +198,18 @@ async def pair_over_ssh(s: Settings, paths: TlsPaths, opts: Any = None,
                                  "set it, or pair by text (`rosnet-tui ros pair --print-request`"
                                  " here, `--sign` on the master, `--install` here)")
     csr = fleet_tls.make_request(paths, s.this.name)
-    rep = await _remote(opts, peer, timeout, "sign", s.master_name, csr)
+    res = await ssh_run(opts, peer, serve_command(s.this.name), stdin=csr, timeout=timeout)
     took = time.monotonic() - t0
+    rep = report_of(res.stdout)
+    if res.failure:
+        rep = {"error": f"SSH to {peer.name} failed ({res.failure}): {res.detail}"}
+    elif rep is None:
+        tail = " | ".join((res.stderr or "").strip().splitlines()[-3:])
+        rep = {"error": f"{peer.name} gave no answer (exit status {res.exit_status}"
+                        f"{': ' + tail if tail else ''})"}
+    elif rep.get("error") == "no_install":
+        rep = {"error": f"{peer.name} has no rosnet-tui installed: install it there as the "
+                        "README says"}
     if "error" in rep:
         return PairResult(False, f"{peer.name} did not sign: {rep['error']}", seconds=took)
     try:
