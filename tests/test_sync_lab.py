@@ -403,7 +403,7 @@ def test_a_slow_public_ip_lookup_does_not_hold_back_a_peers_record(rig_lab, tmp_
     import random
 
     from rosnet_tui.core.config.settings_model import SyncSettings
-    from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
+    from tests.sync_support.lab_sync import write_pinned
 
     lab = rig_lab
     folder = tmp_path / "shared"
@@ -415,8 +415,7 @@ def test_a_slow_public_ip_lookup_does_not_hold_back_a_peers_record(rig_lab, tmp_
     s.probe.public_ip_urls.append(f"http://{ADDR.STALE_ROBOT_PUBLIC}/ip")   # nothing answers
     s.sync = SyncSettings(store="folder", interval_s=2.0, folder=str(folder))
     s.has_sync = True
-    config = tmp_path / "laptop.toml"
-    atomic_write_text(config, render_settings(s), mode=0o644)
+    config = write_pinned(s, tmp_path / "laptop.toml")
     proc = lab.spawn("laptop", sync_argv(config, tmp_path / "state", "--no-checks",
                                          "--bashrc", str(lab.bashrc_path("laptop"))),
                      env=sync_env(lab, "laptop"))
