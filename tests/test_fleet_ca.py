@@ -79,6 +79,14 @@ def test_the_ca_signs_a_member_in_any_case_and_names_it_as_the_settings_do(ca):
     for name in ("sami", "SAMI", "bob"):
         _, cert = sign(ca, csr(name))
         assert fleet_tls.cert_summary(cert.encode())["sans"] == [name.lower()]
+    # a member whose settings spell its name otherwise is paired all the same
+    from tests.builders import ros2_member
+    me = ros2_member()
+    me.this.name = "SAMI"
+    sp = fleet_tls.tls_paths(ca.dir.parent.parent / "s")
+    ca_pem, mine = sign(ca, fleet_tls.make_request(sp, "SAMI"))
+    fleet_tls.install(sp, ca_pem, mine)
+    assert pairing.needs_pairing(me, sp) is None
     leaf = fleet_tls.load_cert(cert.encode())
     ku = leaf.extensions.get_extension_for_class(x509.KeyUsage)
     assert ku.critical and ku.value.digital_signature and not ku.value.key_cert_sign

@@ -121,9 +121,12 @@ def test_text_pairing_path_through_the_cli(tmp_path):
         (home / "rosnet-tui" / "config.toml").write_text(render_settings(s))
     req = _cli(sh, "ros", "pair", "--print-request")
     assert req.returncode == 0 and fleet_tls.PEM_CSR in req.stdout, req.stderr
+    fp = fleet_tls.key_fingerprint(fleet_tls.load_request_key(req.stdout))
+    assert fp in req.stderr
     signed = _cli(mh, "ros", "pair", "--sign", "--yes",
                   stdin="some words around it\n" + req.stdout)
     assert signed.returncode == 0 and signed.stdout.count(fleet_tls.PEM_CERT) == 2, signed.stderr
+    assert fp in signed.stderr and "names sami" in signed.stderr
     assert (mh / "rosnet-tui" / "tls" / "ca.key").exists()
     inst = _cli(sh, "ros", "pair", "--install", stdin=signed.stdout)
     assert inst.returncode == 0 and "Installed" in inst.stdout, inst.stderr

@@ -85,7 +85,10 @@ def run_pair(args: argparse.Namespace) -> int:
         if args.admit:
             return _admit(args, settings)
         if args.print_request:
-            print(fleet_tls.make_request(paths, settings.this.name), end="")
+            pem = fleet_tls.make_request(paths, settings.this.name)
+            print(pem, end="")
+            fp = fleet_tls.key_fingerprint(fleet_tls.load_request_key(pem))
+            say(f"(this key's fingerprint, which `ros pair --sign` on the master shows: {fp})")
             return EXIT_OK
         if args.install:
             pems = fleet_tls.split_pems(_read_stdin("what `ros pair --sign` printed"))

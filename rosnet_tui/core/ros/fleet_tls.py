@@ -310,6 +310,13 @@ def key_fingerprint(public_key: Any) -> str:
     return ":".join(f"{b:02x}" for b in h.finalize())
 
 
+def load_request_key(csr_pem: str) -> Any:
+    """The public key of a request (PEM) this component made."""
+    from cryptography import x509
+
+    return x509.load_pem_x509_csr(csr_pem.encode()).public_key()
+
+
 def key_problem(public_key: Any) -> str | None:
     """Why a member's key is too weak for the fleet (None: EC P-256, or RSA of 2048 bits up)."""
     from cryptography.hazmat.primitives.asymmetric import ec, rsa

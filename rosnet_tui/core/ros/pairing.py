@@ -82,7 +82,7 @@ def needs_pairing(s: Settings, paths: TlsPaths) -> str | None:
         return f"the certificate cannot be read ({exc})"
     if summ["issuer_key_id"] != fleet_tls.ca_key_id(paths.ca_crt):
         return "the certificate is not from the fleet CA installed here"
-    if summ["cn"] != s.this.name:
+    if summ["cn"].lower() != s.this.name.lower():   # the CA names members in lower case
         return f"the certificate names {summ['cn']}, not {s.this.name}"
     if summ["days_left"] <= fleet_tls.WARN_DAYS:
         return f"the certificate expires in {summ['days_left']:.0f} days"
