@@ -187,6 +187,8 @@ def test_admit_writes_a_forced_command_and_remove_ends_it(tmp_path):
     assert lines[1].endswith(" rosnet-tui-pair:sami") and " -I -m rosnet_tui " in lines[1]
     bad = _cli(home, "ros", "pair", "--admit", "relay", stdin=PUB)
     assert bad.returncode == 2 and "not a peer" in bad.stderr
+    bad = _cli(home, "ros", "pair", "--admit", "bob", stdin=PUB)      # one key, one member
+    assert bad.returncode == 2 and "a key of its own" in bad.stderr
     bad = _cli(home, "ros", "pair", "--admit", "sami", stdin="not a key")
     assert bad.returncode == 2 and "public key" in bad.stderr
     r = _cli(home, "ros", "pair", "--remove", "sami", "--yes", "--timeout", "1")

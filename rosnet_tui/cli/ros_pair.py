@@ -169,7 +169,7 @@ def _admit(args: argparse.Namespace, settings) -> int:
     if not settings.is_master:
         say("rosnet-tui: --admit runs on the master (members pair with it)")
         return EXIT_USAGE
-    if settings.peer(args.admit) is None:
+    if args.admit.lower() not in {n.lower() for n in pairing.member_names(settings)}:
         say(f"rosnet-tui: {args.admit} is not a peer in the settings: add it there first")
         return EXIT_USAGE
     keys = pair_access.authorized_keys_path()
@@ -194,8 +194,8 @@ def _remove(args: argparse.Namespace, settings, paths) -> int:
     if not settings.is_master:
         say("rosnet-tui: --remove runs on the master (it holds the fleet CA)")
         return EXIT_USAGE
-    if settings.peer(args.remove) is None and args.remove.lower() not in \
-            fleet_tls.removed_members(paths):
+    if args.remove.lower() not in {n.lower() for n in pairing.member_names(settings)} and \
+            args.remove.lower() not in fleet_tls.removed_members(paths):
         say(f"rosnet-tui: {args.remove} is not a peer in the settings")
         return EXIT_USAGE
     others = [p for p in settings.peers if p.name.lower() != args.remove.lower()]

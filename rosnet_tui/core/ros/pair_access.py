@@ -83,7 +83,12 @@ def admit(name: str, public_key: str, *, path: Path, config: Path | None = None,
           python: str | None = None) -> str:
     """Give *public_key* the pairing line for *name* (replacing any earlier one); the line."""
     line = forced_line(name, public_key, config, python)
+    _, b64 = parse_public_key(public_key)
     lines = [x for x in _read(path) if not _owned_by(x, name)]
+    if any(b64 in x.split() for x in lines):
+        raise AccessError(f"that key already has a line in {path} (sshd would take that one: a "
+                          "shell, or another member's pairing): a pairing key must be a key of "
+                          "its own")
     _write(path, [*lines, line])
     return line
 
