@@ -265,7 +265,7 @@ def folder_sync_settings(folder: Path, interval_s: float = 60, peers: int = 1) -
     return Settings(
         this=ThisComponent(name="sami", role="member", profile="remote", local_ip="192.168.1.10",
                            public_ip="198.51.100.2", interface="eth0"),
-        peers=[replace(p) for p in SYNC_PEERS[:peers]],
+        peers=[replace(p, sync_key=sync_key_text(p.name)) for p in SYNC_PEERS[:peers]],
         ros=RosSettings(master="turtlebot"),
         probe=ProbeSettings(public_ip_urls=["http://127.0.0.1:9/ip"]),
         sync=SyncSettings(store="folder", folder=str(folder), interval_s=interval_s),
@@ -278,7 +278,7 @@ def sync_laptop_settings(**sync) -> Settings:
         this=ThisComponent(name="sami", role="member", profile="remote", local_ip="192.168.1.10",
                            public_ip="198.51.100.2", interface="eth0"),
         peers=[Peer(name="turtlebot", local_ip="10.10.10.1", public_ip="203.0.113.2",
-                    ssh_user="root")],
+                    ssh_user="root", sync_key=sync_key_text("turtlebot"))],
         ros=RosSettings(master="turtlebot"),
         probe=ProbeSettings(public_ip_urls=["http://127.0.0.1:9/ip"]),
         sync=SyncSettings(**sync), has_sync=bool(sync))
@@ -312,3 +312,52 @@ def probe_settings(name="turtlebot", local_ip="10.10.10.1", peers=None,
                     peers=peers if peers is not None else
                     [Peer(name="sami", local_ip="192.168.1.10", public_ip="198.51.100.2")],
                     probe=ProbeSettings(port=free_port()))
+
+
+def sync_key(name: str):
+    """A fixed sync key for the component *name* in tests (the same in every test)."""
+    import hashlib
+
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+    return Ed25519PrivateKey.from_private_bytes(
+        hashlib.sha256(b"rosnet-tui test sync key " + name.lower().encode()).digest())
+
+
+def sync_key_text(name: str) -> str:
+    """*name*'s pinned sync_key (what `sync key` prints there)."""
+    from rosnet_tui.core.sync.signing import public_text
+
+    return public_text(sync_key(name))
+
+
+def signed(rec):
+    """*rec* signed by its component's test sync key."""
+    from rosnet_tui.core.sync.signing import sign_record
+
+    return sign_record(rec, sync_key(rec.name))
+
+
+def pinned(*names: str) -> dict:
+    """What a store's fetch is handed: each name's test sync key (public half)."""
+    return {n.lower(): sync_key(n).public_key() for n in names}
+
+
+def write_sync_key(config_path, name: str) -> None:
+    """Give the component whose settings are *config_path* its fixed test sync key."""
+    from cryptography.hazmat.primitives import serialization as ser
+
+    from rosnet_tui.core.sync.signing import key_path
+
+    path = key_path(config_path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(sync_key(name).private_bytes(ser.Encoding.PEM, ser.PrivateFormat.PKCS8,
+                                                  ser.NoEncryption()))
+    path.chmod(0o600)
+
+
+def signed_record(name: str, **kw):
+    """A new record of *name*, signed by its test sync key."""
+    from rosnet_tui.core.saved.sync_records import new_record
+
+    return signed(new_record(name, **kw))

@@ -13,7 +13,7 @@ from rosnet_tui.core import addresses as A
 from rosnet_tui.core.checks import isp
 from rosnet_tui.core.config.settings_model import Peer, validate_ip, validate_name
 from rosnet_tui.core.exposure.public_ip import parse_ip
-from rosnet_tui.core.sync.records import address_problem
+from rosnet_tui.core.saved.sync_records import address_problem
 from rosnet_tui.core.upnp.forwards import wan_kind
 from tests.builders import laptop_settings
 

@@ -13,6 +13,9 @@ import time
 
 import pytest
 
+from rosnet_tui.core.saved.sync_records import new_record
+from rosnet_tui.core.sync.signing import sign_record
+from tests.builders import sync_key
 from tests.lab import ADDR, outsider
 from tests.lab.firewall import secured
 from tests.sync_support.bench import goal_s
@@ -288,6 +291,19 @@ def test_the_set_follows_a_peers_address_change_within_the_sync_latency(lab, tmp
         assert "firewall: allowed set" in rig.log("laptop")
         listing = nft(lab, "laptop", "list", "table", "inet", "rosnet_tui").stdout
         assert "drop" in listing
+        # Another writer of the folder forges the robot's record (not the robot's key, the
+        # highest seq): the set keeps the robot's genuine address, and the robot's next
+        # address still gets through (issue 35).
+        forged = sign_record(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL,
+                                        public_ip="198.51.100.99", role="master", seq=10**6),
+                             sync_key("sami"))
+        (folder / "turtlebot.json").write_text(forged.to_text())
+        assert lab.wait_output(rig.procs["laptop"], r"refused the record turtlebot\.json .*not "
+                                                    r"by turtlebot's key", WAIT), rig.log("laptop")
+        assert "198.51.100.99" not in allowed() and new_ip in allowed()
+        lab.set_robot_wan("203.0.113.79")
+        assert wait_for(lambda: "203.0.113.79" in allowed(), WAIT), rig.log("laptop")[-3000:]
+        assert "198.51.100.99" not in allowed()
     finally:
         rig.stop()
         nft(lab, "laptop", "delete", "table", "inet", "rosnet_tui")

@@ -84,12 +84,13 @@ def test_sign_and_install_and_their_refusals(tmp_path):
     pairing.prepare_master(master(), mp)
     csr = fleet_tls.make_request(sp, "sami")
     assert stat.S_IMODE(sp.node_key.stat().st_mode) == 0o600
-    ca, cert = fleet_tls.sign_request(mp, csr, master="turtlebot")
+    ca, cert = fleet_tls.sign_request(mp, csr, master="turtlebot", members=["sami"])
     with pytest.raises(TlsError, match="names the master"):
         fleet_tls.sign_request(mp, fleet_tls.make_request(fleet_tls.tls_paths(tmp_path / "x"),
-                                                          "turtlebot"), master="turtlebot")
+                                                          "turtlebot"), master="turtlebot",
+                               members=["sami", "turtlebot"])
     with pytest.raises(TlsError, match="not a certificate request"):
-        fleet_tls.sign_request(mp, "hello", master="turtlebot")
+        fleet_tls.sign_request(mp, "hello", master="turtlebot", members=["sami"])
     foreign = fleet_tls.make_test_ca(tmp_path / "f", "someone else")
     with pytest.raises(TlsError, match="not signed by"):
         fleet_tls.install(sp, foreign.ca_crt.read_text(), cert)
@@ -120,8 +121,12 @@ def test_text_pairing_path_through_the_cli(tmp_path):
         (home / "rosnet-tui" / "config.toml").write_text(render_settings(s))
     req = _cli(sh, "ros", "pair", "--print-request")
     assert req.returncode == 0 and fleet_tls.PEM_CSR in req.stdout, req.stderr
-    signed = _cli(mh, "ros", "pair", "--sign", stdin="some words around it\n" + req.stdout)
+    fp = fleet_tls.key_fingerprint(fleet_tls.load_request_key(req.stdout))
+    assert fp in req.stderr
+    signed = _cli(mh, "ros", "pair", "--sign", "--yes",
+                  stdin="some words around it\n" + req.stdout)
     assert signed.returncode == 0 and signed.stdout.count(fleet_tls.PEM_CERT) == 2, signed.stderr
+    assert fp in signed.stderr and "names sami" in signed.stderr
     assert (mh / "rosnet-tui" / "tls" / "ca.key").exists()
     inst = _cli(sh, "ros", "pair", "--install", stdin=signed.stdout)
     assert inst.returncode == 0 and "Installed" in inst.stdout, inst.stderr
@@ -129,7 +134,7 @@ def test_text_pairing_path_through_the_cli(tmp_path):
     assert fleet_tls.cert_summary(sh / "rosnet-tui" / "tls" / "node.crt")["cn"] == "sami"
     bad = _cli(sh, "ros", "pair", "--install", stdin="nothing here")
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
-    bad = _cli(mh, "ros", "pair", "--sign", stdin="nothing here")
+    bad = _cli(mh, "ros", "pair", "--sign", "--yes", stdin="nothing here")
     assert bad.returncode == 2 and "not a certificate request" in bad.stderr
 
 
@@ -205,7 +210,7 @@ def test_a_real_router_with_the_masters_config_admits_only_the_fleet(tmp_path):
         _wait_port(port, proc)
         sp = fleet_tls.tls_paths(tmp_path / "s")
         ca, cert = fleet_tls.sign_request(mp, fleet_tls.make_request(sp, "sami"),
-                                          master="localhost")
+                                          master="localhost", members=["sami"])
         fleet_tls.install(sp, ca, cert)
         ep = f"tls/localhost:{port}"
 

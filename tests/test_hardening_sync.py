@@ -37,7 +37,7 @@ from rosnet_tui.core.saved.sync_records import (
 from rosnet_tui.core.sync import FolderStore, SyncService
 from rosnet_tui.core.sync.dnsstore import TXT_TAG, record_from_txt
 from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
-from tests.builders import folder_sync_settings
+from tests.builders import folder_sync_settings, pinned, signed
 from tests.hardening_tally import tally
 
 NOW = time.time()
@@ -54,8 +54,8 @@ def base(**kw) -> dict:
 
 def rec(name="turtlebot", local="10.10.10.1", public="203.0.113.2", role="master", seq=1,
         ts=None, **kw):
-    return new_record(name, local_ip=local, public_ip=public, role=role, seq=seq,
-                      now=NOW if ts is None else ts, **kw)
+    return signed(new_record(name, local_ip=local, public_ip=public, role=role, seq=seq,
+                             now=NOW if ts is None else ts, **kw))
 
 
 # =========================================================================== parse_record
@@ -208,7 +208,7 @@ def test_one_bad_file_never_stops_the_others_in_the_folder_store(tmp_path):
     (tmp_path / "turtlebot.sync-conflict-1.json").write_text(json.dumps(base(timestamp=-1e20)))
     (tmp_path / "rover.json").write_text(
         rec(name="rover", role="member", public="198.51.100.40", seq=3).to_text())
-    res = store.fetch(["turtlebot", "rover"], "sami")
+    res = store.fetch(["turtlebot", "rover"], "sami", pinned("turtlebot", "rover", "sami"))
     assert res.records["rover"].record.public_ip == "198.51.100.40"
     refused = {r.source: r.why for r in res.refused}
     assert "milliseconds" in refused["turtlebot.json"]

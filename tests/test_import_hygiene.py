@@ -93,6 +93,7 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/cli/sync.py", "rosnet_tui.core.sync.outcome"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/sync.py", "rosnet_tui.core.sync.service"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/sync.py", "rosnet_tui.core.sync.status"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
+    ("rosnet_tui/cli/sync.py", "rosnet_tui.core.sync.signing"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/sync.py", "rosnet_tui.core.files.regular_file"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/sync.py", "rosnet_tui.core.saved.settings"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/undo.py", "rosnet_tui.cli.common"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
@@ -177,6 +178,7 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/core/wizard/steps.py", "rosnet_tui.core.files.hosts"): "start-up cost: the hosts writer (difflib, hashlib: 29 modules) loads for the Linux step's text",
     ("rosnet_tui/core/wizard/steps.py", "rosnet_tui.core.ros"): "start-up cost: ROS 2's module (json, datetime: 11 modules) loads for a ROS 2 step's text only",
     ("rosnet_tui/core/sync/choose_store.py", ".dnsstore"): "start-up cost: dnspython, for DNS store users only",
+    ("rosnet_tui/core/sync/store.py", ".signing"): "start-up cost: cryptography, loaded when records are read (`sync status` reads no store)",
     ("rosnet_tui/screenshots.py", "rosnet_tui.core.wizard.session"): "start-up cost: textual and the UI, loaded when screenshots are taken",
     ("rosnet_tui/screenshots.py", "rosnet_tui.ui.app"): "start-up cost: textual and the UI, loaded when screenshots are taken",
 }

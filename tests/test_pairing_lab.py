@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from rosnet_tui.core.ros import fleet_tls
+from rosnet_tui.core.ros import fleet_tls, pairing
 from tests.lab.ros2 import ROS2_IDS, explain
 
 pytestmark = pytest.mark.lab
@@ -206,3 +206,49 @@ def test_a_master_certificate_with_the_wrong_name_is_named(ros2):
     assert "ros2.tls.wrong_name" in [a["rule"] for a in router.get("advice") or []], router
     robot_view = ros2.check("robot")["ros2.router"]
     assert robot_view["data"]["tls"]["problem"] == "wrong_name", robot_view
+
+
+def test_a_pairing_key_can_only_sign_its_member_and_remove_ends_it(ros2):
+    """Issue 35: a member's pairing key in the master's authorized_keys runs only the forced
+    `ros pair --serve NAME` (no shell: ca.key is not readable through it), signs only NAME, and
+    `ros pair --remove NAME` deletes it (the next login with it is refused)."""
+    from rosnet_tui.core.ros import pair_access
+    from tests.lab.lab import keypair
+    from tests.lab.readme_install import VENV
+    from tests.test_fleet_ca import csr
+
+    lab = ros2.lab
+    robot_home, laptop_home = lab.home("robot"), lab.home("laptop")
+    private, public = keypair("sami pairing key")
+    key = laptop_home / ".ssh" / "pair_key"
+    key.write_bytes(private)
+    key.chmod(0o600)
+    keys = robot_home / ".ssh" / "authorized_keys"
+    before = keys.read_text()
+    pair_access.admit("sami", public.decode(), path=keys,
+                      python=str(robot_home / VENV / "bin" / "python"))
+    ssh = ["ssh", "-F", "/dev/null", "-i", str(key), "-o", "IdentitiesOnly=yes",
+           "-o", "BatchMode=yes", "-o", "ConnectTimeout=5",
+           "-o", f"UserKnownHostsFile={laptop_home / '.ssh' / 'known_hosts'}",
+           f"root@{lab.hostname('robot')}"]
+    try:
+        r = lab.run("laptop", [*ssh, "cat ~/.config/rosnet-tui/tls/ca.key"],
+                    input=csr("sami"), timeout=30)
+        rep = pairing.report_of(r.stdout)
+        assert rep and "cert" in rep, r.stdout + r.stderr
+        assert "PRIVATE KEY" not in r.stdout                      # the shell never ran
+        assert fleet_tls.cert_summary(rep["cert"].encode())["cn"] == "sami"
+        for name, why in (("Turtlebot", "names the master"), ("SAMI", None)):
+            r = lab.run("laptop", [*ssh, "anything"], input=csr(name), timeout=30)
+            rep = pairing.report_of(r.stdout)
+            assert rep is not None, r.stdout + r.stderr
+            assert (why in rep.get("error", "")) if why else "cert" in rep, rep
+        r = lab.rosnet("robot", "ros", "pair", "--remove", "sami", "--yes", "--config",
+                       str(ros2.config_path("robot")), env=ros2.env("robot"))
+        assert r.returncode == 0 and "Removed 1 pairing key(s) of sami" in r.stdout, \
+            r.stdout + r.stderr
+        assert "holds other keys too" in r.stdout
+        r = lab.run("laptop", [*ssh, "anything"], input=csr("sami"), timeout=30)
+        assert r.returncode == 255 and pairing.report_of(r.stdout) is None, r.stdout + r.stderr
+    finally:
+        keys.write_text(before)

@@ -42,6 +42,7 @@ from rosnet_tui.core.sync.folder import copy_owner
 from rosnet_tui.core.sync.plan import LAN_WHY, check_complete
 from rosnet_tui.core.sync.store import StoreConfigError
 from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
+from tests.builders import pinned, signed, write_sync_key
 from tests.builders import sync_laptop_settings as laptop_settings
 
 NOW = time.time()
@@ -50,8 +51,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 def rec(name="turtlebot", local="10.10.10.1", public="203.0.113.2", role="master", seq=1,
         ts=None):
-    return new_record(name, local_ip=local, public_ip=public, role=role, seq=seq,
-                      now=NOW if ts is None else ts)
+    return signed(new_record(name, local_ip=local, public_ip=public, role=role, seq=seq,
+                             now=NOW if ts is None else ts))
 
 
 def record_text(**kw) -> str:
@@ -63,7 +64,8 @@ def test_record_round_trip_and_format():
     r = rec(seq=7)
     text = r.to_text()
     data = json.loads(text)
-    assert set(data) == {"version", "name", "role", "local_ip", "public_ip", "seq", "timestamp"}
+    assert set(data) == {"version", "name", "role", "local_ip", "public_ip", "seq", "timestamp",
+                         "sig"}
     assert data["timestamp"].endswith("Z")
     back = parse_record(text.encode())
     assert back.same_content(r) and back.seq == 7
@@ -166,7 +168,7 @@ def test_folder_store_publish_is_atomic_and_fetch_picks_the_best_copy(tmp_path):
         record_text(seq=9, public="203.0.113.9")[:50])                    # partial
     (folder / "turtlebot-2.json").write_text(record_text(name="turtlebot-2"))  # another robot
     (folder / "turtlebot.old.json").write_text(record_text(name="sami", role="member"))
-    res = store.fetch(["turtlebot"], "sami")
+    res = store.fetch(["turtlebot"], "sami", pinned("turtlebot", "sami"))
     assert res.records["turtlebot"].record.public_ip == "203.0.113.6"
     assert res.records["turtlebot"].source.startswith("turtlebot.sync-conflict")
     refused = {r.source: r.why for r in res.refused}
@@ -195,7 +197,7 @@ def test_folder_store_removes_own_stale_copies_only(tmp_path):
 def test_folder_store_missing_folder_is_a_store_error(tmp_path):
     store = FolderStore(tmp_path / "not-mounted" / "rosnet")
     with pytest.raises(StoreError, match="does not exist"):
-        store.fetch(["turtlebot"], "sami")
+        store.fetch(["turtlebot"], "sami", pinned("turtlebot", "sami"))
     with pytest.raises(StoreError, match="does not exist"):
         store.publish(rec())
     # A missing last folder under an existing one is created on first publish.
@@ -353,6 +355,7 @@ class World:
         self.local = LocalAddress("eth0", "192.168.1.10", "192.168.1.254")
         self.public: str | None = "198.51.100.2"
         self.robot = FolderStore(self.folder)
+        write_sync_key(self.config, "sami")
         self.svc = self.service(**extra)
 
     def service(self, **kw) -> SyncService:
@@ -474,7 +477,8 @@ def test_service_refuses_garbage_and_stale_copies(tmp_path, caplog):
     assert any("refused the record turtlebot.json" in r.getMessage() and "loopback" in
                r.getMessage() for r in caplog.records)
     st = load_status(w.state)
-    assert st["refused"][-1]["source"] == "turtlebot.json"
+    assert {r["source"] for r in st["refused"]} == {"turtlebot.json",
+                                                     "turtlebot (conflicted copy).json"}
     assert st["peers"]["turtlebot"]["record"]["public_ip"] == "203.0.113.7"
     caplog.clear()
     with caplog.at_level("WARNING", logger="rosnet_tui.sync"):

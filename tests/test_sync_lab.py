@@ -25,7 +25,9 @@ from rosnet_tui.core.files.hosts import parse_hosts
 from rosnet_tui.core.saved.sync_records import format_time, new_record
 from rosnet_tui.core.sync import FolderStore, StoreError
 from rosnet_tui.core.sync.dnsstore import DnsStore
+from rosnet_tui.core.sync.signing import sign_record
 from rosnet_tui.core.sync.watcher import NetlinkMonitor
+from tests.builders import signed_record, sync_key
 from tests.lab import ADDR
 from tests.sync_support.bench import measure_change_latency, summarize
 from tests.sync_support.bind import (
@@ -185,7 +187,7 @@ def test_a_peers_garbage_record_is_refused_and_never_applied(rig_lab, tmp_path):
     folder = tmp_path / "shared"
     folder.mkdir()
     robot = FolderStore(folder)           # the test writes the robot's records itself
-    robot.publish(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL,
+    robot.publish(signed_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL,
                              public_ip=ADDR.ROBOT_PUBLIC, role="master", seq=3))
     rig = SyncRig(lab, tmp_path, "folder", folder=folder)
     rig.start("laptop", extra=("--no-checks",))
@@ -207,8 +209,26 @@ def test_a_peers_garbage_record_is_refused_and_never_applied(rig_lab, tmp_path):
         assert {r["source"] for r in st["refused"]} >= {"turtlebot.json",
                                                         "turtlebot (conflicted copy 2026-01-01).json"}
         assert st["peers"]["turtlebot"]["record"]["seq"] == 3       # the last good one stands
+        # Another writer of the folder (the laptop's own key, not the robot's) forges the
+        # robot's record with a far higher seq: refused, and it blocks nothing after it.
+        forged = sign_record(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL,
+                                        public_ip="203.0.113.66", role="master", seq=10**6),
+                             sync_key("sami"))
+        (folder / "turtlebot.json").write_text(forged.to_text())
+        assert lab.wait_output(proc, r"refused the record turtlebot\.json .*not by "
+                                     r"turtlebot's key", WAIT), rig.log("laptop")
+        (folder / "turtlebot.json").write_text(new_record(   # unsigned
+            "turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip="203.0.113.67", role="master",
+            seq=10**6 + 1).to_text())
+        assert lab.wait_output(proc, r"refused the record turtlebot\.json .*unsigned", WAIT)
+        assert lab.hosts_path("laptop").read_bytes() == good
+        r = lab.rosnet("laptop", "sync", "status", "--state-dir", str(rig.states["laptop"]),
+                       env=sync_env(lab, "laptop"))
+        assert "Last refused record" in r.stdout and "turtlebot.json: unsigned" in r.stdout, \
+            r.stdout
+        assert any("not by turtlebot's key" in x["why"] for x in rig.status("laptop")["refused"])
         # A valid newer record is taken as usual: the service is not stuck on the garbage.
-        robot.publish(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL,
+        robot.publish(signed_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL,
                                  public_ip="203.0.113.79", role="master", seq=1001))
         assert wait_for(lambda: hosts_entry(lab, "laptop", "turtlebot") == "203.0.113.79", WAIT)
     finally:
@@ -222,7 +242,7 @@ def test_sigkill_in_the_middle_of_a_write_leaves_the_hosts_file_whole(rig_lab, t
     folder = tmp_path / "shared"
     folder.mkdir()
     robot = FolderStore(folder)
-    robot.publish(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL,
+    robot.publish(signed_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL,
                              public_ip=ADDR.ROBOT_PUBLIC, role="master", seq=1))
     hosts = tmp_path / "etc" / "hosts"       # a regular file: the rename path of the writer
     hosts.parent.mkdir()
@@ -237,7 +257,7 @@ def test_sigkill_in_the_middle_of_a_write_leaves_the_hosts_file_whole(rig_lab, t
     old = hosts.read_bytes()
     assert hosts_entry_in(old, "turtlebot") == ADDR.ROBOT_PUBLIC
 
-    robot.publish(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip="203.0.113.80",
+    robot.publish(signed_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip="203.0.113.80",
                              role="master", seq=2))
     slow = [sys.executable, str(REPO / "tests" / "sync_support" / "slow_writer.py")]
     proc = lab.spawn("laptop", sync_argv(cfg, state, *args, python=slow), env=env)
@@ -318,7 +338,7 @@ def test_a_record_change_while_the_checks_wait_is_applied_at_once(rig_lab, tmp_p
     robot = FolderStore(folder)            # the test writes the robot's records itself
 
     def publish(public_ip: str, seq: int) -> None:
-        robot.publish(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip=public_ip,
+        robot.publish(signed_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip=public_ip,
                                  role="master", seq=seq))
 
     publish(ADDR.ROBOT_PUBLIC, 1)
@@ -383,20 +403,19 @@ def test_a_slow_public_ip_lookup_does_not_hold_back_a_peers_record(rig_lab, tmp_
     import random
 
     from rosnet_tui.core.config.settings_model import SyncSettings
-    from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
+    from tests.sync_support.lab_sync import write_pinned
 
     lab = rig_lab
     folder = tmp_path / "shared"
     folder.mkdir()
     robot = FolderStore(folder)
-    robot.publish(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip=ADDR.ROBOT_PUBLIC,
+    robot.publish(signed_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip=ADDR.ROBOT_PUBLIC,
                              role="master", seq=1))
     s = lab.settings("laptop")
     s.probe.public_ip_urls.append(f"http://{ADDR.STALE_ROBOT_PUBLIC}/ip")   # nothing answers
     s.sync = SyncSettings(store="folder", interval_s=2.0, folder=str(folder))
     s.has_sync = True
-    config = tmp_path / "laptop.toml"
-    atomic_write_text(config, render_settings(s), mode=0o644)
+    config = write_pinned(s, tmp_path / "laptop.toml")
     proc = lab.spawn("laptop", sync_argv(config, tmp_path / "state", "--no-checks",
                                          "--bashrc", str(lab.bashrc_path("laptop"))),
                      env=sync_env(lab, "laptop"))
@@ -408,7 +427,7 @@ def test_a_slow_public_ip_lookup_does_not_hold_back_a_peers_record(rig_lab, tmp_
         took = []
         for seq, ip in enumerate(["203.0.113.77", "203.0.113.78"] * 3, start=2):
             time.sleep(rng.uniform(0.0, 2.0))
-            robot.publish(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip=ip,
+            robot.publish(signed_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL, public_ip=ip,
                                      role="master", seq=seq))
             t0 = time.monotonic()
             assert wait_for(lambda ip=ip: hosts_entry(lab, "laptop", "turtlebot") == ip, WAIT,

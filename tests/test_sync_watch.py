@@ -32,7 +32,7 @@ from rosnet_tui.core.sync import folder_watch as fw
 from rosnet_tui.core.sync.folder_watch import FolderWatch, WatchUnavailable
 from rosnet_tui.core.sync.timing import read_period
 from rosnet_tui.core.sync.watcher import LocalAddress, PublicLookup
-from tests.builders import folder_sync_settings
+from tests.builders import folder_sync_settings, signed
 
 REPO = Path(__file__).resolve().parents[1]
 APPLY_S = 0.5          # the issue: applied within 0.5 s of the record appearing complete
@@ -107,8 +107,8 @@ class Member:
 
     def publish(self, public_ip: str) -> None:
         self.seq += 1
-        self.robot.publish(new_record("turtlebot", local_ip="10.10.10.1", public_ip=public_ip,
-                                      role="master", seq=self.seq))
+        self.robot.publish(signed(new_record("turtlebot", local_ip="10.10.10.1",
+                                             public_ip=public_ip, role="master", seq=self.seq)))
 
     def follow(self, public_ip: str, timeout: float = 5.0) -> float | None:
         """Publish the robot's record with *public_ip*; seconds until the hosts file has it."""
@@ -257,8 +257,8 @@ def test_half_written_records_and_temporary_files_are_not_read(tmp_path, caplog)
         time.sleep(0.1)
         rounds = len(m.rounds)
         m.seq += 1
-        text = new_record("turtlebot", local_ip="10.10.10.1", public_ip="203.0.113.44",
-                          role="master", seq=m.seq).to_text()
+        text = signed(new_record("turtlebot", local_ip="10.10.10.1", public_ip="203.0.113.44",
+                                 role="master", seq=m.seq)).to_text()
         # sync tools' temporary files, then the record itself written in place, slowly: longer
         # than a poll period, and never read half written
         for tmp in (".syncthing.turtlebot.json.tmp", "~syncthing~turtlebot.json.tmp",

@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import sys
 
 from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, say
 from rosnet_tui.cli.writing import confirm, load_settings_for
 from rosnet_tui.core.config.paths import default_config_dir
-from rosnet_tui.core.ros import fleet_tls, pairing
+from rosnet_tui.core.ros import fleet_tls, pair_access, pairing
 from rosnet_tui.core.ros.fleet_tls import TlsError
 
 
@@ -39,10 +40,18 @@ def register(rs: argparse._SubParsersAction) -> None:
                    help="read what `ros pair --sign` printed on stdin and install it here")
     g.add_argument("--remove", metavar="NAME",
                    help="on the master: take member NAME out of the fleet (a new CA; the other "
-                        "members are re-paired over SSH); says what will happen and asks first")
+                        "members are re-paired over SSH; NAME's pairing key removed); says what "
+                        "will happen and asks first")
+    g.add_argument("--admit", metavar="NAME",
+                   help="on the master: let the SSH public key read on stdin pair member NAME "
+                        "through a forced command in ~/.ssh/authorized_keys (it can only sign "
+                        "NAME's request, no shell)")
+    g.add_argument("--serve", metavar="NAME",
+                   help="on the master, run by a member over SSH (the forced command): sign "
+                        "NAME's request read on stdin, print one ROSNET_TLS line")
     p.add_argument("--yes", "-y", action="store_true",
-                   help="with --remove: go ahead without asking (needed where there is no "
-                        "terminal)")
+                   help="with --sign or --remove: go ahead without asking (needed where there "
+                        "is no terminal)")
     p.add_argument("--dry-run", action="store_true",
                    help="with --remove: show what would happen, change nothing")
     p.add_argument("--timeout", type=float, default=pairing.PAIR_TIMEOUT_S,
@@ -69,20 +78,17 @@ def run_pair(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     paths = fleet_tls.tls_paths(default_config_dir())
     try:
+        if args.serve:
+            return _serve(args, settings, paths)
         if args.sign:
-            if not settings.is_master:
-                say("rosnet-tui: --sign runs on the master (it holds the fleet CA)")
-                return EXIT_USAGE
-            pairing.prepare_master(settings, paths)
-            ca, cert = fleet_tls.sign_request(paths, _read_stdin("the member's request"),
-                                              master=settings.this.name)
-            summ = fleet_tls.cert_summary(cert.encode())
-            print(f"# Certificate for {summ['cn']}, valid until {summ['not_after'][:10]}. Paste "
-                  "everything below into `rosnet-tui ros pair --install` on that member.")
-            sys.stdout.write(cert + ca)
-            return EXIT_OK
+            return _sign(args, settings, paths)
+        if args.admit:
+            return _admit(args, settings)
         if args.print_request:
-            print(fleet_tls.make_request(paths, settings.this.name), end="")
+            pem = fleet_tls.make_request(paths, settings.this.name)
+            print(pem, end="")
+            fp = fleet_tls.key_fingerprint(fleet_tls.load_request_key(pem))
+            say(f"(this key's fingerprint, which `ros pair --sign` on the master shows: {fp})")
             return EXIT_OK
         if args.install:
             pems = fleet_tls.split_pems(_read_stdin("what `ros pair --sign` printed"))
@@ -111,7 +117,7 @@ def run_pair(args: argparse.Namespace) -> int:
         res = asyncio.run(pairing.pair_over_ssh(settings, paths, timeout=args.timeout))
     except TlsError as exc:
         say(f"rosnet-tui: {exc}")
-        return EXIT_USAGE if args.sign or args.install else EXIT_FAIL
+        return EXIT_USAGE if args.sign or args.install or args.admit else EXIT_FAIL
     except OSError as exc:
         say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
@@ -120,6 +126,61 @@ def run_pair(args: argparse.Namespace) -> int:
         return EXIT_FAIL
     print(f"{res.detail[:1].upper()}{res.detail[1:]} ({res.seconds:.1f} s). Restart the router "
           "to use it.")
+    return EXIT_OK
+
+
+NOT_SIGNING = ("rosnet-tui: not signing without a confirmation, and there is no terminal to ask "
+               "on: compare the name and fingerprint above, then run the same command with --yes")
+
+
+def _sign(args: argparse.Namespace, settings, paths) -> int:
+    """--sign: the request read, checked, shown (name, key fingerprint), asked, signed."""
+    if not settings.is_master:
+        say("rosnet-tui: --sign runs on the master (it holds the fleet CA)")
+        return EXIT_USAGE
+    text = _read_stdin("the member's request")
+    pairing.prepare_master(settings, paths)
+    req = fleet_tls.read_request(text, master=settings.this.name,
+                                 members=pairing.member_names(settings),
+                                 removed=fleet_tls.removed_members(paths))
+    say(f"The request names {req.name}, a member in the settings; its key's fingerprint:\n"
+        f"  {req.fingerprint}\n(`ros pair --print-request` on {req.name} printed the same.)")
+    stop = confirm(args, f"Sign a certificate for {req.name}?", cancelled="Not signed.",
+                   no_terminal=NOT_SIGNING)
+    if stop is not None:
+        return stop
+    ca, cert = fleet_tls.sign_checked(paths, req)
+    summ = fleet_tls.cert_summary(cert.encode())
+    print(f"# Certificate for {summ['cn']}, valid until {summ['not_after'][:10]}. Paste "
+          "everything below into `rosnet-tui ros pair --install` on that member.")
+    sys.stdout.write(cert + ca)
+    return EXIT_OK
+
+
+def _serve(args: argparse.Namespace, settings, paths) -> int:
+    """--serve NAME (a member's forced command): one ROSNET_TLS line, never a question."""
+    rep = pairing.serve(settings, paths, args.serve, sys.stdin.read(65536))
+    print(fleet_tls.REPORT_PREFIX + json.dumps(rep), flush=True)
+    return EXIT_FAIL if "error" in rep else EXIT_OK
+
+
+def _admit(args: argparse.Namespace, settings) -> int:
+    """--admit NAME: the public key on stdin gets NAME's forced pairing command."""
+    if not settings.is_master:
+        say("rosnet-tui: --admit runs on the master (members pair with it)")
+        return EXIT_USAGE
+    if args.admit.lower() not in {n.lower() for n in pairing.member_names(settings)}:
+        say(f"rosnet-tui: {args.admit} is not a peer in the settings: add it there first")
+        return EXIT_USAGE
+    keys = pair_access.authorized_keys_path()
+    try:
+        pair_access.admit(args.admit, _read_stdin(f"{args.admit}'s SSH public key (.pub)"),
+                          path=keys, config=getattr(args, "config", None))
+    except pair_access.AccessError as exc:
+        say(f"rosnet-tui: {exc}")
+        return EXIT_USAGE
+    print(f"{keys}: that key can now only ask this master to sign {args.admit}'s certificate "
+          f"(a forced command, no shell). On {args.admit}: `rosnet-tui ros pair` with that key.")
     return EXIT_OK
 
 
@@ -133,17 +194,26 @@ def _remove(args: argparse.Namespace, settings, paths) -> int:
     if not settings.is_master:
         say("rosnet-tui: --remove runs on the master (it holds the fleet CA)")
         return EXIT_USAGE
-    if settings.peer(args.remove) is None:
+    if args.remove.lower() not in {n.lower() for n in pairing.member_names(settings)} and \
+            args.remove.lower() not in fleet_tls.removed_members(paths):
         say(f"rosnet-tui: {args.remove} is not a peer in the settings")
         return EXIT_USAGE
-    others = [p for p in settings.peers if p.name != args.remove]
+    others = [p for p in settings.peers if p.name.lower() != args.remove.lower()]
     _preview_remove(args.remove, settings, paths, others)
     stop = confirm(args, "Rotate the fleet CA now?", dry_run="nothing was changed",
                    cancelled="Cancelled: nothing was changed.", no_terminal=NOT_ROTATING)
     if stop is not None:
         return stop
+    fleet_tls.set_removed(paths, args.remove)
     fleet_tls.rotate_ca(paths, settings.this.name)
     pairing.prepare_master(settings, paths)
+    keys = pair_access.authorized_keys_path()
+    gone = pair_access.revoke(args.remove, path=keys)
+    print(f"Removed {gone} pairing key(s) of {args.remove} from {keys}; this CA never signs for "
+          f"{args.remove} again (its name is in {paths.dir / fleet_tls.REMOVED_FILE}).")
+    if pair_access.other_keys(keys):
+        print(f"  {keys} holds other keys too: if one is {args.remove}'s (its checks' SSH), "
+              "delete that line by hand; a password login on this account is another way in.")
     rc = EXIT_OK
     results = asyncio.run(pairing.repair_members(settings, paths, others, timeout=args.timeout))
     for name, ok, detail in results:
@@ -158,6 +228,8 @@ def _preview_remove(name: str, settings, paths, others: list) -> None:
     """What --remove NAME will do, before it asks."""
     ca = "a new fleet CA replaces" if paths.ca_crt.exists() else "a new fleet CA is made in"
     print(f"Taking {name} out of the fleet, on {settings.this.name} (the master):")
+    print(f"  - {name}'s pairing key leaves {pair_access.authorized_keys_path()}, and this CA "
+          f"will refuse to sign for {name} again.")
     print(f"  - {ca} {paths.dir}: every certificate the old CA signed stops being trusted, "
           f"{name}'s too. The old CA is deleted; `rosnet-tui undo` cannot bring it back.")
     print("  - this router's certificate is signed again by the new CA: restart the router here "

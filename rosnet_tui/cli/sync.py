@@ -75,6 +75,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_state_dir_option(st, "state dir of the service")
     st.set_defaults(func=run_status)
 
+    key = ss.add_parser("key", help="print this component's sync key: the line each peer puts "
+                                    "in this component's [[peer]] table",
+                        description="A record in the store counts only when signed by its "
+                                    "component's own key (made here on first use, beside the "
+                                    "settings file). Every peer pins the public half: copy the "
+                                    "printed line into this component's [[peer]] table on each.")
+    add_config_option(key)
+    key.set_defaults(func=run_key)
+
     ins = ss.add_parser("install-service", help="write a systemd unit that runs the sync service",
                         description="Write a systemd unit (Restart=on-failure) that runs "
                                     "'rosnet-tui sync' with this component's settings. It is shown "
@@ -128,6 +137,22 @@ def _setup_logging(args: argparse.Namespace) -> None:
     logger.propagate = False
     logger.setLevel(logging.DEBUG if args.verbose else
                     logging.WARNING if args.quiet else logging.INFO)
+
+
+def run_key(args: argparse.Namespace) -> int:
+    """`sync key`: this component's public sync key, as a peer's settings line."""
+    from rosnet_tui.core.sync.signing import key_path, load_or_make_key, public_text
+
+    path = key_path(config_path(args))
+    try:
+        key = load_or_make_key(path)
+    except (OSError, ValueError) as exc:
+        say(f"rosnet-tui: cannot use the sync key {path}: {exc}")
+        return EXIT_FAIL
+    print(f'sync_key = "{public_text(key)}"')
+    say(f"(the public half of {path}; put that line in this component's [[peer]] table on "
+        "every peer)")
+    return EXIT_OK
 
 
 # --------------------------------------------------------------------------- the service

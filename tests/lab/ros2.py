@@ -98,8 +98,10 @@ class Ros2World:
         pairing.prepare_master(self.settings(m), mp)
         if host != m and pairing.needs_pairing(s, self.tls_paths(host)) is not None:
             paths = self.tls_paths(host)
+            fleet_tls.set_removed(mp, s.this.name, removed=False)   # a test took it out
             ca, cert = fleet_tls.sign_request(mp, fleet_tls.make_request(paths, s.this.name),
-                                              master=s.master_name)
+                                              master=s.master_name,
+                                              members=pairing.member_names(self.settings(m)))
             fleet_tls.install(paths, ca, cert)
 
     def remove_tls(self, host: str) -> None:

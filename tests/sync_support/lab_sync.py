@@ -14,6 +14,7 @@ from typing import Any
 from rosnet_tui.core.config.settings_model import SyncSettings
 from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 from rosnet_tui.core.sync.status import load_status
+from tests.builders import sync_key_text, write_sync_key
 
 from .bind import BindServer
 
@@ -33,7 +34,16 @@ def write_sync_config(lab, host: str, path: Path, *, store: str, folder: Path | 
                           dns_server=bind.ip if bind else "", zone=bind.zone if bind else "",
                           tsig_key_file=str(bind.key_file) if bind else "")
     s.has_sync = True
+    return write_pinned(s, path)
+
+
+def write_pinned(s, path: Path) -> Path:
+    """Settings *s* written to *path*, each peer's sync key pinned, this component's own key
+    beside them (every component's test key: tests.builders.sync_key)."""
+    for peer in s.peers:
+        peer.sync_key = sync_key_text(peer.name)
     atomic_write_text(path, render_settings(s), mode=0o644)
+    write_sync_key(path, s.this.name)
     return path
 
 

@@ -111,6 +111,18 @@ def validate_name(value: str) -> str | None:
     return None
 
 
+SYNC_KEY_RE = re.compile(r"^ed25519:[A-Za-z0-9+/]{42}[AEIMQUYcgkosw048]=$")
+
+
+def validate_sync_key(value: str) -> str | None:
+    """Why *value* is not a sync record key (``ed25519:`` and 32 bytes in base64), or None
+    (also when empty: not pinned yet)."""
+    if not value or SYNC_KEY_RE.match(value):
+        return None
+    return ("not a sync key: copy the line `rosnet-tui sync key` prints on that component "
+            "(ed25519:...)")
+
+
 def validate_ip(value: str, *, required: bool = True) -> str | None:
     """Return why *value* is not an IPv4 address, or None when it is (or is empty and optional)."""
     if not value:
@@ -201,6 +213,7 @@ class Peer:
     ssh_port: int = 22
     office_ip: str = ""      # the peer's address on the office LAN (default: local_ip)
     portable_ip: str = ""    # the peer's address on the portable LAN (default: local_ip)
+    sync_key: str = ""       # its sync records' public key, "ed25519:BASE64" (`sync key` there)
 
 
 def default_ros_version(env: dict[str, str] | None = None) -> int:
@@ -414,6 +427,7 @@ class Settings:
             add(f"{k}.public_ip", validate_ip(p.public_ip, required=False))
             add(f"{k}.office_ip", validate_ip(p.office_ip, required=False))
             add(f"{k}.portable_ip", validate_ip(p.portable_ip, required=False))
+            add(f"{k}.sync_key", validate_sync_key(p.sync_key))
             if not p.local_ip and not p.public_ip:
                 add(f"{k}.public_ip", "give the peer a local IP, a public IP, or both",
                     Gap.NO_ADDRESS)

@@ -5,14 +5,19 @@ every component (``~/.config/rosnet-tui/tls/``).
 - ``node.key`` (0600) is made on its component and never leaves it; ``node.crt`` is that key's
   certificate, signed by the fleet CA, naming the component (CN and DNS subjectAltName; the
   master's also its public IP when known, since a locator may dial it by address).
-- Every certificate has a Common Name (zenoh 1.7.2 panicked on one without) and the extended key
-  usages serverAuth and clientAuth (a router that connects with mTLS needs clientAuth).
+- Every certificate has a Common Name (zenoh 1.7.2 panicked on one without), a critical key usage
+  (digitalSignature; keyEncipherment too for RSA) and the extended key usages serverAuth and
+  clientAuth (a router that connects with mTLS needs clientAuth).
+- The CA signs only a request whose signature verifies, whose key is EC P-256 (or RSA of 2048
+  bits up), and which names a member in the master's own settings: a host name, compared
+  case-insensitively, never an address, the master's name or a removed member's
+  (:func:`read_request`).
 
 This module needs only the standard library and ``cryptography``, and runs as a program: the
-master's signing step is this file fed on stdin to the interpreter of the rosnet-tui installed on
-the master (the same discovery the Zenoh peer program uses), so a member pairs with any master
-that has rosnet-tui installed, whatever its version: ``python - sign <member name> <CSR PEM>``
-prints one ``ROSNET_TLS {json}`` line.
+master re-pairing its members feeds it on stdin to each member's installed rosnet-tui
+(``python - request NAME``, ``python - install CA_PEM CERT_PEM``; one ``ROSNET_TLS {json}`` line
+out). Signing never runs on code a member sent: a member has its request signed by the master's
+own ``rosnet-tui ros pair --serve NAME`` (core/ros/pairing.py), with the master's settings.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import datetime as _dt
 import ipaddress
 import json
 import os
+import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -174,6 +180,18 @@ def rotate_ca(paths: TlsPaths, fleet: str) -> None:
     ensure_ca(paths, fleet)
 
 
+def _leaf_key_usage(public_key: Any) -> Any:
+    """A TLS endpoint's key usage: signing the handshake (EC and RSA), and for RSA also key
+    encipherment (TLS 1.2's RSA key exchange)."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives.asymmetric import rsa
+
+    return x509.KeyUsage(digital_signature=True, content_commitment=False,
+                         key_encipherment=isinstance(public_key, rsa.RSAPublicKey),
+                         data_encipherment=False, key_agreement=False, key_cert_sign=False,
+                         crl_sign=False, encipher_only=False, decipher_only=False)
+
+
 def issue(ca_crt: Any, ca_key: Any, public_key: Any, cn: str, names: list[str], *,
           days: int = CERT_DAYS, not_before: _dt.datetime | None = None) -> Any:
     """A certificate for *public_key* naming *cn* (and *names* as subjectAltName)."""
@@ -188,6 +206,7 @@ def issue(ca_crt: Any, ca_key: Any, public_key: Any, cn: str, names: list[str], 
             .not_valid_before(start).not_valid_after(start + _dt.timedelta(days=days))
             .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
             .add_extension(_sans(list(dict.fromkeys([cn, *names]))), critical=False)
+            .add_extension(_leaf_key_usage(public_key), critical=True)
             .add_extension(x509.ExtendedKeyUsage([Eku.SERVER_AUTH, Eku.CLIENT_AUTH]), critical=False)
             .add_extension(x509.AuthorityKeyIdentifier.from_issuer_subject_key_identifier(ski),
                            critical=False)
@@ -240,31 +259,151 @@ def make_request(paths: TlsPaths, name: str) -> str:
     return csr.public_bytes(ser.Encoding.PEM).decode()
 
 
-def sign_request(paths: TlsPaths, csr_pem: str, *, master: str = "",
-                 days: int = CERT_DAYS) -> tuple[str, str]:
-    """On the master: sign a member's request. Returns (CA certificate PEM, certificate PEM).
-    Refuses a malformed request, a bad signature, and a request naming the master itself."""
+HOST_LABEL = re.compile(r"^(?!-)[a-z0-9-]{1,63}(?<!-)$")
+REMOVED_FILE = "removed"        # in the TLS folder on the master: members taken out, a name a line
+
+
+def host_name_problem(name: str) -> str | None:
+    """Why *name* cannot be a component's name in a certificate (None: it can): a host name of
+    ASCII letters, digits and '-' (dot-separated labels), never an address or only digits."""
+    shown = name.encode("ascii", "backslashreplace").decode()[:60]
+    if not name:
+        return "the request names no component (an empty name)"
+    try:
+        ipaddress.ip_address(name.strip("[]"))
+        return f"the request names the address {shown}; a certificate names a host, never an address"
+    except ValueError:
+        pass
+    low = name.lower()
+    if len(name) > 253 or not all(HOST_LABEL.match(x) for x in low.split(".")):
+        return f"the request names '{shown}', not a host name (letters, digits and '-')"
+    if low.replace(".", "").isdigit():
+        return f"the request names '{shown}', only digits: not a host name"
+    return None
+
+
+def removed_members(paths: TlsPaths) -> list[str]:
+    """The members `ros pair --remove` took out of the fleet (lower case)."""
+    try:
+        text = (paths.dir / REMOVED_FILE).read_text(encoding="utf-8", errors="replace")
+    except FileNotFoundError:
+        return []
+    return [x.strip().lower() for x in text.splitlines()[:10000] if x.strip()]
+
+
+def set_removed(paths: TlsPaths, name: str, removed: bool = True) -> None:
+    """Say (or unsay) that *name* was taken out of the fleet; the CA never signs for it again."""
+    names = [n for n in removed_members(paths) if n != name.lower()]
+    if removed:
+        names.append(name.lower())
+    _write(paths.dir / REMOVED_FILE, "".join(n + "\n" for n in names).encode(), 0o644)
+
+
+def key_fingerprint(public_key: Any) -> str:
+    """SHA-256 of a public key (its DER SubjectPublicKeyInfo), hex pairs: what `ros pair
+    --sign` shows, to compare with what the member's `--print-request` said."""
+    from cryptography.hazmat.primitives import hashes
+    from cryptography.hazmat.primitives import serialization as ser
+
+    h = hashes.Hash(hashes.SHA256())
+    h.update(public_key.public_bytes(ser.Encoding.DER, ser.PublicFormat.SubjectPublicKeyInfo))
+    return ":".join(f"{b:02x}" for b in h.finalize())
+
+
+def load_request_key(csr_pem: str) -> Any:
+    """The public key of a request (PEM) this component made."""
+    from cryptography import x509
+
+    return x509.load_pem_x509_csr(csr_pem.encode()).public_key()
+
+
+def key_problem(public_key: Any) -> str | None:
+    """Why a member's key is too weak for the fleet (None: EC P-256, or RSA of 2048 bits up)."""
+    from cryptography.hazmat.primitives.asymmetric import ec, rsa
+
+    if isinstance(public_key, ec.EllipticCurvePublicKey):
+        if isinstance(public_key.curve, ec.SECP256R1):
+            return None
+        return f"the request's key is on the curve {public_key.curve.name}; the fleet uses P-256"
+    if isinstance(public_key, rsa.RSAPublicKey):
+        if public_key.key_size >= 2048:
+            return None
+        return f"the request's key is RSA of {public_key.key_size} bits; at least 2048 are needed"
+    return f"the request's key is a {type(public_key).__name__}; the fleet uses EC P-256 (or RSA)"
+
+
+@dataclass(frozen=True)
+class Request:
+    """A member's certificate request that passed every check, and what to show before signing."""
+
+    csr: Any
+    name: str
+    fingerprint: str
+
+
+def read_request(csr_pem: str, *, master: str, members: Any, removed: Any = ()) -> Request:
+    """A member's request, checked: it parses, its signature verifies, its key is strong enough,
+    and it names a member of the fleet: a host name in *members* (the master's own settings,
+    compared case-insensitively), never *master*, never one of *removed*. Raises TlsError with
+    the reason (never anything else, whatever the request holds)."""
     from cryptography import x509
     from cryptography.x509.oid import NameOID
 
+    try:
+        csr = x509.load_pem_x509_csr(csr_pem.strip().encode() + b"\n")
+    except (ValueError, UnicodeError):
+        raise TlsError("that is not a certificate request (a PEM block starting with "
+                       f"{PEM_CSR})") from None
+    try:
+        valid = csr.is_signature_valid
+        public_key = csr.public_key()
+    except Exception:  # noqa: BLE001 - an unsupported algorithm is a refusal, not a crash
+        valid, public_key = False, None
+    if not valid:
+        raise TlsError("the request's signature does not verify (changed after it was made?)")
+    why = key_problem(public_key)
+    if why:
+        raise TlsError(why)
+    try:
+        cns = csr.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+        cn = str(cns[0].value) if len(cns) == 1 else ""
+    except Exception:  # noqa: BLE001 - a subject cryptography cannot read is no name
+        cn = ""
+    why = host_name_problem(cn)
+    if why:
+        raise TlsError(why)
+    low = cn.lower()
+    if not master:
+        raise TlsError("the master's own name is not known here (its settings name none)")
+    if low == master.lower():
+        raise TlsError(f"the request names the master ({cn}); a member cannot take its name")
+    if low in {r.lower() for r in removed}:
+        raise TlsError(f"{cn} was taken out of the fleet (`ros pair --remove`); it is not signed "
+                       "again")
+    if low not in {m.lower() for m in members}:
+        raise TlsError(f"{cn} is not a member in this master's settings (no [[peer]] of that "
+                       "name): add it there first")
+    return Request(csr, low, key_fingerprint(public_key))
+
+
+def sign_request(paths: TlsPaths, csr_pem: str, *, master: str, members: Any,
+                 removed: Any = (), days: int = CERT_DAYS) -> tuple[str, str]:
+    """On the master: sign a member's request checked by :func:`read_request` (the members
+    removed before, from the TLS folder, are refused too). Returns (CA certificate PEM,
+    certificate PEM)."""
     if not paths.ca_key.exists():
         raise TlsError(f"no fleet CA here ({paths.ca_key} is missing): run `rosnet-tui ros "
                        "apply` on the master first")
-    try:
-        csr = x509.load_pem_x509_csr(csr_pem.strip().encode() + b"\n")
-    except ValueError:
-        raise TlsError("that is not a certificate request (a PEM block starting with "
-                       f"{PEM_CSR})") from None
-    if not csr.is_signature_valid:
-        raise TlsError("the request's signature does not verify")
-    cns = csr.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
-    cn = str(cns[0].value) if cns else ""
-    if not cn or len(cn) > 63 or not all(c.isalnum() or c in "-." for c in cn):
-        raise TlsError(f"the request names '{cn}', not a component name")
-    if master and cn == master:
-        raise TlsError(f"the request names the master ({cn}); a member cannot take its name")
+    req = read_request(csr_pem, master=master, members=members,
+                       removed=[*removed, *removed_members(paths)])
+    return sign_checked(paths, req, days=days)
+
+
+def sign_checked(paths: TlsPaths, req: Request, *, days: int = CERT_DAYS) -> tuple[str, str]:
+    """Sign a request :func:`read_request` passed (after asking, on the command line)."""
     ca = load_cert(paths.ca_crt)
-    cert = issue(ca, _load_key(paths.ca_key), csr.public_key(), cn, [cn], days=days)
+    cert = issue(ca, _load_key(paths.ca_key), req.csr.public_key(), req.name, [req.name],
+                 days=days)
     return _cert_pem(ca).decode(), _cert_pem(cert).decode()
 
 
@@ -373,20 +512,17 @@ def issue_test_cert(ca: TlsPaths, into: TlsPaths, name: str, *, days: int = CERT
 
 # --------------------------------------------------------------------------- as a program
 def main(argv: list[str]) -> int:
-    """Run over SSH, one ``ROSNET_TLS`` line out: ``sign MASTER CSR_PEM`` (on the master);
-    ``request NAME`` and ``install CA_PEM CERT_PEM`` (on a member the master re-pairs)."""
+    """Run over SSH on a member the master re-pairs, one ``ROSNET_TLS`` line out: ``request
+    NAME`` and ``install CA_PEM CERT_PEM``. (Signing is never done by this program: a member
+    has it done by the master's own `rosnet-tui ros pair --serve`, with the master's settings.)"""
     cmd, rest = (argv[0], argv[1:]) if argv else ("", [])
-    arity = {"sign": 2, "request": 1, "install": 2}
+    arity = {"request": 1, "install": 2}
     if arity.get(cmd) != len(rest):
-        print("usage: sign MASTER CSR_PEM | request NAME | install CA_PEM CERT_PEM",
-              file=sys.stderr)
+        print("usage: request NAME | install CA_PEM CERT_PEM", file=sys.stderr)
         return 2
     out: dict[str, Any]
     try:
-        if cmd == "sign":
-            ca_pem, cert_pem = sign_request(tls_paths(), rest[1], master=rest[0])
-            out = {"ca": ca_pem, "cert": cert_pem}
-        elif cmd == "request":
+        if cmd == "request":
             out = {"csr": make_request(tls_paths(), rest[0])}
         else:
             out = {"installed": install(tls_paths(), rest[0], rest[1])}

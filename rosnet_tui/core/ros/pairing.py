@@ -5,12 +5,14 @@ member, :func:`pair_over_ssh` makes the member's key and request here, has the m
 request over the SSH the checks already use (host keys verified as for every check), and
 installs the CA certificate and the member's certificate: one SSH round trip.
 
-The master's side is ``core/ros/fleet_tls.py`` itself, fed on stdin to the interpreter of the
-rosnet-tui installed on the master (found by the same shell prelude that runs the Zenoh peer
-program, ``peer.commands.zenoh_peer_command``). A program on stdin rather than a sub-command of the
-master's ``rosnet-tui``: it needs only that installation's ``cryptography``, so a member pairs
-with a master running an older rosnet-tui, and no command name has to be found on the master's
-PATH (pipx puts it where a non-login SSH shell often does not look).
+The master's side is the master's own ``rosnet-tui ros pair --serve NAME`` (:func:`serve`), run
+by the interpreter of the rosnet-tui installed there (found by the prelude the Zenoh peer program
+uses, ``peer.commands.installed_python_command``), the request on stdin. It reads the master's
+own settings: the master's name, the members it signs for. A member whose operators get no shell
+on the master pairs through a forced command in the master's ``authorized_keys``
+(``ros pair --admit NAME``, :mod:`.pair_access`) that runs only that: sshd ignores what the
+member asks for. (The master re-pairing its members still feeds ``fleet_tls.py`` on stdin to
+each member: ``request`` and ``install``, code of the master's own.)
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from typing import Any
 from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
-from rosnet_tui.core.peer.commands import zenoh_peer_command
+from rosnet_tui.core.peer.commands import installed_python_command, zenoh_peer_command
 from rosnet_tui.core.ros import fleet_tls
 from rosnet_tui.core.ros.fleet_tls import TlsError, TlsPaths
 from rosnet_tui.core.ros.ros2 import mtls
@@ -85,7 +87,7 @@ def needs_pairing(s: Settings, paths: TlsPaths) -> str | None:
         return f"the certificate cannot be read ({exc})"
     if summ["issuer_key_id"] != fleet_tls.ca_key_id(paths.ca_crt):
         return "the certificate is not from the fleet CA installed here"
-    if summ["cn"] != s.this.name:
+    if summ["cn"].lower() != s.this.name.lower():   # the CA names members in lower case
         return f"the certificate names {summ['cn']}, not {s.this.name}"
     if summ["days_left"] <= fleet_tls.WARN_DAYS:
         return f"the certificate expires in {summ['days_left']:.0f} days"
@@ -131,7 +133,8 @@ async def repair_members(s: Settings, paths: TlsPaths, peers: list[Any], opts: A
         if "csr" not in rep:
             return (peer.name, False, str(rep.get("error")))
         try:
-            ca, cert = fleet_tls.sign_request(paths, str(rep["csr"]), master=s.this.name)
+            ca, cert = fleet_tls.sign_request(paths, str(rep["csr"]), master=s.this.name,
+                                              members=member_names(s))
         except TlsError as exc:
             return (peer.name, False, str(exc))
         rep = await _remote(opts, peer, timeout, "install", ca, cert)
@@ -142,9 +145,47 @@ async def repair_members(s: Settings, paths: TlsPaths, peers: list[Any], opts: A
     return list(await asyncio.gather(*(one(p) for p in peers)))
 
 
+def member_names(s: Settings) -> list[str]:
+    """The names the fleet CA signs for: the peers in the master's own settings."""
+    return [p.name for p in s.peers]
+
+
+# Run by the master's installed interpreter (found as for the Zenoh program): its own
+# `rosnet-tui ros pair --serve NAME`, the current folder off the path.
+SERVE_BOOT = ("import sys,runpy;sys.path[:]=[p for p in sys.path if p not in ('','.')];"
+              "sys.argv=['rosnet-tui',*sys.argv[1:]];runpy.run_module('rosnet_tui',"
+              "run_name='__main__')")
+
+
+def serve_command(name: str) -> str:
+    """What a member asks the master to run: its `ros pair --serve NAME` (under a forced
+    command in the master's authorized_keys, sshd runs that one whatever is asked)."""
+    return installed_python_command("ros", "pair", "--serve", name,
+                                    mark=fleet_tls.REPORT_PREFIX, boot=SERVE_BOOT)
+
+
+def serve(s: Settings, paths: TlsPaths, name: str, csr_pem: str) -> dict[str, Any]:
+    """On the master (`ros pair --serve NAME`, a member's forced command): sign the request on
+    stdin when it names *name*, a member in these settings. The answer as one ROSNET_TLS
+    line's JSON."""
+    if not s.is_master:
+        return {"error": f"{s.this.name} is not the master in its settings"}
+    try:
+        prepare_master(s, paths)
+        req = fleet_tls.read_request(csr_pem, master=s.this.name, members=member_names(s),
+                                     removed=fleet_tls.removed_members(paths))
+        if req.name != name.lower():
+            raise TlsError(f"this way in signs only for {name}; the request names {req.name}")
+        ca, cert = fleet_tls.sign_checked(paths, req)
+    except (TlsError, OSError) as exc:
+        return {"error": str(exc)}
+    return {"ca": ca, "cert": cert}
+
+
 async def pair_over_ssh(s: Settings, paths: TlsPaths, opts: Any = None,
                         timeout: float = PAIR_TIMEOUT_S) -> PairResult:
-    """Have the master sign this member's request over SSH and install the result."""
+    """Have the master sign this member's request over SSH (its `ros pair --serve`) and install
+    the result."""
     t0 = time.monotonic()
     peer = master_peer(s)
     if s.is_master:
@@ -154,8 +195,18 @@ async def pair_over_ssh(s: Settings, paths: TlsPaths, opts: Any = None,
                                  "set it, or pair by text (`rosnet-tui ros pair --print-request`"
                                  " here, `--sign` on the master, `--install` here)")
     csr = fleet_tls.make_request(paths, s.this.name)
-    rep = await _remote(opts, peer, timeout, "sign", s.master_name, csr)
+    res = await ssh_run(opts, peer, serve_command(s.this.name), stdin=csr, timeout=timeout)
     took = time.monotonic() - t0
+    rep = report_of(res.stdout)
+    if res.failure:
+        rep = {"error": f"SSH to {peer.name} failed ({res.failure}): {res.detail}"}
+    elif rep is None:
+        tail = " | ".join((res.stderr or "").strip().splitlines()[-3:])
+        rep = {"error": f"{peer.name} gave no answer (exit status {res.exit_status}"
+                        f"{': ' + tail if tail else ''})"}
+    elif rep.get("error") == "no_install":
+        rep = {"error": f"{peer.name} has no rosnet-tui installed: install it there as the "
+                        "README says"}
     if "error" in rep:
         return PairResult(False, f"{peer.name} did not sign: {rep['error']}", seconds=took)
     try:
@@ -235,26 +286,3 @@ class CertRenewer:
             return
         self._thread = threading.Thread(target=work, name="certificate renewal", daemon=True)
         self._thread.start()
-
-
-async def after_apply(s: Settings, opts: Any = None) -> str:
-    """What the wizard's ``w`` on the ROS step does after writing under mTLS (as ``ros apply``):
-    the CA and certificate on the master; on a member, pairing over SSH when needed. A line for
-    the user ("" when nothing was needed)."""
-    if not mtls(s):
-        return ""
-    paths = fleet_tls.tls_paths(default_config_dir())
-    try:
-        if s.is_master:
-            made = prepare_master(s, paths)
-            return ("Made " + "; ".join(made) + ".") if made else ""
-        why = needs_pairing(s, paths)
-        if why is None:
-            return ""
-        res = await pair_over_ssh(s, paths, opts)
-    except (TlsError, OSError) as exc:
-        return f"Mutual TLS: {exc}"
-    if res.ok:
-        return f"{res.detail[:1].upper()}{res.detail[1:]} ({res.seconds:.1f} s)."
-    return (f"Pairing failed: {res.detail}. Without SSH to the master: `rosnet-tui ros pair "
-            "--print-request` here, `--sign` there, `--install` here.")

@@ -41,7 +41,7 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "this": {"name": str, "role": str, "connection": str, "profile": str, "local_ip": str,
              "public_ip": str, "interface": str, "office_ip": str, "portable_ip": str},
     "peer": {"name": str, "local_ip": str, "public_ip": str, "ssh_user": str, "ssh_port": int,
-             "office_ip": str, "portable_ip": str},
+             "office_ip": str, "portable_ip": str, "sync_key": str},
     "ros": {"master": str, "port": int, "version": int, "zenoh_port": int, "domain_id": int,
             "security": str},
     "probe": {"port": int, "public_ip_urls": list, "port_check_url": str},
@@ -348,7 +348,7 @@ def _table_values(s: Settings) -> dict[str, dict[str, Any]]:
 
 def _peer_values(p: Peer) -> dict[str, Any]:
     out: dict[str, Any] = {"name": p.name}
-    for k in ("local_ip", "public_ip", "ssh_user", "office_ip", "portable_ip"):
+    for k in ("local_ip", "public_ip", "ssh_user", "office_ip", "portable_ip", "sync_key"):
         if getattr(p, k):
             out[k] = getattr(p, k)
     if p.ssh_port != 22:

@@ -1,7 +1,9 @@
 """Address records: what each component publishes about itself, and how copies are judged.
 
 One record per component: its name, local IP, public IP, role, a sequence number that grows with
-every new content, a timestamp and the record format version; optionally ``seq_epoch``, the time
+every new content, a timestamp, the record format version and ``sig``, its owner's signature
+(:mod:`.signing`: a record counts only when signed by the key pinned for its name); optionally
+``seq_epoch``, the time
 (whole seconds since 1970) at which the component started counting ``seq`` (absent: 0). A
 component that lost its counter starts again at 1 with a later ``seq_epoch``. Stores (a shared
 folder, DNS) hold copies that may be partial, stale or in conflict; :func:`parse_record` refuses
@@ -51,6 +53,7 @@ class Record:
     timestamp: float              # seconds since the epoch (UTC)
     version: int = RECORD_VERSION
     seq_epoch: int = 0            # when this component started counting seq (0: not said)
+    sig: str = ""                 # its owner's signature (base64; core/sync/signing.py)
 
     # ------------------------------------------------------------------ forms
     def to_json(self) -> dict[str, Any]:
@@ -59,6 +62,8 @@ class Record:
              "timestamp": format_time(self.timestamp)}
         if self.seq_epoch:
             d["seq_epoch"] = self.seq_epoch
+        if self.sig:
+            d["sig"] = self.sig
         return d
 
     def to_text(self) -> str:
@@ -82,7 +87,8 @@ class Record:
              now: float | None = None) -> Record:
         """The record that follows this one with new content (seq + 1, fresh timestamp)."""
         return replace(self, local_ip=local_ip, public_ip=public_ip, role=role, seq=self.seq + 1,
-                       timestamp=now if now is not None else time.time(), version=RECORD_VERSION)
+                       timestamp=now if now is not None else time.time(), version=RECORD_VERSION,
+                       sig="")
 
     def describe(self) -> str:
         return (f"{self.name} ({self.role}): local {self.local_ip or '?'}, "
@@ -259,9 +265,13 @@ def parse_record(data: bytes | str | Mapping[str, Any], *, expect_name: str | No
     epoch = data.get("seq_epoch", 0)
     if isinstance(epoch, bool) or not isinstance(epoch, int):
         raise RecordError("seq_epoch must be a whole number of seconds since 1970")
+    sig = data.get("sig", "")
+    if not isinstance(sig, str) or len(sig) > 200:
+        raise RecordError("sig must be a signature (base64 text)")
     rec = Record(name=data["name"].strip(), local_ip=data["local_ip"].strip(),
                  public_ip=data["public_ip"].strip(), role=data["role"].strip(), seq=seq,
-                 timestamp=parse_time(data["timestamp"]), version=version, seq_epoch=epoch)
+                 timestamp=parse_time(data["timestamp"]), version=version, seq_epoch=epoch,
+                 sig=sig)
     check_record(rec, now=now)
     if expect_name is not None and rec.name.lower() != expect_name.lower():
         raise RecordError(f"it names {rec.name!r}, not {expect_name!r}")

@@ -26,11 +26,10 @@ def make_store(settings: Settings, *, timeout_s: float | None = None) -> RecordS
     if y.store == "dns":
         from .dnsstore import DnsStore  # start-up cost: dnspython
 
-        missing = [k for k in ("dns_server", "zone") if not getattr(y, k)]
+        missing = [k for k in ("dns_server", "zone", "tsig_key_file") if not getattr(y, k)]
         if missing:
             raise StoreConfigError("the dns store needs " + " and ".join(f"sync.{k}" for k in missing)
                                    + " in the settings")
-        return DnsStore(y.dns_server, y.zone,
-                        Path(y.tsig_key_file).expanduser() if y.tsig_key_file else None,
+        return DnsStore(y.dns_server, y.zone, Path(y.tsig_key_file).expanduser(),
                         timeout_s=timeout)
     raise StoreConfigError(f"unknown store {y.store!r} (sync.store is 'folder' or 'dns')")

@@ -8,8 +8,11 @@ Each component owns two record sets at ``NAME.ZONE``:
 
 Both change in one UPDATE message (the server applies it whole or not at all). Peers ask the
 server itself (not a caching resolver) so a change is seen at once; a query of the zone's SOA
-serial first tells whether anything changed since the last read. With a key, queries are signed
-too, and the answers' signatures checked: a forged answer is refused like a garbage record.
+serial first tells whether anything changed since the last read. A TSIG key is required (the
+store refuses to start without one): updates and queries are signed, and the answers'
+signatures checked: a forged answer is refused like a garbage record. Each TXT record is also
+signed by its component's own key (:mod:`.signing`): another holder of the TSIG key (every
+member has it) cannot make one that counts.
 """
 
 from __future__ import annotations
@@ -18,9 +21,10 @@ import base64
 import binascii
 import re
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import dns.exception
 import dns.message
@@ -132,12 +136,19 @@ def record_from_txt(strings: Iterable[bytes], expect_name: str) -> Record | None
     return parse_record(b"".join(parts[1:]), expect_name=expect_name)
 
 
+NO_TSIG = ("the dns store needs sync.tsig_key_file (a TSIG key the name server also has: "
+           "`tsig-keygen NAME`): without it anyone who reaches the server could change or read "
+           "the records")
+
+
 # --------------------------------------------------------------------------- the store
 class DnsStore:
     kind = "dns"
 
     def __init__(self, server: str, zone: str, key_file: Path | None, *, port: int = 53,
                  timeout_s: float = 3.0, ttl: int = TTL) -> None:
+        if key_file is None:
+            raise StoreConfigError(NO_TSIG)
         self.server = server
         self.port = port
         self.zone = dns.name.from_text(zone if zone.endswith(".") else zone + ".")
@@ -148,12 +159,11 @@ class DnsStore:
         self._key_mtime: int | None = None
         self._serial: int | None = None
         self._cache: FetchResult | None = None
-        self._cache_names: tuple[str, ...] = ()
+        self._cache_names: tuple[Any, ...] = ()
         self._cache_at = 0.0
 
     def describe(self) -> str:
-        signed = f", TSIG key {self.key_file}" if self.key_file else ", no TSIG key"
-        return f"DNS zone {self.zone.to_text()} on {self.server}{signed}"
+        return f"DNS zone {self.zone.to_text()} on {self.server}, TSIG key {self.key_file}"
 
     def fqdn(self, name: str) -> str:
         return dns.name.from_text(name, self.zone).to_text()
@@ -246,8 +256,11 @@ class DnsStore:
                     return int(rd.serial)
         return None
 
-    def fetch(self, names: Iterable[str], own_name: str) -> FetchResult:
-        names_t = tuple(dict.fromkeys([*names, own_name]))
+    def fetch(self, names: Iterable[str], own_name: str,
+              keys: Mapping[str, Any]) -> FetchResult:
+        names_t = (*dict.fromkeys([*names, own_name]),
+                   *sorted((n, k.public_bytes_raw() if k is not None else b"")
+                           for n, k in keys.items()))
         serial = self._zone_serial()
         if serial is None:
             raise StoreError(f"{self._where()} has no SOA for {self.zone.to_text()}: it does not "
@@ -256,8 +269,8 @@ class DnsStore:
         if (self._cache is not None and serial == self._serial and names_t == self._cache_names
                 and now - self._cache_at < REREAD_S):
             return self._cache
-        out = FetchResult()
-        for n in names_t:
+        out = FetchResult(keys=keys)
+        for n in dict.fromkeys([*names, own_name]):
             cands: list[Candidate] = []
             qname = self.fqdn(n)
             r = self._ask(qname, "TXT")

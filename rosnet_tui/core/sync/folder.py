@@ -13,9 +13,10 @@ import contextlib
 import os
 import re
 import stat
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
 from rosnet_tui.core.saved.settings import atomic_write_text
@@ -162,11 +163,12 @@ class FolderStore:
         self._cache[entry.path] = _Cached(key, result)
         return result
 
-    def fetch(self, names: Iterable[str], own_name: str) -> FetchResult:
+    def fetch(self, names: Iterable[str], own_name: str,
+              keys: Mapping[str, Any]) -> FetchResult:
         self._ensure_folder(create=False)
         names = list(dict.fromkeys([*names, own_name]))
         copies: dict[str, list[Candidate]] = {n: [] for n in names}
-        out = FetchResult()
+        out = FetchResult(keys=keys)
         seen = set()
         for entry in self._entries():
             owner = copy_owner(entry.name, names)

@@ -28,6 +28,7 @@ from .backoff import Backoff
 from .choose_store import make_store
 from .folder_watch import StoreWatch
 from .outcome import SyncError
+from .signing import load_or_make_key, pinned_keys, sign_record, signature_problem
 from .state import Report
 from .status import MAX_REFUSED
 from .store import RecordStore, StoreConfigError, StoreError
@@ -39,9 +40,12 @@ log = logging.getLogger("rosnet_tui.sync")
 class Publisher:
     """See the module docstring. Times named ``next_*`` are monotonic."""
 
-    def __init__(self, report: Report, state_dir: Path, store: RecordStore | None) -> None:
+    def __init__(self, report: Report, state_dir: Path, store: RecordStore | None,
+                 key_file: Path) -> None:
         self.report = report
         self.state_dir = state_dir
+        self.key_file = key_file                 # this component's sync key (signing.py)
+        self._key: Any = None
         self.store = store
         self.store_fixed = store is not None     # handed in: the settings do not choose it
         self.store_key: Any = None
@@ -58,19 +62,30 @@ class Publisher:
         self.backoff = Backoff()
 
     # ------------------------------------------------------------------ start
-    def restore(self, record: Any, peer_names: list[str]) -> None:
+    def restore(self, record: Any, s: Settings | None) -> None:
         """Our record saved in the status before (*record*, JSON), and the record of each peer
         applied before (this run or an earlier one): a copy that does not follow it (a lower
-        seq) is refused, and it stands until a successor comes."""
+        seq) is refused, and it stands until a successor comes (when signed by the key pinned
+        for that peer now)."""
         with contextlib.suppress(RecordError, TypeError):
             if record:
                 self.own = parse_record(record)
                 self.report.update_own(record=self.own.to_json())
         self.applied = load_applied(self.state_dir)
-        for name in peer_names:
+        keys = pinned_keys(s, None) if s is not None else {}
+        for name in [p.name for p in s.peers] if s is not None else []:
             prev = self.applied.get(name.lower())
-            if prev is not None:
+            if prev is not None and signature_problem(prev, keys.get(name.lower())) is None:
                 self.peers[name] = Candidate(prev, "the record applied before (state dir)")
+
+    def key(self) -> Any:
+        """This component's sync key (made on first use). Raises SyncError."""
+        if self._key is None:
+            try:
+                self._key = load_or_make_key(self.key_file)
+            except (OSError, ValueError) as exc:
+                raise SyncError(f"cannot use the sync key {self.key_file}: {exc}") from None
+        return self._key
 
     def follow_settings(self, s: Settings, initial: bool) -> bool:
         """The store the settings name, made again when its settings changed (unless handed
@@ -126,7 +141,12 @@ class Publisher:
         assert self.store is not None
         names = [p.name for p in s.peers]
         try:
-            res = self.store.fetch(names, s.this.name)
+            keys = pinned_keys(s, self.key())
+        except SyncError as exc:
+            self.report.error("publish", str(exc))
+            keys = pinned_keys(s, None)
+        try:
+            res = self.store.fetch(names, s.this.name, keys)
         except StoreError as exc:
             self.next_fetch = self.report.fail(
                 "store", self.backoff, f"cannot read the records: {exc}; keeping the last good "
@@ -176,6 +196,9 @@ class Publisher:
         why = successor_problem(prev, rec)
         if why is not None:
             assert prev is not None
+            if self.report.remember(("refused", cand.source, why)):
+                self.report.add_refused({"at": now, "source": cand.source, "name": name,
+                                         "why": why}, MAX_REFUSED)
             self.report.once(("older", name, rec.rank, prev.rank), logging.WARNING,
                              "refused the record %s (%s): %s; keeping #%d of %s (if %s really "
                              "started counting again, remove its entry from %s)", cand.source,
@@ -251,6 +274,11 @@ class Publisher:
                                  seq=(self.own.seq + 1) if self.own else 1, now=now,
                                  seq_epoch=self.own.seq_epoch if self.own else int(now))
             check_record(rec)
+            rec = sign_record(rec, self.key())
+        except SyncError as exc:
+            self.report.error("publish", f"{exc}; not published")
+            self.next_publish = mono + interval_s
+            return
         except RecordError as exc:
             self.report.error("publish", f"this component's own record would be refused by "
                                          f"peers: {exc}; not published")

@@ -32,6 +32,7 @@ from .applier import Applier, ApplyInput
 from .loop import Loop
 from .outcome import RoundResult, SyncError
 from .publisher import Publisher
+from .signing import key_path
 from .state import Report, SyncConfig
 from .status import load_status
 from .store import RecordStore
@@ -67,7 +68,8 @@ class SyncService:
         self.watch = AddressWatch(self.report, local_source, public_source or (
             lambda s: lookup_public_ip(s, self.config.paths.state_dir,
                                        max(1.0, float(s.checks.timeout_s)))))
-        self.publisher = Publisher(self.report, paths.state_dir, store)
+        self.publisher = Publisher(self.report, paths.state_dir, store,
+                                   key_path(paths.config_path))
         self.forwards = Renewer(self.config.paths.state_dir, log)  # our forwards' leases (router map)
         self.certs = CertRenewer(log)        # ROS 2 mTLS: the fleet certificate before expiry
         self.applier = Applier(self.report, self.config, self._settings_saved)
@@ -84,8 +86,7 @@ class SyncService:
         except BaseException:
             self.close()
             raise
-        self.publisher.restore(record, [p.name for p in self.settings.peers]
-                               if self.settings else [])
+        self.publisher.restore(record, self.settings)
 
     # ================================================================== settings
     @property

@@ -5,9 +5,9 @@ Picking one from the settings is :func:`rosnet_tui.core.sync.choose_store.make_s
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 from rosnet_tui.core.saved.sync_records import Candidate, Record, choose_best
 
@@ -38,10 +38,17 @@ class FetchResult:
     notes: list[str] = field(default_factory=list)
     # Every valid copy seen for our own name (to continue its seq, and to tidy up).
     own_copies: list[Candidate] = field(default_factory=list)
-
+    # Name (lower case) to the public key its records must be signed by (signing.pinned_keys);
+    # a name without one has no record that counts.
+    keys: Mapping[str, Any] = field(default_factory=dict)
 
     def add_copies(self, name: str, copies: list[Candidate], own_name: str) -> None:
-        """Keep the best of *name*'s valid copies (all of them for our own name)."""
+        """Keep the best of *name*'s copies signed by its owner (all of them for our own name);
+        the others are refused before they compete, so a forged copy never wins."""
+        from .signing import verify_each  # start-up cost: cryptography
+
+        copies, bad = verify_each(copies, self.keys)
+        self.refused += [Refusal(c.source, name, why) for c, why in bad]
         if name == own_name:
             self.own_copies = copies
             return
@@ -62,6 +69,7 @@ class RecordStore(Protocol):
         """Make *record* this component's current record (atomic). Raises StoreError."""
         ...
 
-    def fetch(self, names: Iterable[str], own_name: str) -> FetchResult:
-        """The best valid record of each of *names*. Raises StoreError when unreachable."""
+    def fetch(self, names: Iterable[str], own_name: str, keys: Mapping[str, Any]) -> FetchResult:
+        """The best valid record of each of *names* signed by the key *keys* pins for it.
+        Raises StoreError when unreachable."""
         ...
