@@ -244,7 +244,7 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
             except OSError as exc:
                 return False, "local_listen", [f"cannot listen on our test port {port}: "
                                                f"{exc.strerror or exc} (see router.port_free)"]
-            ev.append(f"we listen on TCP {port}")
+            ev.append(f"we listen on TCP {port}" + (f" ({lst.note})" if lst.note else ""))
             left = max(total - (time.monotonic() - start), 0.5)
             t = min(left * 0.45, ctx.timeout_s)
             res = await _peer_chat_run(ctx, peer, ["connect", me, str(port), f"{t:.1f}", token],
@@ -275,7 +275,7 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
             return False, "connect", ev + [
                 f"{peer.name} could not connect to {me} ({resolved}):{port}: our modem does not "
                 f"forward the port to us, or {peer.name}'s hosts entry for {me} is stale"]
-        if ctx.listeners.token not in hello:
+        if lst.token not in hello:
             return False, "wrong_peer", ev + [f"{peer.name} reached something else on "
                                               f"{resolved}:{port} ({hello[:60]!r}), not our listener"]
         if seen is None:
