@@ -46,7 +46,7 @@ def test_nine_runs_at_once_all_pass(lab, tmp_path):
             bad.append(f"run {n} on {host} (exit {code}):\n{table(checks)}")
     assert not bad, "\n\n".join(bad)
     assert waited                  # the later runs said how they came by the port
-    assert took < 90
+    assert took < 90, took
 
 
 def _nine_runs(lab, config, tmp_path):

@@ -240,7 +240,8 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
         port = ctx.settings.probe.port
         async with contextlib.AsyncExitStack() as stack:
             try:
-                lst = await stack.enter_async_context(ctx.listeners.hold(port))
+                lst = await stack.enter_async_context(
+                    ctx.listeners.hold(port, wait_s=min(total * 0.2, 1.0)))
             except OSError as exc:
                 return False, "local_listen", [f"cannot listen on our test port {port}: "
                                                f"{exc.strerror or exc} (see router.port_free)"]
@@ -343,7 +344,7 @@ async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
     async with contextlib.AsyncExitStack() as stack:
         if not await run_blocking(_listening_here, port, timeout=1.0):
             with contextlib.suppress(OSError):
-                await stack.enter_async_context(ctx.listeners.hold(port))
+                await stack.enter_async_context(ctx.listeners.hold(port, wait_s=t * 0.1))
         argv = ["connect", me, str(port), f"{t * 0.5:.1f}"]
         got = await each_peer(peers, lambda p: _peer_chat_run(ctx, p, argv, None, timeout=t,
                                                                connect_timeout=t * 0.5))

@@ -142,14 +142,14 @@ async def check_port_free(ctx: CheckContext) -> Outcome:
         return Outcome(Status.PASS, f"port {port} is free (our own listener has it for this round)",
                        [f"TCP {port}: held by rosnet-tui (pid {os.getpid()})"], data)
     try:
-        async with ctx.listeners.hold(port, wait_s=budget(ctx, "router.port_free") * 0.5) as lst:
+        async with ctx.listeners.hold(port, wait_s=budget(ctx, "router.port_free") * 0.4) as lst:
             pass
     except PortHeld as exc:     # not a failure of the port: say so, and when to look again
-        data.update(in_use=True, pid=exc.pid, process="rosnet-tui")
+        data.update(in_use=True, pid=exc.pid, process="rosnet-tui (another check run)")
         return Outcome(Status.WARN, f"port {port} is held by another check run of rosnet-tui: "
                                     "run the checks again once it ends", [exc.strerror], data)
     except OSError as exc:
-        pid, name, _found = await run_blocking(who_listens, port, timeout=budget(ctx, "router.port_free") * 0.7)
+        pid, name, _found = await run_blocking(who_listens, port, timeout=budget(ctx, "router.port_free") * 0.45)
         data.update(in_use=True, pid=pid, process=name)
         who = (f"{name} (pid {pid})" if pid else
                "a process of another user (run as root to see which)")
@@ -187,7 +187,7 @@ async def check_listener(ctx: CheckContext) -> Outcome:
     t = budget(ctx, "router.listener") * 0.4
     data = {"port": port, "listening": False}
     try:
-        async with ctx.listeners.hold(port, wait_s=t) as lst:
+        async with ctx.listeners.hold(port, wait_s=t * 0.4) as lst:
             evidence = [f"listening on 0.0.0.0:{port} (like nc -l {port})"] + [lst.note] * bool(lst.note)
             targets = ["127.0.0.1"]
             local = await run_blocking(_address_here, ctx.settings.this.interface,

@@ -360,10 +360,15 @@ class ListenerPool:
         """The end of the round: wait for the runs that share our listeners (each at most
         :data:`LINGER_MAX_S`), then close whatever is still open."""
         tasks = list(self._lingering.values())
-        if tasks:
-            await asyncio.gather(*tasks, return_exceptions=True)
-        for port, lst in list(self._listeners.items()):
-            if self._refs.get(port, 0) <= 0:
-                self._listeners.pop(port, None)
-                self._refs.pop(port, None)
-                await lst.close()
+        try:
+            if tasks:
+                await asyncio.gather(*tasks, return_exceptions=True)
+        finally:                            # cancelled too: nothing stays open
+            for t in tasks:
+                t.cancel()
+            for port, lst in list(self._listeners.items()):
+                if self._refs.get(port, 0) <= 0:
+                    self._listeners.pop(port, None)
+                    self._refs.pop(port, None)
+                    self._lingering.pop(port, None)
+                    await asyncio.shield(lst.close())

@@ -205,5 +205,5 @@ def process_words(pid: int | None) -> str:
             cmd = f.read(300).replace(b"\0", b" ").decode("utf-8", "replace").strip()
     except OSError:
         cmd = ""
-    cmd = "".join(c for c in cmd if c.isprintable())[:120]
+    cmd = " ".join("".join(c for c in cmd if c.isprintable()).split()[:3])[:100]
     return f"pid {pid}" + (f": {cmd}" if cmd else "")
