@@ -215,3 +215,48 @@ def test_a_peers_chat_takes_a_random_port_while_a_run_here_holds_the_test_port()
     out = asyncio.run(go())
     listening = int(out.split("LISTENING ")[1].split()[0])
     assert listening != port and "TIMEOUT" in out
+
+
+OWNER = ("import asyncio, sys\n"
+         "from rosnet_tui.core.net.listener import ListenerPool\n"
+         "async def main():\n"
+         "    pool = ListenerPool()\n"
+         "    async with pool.hold(int(sys.argv[1])):\n"
+         "        print('READY', pool.token, flush=True)\n"
+         "        await asyncio.sleep(60)\n"
+         "asyncio.run(main())\n")
+
+
+def test_when_the_run_that_shares_is_killed_the_other_takes_the_port_over():
+    port = free_port()
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    owner = subprocess.Popen([sys.executable, "-c", OWNER, str(port)], stdout=subprocess.PIPE,
+                             text=True, env=env)
+    try:
+        assert owner.stdout is not None
+        ready = owner.stdout.readline().split()
+        assert ready[:1] == ["READY"]
+
+        async def go() -> None:
+            async with ListenerPool().hold(port) as lst:
+                assert isinstance(lst, SharedListener) and lst.token == ready[1]
+                assert lst.pid == owner.pid
+                owner.send_signal(signal.SIGKILL)
+                await asyncio.to_thread(owner.wait, 5)
+                for _ in range(100):                  # bounded: 2 s
+                    if lst.sharing is not None:
+                        break
+                    await asyncio.sleep(0.02)
+                assert lst.listening and lst.sharing is not None     # ours now, same token
+                got = await asyncio.to_thread(greeting, port)
+                assert got.startswith(f"{GREETING} {ready[1]} {port}")
+                await asyncio.to_thread(chat_line, port, "ROSNET-TUI CHAT after abc")
+                assert await lst.wait_for_line("after abc", 2.0) is not None
+            assert lock_free(port)
+
+        asyncio.run(go())
+    finally:
+        owner.kill()
+        owner.wait(timeout=5)
+        if owner.stdout:
+            owner.stdout.close()

@@ -23,6 +23,7 @@ import asyncio
 import contextlib
 import random
 import secrets
+import socket
 import time
 from collections import deque
 from collections.abc import AsyncIterator, Callable, Iterable
@@ -63,6 +64,8 @@ class PortListener:
     """A listener on a test port as the checks see it (ours, or another run's shared with us):
     its port, the token its greeting carries, what it saw, and waiting for a line in it."""
 
+    sharing: PortHost | None = None     # the port's lock and the runs sharing it, when ours
+
     def __init__(self, port: int, token: str) -> None:
         self.port = port
         self.token = token
@@ -77,6 +80,9 @@ class PortListener:
 
     @property
     def listening(self) -> bool:
+        raise NotImplementedError
+
+    async def close(self) -> None:
         raise NotImplementedError
 
     def saw(self, address: str, line: str | None) -> None:
@@ -109,7 +115,7 @@ class TestListener(PortListener):
         self._server: asyncio.base_events.Server | None = None
         self._slots = asyncio.Semaphore(MAX_CONNECTIONS)
         self._tasks: set[asyncio.Task] = set()
-        self.sharing: PortHost | None = None     # the port's lock, when we hold it
+        self.sharing = None
         self.on_seen: Callable[[str, str | None], None] | None = None
 
     @property
@@ -171,26 +177,82 @@ class TestListener(PortListener):
                 self._tasks.discard(task)
 
 
+async def own_port(port: int, token: str, lock: socket.socket) -> TestListener:
+    """Our listener on *port* (greeting with *token*), shared through its *lock* (ours now)."""
+    lst = TestListener(port, token)
+    try:
+        await lst.start()
+        lst.sharing = PortHost(lock, token)
+        await lst.sharing.start()
+    except BaseException:
+        lock.close()
+        await lst.close()
+        raise
+    lst.on_seen = lst.sharing.tell
+    return lst
+
 
 class SharedListener(PortListener):
     """Another run's listener on the port, shared with us: its token, and what it tells us it
-    saw. ``listening`` while that run keeps the link open."""
+    saw. Should that run end first (even SIGKILLed), we take the port over with the same token,
+    so that a peer's test under way still reaches a listener that greets as it expects."""
 
     def __init__(self, port: int, holder: Holder) -> None:
         super().__init__(port, holder.token)
         self.pid = holder.pid
         self._holder = holder
-        self._follow = asyncio.ensure_future(follow(holder, self.saw))
+        self._own: TestListener | None = None   # after a take-over
+        self._closed = False
+        self._follow = asyncio.ensure_future(self._follow_holder())
 
     @property
     def listening(self) -> bool:
-        return not self._follow.done()
+        return self._own.listening if self._own is not None else not self._follow.done()
+
+    @property
+    def sharing(self) -> PortHost | None:
+        return self._own.sharing if self._own is not None else None
+
+    async def _follow_holder(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            await follow(self._holder, self.saw)
+            # The holder is gone: the port is ours now, or a newer holder's to share. Its lock
+            # may outlive its link to us by a moment (a process ends fd by fd): a few tries.
+            deadline = loop.time() + SHARE_WAIT_S
+            while not self._closed and loop.time() < deadline:
+                try:
+                    lock = take_lock(self.port)
+                except OSError:
+                    return
+                if lock is not None:
+                    with contextlib.suppress(OSError):
+                        self._own = await own_port(self.port, self.token, lock)
+                        self._own.on_seen = self._took_over_saw
+                    return
+                holder = await ask_holder(self.port, max(deadline - loop.time(), 0.05))
+                if holder.kind == "share":
+                    self._holder, self.token, self.pid = holder, holder.token, holder.pid
+                    break
+                if holder.writer is not None:
+                    holder.writer.close()
+                await asyncio.sleep(0.02)
+            else:
+                return
+
+    def _took_over_saw(self, address: str, line: str | None) -> None:
+        self.saw(address, line)
+        if self.sharing is not None:
+            self.sharing.tell(address, line)
 
     async def close(self) -> None:
+        self._closed = True
         if self._holder.writer is not None:
             self._holder.writer.close()
         self._follow.cancel()
         await asyncio.gather(self._follow, return_exceptions=True)
+        if self._own is not None:
+            await self._own.close()
 
 
 class PortHeld(OSError):
@@ -283,8 +345,7 @@ class ListenerPool:
             async with self._get_lock():
                 self._refs[port] -= 1
                 if self._refs[port] <= 0:
-                    if isinstance(lst, TestListener) and lst.sharing is not None \
-                            and lst.sharing.guests:
+                    if lst.sharing is not None and lst.sharing.guests:
                         self._lingering[port] = asyncio.ensure_future(self._linger(port, lst))
                     else:
                         del self._refs[port]
@@ -303,16 +364,7 @@ class ListenerPool:
             except OSError:                 # no abstract sockets here: the port alone
                 break
             if sock is not None:
-                lst = TestListener(port, self.token)
-                try:
-                    await lst.start()
-                    lst.sharing = PortHost(sock, self.token)
-                    await lst.sharing.start()
-                except BaseException:
-                    sock.close()
-                    await lst.close()
-                    raise
-                lst.on_seen = lst.sharing.tell
+                lst = await own_port(port, self.token, sock)
                 if last is not None:
                     lst.note = (f"another check run had the test port ({process_words(last.pid)}):"
                                 f" waited {loop.time() - start:.1f} s")
@@ -344,7 +396,7 @@ class ListenerPool:
             raise
         return lst
 
-    async def _linger(self, port: int, lst: TestListener) -> None:
+    async def _linger(self, port: int, lst: PortListener) -> None:
         """Keep *lst* open while other runs share it (bounded), then close it."""
         assert lst.sharing is not None
         with contextlib.suppress(asyncio.TimeoutError):
