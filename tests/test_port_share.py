@@ -260,3 +260,17 @@ def test_when_the_run_that_shares_is_killed_the_other_takes_the_port_over():
         owner.wait(timeout=5)
         if owner.stdout:
             owner.stdout.close()
+
+
+def test_a_listener_of_another_run_is_told_from_a_service_of_the_users():
+    port = free_port()
+
+    async def go() -> None:
+        first, second = ListenerPool(), ListenerPool()
+        assert not second.rosnet_listens(port)
+        async with first.hold(port):
+            assert first.rosnet_listens(port) and second.rosnet_listens(port)
+        await first.aclose()
+        assert not second.rosnet_listens(port)
+
+    asyncio.run(go())

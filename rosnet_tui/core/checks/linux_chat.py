@@ -342,7 +342,8 @@ async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
         return Outcome(Status.SKIP, "no peer has an SSH user in the settings (peer.ssh_user), so "
                                     "the members' side cannot be run from here", data=data)
     async with contextlib.AsyncExitStack() as stack:
-        if not await run_blocking(_listening_here, port, timeout=1.0):
+        if ctx.listeners.rosnet_listens(port) or not await run_blocking(_listening_here, port,
+                                                                         timeout=1.0):
             with contextlib.suppress(OSError):
                 await stack.enter_async_context(ctx.listeners.hold(port, wait_s=t * 0.1))
         argv = ["connect", me, str(port), f"{t * 0.5:.1f}"]

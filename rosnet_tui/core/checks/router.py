@@ -156,9 +156,8 @@ async def check_port_free(ctx: CheckContext) -> Outcome:
         return Outcome(Status.FAIL, f"port {port} is in use by {who}: stop it or choose another test "
                                     "port above 1024", [f"bind 0.0.0.0:{port}: {exc.strerror or exc}",
                                                         f"listening there: {who}"], data)
-    if isinstance(lst, SharedListener):
-        return Outcome(Status.PASS, f"port {port} is free for rosnet-tui (another check run of it "
-                                    "listens there, and shares its listener)", [lst.note], data)
+    if isinstance(lst, SharedListener):     # another check run of rosnet-tui listens there
+        return Outcome(Status.PASS, f"port {port} is free for rosnet-tui", [lst.note], data)
     return Outcome(Status.PASS, f"port {port} is free", [f"bind 0.0.0.0:{port}: ok (released)"]
                    + [lst.note] * bool(lst.note), data)
 
@@ -575,7 +574,8 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
     evidence: list[str] = []
     ours: dict[int, PortListener | None] = {}
     async with contextlib.AsyncExitStack() as stack:
-        if await run_blocking(listening_locally, zport, timeout=1.0):
+        if not ctx.listeners.rosnet_listens(zport) and await run_blocking(
+                listening_locally, zport, timeout=1.0):
             data["zenoh_listener"] = "router"
             evidence.append(f"TCP {zport}: a process listens here (the Zenoh router)")
         else:

@@ -35,6 +35,7 @@ from rosnet_tui.core.net.portshare import (
     PortHost,
     ask_holder,
     follow,
+    lock_held,
     process_words,
     take_lock,
     wait_gone,
@@ -302,6 +303,11 @@ class ListenerPool:
 
     def get(self, port: int) -> PortListener | None:
         return self._listeners.get(port)
+
+    def rosnet_listens(self, port: int) -> bool:
+        """Whether a listener of rosnet-tui has *port*: ours, or another run's (a listener found
+        on the port is then no service of the user's, and ``hold`` shares it)."""
+        return port in self._listeners or lock_held(port)
 
     @contextlib.asynccontextmanager
     async def hold_spare(self, avoid: Iterable[int] = ()

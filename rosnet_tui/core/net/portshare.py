@@ -53,6 +53,17 @@ def take_lock(port: int) -> socket.socket | None:
     return s
 
 
+def lock_held(port: int) -> bool:
+    """Whether a process holds *port*'s lock now (a run of rosnet-tui, as a rule)."""
+    try:
+        s = take_lock(port)
+    except OSError:
+        return False
+    if s is not None:
+        s.close()
+    return s is None
+
+
 def peer_pid(sock: socket.socket) -> int | None:
     """The pid of the process at the other end of a unix socket (SO_PEERCRED), if known."""
     try:
