@@ -138,9 +138,9 @@ def listening_locally(port: int) -> bool:
 async def check_port_free(ctx: CheckContext) -> Outcome:
     port = ctx.settings.probe.port
     data: dict[str, Any] = {"port": port, "in_use": False, "process": None, "pid": None}
-    if ctx.listeners.holds(port):
+    if (held := ctx.listeners.get(port)) is not None:
         return Outcome(Status.PASS, f"port {port} is free (our own listener has it for this round)",
-                       [f"TCP {port}: held by rosnet-tui (pid {os.getpid()})"], data)
+                       [held.note or f"TCP {port}: held by rosnet-tui (pid {os.getpid()})"], data)
     try:
         async with ctx.listeners.hold(port, wait_s=budget(ctx, "router.port_free") * 0.4) as lst:
             pass
