@@ -18,6 +18,9 @@ from pathlib import Path
 
 import pytest
 
+from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import ProbeSettings, Settings, ThisComponent
 from rosnet_tui.core.net import portshare
 from rosnet_tui.core.net.listener import (
     GREETING,
@@ -27,6 +30,7 @@ from rosnet_tui.core.net.listener import (
     TestListener,
 )
 from rosnet_tui.core.peer import chatproto
+from rosnet_tui.core.results import Status
 from tests.builders import free_port
 
 HOLDER = ("import socket, sys, time\n"
@@ -274,3 +278,24 @@ def test_a_listener_of_another_run_is_told_from_a_service_of_the_users():
         assert not second.rosnet_listens(port)
 
     asyncio.run(go())
+
+
+def test_router_port_free_says_plainly_when_another_run_keeps_the_port(tmp_path):
+    load_builtin_checks()
+    port = free_port()
+    ctx = CheckContext(settings=Settings(this=ThisComponent(name="turtlebot"),
+                                         probe=ProbeSettings(port=port)),
+                       timeout_s=1.0, upnp=False, paths=Paths(state_dir=tmp_path))
+    proc = peer_chat(port, 20)                 # a peer's chat here, for longer than we wait
+    try:
+        r = asyncio.run(run_check(REGISTRY["router.port_free"], ctx))
+    finally:
+        proc.kill()
+        proc.wait(timeout=5)
+        if proc.stdout:
+            proc.stdout.close()
+    assert r.status == Status.WARN, r
+    assert "another check run of rosnet-tui" in r.summary and r.duration_s <= r.timeout_s + 0.5
+    assert r.data["pid"] == proc.pid and r.data["in_use"] is True
+    r = asyncio.run(run_check(REGISTRY["router.port_free"], ctx))     # it ended: free again
+    assert r.status == Status.PASS, r
