@@ -174,6 +174,7 @@ async def run_checks(specs: Iterable[CheckSpec], ctx: CheckContext) -> AsyncIter
         for t in tasks:
             t.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
+        await ctx.listeners.aclose()       # other runs sharing our listener finish first
         if ctx.peer_agents is not None:    # the round's peer agents end with it (before the
             ctx.peer_agents.close()        # connections their channels are on)
             ctx.peer_agents = None

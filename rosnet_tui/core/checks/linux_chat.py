@@ -238,11 +238,12 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
         port = ctx.settings.probe.port
         async with contextlib.AsyncExitStack() as stack:
             try:
-                lst = await stack.enter_async_context(ctx.listeners.hold(port))
+                lst = await stack.enter_async_context(
+                    ctx.listeners.hold(port, wait_s=min(total * 0.2, 1.0)))
             except OSError as exc:
                 return False, "local_listen", [f"cannot listen on our test port {port}: "
                                                f"{exc.strerror or exc} (see router.port_free)"]
-            ev.append(f"we listen on TCP {port}")
+            ev.append(f"we listen on TCP {port}" + (f" ({lst.note})" if lst.note else ""))
             left = max(total - (time.monotonic() - start), 0.5)
             t = min(left * 0.45, ctx.timeout_s)
             res = await _peer_chat_run(ctx, peer, ["connect", me, str(port), f"{t:.1f}", token],
@@ -273,7 +274,7 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
             return False, "connect", ev + [
                 f"{peer.name} could not connect to {me} ({resolved}):{port}: our modem does not "
                 f"forward the port to us, or {peer.name}'s hosts entry for {me} is stale"]
-        if ctx.listeners.token not in hello:
+        if lst.token not in hello:
             return False, "wrong_peer", ev + [f"{peer.name} reached something else on "
                                               f"{resolved}:{port} ({hello[:60]!r}), not our listener"]
         if seen is None:
@@ -339,9 +340,10 @@ async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
         return Outcome(Status.SKIP, "no peer has an SSH user in the settings (peer.ssh_user), so "
                                     "the members' side cannot be run from here", data=data)
     async with contextlib.AsyncExitStack() as stack:
-        if not await run_blocking(_listening_here, port, timeout=1.0):
+        if ctx.listeners.rosnet_listens(port) or not await run_blocking(_listening_here, port,
+                                                                         timeout=1.0):
             with contextlib.suppress(OSError):
-                await stack.enter_async_context(ctx.listeners.hold(port))
+                await stack.enter_async_context(ctx.listeners.hold(port, wait_s=t * 0.1))
         argv = ["connect", me, str(port), f"{t * 0.5:.1f}"]
         got = await each_peer(peers, lambda p: _peer_chat_run(ctx, p, argv, None, timeout=t,
                                                                connect_timeout=t * 0.5))

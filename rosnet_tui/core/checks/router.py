@@ -26,7 +26,7 @@ from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.connect import close_writer, kind_from_text
 from rosnet_tui.core.net.http import http_get
-from rosnet_tui.core.net.listener import GREETING, TestListener
+from rosnet_tui.core.net.listener import GREETING, PortHeld, PortListener, SharedListener
 from rosnet_tui.core.net.netinfo import (
     LinkState,
     LocalNet,
@@ -139,21 +139,28 @@ def listening_locally(port: int) -> bool:
 async def check_port_free(ctx: CheckContext) -> Outcome:
     port = ctx.settings.probe.port
     data: dict[str, Any] = {"port": port, "in_use": False, "process": None, "pid": None}
-    if ctx.listeners.holds(port):
+    if (held := ctx.listeners.get(port)) is not None:
         return Outcome(Status.PASS, f"port {port} is free (our own listener has it for this round)",
-                       [f"TCP {port}: held by rosnet-tui (pid {os.getpid()})"], data)
+                       [held.note or f"TCP {port}: held by rosnet-tui (pid {os.getpid()})"], data)
     try:
-        async with ctx.listeners.hold(port):
+        async with ctx.listeners.hold(port, wait_s=budget(ctx, "router.port_free") * 0.4) as lst:
             pass
+    except PortHeld as exc:     # not a failure of the port: say so, and when to look again
+        data.update(in_use=True, pid=exc.pid, process="rosnet-tui (another check run)")
+        return Outcome(Status.WARN, f"port {port} is held by another check run of rosnet-tui: "
+                                    "run the checks again once it ends", [exc.strerror], data)
     except OSError as exc:
-        pid, name, _found = await run_blocking(who_listens, port, timeout=budget(ctx, "router.port_free") * 0.7)
+        pid, name, _found = await run_blocking(who_listens, port, timeout=budget(ctx, "router.port_free") * 0.45)
         data.update(in_use=True, pid=pid, process=name)
         who = (f"{name} (pid {pid})" if pid else
                "a process of another user (run as root to see which)")
         return Outcome(Status.FAIL, f"port {port} is in use by {who}: stop it or choose another test "
                                     "port above 1024", [f"bind 0.0.0.0:{port}: {exc.strerror or exc}",
                                                         f"listening there: {who}"], data)
-    return Outcome(Status.PASS, f"port {port} is free", [f"bind 0.0.0.0:{port}: ok (released)"], data)
+    if isinstance(lst, SharedListener):     # another check run of rosnet-tui listens there
+        return Outcome(Status.PASS, f"port {port} is free for rosnet-tui", [lst.note], data)
+    return Outcome(Status.PASS, f"port {port} is free", [f"bind 0.0.0.0:{port}: ok (released)"]
+                   + [lst.note] * bool(lst.note), data)
 
 
 # --------------------------------------------------------------------------- router.listener
@@ -178,8 +185,8 @@ async def check_listener(ctx: CheckContext) -> Outcome:
     t = budget(ctx, "router.listener") * 0.4
     data = {"port": port, "listening": False}
     try:
-        async with ctx.listeners.hold(port) as lst:
-            evidence = [f"listening on 0.0.0.0:{port} (like nc -l {port})"]
+        async with ctx.listeners.hold(port, wait_s=t * 0.4) as lst:
+            evidence = [f"listening on 0.0.0.0:{port} (like nc -l {port})"] + [lst.note] * bool(lst.note)
             targets = ["127.0.0.1"]
             local = await run_blocking(_address_here, ctx.settings.this.interface,
                                        ctx.settings.this.local_ip, timeout=t)
@@ -292,7 +299,7 @@ def port_probe_command(ip: str, t_connect: float, ports: dict[int, PortTalk]) ->
     return python_command(_PROBE_SCRIPT, ip, f"{t_connect:.2f}", spec)
 
 
-def _talk(port: int, lst: TestListener | None, ros_port: int) -> PortTalk:
+def _talk(port: int, lst: PortListener | None, ros_port: int) -> PortTalk:
     """How to talk to *port* (*lst*: our listener holds it)."""
     if lst is not None or port == 22:
         return "line"
@@ -353,7 +360,7 @@ def parse_probe_result(stdout: str) -> dict[int, tuple[str, str]] | None:
     return None
 
 
-def _answer_kind(state: str, text: str, lst: TestListener | None) -> str:
+def _answer_kind(state: str, text: str, lst: PortListener | None) -> str:
     """How a port answered the peer (data.PortAnswer): our token, another program, or the way
     the connection failed."""
     if state == "open":
@@ -425,11 +432,13 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
         return max(total - (loop.time() - start), 0.2)
 
     test_port = s.probe.port
-    ours: dict[int, TestListener | None] = {}
+    ours: dict[int, PortListener | None] = {}
     evidence: list[str] = []
     async with contextlib.AsyncExitStack() as stack:
         try:
-            ours[test_port] = await stack.enter_async_context(ctx.listeners.hold(test_port))
+            ours[test_port] = lst = await stack.enter_async_context(
+                ctx.listeners.hold(test_port, wait_s=left() * 0.3))
+            evidence += [lst.note] * bool(lst.note)
         except OSError as exc:
             ours[test_port] = None
             evidence.append(f"our listener could not bind {test_port}: {exc.strerror or exc}")
@@ -562,9 +571,10 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
         return max(total - (loop.time() - start), 0.2)
 
     evidence: list[str] = []
-    ours: dict[int, TestListener | None] = {}
+    ours: dict[int, PortListener | None] = {}
     async with contextlib.AsyncExitStack() as stack:
-        if await run_blocking(listening_locally, zport, timeout=1.0):
+        if not ctx.listeners.rosnet_listens(zport) and await run_blocking(
+                listening_locally, zport, timeout=1.0):
             data["zenoh_listener"] = "router"
             evidence.append(f"TCP {zport}: a process listens here (the Zenoh router)")
         else:
@@ -573,7 +583,8 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
                 data["zenoh_listener"] = "ours"
                 evidence.append(f"TCP {zport}: no router listens; our listener stands in for it")
         with contextlib.suppress(OSError):
-            ours[test_port] = await stack.enter_async_context(ctx.listeners.hold(test_port))
+            ours[test_port] = await stack.enter_async_context(
+                ctx.listeners.hold(test_port, wait_s=left() * 0.3))
         ports = [zport, test_port]
         peer = next(iter(ssh_peers(s)), None) if s.this.profile == "remote" else None
         public_ip = await fetch_public_ip(ctx, min(left() * 0.25, 3.0)) or s.this.public_ip or None
