@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.printable import printable
 from rosnet_tui.core.saved.state import read_json, write_json
 
 from .records import format_time
@@ -183,4 +184,6 @@ def render_status(status: dict[str, Any], now: float | None = None) -> list[str]
         r = refused[-1]
         lines.append(f"Last refused record: {_ago(r.get('at'), now)}: {r.get('source')}: "
                      f"{r.get('why')} ({len(refused)} kept)")
-    return lines
+    # every text here may come from a file name or a record: no control character reaches the
+    # terminal (the status file is the user's, read by whoever runs `sync status`)
+    return [printable(line) for line in lines]
