@@ -3,12 +3,12 @@
 
 from __future__ import annotations
 
-import contextlib
 import os
 import time
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.files.undo_journal import make_private_dir
 from rosnet_tui.core.printable import printable
 from rosnet_tui.core.saved.state import read_json, write_json
 
@@ -56,14 +56,9 @@ def state_owner(state_dir: Path) -> tuple[int, int] | None:
 
 
 def save_status(state_dir: Path, status: dict[str, Any]) -> None:
-    folder = sync_dir(state_dir)
-    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
-    write_json(status_path(state_dir), status)
     owner = state_owner(Path(state_dir))
-    if owner:
-        for p in (folder, status_path(state_dir)):
-            with contextlib.suppress(OSError):
-                os.chown(p, *owner)
+    make_private_dir(sync_dir(state_dir), owner)   # as root: through descriptors, no link
+    write_json(status_path(state_dir), status, owner)
 
 
 # --------------------------------------------------------------------------- reading it
