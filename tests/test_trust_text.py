@@ -8,6 +8,7 @@ import asyncio
 import json
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -15,7 +16,12 @@ import pytest
 from rosnet_tui.core.checks.security import run_here
 from rosnet_tui.core.config.settings_model import Peer, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.exposure import outsider
-from rosnet_tui.core.peer.commands import python_command, python_stdin_command
+from rosnet_tui.core.peer import zenohproto
+from rosnet_tui.core.peer.commands import (
+    python_command,
+    python_stdin_command,
+    zenoh_peer_command,
+)
 from rosnet_tui.core.printable import printable
 from rosnet_tui.core.ros import ros2
 from rosnet_tui.core.sync.folder import FolderStore
@@ -62,6 +68,14 @@ def test_the_programs_fed_to_peers_run_isolated(tmp_path):
                            env={"PATH": "/usr/bin:/bin", "PYTHONPATH": str(tmp_path)})
         assert r.stdout.strip() == "ok", (cmd, r.stdout, r.stderr)
     assert not marker.exists()
+    # the Zenoh peer program, on the interpreter of the rosnet-tui installed there
+    path = f"{Path(sys.executable).parent}:/usr/bin:/bin"
+    r = subprocess.run(["sh", "-c", zenoh_peer_command("graph", "--timeout", "1")],
+                       input=Path(zenohproto.__file__).read_text(), capture_output=True,
+                       text=True, timeout=60, cwd=tmp_path,
+                       env={"HOME": str(tmp_path), "PATH": path})
+    assert zenohproto.parse_report(r.stdout) is not None, (r.stdout, r.stderr)
+    assert not marker.exists(), marker.read_text()
 
 
 # --------------------------------------------------------------------------- 7: quoting

@@ -43,6 +43,7 @@ def python_stdin_command(*args: str) -> str:
 # path on its second line in the `#!/bin/sh` form pip and uv write for long paths, or else the
 # `python` beside the launcher's target. The program is still fed on stdin, so the version of
 # the peer's rosnet-tui does not matter. Nothing here reads stdin: the program must arrive whole.
+# It runs from / (the folder an interpreter puts first on its path: one only root may write).
 NO_INSTALL_EXIT = 4       # the prelude's exit status when no rosnet-tui is installed on the peer
 PEER_INSTALL_PLACES = ("the PATH, ~/.local/bin, pipx's and uv's tool folders, /usr/local/bin, "
                        "/opt/pipx, a login shell's PATH")
@@ -73,6 +74,7 @@ done
 [ -n "$py" ] || L /usr/local/bin/rosnet-tui || V /opt/pipx/venvs
 [ -n "$py" ] || { b=$(timeout 3 "${SHELL:-/bin/sh}" -lc "command -v rosnet-tui" </dev/null \
                      2>/dev/null | tail -n 1) && L "$b"; }
+cd / || exit 1     # the interpreter puts its folder first on the path: one only root may write
 [ -n "$py" ] && [ -n "$BOOT" ] && exec "$py" -c "$BOOT" "$@"
 [ -n "$py" ] && exec "$py" - "$@"
 [ -n "$FALLBACK" ] && [ -n "$BOOT" ] && exec python3 -I -S -c "$BOOT" "$@" no-install
