@@ -509,8 +509,8 @@ def atomic_write(path: Path, data: bytes, *, create_mode: int = 0o600, mode: int
     called between the fsync and the rename (crash tests stop a writer there).
     """
     folder = path.parent
+    dfd, roots_only = open_folder(folder)     # first: as root, no user's link on the way
     tempfiles.sweep(folder, tempfiles.MANAGED_TMP, path.name)
-    dfd, roots_only = open_folder(folder)
     tmp = f".{path.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC,
