@@ -12,7 +12,6 @@ from pathlib import Path
 import pytest
 
 from rosnet_tui.core.files import managed_file as mf
-from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files import undo_journal as uj
 from rosnet_tui.core.saved.settings import load_settings
 from tests.builders import ROBOT_CONFIG, ros2_master
@@ -226,13 +225,15 @@ def test_when_root_is_needed_the_exact_sudo_command_is_run(box, tmp_path, monkey
     monkeypatch.setenv("PATH", f"{fake}{os.pathsep}{os.environ.get('PATH', '')}")
     monkeypatch.setenv("HOME", str(box.home))
     monkeypatch.setattr(mf, "can_write", lambda path: False)
+    from rosnet_tui.core.files.hosts import preview_hosts
+    seen = preview_hosts(load_settings(box.cfg), "remote", box.hosts)
     rc = main(["hosts", "apply", "--file", str(box.hosts), "--yes", "--no-checks"])
     out = capsys.readouterr().out
     assert rc == 0, out
     called = (fake / "called").read_text().split()
     called = [x for x in called if x != "-n"]  # no terminal here: sudo -n
     assert called[:4] == ["sudo", sys.executable, "-m", "rosnet_tui"]
-    assert f"--expect-digest {mt.file_digest(HOSTS)}" in " ".join(called)
+    assert f"--expect-digest {seen.write_digest}" in " ".join(called)   # what was previewed
     assert "needs root; running:" in out
     assert b"198.51.100.2    sami" in box.hosts.read_bytes()
     assert [e.label for e in uj.journal_entries(box.state)] == ["hosts: remote set"]

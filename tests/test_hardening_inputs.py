@@ -23,9 +23,9 @@ import pytest
 
 from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
-from rosnet_tui.core.files import managed_write as mw
 from rosnet_tui.core.files import undo_journal as uj
 from rosnet_tui.core.files.cut_writes import MAGIC, journal_target
+from rosnet_tui.core.files.inplace_format import parse_journal
 from tests.hardening_tally import tally
 
 REPO = Path(__file__).resolve().parents[1]
@@ -82,7 +82,7 @@ def test_a_deeply_nested_undo_journal_entry_is_skipped_not_a_crash(tmp_path):
 
 def test_an_in_place_journal_with_a_deep_header_is_not_trusted(tmp_path):
     head = MAGIC + DEEP.encode() + b"\n"
-    assert mw._parse_journal(head) is None
+    assert parse_journal(head) is None
     journal = tmp_path / ".hosts.rosnet-tui.1-2.inplace"
     journal.write_bytes(head)
     assert journal_target(str(journal)) is None        # what start-up reads of it: no crash

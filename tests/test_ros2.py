@@ -240,7 +240,7 @@ def test_the_zenoh_peer_program_runs_with_the_peers_site_packages(tmp_path):
 
     cmd = zenoh_peer_command("graph", "--timeout", "1")
     assert cmd.startswith("sh -c ") and 'exec "$py" - "$@"' in cmd
-    assert python_stdin_command("nodes").startswith("python3 -S - ")
+    assert python_stdin_command("nodes").startswith("python3 -I -S - ")
     src = Path(zenohproto.__file__).read_text()
     path = f"{Path(sys.executable).parent}:/usr/bin:/bin"   # where this rosnet-tui's launcher is
     r = subprocess.run(["sh", "-c", cmd], input=src, capture_output=True, text=True, timeout=30,

@@ -121,9 +121,9 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
     except mt.ManagedFileError as exc:
         say(f"rosnet-tui: {exc}")
         return EXIT_FAIL, settings
-    if args.expect_digest and preview.digest != args.expect_digest:
-        say(f"rosnet-tui: {path} changed since the preview was made; nothing was written. "
-            "Look at the new preview and apply again.")
+    if args.expect_digest and preview.write_digest != args.expect_digest:
+        say(f"rosnet-tui: {path}, its mode or owner, or the settings changed since the preview "
+            "was made; nothing was written. Look at the new preview and apply again.")
         return EXIT_FAIL, settings
     print(f"Hosts set '{profile}' for {settings.this.name} in {path}:")
     show_preview(preview)
@@ -133,7 +133,7 @@ def apply_profile(args: argparse.Namespace, profile: str | None) -> tuple[int, S
     if stop is not None:
         return stop, settings
     sudo_cmd = privilege.hosts_apply_command(
-        profile=profile, config=config_path(args), digest=preview.digest, hosts_file=path,
+        profile=profile, config=config_path(args), digest=preview.write_digest, hosts_file=path,
         state_dir=state_dir_of(args), fix_conflicts=bool(fix))
     rc = write_preview(args, preview, sudo_cmd)
     if rc == EXIT_OK and not args.no_checks:

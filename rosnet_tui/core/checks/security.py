@@ -21,9 +21,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import getpass
+import os
 import sys
+import tempfile
 from typing import Any
 
+import rosnet_tui
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import peer_program_problem, stderr_tail
 from rosnet_tui.core.checks.probes.budget import budget
@@ -59,7 +62,7 @@ def _offers_password(methods: list[str]) -> list[str]:
 async def _audit_here(users: list[str], timeout: float) -> tuple[outsider.SshAudit | None, str]:
     """What the sshd of this machine offers (the audit program run here against loopback):
     (the audit, why none)."""
-    out, err = await _run_here(outsider.SSH_AUDIT_PROGRAM.encode(),
+    out, err = await run_here(outsider.SSH_AUDIT_PROGRAM.encode(),
                                ["127.0.0.1", str(SSH_PORT), f"{min(1.0, timeout / 3):.1f}",
                                 *users], timeout)
     rep = outsider.parse_marked(out, outsider.SSH_MARK)
@@ -216,20 +219,32 @@ async def check_outsider(ctx: CheckContext) -> Outcome:
     return await _outsider_ros1(ctx, data)
 
 
-async def _run_here(program: bytes, args: list[str], timeout: float) -> tuple[str, str]:
-    """Run a probe program here (stdin), as a peer would: (stdout, why not)."""
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-", *args, stdin=asyncio.subprocess.PIPE,
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-    try:
-        out, err = await asyncio.wait_for(proc.communicate(program), timeout)
-    except asyncio.TimeoutError:
-        return "", f"the probe gave no verdict within {timeout:.1f} s"
-    finally:     # timed out, or the check itself was stopped: the program goes with it
-        if proc.returncode is None:
-            with contextlib.suppress(ProcessLookupError):
-                proc.kill()
-            await proc.wait()
+def _package_parent() -> str:
+    """The folder holding the rosnet_tui package this run imports (a checkout or site-packages)."""
+    return os.path.dirname(os.path.dirname(os.path.abspath(rosnet_tui.__file__)))
+
+
+async def run_here(program: bytes, args: list[str], timeout: float) -> tuple[str, str]:
+    """Run a probe program here (stdin), as a peer would: (stdout, why not).
+
+    Isolated (``python -I``: no PYTHON* variables, no user site, not the caller's folder on the
+    path) and from a private folder of its own, so nothing planted where the caller stands
+    (an ``ssl.py``) runs; it finds this run's rosnet_tui by the path put first in it."""
+    head = f"import sys; sys.path.insert(0, {_package_parent()!r})\n".encode()
+    with tempfile.TemporaryDirectory(prefix="rosnet-probe-") as private:
+        os.chmod(private, 0o700)
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-I", "-", *args, stdin=asyncio.subprocess.PIPE,
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, cwd=private)
+        try:
+            out, err = await asyncio.wait_for(proc.communicate(head + program), timeout)
+        except asyncio.TimeoutError:
+            return "", f"the probe gave no verdict within {timeout:.1f} s"
+        finally:     # timed out, or the check itself was stopped: the program goes with it
+            if proc.returncode is None:
+                with contextlib.suppress(ProcessLookupError):
+                    proc.kill()
+                await proc.wait()
     return out.decode(errors="replace"), err.decode(errors="replace").strip()[-200:]
 
 
@@ -259,7 +274,7 @@ async def _outsider_ros2(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
             return Outcome(Status.WARN, f"not judged from outside: {problem}", [], data)
     else:
         data["from"] = "here"
-        out, err = await _run_here(program, args, t * 0.9)
+        out, err = await run_here(program, args, t * 0.9)
         rep = outsider.parse_marked(out, outsider.TLS_MARK)
         problem = None if rep is not None else f"the probe gave no report ({err or 'no output'})"
     if rep is None:

@@ -47,6 +47,7 @@ from pathlib import Path
 from rosnet_tui.core import jsonsafe
 from rosnet_tui.core.addresses import KIND_WORDS, address_kind, parse_ip
 from rosnet_tui.core.config.settings_model import PORT_MAX, PORT_MIN, Settings, validate_network
+from rosnet_tui.core.exposure import nft_text
 from rosnet_tui.core.files import privilege
 from rosnet_tui.core.files import undo_journal as uj
 from rosnet_tui.core.files.managed_text import ManagedFileError
@@ -60,6 +61,7 @@ SET4, SET6 = "peers4", "peers6"
 LAN4, LAN6 = "lan4", "lan6"
 ALLOW4, ALLOW6 = "allow4", "allow6"
 SESSION4, SESSION6 = "session4", "session6"
+SET_NAMES = (SET4, SET6, LAN4, LAN6, ALLOW4, ALLOW6, SESSION4, SESSION6)
 CHAIN = "input"
 PRIORITY = -10            # before the distribution's filter (priority 0)
 KIND = "nft_table"        # the journal entry's kind (managed_file's undo dispatches on it)
@@ -504,8 +506,10 @@ def apply(pv: FirewallPreview, *, state_dir: Path | None = None) -> str | None:
 def _restore(record: dict) -> str:
     before = record.get("before")
     if isinstance(before, str) and before.strip():
-        if not only_our_table(before):
-            raise FirewallError(f"the journal's copy is not a table {TABLE}; not loaded")
+        why = nft_text.our_table_problem(before, TABLE, CHAIN, set(SET_NAMES))
+        if why:
+            raise FirewallError(f"the journal's copy is not our table {TABLE} alone ({why}); "
+                                "nothing was loaded")
         load(transaction_text(before))
         return f"the firewall table {TABLE}: put back as it was before"
     if current_ruleset() is not None:
@@ -515,9 +519,8 @@ def _restore(record: dict) -> str:
 
 def only_our_table(text: str) -> bool:
     """True when *text* defines our table and nothing else (a journal copy is checked before
-    root loads it)."""
-    top = [ln.rstrip() for ln in text.splitlines() if ln.strip() and not ln[:1].isspace()]
-    return top == [f"table {TABLE} {{", "}"]
+    root loads it): read as nft reads it (:mod:`.nft_text`), not line by line."""
+    return nft_text.our_table_problem(text, TABLE, CHAIN, set(SET_NAMES)) is None
 
 
 def undo_records(records: list[dict], force: bool = False) -> list[str]:

@@ -11,6 +11,7 @@ commented out (never deleted): on a remote network they override the names in th
 from __future__ import annotations
 
 import re
+import shlex
 import shutil
 import subprocess
 from collections.abc import Mapping, Sequence
@@ -22,6 +23,7 @@ from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files import managed_write as mw
 from rosnet_tui.core.files.hosts import WriterSettingsError
+from rosnet_tui.core.printable import printable
 
 ROS_IP_REASON = (
     "on a remote network ROS_IP and ROS_HOSTNAME override the names in the hosts files: this "
@@ -60,7 +62,7 @@ def master_uri(settings: Settings) -> str:
 
 def export_line(settings: Settings) -> str:
     """The one line to paste into the current shell: ``export ROS_MASTER_URI=...``."""
-    return f"export ROS_MASTER_URI={master_uri(settings)}"
+    return f"export ROS_MASTER_URI={shlex.quote(master_uri(settings))}"
 
 
 def shell_lines(settings: Settings, env: Mapping[str, str]) -> list[str]:
@@ -83,8 +85,8 @@ def render_bashrc_block(settings: Settings, *, commented: int = 0) -> list[str]:
                f"{settings.master_name}, by name (see /etc/hosts)")
     lines = [
         "# Managed by rosnet-tui: edits inside this block are replaced.",
-        f"# ROS master: {who}",
-        f"export ROS_MASTER_URI={uri}",
+        f"# ROS master: {printable(who)}",
+        f"export ROS_MASTER_URI={shlex.quote(uri)}",
     ]
     if commented:
         lines.append(f"# {_TAG} commented out ROS_IP/ROS_HOSTNAME line(s) above: they override "

@@ -26,12 +26,15 @@ from __future__ import annotations
 
 import contextlib
 import difflib
+import hashlib
+import json
 import os
 import stat
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rosnet_tui.core.files import nofollow
 from rosnet_tui.core.files.cut_writes import INPLACE_DIR
 from rosnet_tui.core.files.managed_text import (
     ManagedFileError,
@@ -93,6 +96,23 @@ class Preview:
     @property
     def new_digest(self) -> str:
         return file_digest(self.new)
+
+    @property
+    def write_digest(self) -> str:
+        """Digest of exactly what writing this preview does: the path (as named and as
+        resolved), the old and the new bytes, the file's mode and owner now (or the mode of a
+        file created). A privileged re-run (sudo) recomputes the preview and writes only when
+        this matches the one the user saw, so settings changed since write nothing."""
+        real = os.path.realpath(self.path)
+        try:
+            st = os.stat(real)
+            meta: list[int] | None = [stat.S_IMODE(st.st_mode), st.st_uid, st.st_gid]
+        except OSError:
+            meta = None
+        what = {"path": str(Path(self.path).absolute()), "real": real, "old": self.digest,
+                "new": self.new_digest, "meta": meta, "new_mode": self.new_mode}
+        return "sha256:" + hashlib.sha256(
+            json.dumps(what, sort_keys=True).encode()).hexdigest()
 
     @property
     def changed(self) -> bool:
@@ -190,9 +210,13 @@ def apply_previews(previews: Sequence[Preview], *, state_dir: Path | None = None
         make_private_dir(bdir, owner)
         result = ApplyResult(True, entry.id)
         for i, p in enumerate(todo):
-            real = Path(os.path.realpath(p.path))
+            real = root_target(p.path) if os.geteuid() == 0 else Path(os.path.realpath(p.path))
             st = os.stat(real) if p.old is not None else None
             backup = None
+            if st is not None and owner is not None and not readable_by(st, owner):
+                raise ManagedFileError(
+                    f"{p.path}: its user may not read it, so root keeps no copy of it in that "
+                    f"user's {sd}; nothing was written")
             if p.old is not None:
                 bpath = bdir / f"{i}-{real.name}"
                 write_private(bpath, p.old, owner)
@@ -279,17 +303,36 @@ def _read_backup(sd: Path, f: JournalFile) -> bytes | None:
 ROOT_RESTORABLE = ("/etc/hosts",)
 
 
+def root_target(path: Path) -> Path:
+    """Where root writing *path* lands: links followed only when root's own (a user's link is
+    refused: :class:`~rosnet_tui.core.files.nofollow.LinkRefusedError`)."""
+    return nofollow.resolve(Path(path))[0]
+
+
+def readable_by(st: os.stat_result, owner: tuple[int, int]) -> bool:
+    """Whether the user *owner* (uid, gid) may read a file of stat *st* (supplementary groups
+    not counted: when in doubt, no)."""
+    mode = st.st_mode
+    return bool(mode & 0o004 or (st.st_uid == owner[0] and mode & 0o400)
+                or (st.st_gid == owner[1] and mode & 0o040))
+
+
 def _check_root_safe(sd: Path, entry: JournalEntry) -> None:
-    """Root undoing from a user's journal restores only system files rosnet-tui writes."""
+    """Root undoing from a user's journal (which that user may have written anything into)
+    restores only the system files rosnet-tui writes, by their own names, and files in that
+    user's folders that are the user's, reached without following the user's links."""
     owner = owner_for(sd)
     if owner is None:
         return
     for f in entry.files:
+        if f.real_path in ROOT_RESTORABLE:
+            continue
         try:
-            mine = os.stat(f.real_path).st_uid == owner[0]
-        except OSError:
+            real = root_target(Path(f.real_path))
+            mine = os.lstat(real).st_uid == owner[0]
+        except FileNotFoundError:
             mine = False
-        if f.real_path not in ROOT_RESTORABLE and not mine:
+        if not mine:
             raise ManagedFileError(
                 f"as root, undo from a user's journal restores only {', '.join(ROOT_RESTORABLE)}"
                 f" and that user's files; not {f.real_path}")
@@ -300,6 +343,10 @@ def _restore_one(sd: Path, f: JournalFile) -> None:
     if data is not None and file_digest(data) != f.before:
         raise ManagedFileError(f"the backup {_backup_path(sd, f)} is damaged (digest mismatch); "
                                f"{f.path} was left as it is")
+    if owner_for(sd) is not None:
+        # root, from a user's journal: the mode and owner it sees itself, never the entry's
+        write_file(Path(f.real_path), data, journal_dir=sd / INPLACE_DIR)
+        return
     write_file(Path(f.real_path), data, mode=f.mode, uid=f.uid, gid=f.gid,
                journal_dir=sd / INPLACE_DIR)
 
@@ -355,6 +402,7 @@ def plan_undo(state_dir: Path | None = None, *, entry_id: str | None = None) -> 
         raise StalePreviewError(f"the last change is now #{entry.id}, not #{entry_id}; "
                                 "look at the new preview and try again")
     sweep_state_dir(sd)
+    _check_root_safe(sd, entry)     # before root reads anything the entry names
     previews, conflicts = [], []
     for f in entry.files:
         with contextlib.suppress(OSError):

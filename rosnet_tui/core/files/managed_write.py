@@ -18,8 +18,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
-import hashlib
-import json
 import os
 import re
 import secrets
@@ -31,11 +29,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rosnet_tui.core.config.paths import DEFAULT_HOSTS_PATH, default_state_dir
-from rosnet_tui.core.files import tempfiles
-from rosnet_tui.core.files.cut_writes import INPLACE_DIR, MAGIC, journal_name
+from rosnet_tui.core.files import nofollow, tempfiles
+from rosnet_tui.core.files.cut_writes import INPLACE_DIR, journal_name
+from rosnet_tui.core.files.inplace_format import is_torn, journal_bytes, parse_journal
 from rosnet_tui.core.files.managed_text import ManagedFileError, PermissionNeededError, decode
 from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
-from rosnet_tui.core.jsonsafe import loads_bounded
 
 LOCK_TIMEOUT_S = 10.0
 
@@ -89,6 +87,8 @@ def read_bytes(path: Path, *, state_dir: Path | None = None,
     new, with a journal this process may not act on, is read as it is). A writer still at work
     is waited for, up to *wait_s*."""
     try:
+        if os.geteuid() == 0:
+            nofollow.resolve(Path(path))   # root reads nothing through a user's link
         recover_in_place(
             Path(path), journal_dir=Path(state_dir) / INPLACE_DIR if state_dir else None,
             wait_s=wait_s)
@@ -97,6 +97,8 @@ def read_bytes(path: Path, *, state_dir: Path | None = None,
         return _read_regular(Path(path))
     except FileNotFoundError:
         return None
+    except nofollow.LinkRefusedError:
+        raise
     except IsADirectoryError:
         raise ManagedFileError(f"{path} is a folder, not a file") from None
     except PermissionError:
@@ -219,6 +221,13 @@ def sweep_state_dir(state_dir: Path) -> list[str]:
     """Remove the temp files killed writers left in the state dir (journal entries, backups,
     status files); the names removed."""
     sd = Path(state_dir)
+    if os.geteuid() == 0:     # root in a user's state dir: not through a link of the user's
+        try:
+            os.close(nofollow.walk(sd)[0])
+        except OSError:
+            return []
+        if any(os.path.islink(sd / f) for f in ("journal", "backups", "sync", "inplace")):
+            return []
     removed = tempfiles.sweep(sd / "journal", tempfiles.PRIVATE_TMP)
     with contextlib.suppress(OSError), os.scandir(sd / "backups") as it:
         for e in it:
@@ -239,69 +248,6 @@ def write_all(fd: int, data: bytes) -> None:
 
 
 # --------------------------------------------------------------------------- in-place journal
-def _journal_bytes(real: Path, st: os.stat_result, old: bytes, new: bytes) -> bytes:
-    head = {"path": str(real), "dev": st.st_dev, "ino": st.st_ino,
-            "old_len": len(old), "old_sha256": hashlib.sha256(old).hexdigest(),
-            "new_len": len(new), "new_sha256": hashlib.sha256(new).hexdigest()}
-    return MAGIC + json.dumps(head, sort_keys=True).encode() + b"\n" + old + new
-
-
-def _parse_journal(data: bytes) -> tuple[dict, bytes, bytes] | None:
-    """(header, old, new) of an in-place journal, or None when it is not a whole, valid one."""
-    if not data.startswith(MAGIC):
-        return None
-    nl = data.find(b"\n", len(MAGIC))
-    if nl < 0:
-        return None
-    try:
-        head = loads_bounded(data[len(MAGIC):nl].decode("utf-8"))
-        old_len, new_len = int(head["old_len"]), int(head["new_len"])
-    except (ValueError, TypeError, KeyError):   # JsonInputError, UnicodeDecodeError included
-        return None
-    body = data[nl + 1:]
-    if old_len < 0 or new_len < 0 or len(body) != old_len + new_len:
-        return None
-    old, new = body[:old_len], body[old_len:]
-    if hashlib.sha256(old).hexdigest() != head.get("old_sha256") \
-            or hashlib.sha256(new).hexdigest() != head.get("new_sha256"):
-        return None
-    return head, old, new
-
-
-def _common_prefix(a: bytes, b: bytes) -> int:
-    n = min(len(a), len(b))
-    lo, step = 0, 1 << 16
-    while lo < n:                                 # whole blocks first, then bytes
-        hi = min(n, lo + step)
-        if a[lo:hi] != b[lo:hi]:
-            break
-        lo = hi
-    while lo < n and a[lo] == b[lo]:
-        lo += 1
-    return lo
-
-
-_SECTOR = 512
-
-
-def _is_torn(cur: bytes, old: bytes, new: bytes) -> bool:
-    """Whether *cur* is what rewriting *old* with *new* in place leaves when cut short: the new
-    bytes up to some point and the old ones after it (a killed writer: not yet truncated, or
-    extended); or, after the machine itself went down, each 512-byte sector the old one or the
-    new one (zeros where the file grew)."""
-    k = _common_prefix(cur, new)
-    if cur[k:] == old[k:]:
-        return True
-    if not min(len(old), len(new)) <= len(cur) <= max(len(old), len(new)):
-        return False
-    for i in range(0, len(cur), _SECTOR):
-        c = cur[i:i + _SECTOR]
-        if c != new[i:i + len(c)] and c != old[i:i + len(c)] \
-                and not (i >= len(old) and c == bytes(len(c))):
-            return False
-    return True
-
-
 def _rewrite(real: Path, data: bytes) -> None:
     """*data* into *real* through its own inode, keeping the time other programs may read a mix
     as short as in place allows: one write of the whole buffer, the truncation right after it
@@ -431,7 +377,7 @@ def _recover_from(real: Path, st: os.stat_result, jpath: Path, wait_s: float) ->
                     or not stat.S_ISREG(jst.st_mode):
                 return None
             with os.fdopen(os.dup(jfd), "rb") as f:
-                parsed = _parse_journal(f.read(min(jst.st_size, 2 * MAX_FILE_BYTES + (1 << 20))))
+                parsed = parse_journal(f.read(min(jst.st_size, 2 * MAX_FILE_BYTES + (1 << 20))))
             return _settle_from(real, st, jpath, parsed)
         finally:
             os.close(jfd)
@@ -445,7 +391,7 @@ def _settle_from(real: Path, st: os.stat_result, jpath: Path,
     if parsed is not None and parsed[0].get("path") == str(real) \
             and (parsed[0].get("dev"), parsed[0].get("ino")) == (st.st_dev, st.st_ino):
         _, old, new = parsed
-        if cur == new or cur == old or _is_torn(cur, old, new):
+        if cur == new or cur == old or is_torn(cur, old, new):
             target, torn = new, cur not in (old, new)
     changed = target is not None and target != cur
     if not (os.access(real, os.W_OK, effective_ids=True)
@@ -491,7 +437,7 @@ def _write_in_place(real: Path, data: bytes, journal_dir: Path | None = None) ->
                       stat.S_IMODE(st.st_mode) & 0o644)
         try:
             fcntl.flock(jfd, fcntl.LOCK_EX)   # held until the write is done (or we die)
-            write_all(jfd, _journal_bytes(real, st, old, data))
+            write_all(jfd, journal_bytes(real, st, old, data))
             os.fsync(jfd)
             os.rename(tmp, jpath)
             fsync_dir(Path(folder))           # the intent is on disk before the file is touched
@@ -560,33 +506,48 @@ def atomic_write(path: Path, data: bytes, *, create_mode: int = 0o600, mode: int
     called between the fsync and the rename (crash tests stop a writer there).
     """
     folder = path.parent
+    dfd, roots_only = open_folder(folder)     # first: as root, no user's link on the way
     tempfiles.sweep(folder, tempfiles.MANAGED_TMP, path.name)
-    tmp = folder / f".{path.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, create_mode)
+    tmp = f".{path.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
     try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC,
+                     create_mode, dir_fd=dfd)
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
-            write_all(fd, data)
-            if uid is not None or gid is not None:
-                try:
-                    os.fchown(fd, -1 if uid is None else uid, -1 if gid is None else gid)
-                except owner_errors:
-                    pass  # e.g. a normal user's own file: owner is already right
-            if mode is not None:
-                os.fchmod(fd, mode)
-            if xattr_src is not None:
-                _copy_xattrs(xattr_src, fd)
-            os.fsync(fd)
-            if before_rename is not None:
-                before_rename()
-            os.replace(tmp, path)
-        finally:
-            os.close(fd)
-    except BaseException:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX)    # ours until renamed: sweepers leave it alone
+                write_all(fd, data)
+                if uid is not None or gid is not None:
+                    try:
+                        os.fchown(fd, -1 if uid is None else uid, -1 if gid is None else gid)
+                    except owner_errors:
+                        pass  # e.g. a normal user's own file: owner is already right
+                if mode is not None:
+                    os.fchmod(fd, mode if roots_only else mode & 0o777)
+                if xattr_src is not None and roots_only:
+                    _copy_xattrs(xattr_src, fd)
+                os.fsync(fd)
+                if before_rename is not None:
+                    before_rename()
+                os.replace(tmp, path.name, src_dir_fd=dfd, dst_dir_fd=dfd)
+            finally:
+                os.close(fd)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp, dir_fd=dfd)
+            raise
         with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    fsync_dir(folder)
+            os.fsync(dfd)
+    finally:
+        os.close(dfd)
+
+
+def open_folder(folder: Path) -> tuple[int, bool]:
+    """(descriptor of *folder*, whether only root may change it). Root reaches it without
+    following a link that is not root's own (:mod:`.nofollow`); a user's process as the path
+    says (its links are that user's own)."""
+    if os.geteuid() == 0:
+        return nofollow.walk(folder)
+    return os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC), True
 
 
 def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
@@ -594,24 +555,44 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
                new_mode: int = 0o644, journal_dir: Path | None = None) -> WriteOutcome:
     """Write *data* to *path* safely (None deletes it); keeps mode, owner and xattrs.
 
-    Symlinks are followed (a dotfile linked into a repo stays a link). Rename when possible;
-    in place for mount points (or when rename fails with EBUSY/EXDEV), hard links, files owned by
-    another user that we may write, and files in folders we may not write.
+    Symlinks are followed (a dotfile linked into a repo stays a link); as root only root's own
+    (:mod:`.nofollow`), and in a folder a user may change root only renames a whole new file
+    into place through the folder's descriptor. Rename when possible; in place for mount points
+    (or when rename fails with EBUSY/EXDEV), hard links, files owned by another user that we may
+    write, and files in folders we may not write.
     """
-    real = Path(os.path.realpath(path))
+    users_folder = False
+    if os.geteuid() == 0:
+        real, roots_only = nofollow.resolve(Path(path))
+        users_folder = not roots_only
+    else:
+        real = Path(os.path.realpath(path))
     try:
-        st: os.stat_result | None = os.stat(real)
+        st: os.stat_result | None = os.lstat(real) if users_folder else os.stat(real)
     except FileNotFoundError:
         st = None
     if st is not None and not stat.S_ISREG(st.st_mode):
         raise ManagedFileError(f"{path} is not a regular file")
+    if users_folder and st is not None and (st.st_nlink > 1 or is_mount_point(real)):
+        raise ManagedFileError(f"{path} has other names (hard links) or is a mount point, in a "
+                               "folder a user may change: root does not write it")
     if data is None:
         if st is not None:
-            os.unlink(real)
-            fsync_dir(real.parent)
+            dfd, _ = open_folder(real.parent)
+            try:
+                os.unlink(real.name, dir_fd=dfd)
+                os.fsync(dfd)
+            finally:
+                os.close(dfd)
         return WriteOutcome(Path(path), False, deleted=True)
     if st is None:
-        real.parent.mkdir(parents=True, exist_ok=True)
+        if users_folder:
+            nofollow.make_dir(real.parent, 0o755)
+            folder = os.stat(real.parent)   # a new file in a user's folder is that user's
+            uid = folder.st_uid if uid is None else uid
+            gid = folder.st_gid if gid is None else gid
+        else:
+            real.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(real, data, mode=new_mode if mode is None else mode, uid=uid, gid=gid,
                      before_rename=_before_rename)
         return WriteOutcome(Path(path), False)
@@ -628,7 +609,7 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
                          before_rename=_before_rename)
             return WriteOutcome(Path(path), False)
         except OSError as exc:
-            if exc.errno not in (errno.EBUSY, errno.EXDEV):
+            if users_folder or exc.errno not in (errno.EBUSY, errno.EXDEV):
                 raise
     _remove_stale_temps(real.parent, real.name)
     _write_in_place(real, data, journal_dir)

@@ -25,8 +25,14 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from rosnet_tui.core.config.paths import default_state_dir
+from rosnet_tui.core.files import nofollow
 from rosnet_tui.core.files.managed_text import ManagedFileError
-from rosnet_tui.core.files.managed_write import LOCK_TIMEOUT_S, MAX_FILE_BYTES, atomic_write
+from rosnet_tui.core.files.managed_write import (
+    LOCK_TIMEOUT_S,
+    MAX_FILE_BYTES,
+    atomic_write,
+    open_folder,
+)
 from rosnet_tui.core.files.regular_file import read_regular
 from rosnet_tui.core.jsonsafe import loads_bounded
 
@@ -107,6 +113,11 @@ def owner_for(state_dir: Path) -> tuple[int, int] | None:
 
 
 def make_private_dir(path: Path, owner: tuple[int, int] | None) -> None:
+    """Make the folder *path* (0700; the folders made handed to *owner*). Root does it through
+    descriptors, following no link that is not root's own (:mod:`.nofollow`)."""
+    if os.geteuid() == 0:
+        nofollow.make_dir(path, 0o700, owner)
+        return
     missing = []
     p = path
     while not p.exists():
@@ -134,7 +145,12 @@ def locked(state_dir: Path, owner: tuple[int, int] | None,
     """One writer at a time per state dir (bounded wait)."""
     make_private_dir(state_dir, owner)
     lock = state_dir / "lock"
-    fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+    dfd, _ = open_folder(state_dir)
+    try:
+        fd = os.open("lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600,
+                     dir_fd=dfd)
+    finally:
+        os.close(dfd)
     try:
         if owner:
             with contextlib.suppress(OSError):

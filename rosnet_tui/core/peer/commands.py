@@ -20,17 +20,18 @@ def python_command(script: str, *args: str, python: str = "python3") -> str:
 
     ``-S``: the probes need the standard library only, so the peer skips site (its
     site-packages, .pth files): a faster start, and nothing of the peer's can shadow a module.
+    ``-I``: nor can the folder it starts in, nor PYTHON* variables.
     """
     b64 = base64.b64encode(script.encode()).decode()
     quoted = " ".join(shq(a) for a in args)
-    return (f"{python} -S -c 'import base64;exec(base64.b64decode(\"{b64}\"))' "
+    return (f"{python} -I -S -c 'import base64;exec(base64.b64decode(\"{b64}\"))' "
             f"{quoted}").strip()
 
 
 def python_stdin_command(*args: str) -> str:
     """A shell command running the stdlib-only program fed on stdin with python3 on a peer
-    (``python3 -S -``: without site, as :func:`python_command`)."""
-    return "python3 -S - " + " ".join(shlex.quote(a) for a in args)
+    (``python3 -I -S -``: isolated, without site, as :func:`python_command`)."""
+    return "python3 -I -S - " + " ".join(shlex.quote(a) for a in args)
 
 
 # The README installs rosnet-tui (with eclipse-zenoh) in a virtual environment of its own; the
@@ -42,6 +43,7 @@ def python_stdin_command(*args: str) -> str:
 # path on its second line in the `#!/bin/sh` form pip and uv write for long paths, or else the
 # `python` beside the launcher's target. The program is still fed on stdin, so the version of
 # the peer's rosnet-tui does not matter. Nothing here reads stdin: the program must arrive whole.
+# It runs from / (the folder an interpreter puts first on its path: one only root may write).
 NO_INSTALL_EXIT = 4       # the prelude's exit status when no rosnet-tui is installed on the peer
 PEER_INSTALL_PLACES = ("the PATH, ~/.local/bin, pipx's and uv's tool folders, /usr/local/bin, "
                        "/opt/pipx, a login shell's PATH")
@@ -72,10 +74,11 @@ done
 [ -n "$py" ] || L /usr/local/bin/rosnet-tui || V /opt/pipx/venvs
 [ -n "$py" ] || { b=$(timeout 3 "${SHELL:-/bin/sh}" -lc "command -v rosnet-tui" </dev/null \
                      2>/dev/null | tail -n 1) && L "$b"; }
+cd / || exit 1     # the interpreter puts its folder first on the path: one only root may write
 [ -n "$py" ] && [ -n "$BOOT" ] && exec "$py" -c "$BOOT" "$@"
 [ -n "$py" ] && exec "$py" - "$@"
-[ -n "$FALLBACK" ] && [ -n "$BOOT" ] && exec python3 -S -c "$BOOT" "$@" no-install
-[ -n "$FALLBACK" ] && exec python3 -S - "$@"
+[ -n "$FALLBACK" ] && [ -n "$BOOT" ] && exec python3 -I -S -c "$BOOT" "$@" no-install
+[ -n "$FALLBACK" ] && exec python3 -I -S - "$@"
 echo "$MARK$NO_INSTALL"
 exit @EXIT@
 """.replace("@EXIT@", str(NO_INSTALL_EXIT))

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -184,15 +185,19 @@ def env_lines(s: Settings, *, client: bool = False, router_config_path: Path | N
     Always RMW_IMPLEMENTATION and ROS_DOMAIN_ID; the router's config file (components with a
     router); for a lone *client* node its override (on Humble, a session config file instead).
     """
-    lines = [f"export RMW_IMPLEMENTATION={RMW_ZENOH}", f"export ROS_DOMAIN_ID={s.ros.domain_id}"]
+    # Every value shell-quoted: a path or an override holding ' or $(..) stays one word
+    q = shlex.quote
+    lines = [f"export RMW_IMPLEMENTATION={q(RMW_ZENOH)}",
+             f"export ROS_DOMAIN_ID={q(str(s.ros.domain_id))}"]
     if client and not s.is_master:
         if distro.lower() in DISTROS_WITHOUT_OVERRIDE:
             path = session_config_path or default_session_config_path()
-            lines.append(f"export ZENOH_SESSION_CONFIG_URI={path}")
+            lines.append(f"export ZENOH_SESSION_CONFIG_URI={q(str(path))}")
         else:
-            lines.append(f"export ZENOH_CONFIG_OVERRIDE='{client_override(s)}'")
+            lines.append(f"export ZENOH_CONFIG_OVERRIDE={q(client_override(s))}")
     else:
-        lines.append(f"export ZENOH_ROUTER_CONFIG_URI={router_config_path or default_router_config_path()}")
+        path = router_config_path or default_router_config_path()
+        lines.append(f"export ZENOH_ROUTER_CONFIG_URI={q(str(path))}")
     return lines
 
 

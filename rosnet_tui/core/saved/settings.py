@@ -424,9 +424,11 @@ def _merge_table(doc: Any, name: str, values: dict[str, Any]) -> None:
             tbl[k] = v
 
 
-def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
+def atomic_write_text(path: Path, text: str, mode: int | None = None,
+                      owner: tuple[int, int] | None = None) -> None:
     """Write *text* (UTF-8) to *path* atomically (:func:`~.managed_write.atomic_write`); a new
-    file gets *mode* (default: the file's mode now, or 0600), the umask applying."""
+    file gets *mode* (default: the file's mode now, or 0600), the umask applying; *owner*:
+    handed to that user (root writing a user's file: on the new file's descriptor)."""
     from rosnet_tui.core.files.managed_write import atomic_write
 
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -437,10 +439,11 @@ def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
             mode = path.stat().st_mode & 0o7777
         except FileNotFoundError:
             mode = 0o600
-    atomic_write(path, text.encode("utf-8"), create_mode=mode)
+    atomic_write(path, text.encode("utf-8"), create_mode=mode,
+                 uid=owner[0] if owner else None, gid=owner[1] if owner else None)
 
 
-def save_settings(s: Settings, path: Path) -> None:
+def save_settings(s: Settings, path: Path, owner: tuple[int, int] | None = None) -> None:
     """Save *s* to *path* atomically, keeping a hand-edited file's comments.
 
     Refuses (SettingsError) to overwrite an existing file that does not parse: the user's text is
@@ -449,5 +452,5 @@ def save_settings(s: Settings, path: Path) -> None:
     previous = read_settings_text(path)
     if previous is not None:
         parse_settings(previous, path)  # raises on a malformed file: never clobber it
-    atomic_write_text(path, render_settings(s, previous))
+    atomic_write_text(path, render_settings(s, previous), owner=owner)
     s.saved_at = _mtime(path)

@@ -19,7 +19,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.files.managed_write import open_folder
 from rosnet_tui.core.files.regular_file import read_regular
+from rosnet_tui.core.files.undo_journal import make_private_dir
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.saved.settings import atomic_write_text
 
@@ -35,8 +37,16 @@ def locked(state_dir: Path, wait_s: float = 2.0) -> Iterator[None]:
     Waits at most *wait_s*; after that it goes ahead unlocked (writes stay atomic anyway, a
     concurrent update could only be lost).
     """
-    state_dir.mkdir(parents=True, exist_ok=True, mode=0o700)
-    fd = os.open(state_dir / ".lock", os.O_RDWR | os.O_CREAT, 0o600)
+    if os.geteuid() == 0:    # root in a user's state dir: through descriptors, no user's link
+        make_private_dir(state_dir, None)
+    else:
+        state_dir.mkdir(parents=True, exist_ok=True, mode=0o700)
+    dfd, _ = open_folder(state_dir)
+    try:
+        fd = os.open(".lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600,
+                     dir_fd=dfd)
+    finally:
+        os.close(dfd)
     got = False
     try:
         deadline = time.monotonic() + wait_s
@@ -72,8 +82,10 @@ def read_json(path: Path) -> Any | None:
         return None
 
 
-def write_json(path: Path, data: Any) -> None:
-    atomic_write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n", mode=0o600)
+def write_json(path: Path, data: Any, owner: tuple[int, int] | None = None) -> None:
+    """*data* as JSON to *path* atomically, 0600 (handed to *owner*, on its descriptor)."""
+    atomic_write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n", mode=0o600,
+                      owner=owner)
 
 
 def sync_dir(state_dir: Path) -> Path:

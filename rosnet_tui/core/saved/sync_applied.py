@@ -9,11 +9,11 @@ replay) is refused even after a restart: a record is taken only when
 from __future__ import annotations
 
 import contextlib
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.files.undo_journal import make_private_dir
 from rosnet_tui.core.saved.state import read_json, state_owner, sync_dir, write_json
 from rosnet_tui.core.saved.sync_records import Record, RecordError, parse_record
 
@@ -48,13 +48,9 @@ def load_applied(state_dir: Path) -> dict[str, Record]:
 
 def save_applied(state_dir: Path, records: Mapping[str, Record]) -> None:
     """Write the applied records atomically (raises OSError)."""
-    folder = sync_dir(state_dir)
-    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+    owner = state_owner(Path(state_dir))
+    make_private_dir(sync_dir(state_dir), owner)   # as root: through descriptors, no link
     data: dict[str, Any] = {"version": APPLIED_VERSION,
                             "peers": {r.name.lower(): r.to_json() for r in records.values()}}
     path = applied_path(state_dir)
-    write_json(path, data)
-    owner = state_owner(Path(state_dir))
-    if owner:
-        with contextlib.suppress(OSError):
-            os.chown(path, *owner)
+    write_json(path, data, owner)

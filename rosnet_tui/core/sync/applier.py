@@ -228,10 +228,10 @@ class Applier:
             return
         try:
             st = os.stat(self.config.paths.config_path)
-            save_settings(fresh, self.config.paths.config_path)
-            if os.geteuid() == 0 and (st.st_uid, st.st_gid) != (0, 0):
-                with contextlib.suppress(OSError):
-                    os.chown(self.config.paths.config_path, st.st_uid, st.st_gid)
+            # root saving a user's settings hands the new file back on its descriptor (never a
+            # chown by path: the user may have swapped the path for a link meanwhile)
+            owner = (st.st_uid, st.st_gid) if os.geteuid() == 0 and st.st_uid != 0 else None
+            save_settings(fresh, self.config.paths.config_path, owner)
             with contextlib.suppress(OSError):
                 st2 = os.stat(self.config.paths.config_path)
                 self.settings_saved(fresh, (st2.st_mtime_ns, st2.st_size, st2.st_ino))

@@ -7,6 +7,9 @@ import fcntl
 import os
 from pathlib import Path
 
+from rosnet_tui.core.files.managed_text import ManagedFileError
+from rosnet_tui.core.files.managed_write import open_folder
+from rosnet_tui.core.files.undo_journal import make_private_dir
 from rosnet_tui.core.saved.state import state_owner, sync_dir
 
 from .outcome import SyncError
@@ -20,17 +23,21 @@ class ServiceLock:
         self.fd: int | None = None
 
     def acquire(self) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        try:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
-        except OSError as exc:
-            raise SyncError(f"cannot open the lock {self.path}: {exc.strerror} (is the service "
-                            "running as another user?)") from None
         owner = state_owner(self.path.parent.parent)
+        try:   # as root: through descriptors, following no link of the user's
+            make_private_dir(self.path.parent, owner)
+            dfd, _ = open_folder(self.path.parent)
+            try:
+                fd = os.open(self.path.name, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC,
+                             0o600, dir_fd=dfd)
+            finally:
+                os.close(dfd)
+        except (OSError, ManagedFileError) as exc:   # a link refused, for one
+            raise SyncError(f"cannot open the lock {self.path}: {exc} (is the service "
+                            "running as another user?)") from None
         if owner:
             with contextlib.suppress(OSError):
                 os.fchown(fd, *owner)
-                os.chown(self.path.parent, *owner)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.config.settings_model import Settings
+from rosnet_tui.core.printable import printable
 from rosnet_tui.core.saved.sync_applied import applied_path, load_applied, save_applied
 from rosnet_tui.core.saved.sync_records import (
     Candidate,
@@ -164,7 +165,8 @@ class Publisher:
             self.report.add_refused({"at": now, "source": r.source, "name": r.name, "why": r.why},
                                     MAX_REFUSED)
         for note in res.notes:
-            self.report.once(("note", note), logging.WARNING, "conflicting copies: %s", note)
+            self.report.once(("note", note), logging.WARNING, "conflicting copies: %s",
+                             printable(note))
         changed = False
         for name, cand in res.records.items():
             changed = self._take_peer(name, cand, now) or changed

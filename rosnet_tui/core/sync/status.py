@@ -3,12 +3,13 @@
 
 from __future__ import annotations
 
-import contextlib
 import os
 import time
 from pathlib import Path
 from typing import Any
 
+from rosnet_tui.core.files.undo_journal import make_private_dir
+from rosnet_tui.core.printable import printable
 from rosnet_tui.core.saved.state import read_json, state_owner, sync_dir, write_json
 from rosnet_tui.core.saved.sync_records import format_time
 from rosnet_tui.core.words import age
@@ -40,14 +41,9 @@ def load_status(state_dir: Path) -> dict[str, Any] | None:
 
 
 def save_status(state_dir: Path, status: dict[str, Any]) -> None:
-    folder = sync_dir(state_dir)
-    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
-    write_json(status_path(state_dir), status)
     owner = state_owner(Path(state_dir))
-    if owner:
-        for p in (folder, status_path(state_dir)):
-            with contextlib.suppress(OSError):
-                os.chown(p, *owner)
+    make_private_dir(sync_dir(state_dir), owner)   # as root: through descriptors, no link
+    write_json(status_path(state_dir), status, owner)
 
 
 # --------------------------------------------------------------------------- reading it
@@ -156,4 +152,6 @@ def render_status(status: dict[str, Any], now: float | None = None) -> list[str]
         r = refused[-1]
         lines.append(f"Last refused record: {_ago(r.get('at'), now)}: {r.get('source')}: "
                      f"{r.get('why')} ({len(refused)} kept)")
-    return lines
+    # every text here may come from a file name or a record: no control character reaches the
+    # terminal (the status file is the user's, read by whoever runs `sync status`)
+    return [printable(line) for line in lines]

@@ -9,6 +9,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from rosnet_tui.core.printable import printable
 from rosnet_tui.core.saved.sync_records import Candidate, Record, choose_best
 
 
@@ -27,6 +28,12 @@ class Refusal:
     source: str
     name: str | None
     why: str
+
+    def __post_init__(self) -> None:   # a file name or a record's text: shown and logged
+        object.__setattr__(self, "source", printable(self.source))
+        object.__setattr__(self, "why", printable(self.why))
+        if self.name is not None:
+            object.__setattr__(self, "name", printable(self.name))
 
 
 @dataclass

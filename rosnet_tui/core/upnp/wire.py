@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from urllib.parse import urljoin, urlsplit
 
 from rosnet_tui.core.addresses import parse_ip
+from rosnet_tui.core.printable import printable
 
 SSDP_ADDR = ("239.255.255.250", 1900)
 IGD_TYPES = ("urn:schemas-upnp-org:device:InternetGatewayDevice:2",
@@ -72,7 +73,7 @@ def ascii_number(text: str | None, what: str, *, digits: int = 10) -> int:
 def shown(value: str, limit: int = MAX_TEXT) -> str:
     """*value* fit to be shown to a person: control characters (C0, DEL and C1: a terminal acts
     on them) each become "?", and at most *limit* characters are kept."""
-    return "".join(c if c.isprintable() else "?" for c in value[:limit])
+    return printable(value, limit)
 
 
 def clean_text(value: str | None, what: str, *, limit: int = MAX_TEXT) -> str:

@@ -92,7 +92,7 @@ def hosts_plan(settings: Settings, paths: Paths) -> WritePlan:
         option_label="also comment out other lines that give our names other addresses",
         option_count=conflicts,
         sudo_command=lambda p, fix: privilege.hosts_apply_command(
-            profile=profile, config=paths.config_path, digest=p.digest,
+            profile=profile, config=paths.config_path, digest=p.write_digest,
             hosts_file=paths.hosts_path, state_dir=paths.state_dir, fix_conflicts=fix),
         after=affected.HOSTS,
         then=lambda: firewall_plan(settings, paths))

@@ -44,7 +44,7 @@ def peer_python() -> str:
 
 
 ROS_AGENT = AgentKind(
-    "ros1", lambda max_s: f"{peer_python()} -S -c {shq(agentproto.BOOT)} {max_s:.0f}",
+    "ros1", lambda max_s: f"{peer_python()} -I -S -c {shq(agentproto.BOOT)} {max_s:.0f}",
     (("ros", ROSPROTO_SOURCE, "main"), ("chat", CHAT_SOURCE, "main")))
 ZENOH_AGENT = AgentKind(
     "ros2", lambda max_s: installed_python_command(f"{max_s:.0f}", mark=zenohproto.REPORT_MARK,
