@@ -6,6 +6,7 @@ log read in one). The one rule for every text shown from outside."""
 
 from __future__ import annotations
 
+
 def printable(text: object, limit: int | None = None) -> str:
     """*text* as a string (at most *limit* characters of it) with every control character (tabs
     and newlines too) replaced by ``?``; None stays ``''``."""
