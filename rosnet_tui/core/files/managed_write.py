@@ -506,7 +506,7 @@ def atomic_write(path: Path, data: bytes, *, create_mode: int = 0o600, mode: int
     called between the fsync and the rename (crash tests stop a writer there).
     """
     folder = path.parent
-    dfd, roots_only = open_folder(folder)     # first: as root, no user's link on the way
+    dfd, roots_only = nofollow.open_folder(folder)     # first: as root, no user's link on the way
     tempfiles.sweep(folder, tempfiles.MANAGED_TMP, path.name)
     tmp = f".{path.name}.rosnet-tui.{os.getpid()}.{secrets.token_hex(4)}.tmp"
     try:
@@ -541,15 +541,6 @@ def atomic_write(path: Path, data: bytes, *, create_mode: int = 0o600, mode: int
         os.close(dfd)
 
 
-def open_folder(folder: Path) -> tuple[int, bool]:
-    """(descriptor of *folder*, whether only root may change it). Root reaches it without
-    following a link that is not root's own (:mod:`.nofollow`); a user's process as the path
-    says (its links are that user's own)."""
-    if os.geteuid() == 0:
-        return nofollow.walk(folder)
-    return os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC), True
-
-
 def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
                uid: int | None = None, gid: int | None = None,
                new_mode: int = 0o644, journal_dir: Path | None = None) -> WriteOutcome:
@@ -578,7 +569,7 @@ def write_file(path: Path, data: bytes | None, *, mode: int | None = None,
                                "folder a user may change: root does not write it")
     if data is None:
         if st is not None:
-            dfd, _ = open_folder(real.parent)
+            dfd, _ = nofollow.open_folder(real.parent)
             try:
                 os.unlink(real.name, dir_fd=dfd)
                 os.fsync(dfd)

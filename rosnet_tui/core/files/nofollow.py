@@ -18,8 +18,10 @@ root (the user writes it: ``rosnet-tui ros apply``).
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import stat
+import time
 from pathlib import Path
 
 from rosnet_tui.core.files.managed_text import ManagedFileError
@@ -155,3 +157,41 @@ def resolve(path: Path) -> tuple[Path, bool]:
         finally:
             os.close(fd)
     raise LinkRefusedError(f"{path}: too many links on the way")
+
+
+def open_folder(folder: Path) -> tuple[int, bool]:
+    """(descriptor of *folder*, whether only root may change it). Root reaches it without
+    following a link that is not root's own (:func:`walk`); a user's process as the path
+    says (its links are that user's own)."""
+    if os.geteuid() == 0:
+        return walk(folder)
+    return os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC), True
+
+
+def open_lock(folder: Path, name: str, owner: tuple[int, int] | None = None) -> int:
+    """A descriptor of the lock file *name* in *folder* (made 0600 when missing, never through
+    a link; handed to *owner* on its descriptor). The caller closes it."""
+    dfd, _ = open_folder(folder)
+    try:
+        fd = os.open(name, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600,
+                     dir_fd=dfd)
+    finally:
+        os.close(dfd)
+    if owner:
+        with contextlib.suppress(OSError):
+            os.fchown(fd, *owner)
+    return fd
+
+
+def flock_within(fd: int, wait_s: float, step_s: float = 0.02) -> bool:
+    """Take an exclusive flock on *fd*, trying for at most *wait_s* seconds; whether it was
+    taken."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(step_s)

@@ -14,11 +14,9 @@ what it creates back to that user.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import os
 import re
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -31,7 +29,6 @@ from rosnet_tui.core.files.managed_write import (
     LOCK_TIMEOUT_S,
     MAX_FILE_BYTES,
     atomic_write,
-    open_folder,
 )
 from rosnet_tui.core.files.regular_file import read_regular
 from rosnet_tui.core.jsonsafe import loads_bounded
@@ -145,27 +142,11 @@ def locked(state_dir: Path, owner: tuple[int, int] | None,
     """One writer at a time per state dir (bounded wait)."""
     make_private_dir(state_dir, owner)
     lock = state_dir / "lock"
-    dfd, _ = open_folder(state_dir)
+    fd = nofollow.open_lock(state_dir, "lock", owner)
     try:
-        fd = os.open("lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600,
-                     dir_fd=dfd)
-    finally:
-        os.close(dfd)
-    try:
-        if owner:
-            with contextlib.suppress(OSError):
-                os.fchown(fd, *owner)
-        deadline = time.monotonic() + timeout_s
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    raise ManagedFileError(
-                        f"another rosnet-tui is writing (lock {lock} held for {timeout_s:g} s); "
-                        "try again when it is done") from None
-                time.sleep(0.05)
+        if not nofollow.flock_within(fd, timeout_s, 0.05):
+            raise ManagedFileError(f"another rosnet-tui is writing (lock {lock} held for "
+                                   f"{timeout_s:g} s); try again when it is done")
         yield
     finally:
         os.close(fd)

@@ -12,14 +12,13 @@ import contextlib
 import fcntl
 import json
 import os
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from rosnet_tui.core.files.managed_write import open_folder
+from rosnet_tui.core.files import nofollow
 from rosnet_tui.core.files.regular_file import read_regular
 from rosnet_tui.core.files.undo_journal import make_private_dir
 from rosnet_tui.core.jsonsafe import loads_bounded
@@ -41,24 +40,10 @@ def locked(state_dir: Path, wait_s: float = 2.0) -> Iterator[None]:
         make_private_dir(state_dir, None)
     else:
         state_dir.mkdir(parents=True, exist_ok=True, mode=0o700)
-    dfd, _ = open_folder(state_dir)
-    try:
-        fd = os.open(".lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600,
-                     dir_fd=dfd)
-    finally:
-        os.close(dfd)
+    fd = nofollow.open_lock(state_dir, ".lock")
     got = False
     try:
-        deadline = time.monotonic() + wait_s
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                got = True
-                break
-            except BlockingIOError:
-                if time.monotonic() >= deadline:
-                    break
-                time.sleep(0.02)
+        got = nofollow.flock_within(fd, wait_s)
         yield
     finally:
         if got:

@@ -7,8 +7,8 @@ import fcntl
 import os
 from pathlib import Path
 
+from rosnet_tui.core.files import nofollow
 from rosnet_tui.core.files.managed_text import ManagedFileError
-from rosnet_tui.core.files.managed_write import open_folder
 from rosnet_tui.core.files.undo_journal import make_private_dir
 from rosnet_tui.core.saved.state import state_owner, sync_dir
 
@@ -26,18 +26,10 @@ class ServiceLock:
         owner = state_owner(self.path.parent.parent)
         try:   # as root: through descriptors, following no link of the user's
             make_private_dir(self.path.parent, owner)
-            dfd, _ = open_folder(self.path.parent)
-            try:
-                fd = os.open(self.path.name, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC,
-                             0o600, dir_fd=dfd)
-            finally:
-                os.close(dfd)
+            fd = nofollow.open_lock(self.path.parent, self.path.name, owner)
         except (OSError, ManagedFileError) as exc:   # a link refused, for one
             raise SyncError(f"cannot open the lock {self.path}: {exc} (is the service "
                             "running as another user?)") from None
-        if owner:
-            with contextlib.suppress(OSError):
-                os.fchown(fd, *owner)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
