@@ -29,7 +29,7 @@ TLS_MARK = "ROSNET_OUTSIDER "
 PASSWORD_METHODS = ("password", "keyboard-interactive")
 
 SSH_AUDIT_PROGRAM = r"""
-import errno, json, socket, sys
+import errno, json, socket, sys, threading
 MARK = "ROSNET_SSHAUDIT "
 host, port, t = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 users = sys.argv[4:]
@@ -39,6 +39,7 @@ except ImportError:
     print(MARK + json.dumps({"error": "no_paramiko", "python": sys.executable}))
     sys.exit(3)
 out = {"users": {}, "python": sys.executable}
+got = {}
 
 def tcp_kind(e):
     if isinstance(e, ConnectionRefusedError):
@@ -49,18 +50,15 @@ def tcp_kind(e):
         return "unreachable"
     return "error"
 
-for user in users:
+def audit(user):
+    # sshd refuses another user name on the same connection: one connection per user, all at
+    # once, so the audit costs the round trips of one
     sock = tr = None
     try:
         sock = socket.create_connection((host, port), timeout=t)
     except OSError as e:
-        if out.get("tcp") == "connected":     # an earlier user got through: this one's error
-            out["users"][user] = {"error": "%s: %s" % (type(e).__name__, e)}
-            continue
-        out["tcp"] = tcp_kind(e)    # no TCP at all: the other users would fare the same
-        out["tcp_error"] = "%s: %s" % (type(e).__name__, e)
-        break
-    out["tcp"] = "connected"
+        got[user] = ("tcp", e)
+        return
     try:
         sock.settimeout(t)
         tr = paramiko.Transport(sock)
@@ -69,22 +67,40 @@ for user in users:
         out["banner"] = tr.remote_version
         try:
             tr.auth_none(user)
-            out["users"][user] = {"methods": ["none"]}
+            got[user] = ("ok", {"methods": ["none"]})
         except paramiko.BadAuthenticationType as e:
-            out["users"][user] = {"methods": list(e.allowed_types)}
+            got[user] = ("ok", {"methods": list(e.allowed_types)})
     except Exception as e:
-        out["users"][user] = {"error": "%s: %s" % (type(e).__name__, e)}
+        got[user] = ("ok", {"error": "%s: %s" % (type(e).__name__, e)})
     finally:
         for x in (tr, sock):
             try:
                 x is not None and x.close()
             except Exception:
                 pass
+
+threads = [threading.Thread(target=audit, args=(u,), daemon=True) for u in users]
+for th in threads:
+    th.start()
+for th in threads:
+    th.join(4 * t + 1)
+reached = [u for u in users if got.get(u, ("",))[0] == "ok"]
+if reached:
+    out["tcp"] = "connected"
+for u in users:
+    kind, what = got.get(u, ("ok", {"error": "no answer within %.1f s" % (4 * t + 1)}))
+    if kind == "ok":
+        out["users"][u] = what
+    elif reached:          # another user got through: this one's own error
+        out["users"][u] = {"error": "%s: %s" % (type(what).__name__, what)}
+    elif "tcp" not in out:  # no TCP at all: the other users fared the same
+        out["tcp"] = tcp_kind(what)
+        out["tcp_error"] = "%s: %s" % (type(what).__name__, what)
 print(MARK + json.dumps(out))
 """
 
 _TLS_PROGRAM = r"""
-import base64, json, os, shutil, socket, ssl, sys, tempfile, time
+import base64, json, os, select, shutil, socket, ssl, sys, tempfile, time
 MARK = "ROSNET_OUTSIDER "
 host, port, t = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 wait = min(1.0, t)
@@ -127,23 +143,37 @@ def attempt(cert=None, key=None, ca=None, patient=True):
     out["tls"] = s.version()
     out["server_cert"] = base64.b64encode(s.getpeercert(True) or b"").decode()
     # TLS 1.3: the server's verdict on our certificate follows the handshake, half a round trip
-    # after our last message. Silence until the wait ends means the certificate was taken. A
-    # stranger (patient) waits the whole per-step timeout: its healthy answer is a refusal, which
-    # ends the wait at once, and a busy router's late refusal must not read as a session. The
-    # insider's healthy answer is silence: five handshake times (0.4 s to `wait`) are ample.
-    s.settimeout(t if patient else min(wait, max(0.4, 5 * (time.monotonic() - started))))
+    # after our last message: an alert refuses it; a session ticket, which a server sends only
+    # once it has taken the certificate (Zenoh's rustls sends two), accepts it. Either ends the
+    # wait at once, so a healthy verdict costs a round trip. A server that sends no ticket
+    # answers a taken certificate with silence: it reads as accepted when the wait ends. A
+    # stranger (patient) waits the whole per-step timeout (its healthy answer, a refusal, ends it
+    # at once, and a busy router's late refusal must not read as a session); the insider five
+    # handshake times (0.4 s to `wait`).
+    limit = t if patient else min(wait, max(0.4, 5 * (time.monotonic() - started)))
+    out.update(zip(("result", "detail"), verdict(s, limit)))
+    return out
+
+
+def verdict(s, limit):
+    end = time.monotonic() + limit
     try:
-        got = s.recv(1)
-        out["result"] = "accepted" if got else "closed"
-    except socket.timeout:
-        out["result"] = "accepted"
-    except ssl.SSLError as e:
-        out.update(result="alert", detail=str(e.reason or e)[:160])
-    except OSError as e:
-        out.update(result="closed", detail=str(e)[:160])
+        s.setblocking(False)
+        while True:
+            left = end - time.monotonic()
+            if not s.pending() and (left <= 0 or not select.select([s], [], [], left)[0]):
+                return "accepted", "no verdict within %.1f s: taken" % limit
+            try:
+                return ("accepted", "data") if s.recv(1) else ("closed", "the server hung up")
+            except ssl.SSLWantReadError:     # a handshake message, no data: a ticket?
+                if s.session is not None and s.session.has_ticket:
+                    return "accepted", "a session ticket came: the certificate was taken"
+            except ssl.SSLError as e:
+                return "alert", str(e.reason or e)[:160]
+            except OSError as e:
+                return "closed", str(e)[:160]
     finally:
         s.close()
-    return out
 
 import threading
 rep = {}
