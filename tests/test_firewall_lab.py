@@ -243,6 +243,31 @@ def test_the_technician_who_applies_it_over_ssh_and_the_lan_still_get_in(fw_lab,
         lab.call_in("robot", srv.close)
 
 
+def test_a_peer_at_a_new_address_is_refused_at_once_and_told_it_is_the_firewall(fw_lab,
+                                                                                 tmp_path):
+    """Issue 32: the laptop's table holds the robot's address; the robot's modem restarts with a
+    new one (no sync service running). The robot's connections to the laptop's forwarded ports
+    are refused at once (a reset, not a wait), and the robot's advice reads the refusal as the
+    laptop's firewall not knowing its new address, not as the laptop's forwarding."""
+    lab = fw_lab
+    r = fw(lab, "laptop", tmp_path / "fw", "firewall", "apply", "--yes", "--no-checks")
+    assert r.returncode == 0, r.stdout + r.stderr
+    new_ip = "203.0.113.78"
+    with lab.set_robot_wan(new_ip):
+        assert lab.call_in("robot", tcp_try_any, ADDR.LAPTOP_PUBLIC, 22, 10.0) == "refused"
+        got = check(lab, "robot", tmp_path, "isp", "linux")
+        assert got["isp.public_ip"]["data"]["public_ip"] == new_ip, explain(got)
+        ssh = got["linux.ssh"]
+        assert ssh["status"] == "fail", ssh
+        assert ssh["data"]["peers"]["sami"]["tcp"] == "refused", ssh["data"]
+        first = ssh["advice"][0]
+        assert first["rule"] == "linux.ssh.refused" and first["goto_step"] == "linux", first
+        assert "sami's peers-only firewall does not know this machine's address" in \
+            first["meaning"], first
+        assert first["actions"][0].startswith(f"Give sami's firewall this machine's address "
+                                              f"{new_ip}"), first["actions"]
+
+
 def test_firewall_undo_then_undo_loads_it_again_and_bad_input_exits_2(fw_lab, tmp_path):
     lab = fw_lab
     assert fw(lab, "robot", tmp_path, "firewall", "apply", "--yes", "--no-checks").returncode == 0

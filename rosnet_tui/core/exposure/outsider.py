@@ -33,6 +33,7 @@ import errno, json, socket, sys, threading
 MARK = "ROSNET_SSHAUDIT "
 host, port, t = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 users = sys.argv[4:]
+sys.modules["invoke"] = None    # paramiko's optional ssh_config helper: a third of its import
 try:
     import paramiko
 except ImportError:
