@@ -1,10 +1,12 @@
 """What an outsider sees: the programs and verdicts behind ``security.ssh_auth`` and
 ``security.outsider`` (no Textual, no check registry; the checks live in core/checks/security.py).
 
-- The SSH audit program runs on a peer with the interpreter of the rosnet-tui installed there
-  (it needs paramiko): it opens an SSH transport to this component's public address, asks
-  ``auth_none(user)`` and reports the methods the server offers (``BadAuthenticationType``'s
-  ``allowed_types``), the same answer any stranger on the internet gets. It never logs in and
+- The SSH audit program runs on a peer with the interpreter of the rosnet-tui installed there:
+  for each user at once, it opens an SSH connection to this component's public address, asks
+  for the ``none`` method and reports the methods the server offers, the same answer any
+  stranger on the internet gets. It asks with the standard library (core/peer/sshnone.py:
+  curve25519 and chacha20-poly1305, OpenSSH's defaults), so it costs its round trips; paramiko
+  (``auth_none``) only for a server that offers neither. It never logs in and
   sends no secret: it does not verify the host key because it authenticates nothing. When no
   TCP connection is made at all it says how it failed (``tcp``: refused, timeout, unreachable,
   error): nothing there to offer strangers anything, or no verdict.
@@ -22,25 +24,23 @@ import base64
 import datetime as dt
 import json
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
+
+from rosnet_tui.core.peer import sshnone
 
 SSH_MARK = "ROSNET_SSHAUDIT "
 TLS_MARK = "ROSNET_OUTSIDER "
 PASSWORD_METHODS = ("password", "keyboard-interactive")
 
-SSH_AUDIT_PROGRAM = r"""
+_AUDIT_MAIN = r"""
 import errno, json, socket, sys, threading
 MARK = "ROSNET_SSHAUDIT "
 host, port, t = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 users = sys.argv[4:]
-sys.modules["invoke"] = None    # paramiko's optional ssh_config helper: a third of its import
-try:
-    import paramiko
-except ImportError:
-    print(MARK + json.dumps({"error": "no_paramiko", "python": sys.executable}))
-    sys.exit(3)
 out = {"users": {}, "python": sys.executable}
 got = {}
+lock = threading.Lock()
 
 def tcp_kind(e):
     if isinstance(e, ConnectionRefusedError):
@@ -51,15 +51,14 @@ def tcp_kind(e):
         return "unreachable"
     return "error"
 
-def audit(user):
-    # sshd refuses another user name on the same connection: one connection per user, all at
-    # once, so the audit costs the round trips of one
-    sock = tr = None
-    try:
-        sock = socket.create_connection((host, port), timeout=t)
-    except OSError as e:
-        got[user] = ("tcp", e)
-        return
+def with_paramiko(user):
+    # a server that offers neither curve25519 nor chacha20-poly1305: paramiko asks instead
+    with lock:
+        if "invoke" not in sys.modules:
+            sys.modules["invoke"] = None   # paramiko's optional ssh_config helper, unused here
+        import paramiko
+    sock = socket.create_connection((host, port), timeout=t)
+    tr = None
     try:
         sock.settimeout(t)
         tr = paramiko.Transport(sock)
@@ -68,17 +67,39 @@ def audit(user):
         out["banner"] = tr.remote_version
         try:
             tr.auth_none(user)
-            got[user] = ("ok", {"methods": ["none"]})
+            return {"methods": ["none"], "via": "paramiko"}
         except paramiko.BadAuthenticationType as e:
-            got[user] = ("ok", {"methods": list(e.allowed_types)})
-    except Exception as e:
-        got[user] = ("ok", {"error": "%s: %s" % (type(e).__name__, e)})
+            return {"methods": list(e.allowed_types), "via": "paramiko"}
     finally:
         for x in (tr, sock):
             try:
                 x is not None and x.close()
             except Exception:
                 pass
+
+def audit(user):
+    # sshd refuses another user name on the same connection: one connection per user, all at
+    # once, so the audit costs the round trips of one
+    try:
+        sock = socket.create_connection((host, port), timeout=t)
+    except OSError as e:
+        got[user] = ("tcp", e)
+        return
+    try:
+        sock.settimeout(t)
+        try:
+            methods, out["banner"] = none_methods(sock, user)
+            got[user] = ("ok", {"methods": methods, "via": "stdlib"})
+        except Unsupported:
+            sock.close()
+            got[user] = ("ok", with_paramiko(user))
+    except ImportError:
+        got[user] = ("ok", {"error": "no_paramiko: the server offers neither curve25519 nor "
+                                     "chacha20-poly1305, and paramiko is not installed"})
+    except Exception as e:
+        got[user] = ("ok", {"error": "%s: %s" % (type(e).__name__, e)})
+    finally:
+        sock.close()
 
 threads = [threading.Thread(target=audit, args=(u,), daemon=True) for u in users]
 for th in threads:
@@ -99,6 +120,9 @@ for u in users:
         out["tcp_error"] = "%s: %s" % (type(what).__name__, what)
 print(MARK + json.dumps(out))
 """
+SSH_AUDIT_PROGRAM = Path(sshnone.__file__).read_text() + _AUDIT_MAIN
+"""The SSH audit (fed on stdin): core/peer/sshnone.py asks sshd with the standard library;
+paramiko only for a server that offers neither curve25519 nor chacha20-poly1305."""
 
 _TLS_PROGRAM = r"""
 import base64, json, os, select, shutil, socket, ssl, sys, tempfile, time
