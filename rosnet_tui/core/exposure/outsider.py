@@ -90,7 +90,7 @@ def audit(user):
         try:
             methods, out["banner"] = none_methods(sock, user)
             got[user] = ("ok", {"methods": methods, "via": "stdlib"})
-        except Unsupported:
+        except (Unsupported, ValueError, ConnectionError):   # or a server it misreads
             sock.close()
             got[user] = ("ok", with_paramiko(user))
     except ImportError:

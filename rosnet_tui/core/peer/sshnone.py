@@ -149,7 +149,7 @@ class Conn:
     def recv_msg(self):
         while True:
             m = self.recv()
-            if m[:1] in (b"\x02", b"\x04", b"\x35"):   # ignore, debug, banner
+            if m[:1] in (b"\x02", b"\x04", b"\x07", b"\x35"):   # ignore, debug, ext-info, banner
                 continue
             if m[:1] == b"\x01":
                 r = Reader(m[1:]); r.u32()
@@ -212,6 +212,4 @@ def none_methods(sock, user, version=b"SSH-2.0-rosnet_tui_audit"):
         if m[:1] == b"\x33":
             methods = Reader(m[1:]).s().decode(errors="replace").split(",")
             return [x for x in methods if x], v_s.decode(errors="replace")
-        if m[:1] == b"\x07":     # EXT_INFO
-            continue
         raise ValueError(f"unexpected SSH message {m[0]}")
