@@ -4,12 +4,13 @@
 - The SSH audit program runs on a peer with the interpreter of the rosnet-tui installed there:
   for each user at once, it opens an SSH connection to this component's public address, asks
   for the ``none`` method and reports the methods the server offers, the same answer any
-  stranger on the internet gets. It asks with the standard library (core/peer/sshnone.py:
-  curve25519 and chacha20-poly1305, OpenSSH's defaults), so it costs its round trips; paramiko
-  (``auth_none``) only for a server that offers neither. It never logs in and
-  sends no secret: it does not verify the host key because it authenticates nothing. When no
-  TCP connection is made at all it says how it failed (``tcp``: refused, timeout, unreachable,
-  error): nothing there to offer strangers anything, or no verdict.
+  stranger on the internet gets. It asks with cryptography's primitives (core/peer/sshnone.py:
+  curve25519 and chacha20-poly1305, OpenSSH's defaults), so it costs its round trips, not
+  paramiko's import; paramiko (``auth_none``) only for a server that offers neither, or a reply
+  that client misreads. It never logs in and sends no secret: it does not verify the host key
+  because it authenticates nothing. When no TCP connection is made at all it says how it failed
+  (``tcp``: refused, timeout, unreachable, error): nothing there to offer strangers anything, or
+  no verdict.
 - The TLS probe (standard library only) dials the master's Zenoh port with no client
   certificate, with a certificate from a throwaway CA made here (the "foreign" one, shipped in
   the program text on stdin; the probe writes it to a private temporary folder and removes it),
@@ -89,13 +90,12 @@ def audit(user):
         sock.settimeout(t)
         try:
             methods, out["banner"] = none_methods(sock, user)
-            got[user] = ("ok", {"methods": methods, "via": "stdlib"})
+            got[user] = ("ok", {"methods": methods, "via": "sshnone"})
         except (Unsupported, ValueError, ConnectionError):   # or a server it misreads
             sock.close()
             got[user] = ("ok", with_paramiko(user))
-    except ImportError:
-        got[user] = ("ok", {"error": "no_paramiko: the server offers neither curve25519 nor "
-                                     "chacha20-poly1305, and paramiko is not installed"})
+    except ImportError as e:   # cryptography, or paramiko for a server sshnone cannot ask
+        got[user] = ("ok", {"error": "no_module: %s" % e})
     except Exception as e:
         got[user] = ("ok", {"error": "%s: %s" % (type(e).__name__, e)})
     finally:
@@ -121,7 +121,7 @@ for u in users:
 print(MARK + json.dumps(out))
 """
 SSH_AUDIT_PROGRAM = Path(sshnone.__file__).read_text() + _AUDIT_MAIN
-"""The SSH audit (fed on stdin): core/peer/sshnone.py asks sshd with the standard library;
+"""The SSH audit (fed on stdin): core/peer/sshnone.py asks sshd with cryptography's primitives;
 paramiko only for a server that offers neither curve25519 nor chacha20-poly1305."""
 
 _TLS_PROGRAM = r"""

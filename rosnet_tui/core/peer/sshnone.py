@@ -1,15 +1,16 @@
-"""What sshd offers a user who presents no credentials (SSH ``none`` authentication), with the
-standard library alone: the SSH audit's program (core/exposure/outsider.py) runs this on a peer
-first, so the audit costs its round trips instead of an interpreter importing paramiko.
+"""What sshd offers a user who presents no credentials (SSH ``none`` authentication), with
+``cryptography``'s primitives: the SSH audit's program (core/exposure/outsider.py) runs this on a
+peer first, under the interpreter of the rosnet-tui installed there, so the audit costs its round
+trips and cryptography's import instead of paramiko's.
 
-It speaks only what OpenSSH offers by default: key exchange curve25519-sha256 (X25519 in pure
-Python, RFC 7748) and the cipher chacha20-poly1305@openssh.com (ChaCha20 and Poly1305 in pure
-Python, OpenSSH's PROTOCOL.chacha20poly1305). A server offering neither raises
+It speaks only what OpenSSH offers by default: key exchange curve25519-sha256 (X25519) and the
+cipher chacha20-poly1305@openssh.com (ChaCha20 and Poly1305 as OpenSSH's
+PROTOCOL.chacha20poly1305 puts them together). A server offering neither raises
 :class:`Unsupported` (the program then asks with paramiko). It authenticates nothing and sends no
 secret, so it does not verify the server's host key: the answer is what any stranger gets.
-Single file, Python 3.8+, no imports from rosnet_tui (fed to a peer's interpreter as source).
+Single file, no imports from rosnet_tui (fed to a peer's interpreter as source); cryptography is
+imported when a connection is asked, so importing this module for its path costs nothing.
 """
-# ruff: noqa: E702, B905
 
 from __future__ import annotations
 
@@ -21,81 +22,65 @@ import struct
 class Unsupported(Exception):
     """The server offers neither curve25519 nor chacha20-poly1305."""
 
-P = 2 ** 255 - 19
 
-def x25519(k, u):
-    k = bytearray(k); k[0] &= 248; k[31] &= 127; k[31] |= 64
-    k = int.from_bytes(k, "little"); x1 = int.from_bytes(u, "little") & ((1 << 255) - 1)
-    x2, z2, x3, z3, swap = 1, 0, x1, 1, 0
-    for i in range(254, -1, -1):
-        b = (k >> i) & 1
-        if swap ^ b:
-            x2, x3, z2, z3 = x3, x2, z3, z2
-        swap = b
-        a, bb = x2 + z2, x2 - z2
-        aa, b2 = a * a % P, bb * bb % P
-        e = aa - b2
-        c, d = x3 + z3, x3 - z3
-        da, cb = d * a % P, c * bb % P
-        x3, z3 = (da + cb) ** 2 % P, x1 * (da - cb) ** 2 % P
-        x2, z2 = aa * b2 % P, e * (aa + 121665 * e) % P
-    if swap:
-        x2, z2 = x3, z3
-    return (x2 * pow(z2, P - 2, P) % P).to_bytes(32, "little")
+def chacha20(key, seq, data, counter=0):
+    """*data* XOR OpenSSH's ChaCha20 stream: a 64-bit block counter and the packet's 64-bit
+    sequence number as nonce. cryptography's 16-byte nonce is the cipher's last four state words
+    (little-endian): the counter's eight bytes, then the sequence number's (big-endian, as sent)."""
+    from cryptography.hazmat.primitives.ciphers import Cipher, algorithms
 
-M32 = 0xffffffff
+    nonce = struct.pack("<Q", counter) + struct.pack(">Q", seq)
+    return Cipher(algorithms.ChaCha20(key, nonce), mode=None).encryptor().update(data)
 
-def _block(key, counter, nonce):
-    s = [0x61707865, 0x3320646e, 0x79622d32, 0x6b206574, *struct.unpack("<8I", key),
-         counter & M32, counter >> 32, *struct.unpack("<2I", nonce)]
-    x = s[:]
-    def q(a, b, c, d):
-        x[a] = (x[a] + x[b]) & M32; x[d] ^= x[a]; x[d] = ((x[d] << 16) | (x[d] >> 16)) & M32
-        x[c] = (x[c] + x[d]) & M32; x[b] ^= x[c]; x[b] = ((x[b] << 12) | (x[b] >> 20)) & M32
-        x[a] = (x[a] + x[b]) & M32; x[d] ^= x[a]; x[d] = ((x[d] << 8) | (x[d] >> 24)) & M32
-        x[c] = (x[c] + x[d]) & M32; x[b] ^= x[c]; x[b] = ((x[b] << 7) | (x[b] >> 25)) & M32
-    for _ in range(10):
-        q(0, 4, 8, 12); q(1, 5, 9, 13); q(2, 6, 10, 14); q(3, 7, 11, 15)
-        q(0, 5, 10, 15); q(1, 6, 11, 12); q(2, 7, 8, 13); q(3, 4, 9, 14)
-    return struct.pack("<16I", *((a + b) & M32 for a, b in zip(x, s)))
 
-def chacha(key, nonce, data, counter=0):
-    out = bytearray()
-    for i in range(0, len(data), 64):
-        ks = _block(key, counter + i // 64, nonce)
-        out += bytes(a ^ b for a, b in zip(data[i:i + 64], ks))
-    return bytes(out)
+def poly1305_key(main, seq):
+    """The packet's Poly1305 key: the first 32 bytes of the main key's stream at block 0."""
+    return chacha20(main, seq, bytes(32))
 
-def poly1305(key, msg):
-    r = int.from_bytes(key[:16], "little") & 0x0ffffffc0ffffffc0ffffffc0fffffff
-    s, p, acc = int.from_bytes(key[16:], "little"), (1 << 130) - 5, 0
-    for i in range(0, len(msg), 16):
-        acc = (acc + int.from_bytes(msg[i:i + 16] + b"\x01", "little")) * r % p
-    return ((acc + s) & ((1 << 128) - 1)).to_bytes(16, "little")
 
 def sstr(b):
     return struct.pack(">I", len(b)) + b
+
 
 def mpint(n):
     b = n.to_bytes((n.bit_length() + 8) // 8, "big") if n else b""
     return sstr(b)
 
+
+def padding(n):
+    """The random padding's length for a packet of *n* bytes before it (4 to 11 bytes, up to a
+    multiple of 8)."""
+    pad = 8 - n % 8
+    return pad + 8 if pad < 4 else pad
+
+
 class Reader:
     def __init__(self, b):
-        self.b, self.i = b, 0
+        self.b = b
+        self.i = 0
+
     def take(self, n):
-        v = self.b[self.i:self.i + n]; self.i += n
+        v = self.b[self.i:self.i + n]
+        self.i += n
         if len(v) < n:
             raise ValueError("short message")
         return v
+
     def u32(self):
         return struct.unpack(">I", self.take(4))[0]
+
     def s(self):
         return self.take(self.u32())
 
+
 class Conn:
     def __init__(self, sock):
-        self.sock, self.buf, self.seq_in, self.seq_out, self.keys = sock, b"", 0, 0, None
+        self.sock = sock
+        self.buf = b""
+        self.seq_in = 0
+        self.seq_out = 0
+        self.keys = None   # ((main, header) to the server, (main, header) from it)
+
     def recv_exact(self, n):
         while len(self.buf) < n:
             d = self.sock.recv(65536)
@@ -104,6 +89,7 @@ class Conn:
             self.buf += d
         v, self.buf = self.buf[:n], self.buf[n:]
         return v
+
     def line(self):
         while b"\n" not in self.buf:
             d = self.sock.recv(65536)
@@ -112,56 +98,75 @@ class Conn:
             self.buf += d
         v, _, self.buf = self.buf.partition(b"\n")
         return v.rstrip(b"\r")
+
     def send(self, payload):
-        nonce = struct.pack(">Q", self.seq_out); self.seq_out += 1
+        seq = self.seq_out
+        self.seq_out += 1
         if self.keys is None:
-            pad = 8 - (5 + len(payload)) % 8
-            pad += 8 if pad < 4 else 0
+            pad = padding(5 + len(payload))
             self.sock.sendall(struct.pack(">IB", 1 + len(payload) + pad, pad) + payload
                               + os.urandom(pad))
             return
+        from cryptography.hazmat.primitives.poly1305 import Poly1305
+
         main, header = self.keys[0]
-        pad = 8 - (1 + len(payload)) % 8
-        pad += 8 if pad < 4 else 0
+        pad = padding(1 + len(payload))
         body = struct.pack(">B", pad) + payload + os.urandom(pad)
-        elen = chacha(header, nonce, struct.pack(">I", len(body)))
-        ebody = chacha(main, nonce, body, 1)
-        tag = poly1305(chacha(main, nonce, bytes(32)), elen + ebody)
+        elen = chacha20(header, seq, struct.pack(">I", len(body)))
+        ebody = chacha20(main, seq, body, 1)
+        tag = Poly1305.generate_tag(poly1305_key(main, seq), elen + ebody)
         self.sock.sendall(elen + ebody + tag)
+
     def recv(self):
-        nonce = struct.pack(">Q", self.seq_in); self.seq_in += 1
+        seq = self.seq_in
+        self.seq_in += 1
         if self.keys is None:
             n = struct.unpack(">I", self.recv_exact(4))[0]
             if n > 65536:
                 raise ValueError("packet too long")
             body = self.recv_exact(n)
         else:
+            from cryptography.exceptions import InvalidSignature
+            from cryptography.hazmat.primitives.poly1305 import Poly1305
+
             main, header = self.keys[1]
             elen = self.recv_exact(4)
-            n = struct.unpack(">I", chacha(header, nonce, elen))[0]
+            n = struct.unpack(">I", chacha20(header, seq, elen))[0]
             if n > 65536:
                 raise ValueError("packet too long")
-            ebody, tag = self.recv_exact(n), self.recv_exact(16)
-            if poly1305(chacha(main, nonce, bytes(32)), elen + ebody) != tag:
-                raise ValueError("bad MAC")
-            body = chacha(main, nonce, ebody, 1)
+            ebody = self.recv_exact(n)
+            tag = self.recv_exact(16)
+            try:
+                Poly1305.verify_tag(poly1305_key(main, seq), elen + ebody, tag)
+            except InvalidSignature:
+                raise ValueError("bad MAC") from None
+            body = chacha20(main, seq, ebody, 1)
         return body[1:len(body) - body[0]]
+
     def recv_msg(self):
         while True:
             m = self.recv()
             if m[:1] in (b"\x02", b"\x04", b"\x07", b"\x35"):   # ignore, debug, ext-info, banner
                 continue
             if m[:1] == b"\x01":
-                r = Reader(m[1:]); r.u32()
+                r = Reader(m[1:])
+                r.u32()
                 raise ConnectionError("the server disconnected: " + r.s().decode(errors="replace"))
             return m
+
 
 KEX = (b"curve25519-sha256", b"curve25519-sha256@libssh.org")
 CIPHER = b"chacha20-poly1305@openssh.com"
 
+
 def none_methods(sock, user, version=b"SSH-2.0-rosnet_tui_audit"):
     """(the methods sshd offers *user* when asked with "none", the server's version line) on
     the connected *sock*; raises Unsupported (see the module), ConnectionError or ValueError."""
+    from cryptography.hazmat.primitives.asymmetric.x25519 import (
+        X25519PrivateKey,
+        X25519PublicKey,
+    )
+
     c = Conn(sock)
     sock.sendall(version + b"\r\n")
     v_s = c.line()
@@ -181,25 +186,28 @@ def none_methods(sock, user, version=b"SSH-2.0-rosnet_tui_audit"):
     kexalg = next((k for k in KEX if k in kex), None)
     if kexalg is None or CIPHER not in enc_cs or CIPHER not in enc_sc:
         raise Unsupported(f"kex {b','.join(kex).decode()}; ciphers {b','.join(enc_cs).decode()}")
-    priv = os.urandom(32)
-    q_c = x25519(priv, (9).to_bytes(32, "little"))
+    priv = X25519PrivateKey.generate()
+    q_c = priv.public_key().public_bytes_raw()   # public_bytes() would import serialization: 25 ms
     c.send(b"\x1e" + sstr(q_c))
     reply = c.recv_msg()
     if reply[:1] != b"\x1f":
         raise ValueError("no KEX reply")
     r = Reader(reply[1:])
     k_s, q_s = r.s(), r.s()
-    k = int.from_bytes(x25519(priv, q_s), "big")
+    # a bad point or an all-zero secret raises ValueError, as any misread reply does
+    k = int.from_bytes(priv.exchange(X25519PublicKey.from_public_bytes(q_s)), "big")
     h = hashlib.sha256(sstr(version) + sstr(v_s) + sstr(i_c) + sstr(i_s) + sstr(k_s) + sstr(q_c)
                        + sstr(q_s) + mpint(k)).digest()
     if c.recv_msg()[:1] != b"\x15":
         raise ValueError("no NEWKEYS from the server")
     c.send(b"\x15")
+
     def key(letter):
+        # 64 bytes: the main key (payload, Poly1305 key), then the header key (packet length)
         k1 = hashlib.sha256(mpint(k) + h + letter + h).digest()
         k2 = hashlib.sha256(mpint(k) + h + k1).digest()
-        kk = k1 + k2
-        return kk[:32], kk[32:]
+        return k1, k2
+
     c.keys = (key(b"C"), key(b"D"))
     c.send(b"\x05" + sstr(b"ssh-userauth"))
     if c.recv_msg()[:1] != b"\x06":
