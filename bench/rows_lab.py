@@ -54,11 +54,30 @@ def rosnet_check(lab: Any, host: str, state: Path, *extra: str, config: Path | N
                          f"{r.stderr[-500:]}") from exc
     margins = [(c["duration_s"] - base, c["id"], c["duration_s"], base) for c in checks]
     worst = max(margins)
+    slowest = max(checks, key=lambda c: c["duration_s"])
     return {"wall_s": wall, "exit": r.returncode,
             "all_pass": r.returncode == 0 and all(c["status"] == "pass" for c in checks),
             "statuses": {c["id"]: c["status"] for c in checks},
+            "durations": {c["id"]: c["duration_s"] for c in checks},
+            "waits": waits_seen(checks),
             "worst_margin_s": worst[0], "worst_check": f"{worst[1]} {worst[2]:.2f}/{worst[3]:g} s",
-            "slowest_check_s": max(c["duration_s"] for c in checks)}
+            "slowest_check_s": slowest["duration_s"], "slowest_check": slowest["id"]}
+
+
+def waits_seen(checks: list[dict[str, Any]]) -> list[str]:
+    """The silences security.outsider waited out in a healthy run (issue 32): a port the port
+    checker judged only when its own connect timeout ran out (the lab's checker waits 2 s), and
+    a TLS verdict read from silence instead of an answer."""
+    out = []
+    for c in checks:
+        if c["id"] != "security.outsider":
+            continue
+        d = c.get("data") or {}
+        out += [f"port checker, port {p}: {s:.2f} s" for p, s in
+                (d.get("outsider_s") or {}).items() if s is not None and s >= 1.9]
+        out += [f"TLS {k}: {a.get('detail')}" for k, a in (d.get("attempts") or {}).items()
+                if str(a.get("detail") or "").startswith("no verdict within")]
+    return out
 
 
 # =============================================================================== row 2
@@ -103,8 +122,8 @@ def row2_full(lab: Any, opts: Options, state: Path) -> RowResult:
     ln = Line(2, "Full verification (wall time)", "s",
               [r["wall_s"] for r in app_runs], [r["wall_s"] for r in base_runs],
               baseline="manual tests with standard tools, one after another (script)",
-              goal="<= 0.3x")
-    goal_ratio(ln, 0.3)
+              goal="<= 0.15x")
+    goal_ratio(ln, 0.15)
     app_ok = all(r["all_pass"] for r in app_runs)
     base_ok = all(r["all_pass"] for r in base_runs)
     n_checks = len(app_runs[0]["statuses"]) if app_runs else 0
@@ -112,8 +131,9 @@ def row2_full(lab: Any, opts: Options, state: Path) -> RowResult:
     ln.note = (f"all steps, both ways, from the laptop: {n_checks} checks vs {n_tests} manual "
                f"tests; same verdict (all good): "
                f"{'yes' if app_ok and base_ok else 'NO'}; slowest check "
-               f"{median([r['slowest_check_s'] for r in app_runs]):.2f} s; rosnet-tui "
-               "byte-compiled, as installed")
+               f"{median([r['slowest_check_s'] for r in app_runs]):.2f} s; "
+               f"{_waits_note(app_runs)}; with the peers-only firewall loaded on both, as "
+               "the product sets ROS 1 up; rosnet-tui byte-compiled, as installed")
     if not (app_ok and base_ok):
         ln.status = "error"
         bad_app = sorted({k for r in app_runs for k, v in r["statuses"].items() if v != "pass"})
@@ -138,6 +158,43 @@ def row2_full(lab: Any, opts: Options, state: Path) -> RowResult:
     res.details = {"app_runs": app_runs, "base_runs": base_runs, "master_runs": master_runs,
                    **tls_details}
     return res
+
+
+def _waits_note(runs: list[dict[str, Any]]) -> str:
+    n = sum(len(r["waits"]) for r in runs)
+    return f"silences waited out: {n} in {len(runs)} runs" + (
+        f" ({'; '.join(sorted({w for r in runs for w in r['waits']}))})" if n else "")
+
+
+def every_seat(row: int, measure: str, seats: dict[str, list[dict[str, Any]]], limit: float,
+               what: str) -> Line:
+    """A line for every seat's full verification: the slowest seat's runs against *limit*
+    seconds (its median), each seat's median and slowest check in the note."""
+    def ok(r: dict[str, Any]) -> bool:       # skips: checks that do not apply to that seat
+        return not [k for k, v in r["statuses"].items() if v not in ("pass", "skip")]
+
+    meds = {h: median([r["wall_s"] for r in rs]) or 0.0 for h, rs in seats.items()}
+    worst = max(meds, key=lambda h: meds[h]) if meds else ""
+    ln = Line(row, measure, "s", [r["wall_s"] for r in seats.get(worst, [])], [],
+              goal=f"<= {limit:g} s")
+    ln.met = bool(meds) and max(meds.values()) <= limit
+    good = all(ok(r) for rs in seats.values() for r in rs)
+    runs = [r for rs in seats.values() for r in rs]
+    ln.note = (f"{what}; the slowest seat shown ({worst}); each seat: " + ", ".join(
+        f"{h} {meds[h]:.2f} s (slowest check "
+        f"{_median_run(rs)['slowest_check']} {_median_run(rs)['slowest_check_s']:.2f} s)"
+        for h, rs in seats.items()) + f"; every check passing: {'yes' if good else 'NO'}; "
+        + _waits_note(runs))
+    if not good:
+        ln.status = "error"
+        ln.note += "; not passing: " + ", ".join(sorted({
+            f"{h}: {k}" for h, rs in seats.items() for r in rs
+            for k, v in r["statuses"].items() if v not in ("pass", "skip")}))
+    return ln
+
+
+def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    return sorted(runs, key=lambda r: r["wall_s"])[len(runs) // 2]
 
 
 def _row2_tls(lab: Any, opts: Options, state: Path) -> tuple[list[Line], dict[str, Any]]:
@@ -191,8 +248,46 @@ def _row2_tls(lab: Any, opts: Options, state: Path) -> tuple[list[Line], dict[st
     if not master_ok:
         seat.status = "error"
         seat.note += f"; not all good: {sorted({x for r in runs['master'] for x in bad(r)})}"
-    return [line, seat], {"ros2_mtls_runs": runs["mtls"], "ros2_none_runs": runs["none"],
-                          "ros2_master_runs": runs["master"]}
+    seats = every_seat(2, "ROS 2 with mutual TLS, two sites: every seat's full verification "
+                          "(wall time)", {"laptop (member)": runs["mtls"],
+                                          "robot (master)": runs["master"]}, 0.9,
+                       "ROS 2 as users run it (mutual TLS, the default), all steps both ways")
+    return [line, seat, seats], {"ros2_mtls_runs": runs["mtls"], "ros2_none_runs": runs["none"],
+                                 "ros2_master_runs": runs["master"]}
+
+
+def row2_three_sites(opts: Options, state: Path, log: Callable[[str], None]) -> RowResult:
+    """ROS 2 with mutual TLS on the three-site lab (tests/lab/fleet.py: a master, two members):
+    every seat's full verification."""
+    from tests.lab import LabUnavailable
+    from tests.lab.fleet import Fleet
+    from tests.lab.fleet_ros2 import FleetRos2
+
+    res = RowResult(2, TITLES[2])
+    fleet = Fleet(3)
+    try:
+        log("row 2: building the three-site lab")
+        try:
+            fleet.build()
+        except LabUnavailable as exc:
+            res.status, res.reason = "skipped", str(exc)
+            return res
+        seats: dict[str, list[dict[str, Any]]] = {h: [] for h in fleet.COMPUTERS}
+        with FleetRos2(fleet) as w:
+            for i in range(opts.reps):
+                for h in (fleet.COMPUTERS if i % 2 == 0 else list(reversed(fleet.COMPUTERS))):
+                    seats[h].append(rosnet_check(fleet, h, state / f"three-{h}",
+                                                 config=w.config_path(h), env=w.env(h)))
+        names = {h: f"{h} ({'master' if h == fleet.master else 'member'})" for h in seats}
+        res.lines.append(every_seat(2, "ROS 2 with mutual TLS, three sites: every seat's full "
+                                       "verification (wall time)",
+                                    {names[h]: rs for h, rs in seats.items()}, 1.1,
+                                    "a master and two members (tests/lab/fleet.py), all steps "
+                                    "both ways"))
+        res.details = {"three_site_runs": seats}
+    finally:
+        fleet.destroy()
+    return res
 
 
 # =============================================================================== row 3
@@ -380,6 +475,27 @@ def run_lab_rows(rows: list[int], opts: Options, log: Callable[[str], None]) -> 
                                 reason=f"{type(exc).__name__}: {exc}")
             res.seconds = time.monotonic() - t0
             out.append(res)
+        if 2 in wanted and opts.quick:
+            next(x for x in out if x.row == 2).lines.append(Line(
+                2, "ROS 2 with mutual TLS, three sites: every seat's full verification (wall "
+                   "time)", "s", status="skipped", note="not with --quick (it builds a "
+                                                         "three-site lab)"))
+        elif 2 in wanted:   # the three-site lab: its own namespaces, built after the two-site
+            lab.destroy()
+            t0 = time.monotonic()
+            try:
+                three = row2_three_sites(opts, state, log)
+            except Exception as exc:
+                three = RowResult(2, TITLES[2], status="error",
+                                  reason=f"{type(exc).__name__}: {exc}")
+            row2 = next(x for x in out if x.row == 2)
+            row2.lines += three.lines
+            row2.details.update(three.details)
+            row2.seconds += time.monotonic() - t0
+            if three.status != "measured":
+                row2.lines.append(Line(2, "ROS 2 with mutual TLS, three sites: every seat's "
+                                          "full verification (wall time)", "s",
+                                       status=three.status, note=three.reason))
     finally:
         _COMPILED = None
         lab.destroy()

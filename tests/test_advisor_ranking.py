@@ -240,3 +240,41 @@ def test_peer_cannot_register_follows_the_port_test():
     closed_port(r, "timeout")                          # the test port closed (Table 1)
     f = next(f for f in run(r, s) if f.rule == "ros.master.peer_cannot_register")
     assert f.goto_step == "router" and f.actions[0].startswith("On turtlebot's modem")
+
+
+# --------------------------------------------------------------------------- a peer's firewall
+def test_refused_by_the_masters_firewall_after_a_new_address_names_that_firewall():
+    """Issue 32: ROS 1's peers-only firewall answers an address it does not hold with a TCP
+    reset. The laptop's public IP changed (isp.public_ip measures 198.51.100.77; the settings,
+    which the robot's table follows, say 198.51.100.2): SSH and the master's port refused at the
+    robot's address read as that firewall's doing, not as a forwarding fault."""
+    r = healthy_laptop()
+    r["isp.public_ip"].data.update(public_ip="198.51.100.77")
+    ssh_shut_out(r, "refused", address="203.0.113.2")
+    put(r, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp="refused")
+    fs = run(r)
+    first = first_failure(fs)
+    assert first.rule == "linux.ssh.refused" and first.goto_step == "linux", ids(fs)
+    assert ("most likely turtlebot's peers-only firewall does not know this machine's address "
+            "yet") in first.meaning
+    assert "this machine's public IP is 198.51.100.77 now, not 198.51.100.2" in first.meaning
+    assert first.actions[0].startswith("Give turtlebot's firewall this machine's address "
+                                       "198.51.100.77"), first.actions
+    master = next(f for f in fs if f.rule == "ros.master.unreachable")
+    assert master.actions[0].startswith("Give turtlebot's firewall"), master.actions
+    # The same refusals with the address the settings give: the modem first, as before.
+    r = healthy_laptop()
+    ssh_shut_out(r, "refused", address="203.0.113.2")
+    put(r, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp="refused")
+    first = first_failure(run(r))
+    assert first.actions[0].startswith("Check that turtlebot's modem forwards TCP 22")
+    # No peers-only firewall (ROS 1 with security "none"): never named.
+    r = healthy_laptop()
+    r["isp.public_ip"].data.update(public_ip="198.51.100.77")
+    ssh_shut_out(r, "refused", address="203.0.113.2")
+    put(r, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp="refused")
+    s = laptop_settings()
+    s.ros.security = "none"
+    fs = run(r, s)
+    assert not any("firewall does not know" in f.meaning or "Give turtlebot's firewall" in a
+                   for f in fs for a in f.actions), [f.actions for f in fs]

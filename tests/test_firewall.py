@@ -15,11 +15,17 @@ import pytest
 
 from rosnet_tui.core.addresses import is_lan_network
 from rosnet_tui.core.advisor import advise
-from rosnet_tui.core.config.settings_model import Peer, RosSettings, Settings, ThisComponent
+from rosnet_tui.core.config.settings_model import (
+    Peer,
+    RosSettings,
+    Settings,
+    SettingsError,
+    ThisComponent,
+)
 from rosnet_tui.core.exposure import firewall as fw
 from rosnet_tui.core.net import netinfo
 from rosnet_tui.core.results import CheckResult, Status
-from rosnet_tui.core.saved.settings import render_settings
+from rosnet_tui.core.saved.settings import parse_settings, render_settings
 from rosnet_tui.core.ssh import origin
 from tests.prompts import run_answering
 
@@ -50,7 +56,10 @@ def test_the_ruleset_lets_only_peers_loopback_and_replies_reach_the_forwarded_po
     assert "priority filter - 10; policy accept;" in text
     assert 'iif "lo" accept' in text and "ct state established,related accept" in text
     assert "tcp dport { 22, 1024-65000 } ip saddr @peers4 accept" in text
-    assert text.rstrip().endswith("tcp dport { 22, 1024-65000 } drop\n\t}\n}")
+    # Strangers: a reset (bounded: a scan beyond the rate meets silence), then the drop.
+    assert text.rstrip().endswith(
+        "tcp dport { 22, 1024-65000 } limit rate 20/second burst 40 packets reject with tcp "
+        "reset\n\t\ttcp dport { 22, 1024-65000 } drop\n\t}\n}")
     assert fw.only_our_table(text)
     # A master's port outside the range is forwarded too, so it is guarded too.
     assert fw.forwarded_ports(robot(port=80)) == ["22", "1024-65000", "80"]
@@ -88,7 +97,9 @@ def test_every_accept_rule_of_the_ruleset_exactly():
         "ip saddr . tcp dport @session4 accept",            # the session: its sshd port only
         "ip6 saddr . tcp dport @session6 accept",
         "tcp dport 12345 accept",                           # probe.port, for router.port_open
-        "tcp dport { 22, 1024-65000 } drop"]
+        "tcp dport { 22, 1024-65000 } limit rate 20/second burst 40 packets reject with tcp "
+        "reset",                                            # strangers: refused at once
+        "tcp dport { 22, 1024-65000 } drop"]                # beyond the rate: silence
     assert _set(text, "peers4") == ["type ipv4_addr", "elements = { 198.51.100.2 }"]
     assert _set(text, "peers6") == ["type ipv6_addr", "elements = { 2001:db8::7 }"]
     assert _set(text, "lan4") == ["type ipv4_addr", "flags interval",
@@ -107,6 +118,27 @@ def test_every_accept_rule_of_the_ruleset_exactly():
     empty = fw.render_ruleset(s, fw.Admission(peers=["198.51.100.2"]))
     assert _set(empty, "session4") == ["type ipv4_addr . inet_service"]
     assert _set(empty, "allow4") == ["type ipv4_addr", "flags interval"]
+
+
+def test_the_probe_port_alone_is_open_to_anyone_and_never_the_masters_port():
+    """Issue 36: the one port the table opens to strangers is probe.port (router.port_open's
+    listener), by a rule of its own; the master's port is never it: settings naming the
+    same port for both are refused (the CLI exits 2, test_the_cli_refuses_bad_input_with_exit_2)."""
+    s = robot()
+    s.probe.port = 23456
+    text = fw.render_ruleset(s, fw.Admission(peers=["198.51.100.2"]))
+    opened = [ln for ln in _chain(text) if ln.endswith(" accept") and "saddr" not in ln
+              and ln.startswith("tcp dport")]
+    assert opened == ["tcp dport 23456 accept"], opened
+    assert fw.open_ports(s) == [23456]
+    s.probe.port = s.ros.port = 20000          # the same port: refused by the settings ...
+    assert ("probe.port", "must differ from ros.port (20000): the test port is open to anyone "
+            "on the internet, the ROS master's port is not") in s.problems()
+    assert fw.open_ports(s) == []              # ... and never opened by the table
+    assert "tcp dport 20000 accept" not in fw.render_ruleset(s, fw.Admission(peers=["1.2.3.4"]))
+    with pytest.raises(SettingsError, match="must differ from ros.port") as info:
+        parse_settings(render_settings(s))
+    assert info.value.key == "probe.port"
 
 
 def test_who_gets_in_peers_everywhere_lan_everywhere_allow_and_session_on_ssh_only():
@@ -222,6 +254,12 @@ def test_a_journal_copy_that_holds_anything_but_our_table_is_not_loaded():
     assert fw.only_our_table(ours)
     assert not fw.only_our_table(ours + "delete table inet filter\n")
     assert not fw.only_our_table("table inet filter {\n}\n")
+    # the verdict "reject with tcp reset" (strangers get a reset) is ours; a bare "reset" is not
+    assert "reject with tcp reset" in ours
+    rule = "\t\ttcp dport { 22, 1024-65000 } drop\n"
+    assert rule in ours
+    assert not fw.only_our_table(ours.replace(rule, rule + "\t\treset counters\n"))
+    assert not fw.only_our_table(ours.replace("reject with tcp reset", "reset"))
 
 
 def test_undo_to_a_table_that_shuts_this_session_out_says_so_before_it_asks(monkeypatch):
@@ -279,6 +317,12 @@ def _cli(tmp_path, *args, settings: Settings | None = None, text: str | None = N
                           stdin=subprocess.DEVNULL, env=env or _env())
 
 
+def _probe_on_master_port() -> Settings:
+    s = robot()
+    s.probe.port = s.ros.port
+    return s
+
+
 def test_the_cli_refuses_bad_input_with_exit_2(tmp_path):
     s = robot()
     s.peers[0].public_ip = ""
@@ -286,6 +330,8 @@ def test_the_cli_refuses_bad_input_with_exit_2(tmp_path):
             (("firewall", "apply", "--profile", "nowhere"), None, "invalid choice"),
             (("firewall", "apply", "--dry-run"), s, "peers[0] (sami)"),
             (("firewall", "apply", "--dry-run"), robot(version=2), "for ROS 1"),
+            (("firewall", "apply", "--dry-run"), _probe_on_master_port(), "must differ from "
+                                                                          "ros.port (11311)"),
             (("firewall", "nonsense"), None, "invalid choice"),
             (("firewall",), None, "ACTION")):
         r = _cli(tmp_path, *args, settings=settings)
@@ -315,7 +361,7 @@ def test_apply_over_ssh_names_the_session_and_keeps_it_in(tmp_path):
             "to [firewall] allow") in out
     assert "elements = { 203.0.113.50 . 22 }" in out
     assert "ip saddr . tcp dport @session4 accept" in out
-    for line in ("On TCP 22, 1024-65000 only these get in (the rest is dropped there):",
+    for line in ("On TCP 22, 1024-65000 only these get in (the rest is refused there):",
                  "  the peers (remote profile; SSH and ROS): 198.51.100.2 (sami)",
                  "  this machine's LAN (SSH and ROS): ",
                  "  [firewall] allow (SSH): none",
@@ -402,7 +448,6 @@ def test_the_prompt_names_the_session_it_keeps(tmp_path):
 
 
 def test_settings_firewall_allow_is_read_saved_and_refused_when_bad(tmp_path):
-    from rosnet_tui.core.config.settings_model import SettingsError
     from rosnet_tui.core.saved.settings import load_settings, save_settings
 
     base = render_settings(robot())

@@ -1,7 +1,7 @@
 """`rosnet-tui firewall` on the network lab (ROS 1): the robot loads its peers-only table; the
 laptop (a peer) still passes every Linux and ROS check, while an address that is no peer (the
-lab internet's probe address, 192.0.2.10) is dropped at the master's port and at a port of the
-range; `undo` removes our table and leaves a foreign table alone; the sync service follows a
+lab internet's probe address, 192.0.2.10) is refused (a TCP reset, at once) at the master's port
+and at a port of the range, and reaches the port checker's test port; `undo` removes our table and leaves a foreign table alone; the sync service follows a
 peer's address change with the set.
 """
 
@@ -118,13 +118,23 @@ def test_only_the_peer_gets_through_and_undo_leaves_a_foreign_table(fw_lab, tmp_
         assert "Loaded the table inet rosnet_tui (journal #" in r.stdout
         assert "PASS linux.firewall" in r.stdout, r.stdout       # the check re-run after it
         listing = nft(lab, "robot", "list", "table", "inet", "rosnet_tui").stdout
-        assert ADDR.LAPTOP_PUBLIC in listing and "drop" in listing
+        assert ADDR.LAPTOP_PUBLIC in listing and "reject with tcp reset" in listing
         assert nft(lab, "robot", "list", "table", "inet", "foreign_fw").stdout == foreign
 
-        # The outsider: the master's port and a port of the range are dropped.
+        # The outsider: the master's port and a port of the range are refused with a reset,
+        # which arrives in one round trip: with a connect timeout of 10 s, "refused" (not
+        # "timeout") proves the answer came, not a silence waited out (issue 32).
         for port in (11311, RANGE_PORT):
-            got = lab.call_in("internet", tcp_try, OUTSIDER, ADDR.ROBOT_PUBLIC, port)
-            assert got in ("timeout", "refused"), (port, got)
+            got = lab.call_in("internet", tcp_try, OUTSIDER, ADDR.ROBOT_PUBLIC, port, 10.0)
+            assert got == "refused", (port, got)
+        # The one port open to anyone is the port checker's test port (probe.port, issue 36).
+        probe = lab.settings("robot").probe.port
+        probe_srv = lab.call_in("robot", listen, probe)
+        try:
+            assert lab.call_in("internet", tcp_try, OUTSIDER, ADDR.ROBOT_PUBLIC,
+                               probe) == "connected"
+        finally:
+            lab.call_in("robot", probe_srv.close)
         # The peer still gets through, to the same ports.
         for port in (11311, RANGE_PORT):
             assert lab.call_in("laptop", tcp_try_any, ADDR.ROBOT_PUBLIC, port) == "connected"
@@ -185,15 +195,15 @@ def test_the_technician_who_applies_it_over_ssh_and_the_lan_still_get_in(fw_lab,
         # ... and SSH only: the master's port and the range stay shut to that address.
         for port in (11311, RANGE_PORT):
             assert lab.call_in("outsider", tcp_try, TECHNICIAN, ADDR.ROBOT_PUBLIC,
-                               port) in ("timeout", "refused"), port
+                               port, 10.0) == "refused", port
         # A host on the robot's LAN: SSH and ROS.
         for port in (22, RANGE_PORT):
             assert lab.call_in("robot_modem", tcp_try, LAN_HOST, ADDR.ROBOT_LOCAL,
                                port) == "connected", port
-        # The stranger: dropped at SSH and at the range. The peer: in.
+        # The stranger: refused at SSH and at the range. The peer: in.
         for port in (22, RANGE_PORT):
             assert lab.call_in("internet", tcp_try, OUTSIDER, ADDR.ROBOT_PUBLIC,
-                               port) in ("timeout", "refused"), port
+                               port, 10.0) == "refused", port
             assert lab.call_in("laptop", tcp_try_any, ADDR.ROBOT_PUBLIC, port) == "connected"
 
         # linux.firewall, run by that session: passes, says who gets in and that it does.
@@ -231,9 +241,34 @@ def test_the_technician_who_applies_it_over_ssh_and_the_lan_still_get_in(fw_lab,
         assert r.returncode == 0 and f"[firewall] allow (SSH): {TECHNICIAN}" in r.stdout, r.stderr
         assert outsider.ssh_auth_none(lab, ADDR.ROBOT_PUBLIC).get("methods")
         assert lab.call_in("outsider", tcp_try, TECHNICIAN, ADDR.ROBOT_PUBLIC,
-                           11311) in ("timeout", "refused")
+                           11311, 10.0) == "refused"
     finally:
         lab.call_in("robot", srv.close)
+
+
+def test_a_peer_at_a_new_address_is_refused_at_once_and_told_it_is_the_firewall(fw_lab,
+                                                                                 tmp_path):
+    """Issue 32: the laptop's table holds the robot's address; the robot's modem restarts with a
+    new one (no sync service running). The robot's connections to the laptop's forwarded ports
+    are refused at once (a reset, not a wait), and the robot's advice reads the refusal as the
+    laptop's firewall not knowing its new address, not as the laptop's forwarding."""
+    lab = fw_lab
+    r = fw(lab, "laptop", tmp_path / "fw", "firewall", "apply", "--yes", "--no-checks")
+    assert r.returncode == 0, r.stdout + r.stderr
+    new_ip = "203.0.113.78"
+    with lab.set_robot_wan(new_ip):
+        assert lab.call_in("robot", tcp_try_any, ADDR.LAPTOP_PUBLIC, 22, 10.0) == "refused"
+        got = check(lab, "robot", tmp_path, "isp", "linux")
+        assert got["isp.public_ip"]["data"]["public_ip"] == new_ip, explain(got)
+        ssh = got["linux.ssh"]
+        assert ssh["status"] == "fail", ssh
+        assert ssh["data"]["peers"]["sami"]["tcp"] == "refused", ssh["data"]
+        first = ssh["advice"][0]
+        assert first["rule"] == "linux.ssh.refused" and first["goto_step"] == "linux", first
+        assert "sami's peers-only firewall does not know this machine's address" in \
+            first["meaning"], first
+        assert first["actions"][0].startswith(f"Give sami's firewall this machine's address "
+                                              f"{new_ip}"), first["actions"]
 
 
 def test_firewall_undo_then_undo_loads_it_again_and_bad_input_exits_2(fw_lab, tmp_path):

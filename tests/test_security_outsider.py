@@ -184,6 +184,9 @@ def test_mtls_router_refuses_every_outsider_and_lets_the_member_in(world):
     assert "CERTIFICATE_REQUIRED" in a["no_cert"]["detail"], a        # SECURITY.md's alerts
     assert a["foreign"]["result"] == "alert", a
     assert a["plain"]["result"] == "refused" and a["insider"]["result"] == "accepted", a
+    # Issue 32: the fleet certificate's acceptance is read from the router's session ticket,
+    # one round trip after the handshake, not from a silence waited out (0.4 s at least).
+    assert a["insider"]["detail"] == "a session ticket came: the certificate was taken", a
     assert r.data["cause"] is None and "localhost" in r.data["master_cert"]["names"]
     assert took < r.timeout_s + 0.5, took
 

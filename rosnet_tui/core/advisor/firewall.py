@@ -9,6 +9,15 @@ from rosnet_tui.core.exposure.router_card import ros1_exposure
 TABLE = "table inet rosnet_tui"
 
 
+def firewall_action(ev: Evidence, name: str) -> str:
+    """What lets this machine's new address through *name*'s peers-only firewall (ROS 1)."""
+    seen = ev.data("isp.public_ip").get("public_ip") or "this machine's public IP"
+    return (f"Give {name}'s firewall this machine's address {seen}: set public_ip = \"{seen}\" "
+            f"under [this] here and under the [[peer]] named {ev.me} on {name}, then "
+            f"`rosnet-tui firewall apply` on {name}; with the sync service running on both, "
+            "its set follows by itself.")
+
+
 @rule("security.firewall.off", "linux", ("linux.firewall",),
       "[ros] security = \"none\" on ROS 1",
       "The settings opt out of the peers-only firewall: the forwarded ports (22, the ROS range, "

@@ -13,6 +13,7 @@ from rosnet_tui.core.advisor.evidence import (
     linux_peers,
     peer_state,
 )
+from rosnet_tui.core.advisor.firewall import firewall_action
 from rosnet_tui.core.advisor.ranking import (
     Cause,
     chat_causes,
@@ -76,8 +77,9 @@ def _peer_actions(ev: Evidence, name: str, causes: list[Cause], port: int) -> li
         "address": f"Check our hosts line for {name}: `getent hosts {name}` must print its "
                    f"current public IP ({pub} in the settings; the ISP step on {name} shows the "
                    f"address it has now). If it moved, `rosnet-tui sync` keeps it current.",
+        "firewall": firewall_action(ev, name),
     }
-    return [words[c.key] for c in causes]
+    return [words[c.key] for c in causes if c.key != "firewall" or c.score > 0]
 
 
 _LEAD = {
@@ -89,7 +91,10 @@ _LEAD = {
     "offline": "most likely {name} itself is off or off-line",
     "address": "most likely {ip} is not {name}'s address any more (a new public IP, or "
                "carrier-grade NAT on {name}'s side: its isp.cgnat check tells)",
+    "firewall": "most likely {name}'s peers-only firewall does not know this machine's address "
+                "yet and refuses it",
 }
+
 
 
 def _peer_hit(ev: Evidence, name: str, meaning: str) -> Hit:
@@ -425,7 +430,9 @@ def _chat_out_fails(ev: Evidence) -> list[Hit]:
                        + causes[0].sentence())
             fixes = {"forwarding": f"On {name}'s modem: forward TCP {FORWARD_RANGE} to {local} "
                                    f"(Router step on {name}).",
-                     "firewall": f"On {name}: check its firewall (`sudo ufw status`).",
+                     "firewall": (firewall_action(ev, name) if causes[0].key == "firewall"
+                                  and not ev.s.ros2 and ev.s.ros.security == "firewall" else
+                                  f"On {name}: check its firewall (`sudo ufw status`)."),
                      "hosts": f"Here: `getent hosts {name}` must print {exp}."}
             hits.append(Hit(meaning.strip(), [fixes[c.key] for c in causes if c.score > -50],
                             check_ids=_chat_ids(ev, name), goto_step=causes[0].step,

@@ -343,12 +343,34 @@ def resolved_elsewhere(ev: Evidence, name: str) -> tuple[str, str] | None:
     return None
 
 
+def firewall_refusal(ev: Evidence, name: str, cause: Cause) -> None:
+    """Score *cause* ("firewall": *name*'s peers-only table) for a connection to *name* that was
+    refused. ROS 1's table answers every address it does not hold with a TCP reset
+    (core/exposure/firewall.py), so a refusal is its doing when this machine's public IP is not
+    the one *name* was given (the settings' [this] public_ip, which the peers' tables and sync
+    records follow): then it comes first."""
+    if ev.s.ros2 or ev.s.ros.security != "firewall" or not ev.remote:
+        cause.down(100, "no peers-only firewall on ROS 1 here")
+        return
+    seen = ev.data("isp.public_ip").get("public_ip") or ""
+    said = ev.s.this.public_ip
+    if seen and said and seen != said:
+        cause.up(70, f"this machine's public IP is {seen} now, not {said} as the settings say: "
+                     f"{name}'s peers-only firewall lets in the addresses it was given and "
+                     f"refuses {seen} (a TCP reset) until its set follows")
+    else:
+        cause.up(10, f"{name}'s peers-only firewall refuses (resets) every address it does "
+                     "not hold")
+
+
 def peer_causes(ev: Evidence, name: str) -> list[Cause]:
     """Why *name* takes no TCP connection (SSH) from here: "sshd" (not on its ssh_port),
     "forwarding" (its modem), "offline" (it is off or off-line), "address" (the address we use
-    for it is wrong), most likely first."""
+    for it is wrong), "firewall" (ROS 1: its peers-only table does not hold this machine's
+    address), most likely first."""
     sshd, fwd = Cause("sshd", "linux"), Cause("forwarding", "router")
     off, addr = Cause("offline", "isp"), Cause("address", "linux")
+    wall = Cause("firewall", "linux")
     kind = peer_tcp(ev, name)
     port = _ssh_peer(ev, name).get("port") or _ping_peer(ev, name).get("port") or 22
     ip = _ssh_peer(ev, name).get("address") or ev.expected_ip(name) or "its address"
@@ -362,9 +384,13 @@ def peer_causes(ev: Evidence, name: str) -> list[Cause]:
         if m == "connected":
             sshd.up(40, f"{name}'s {'Zenoh router' if ev.s.ros2 else 'ROS master'} answers at "
                         "the same address, so its modem forwards and the machine is up")
+            wall.down(100, f"{name}'s master lets this machine in at the same address, so its "
+                           "firewall knows this machine")
         elif m == "refused":
             fwd.up(35, f"{ip} refuses {master_port_words(ev)} as well: the modem (or its "
                        "provider) seems to reject everything")
+        if m != "connected":
+            firewall_refusal(ev, name, wall)
     elif kind == "unreachable":
         fwd.up(40, f"the connection to {ip}:{port} came back unreachable: {name}'s modem "
                    "forwards to a local address where no machine answers (its local IP changed?)")
@@ -390,7 +416,10 @@ def peer_causes(ev: Evidence, name: str) -> list[Cause]:
     moved = resolved_elsewhere(ev, name)
     if moved:
         addr.up(50, f"{name} resolves to {moved[0]} here, not to {moved[1]} as the settings say")
-    return rank([sshd, fwd, off, addr], ["forwarding", "sshd", "offline", "address"])
+    if kind != "refused":
+        wall.down(100, "a peers-only firewall refuses at once; this was no refusal")
+    return rank([sshd, fwd, off, addr, wall],
+                ["forwarding", "sshd", "offline", "address", "firewall"])
 
 
 def peer_check_ids(ev: Evidence, name: str) -> list[str]:
@@ -439,6 +468,8 @@ def chat_causes(ev: Evidence, name: str, inbound: bool) -> list[Cause]:
         fwd.up(15, f"the connection to {target} was refused: the modem rejects the port, or a "
                    "firewall there does")
         fw.up(15, f"a firewall on {target} that rejects would refuse it too")
+        if not inbound:
+            firewall_refusal(ev, name, fw)
     elif kind in ("timeout", "unreachable"):
         fwd.up(15, f"the connection to {target} got no answer (dropped)")
     return rank([fwd, fw, hosts], ["forwarding", "firewall", "hosts"])
@@ -448,9 +479,11 @@ def chat_causes(ev: Evidence, name: str, inbound: bool) -> list[Cause]:
 def master_causes(ev: Evidence, master: str) -> list[Cause]:
     """Why the master does not answer at ROS_MASTER_URI: "roscore" (not running there),
     "forwarding" (its port is not forwarded to it), "address" (the name leads elsewhere),
-    "peer" (the master's machine cannot be reached at all), most likely first."""
+    "peer" (the master's machine cannot be reached at all), "firewall" (its peers-only table
+    does not hold this machine's address), most likely first."""
     core, fwd = Cause("roscore", "ros"), Cause("forwarding", "router")
     addr, peer = Cause("address", "linux"), Cause("peer", "linux")
+    wall = Cause("firewall", "linux")
     d = ev.data("ros.master")
     kind, port = d.get("tcp"), ev.s.ros.port
     if ev.s.is_master:
@@ -466,14 +499,19 @@ def master_causes(ev: Evidence, master: str) -> list[Cause]:
                         "names nothing")
         if kind == "refused":
             core.up(40, f"port {port} was refused on this machine: nothing listens there")
-        return rank([core, addr, fwd, peer], ["roscore", "address", "forwarding", "peer"])
+        wall.down(100, "the master is this machine (loopback gets in)")
+        return rank([core, addr, fwd, peer, wall],
+                    ["roscore", "address", "forwarding", "peer", "firewall"])
     ssh = _ssh_peer(ev, master)
     reached = ssh.get("ok") is True or ssh.get("tcp") == "connected"
     ip = ssh.get("address") or ev.expected_ip(master) or "its address"
     if kind == "refused":
+        firewall_refusal(ev, master, wall)
         if reached:
             core.up(50, f"{master} answers SSH at {ip} but refuses port {port}: most likely "
                         "nothing listens there")
+            wall.down(100, f"{master}'s firewall lets this machine in on SSH, so it knows "
+                           "this machine's address")
         elif peer_tcp(ev, master) == "refused":
             fwd.up(40, f"{ip} refuses port {port} and its SSH port alike: the modem (or its "
                        "provider) seems to reject everything")
@@ -494,4 +532,7 @@ def master_causes(ev: Evidence, master: str) -> list[Cause]:
     if does_not_resolve(ev, master):
         addr.up(80, f"{master} does not resolve here (linux.resolve): no connection to it can "
                     "even start")
-    return rank([core, fwd, addr, peer], ["roscore", "forwarding", "peer", "address"])
+    if kind != "refused":
+        wall.down(100, "a peers-only firewall refuses at once; this was no refusal")
+    return rank([core, fwd, addr, peer, wall],
+                ["roscore", "forwarding", "peer", "address", "firewall"])

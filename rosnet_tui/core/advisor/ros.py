@@ -15,6 +15,7 @@ from rosnet_tui.core.advisor.evidence import (
     linux_peers,
     uri_host,
 )
+from rosnet_tui.core.advisor.firewall import firewall_action
 from rosnet_tui.core.advisor.ranking import master_causes
 from rosnet_tui.core.results import Status
 
@@ -208,7 +209,7 @@ def _master_down(ev: Evidence) -> list[Hit]:
                 "address": f"Map {ev.me} to this machine's address: `getent hosts {ev.me}` must "
                            f"print {here} (`rosnet-tui hosts apply` after setting local_ip = "
                            f"\"{here}\" under [this]).",
-                "forwarding": "", "peer": ""}
+                "forwarding": "", "peer": "", "firewall": ""}
         return [Hit(f"No ROS master answers at {uri} on {ev.me} (this component is the master): "
                     + ("roscore is not running here, or the name leads elsewhere. " + said).strip(),
                     [acts[c.key] for c in causes if acts[c.key]], check_ids=ids,
@@ -221,13 +222,15 @@ def _master_down(ev: Evidence) -> list[Hit]:
                           f"step on {master} tests {port} from outside when roscore listens.)",
             "address": f"Does {host or master} lead to the master here? `getent hosts "
                        f"{host or master}` must print {pub}.",
-            "peer": f"Reach {master} first (the Linux step): the master follows."}
+            "peer": f"Reach {master} first (the Linux step): the master follows.",
+            "firewall": firewall_action(ev, master)}
     meaning = f"The master {master} does not answer at {uri} from {ev.me}."
     if master in linux_peers(ev) and is_unreachable(ev, master):
         meaning += (f" {master} itself cannot be reached from here (see the Linux step), so "
                     "fix that first: the master follows.")
     return [Hit((meaning + " " + said).strip(),
-                [acts[c.key] for c in causes if c.key != "peer" or c.score > 0], check_ids=ids,
+                [acts[c.key] for c in causes if c.key not in ("peer", "firewall")
+                 or c.score > 0], check_ids=ids,
                 goto_step=causes[0].step, evidence=evid + causes[0].evidence())]
 
 

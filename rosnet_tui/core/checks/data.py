@@ -469,6 +469,7 @@ SecurityOutsiderData = TypedDict("SecurityOutsiderData", {
     "ports": list[int],  # ROS 1: the ports tried (the master's port on the master, a range port)
     "outsider_reachable": dict[str, bool | None],  # ROS 1, by port: the port checker got in (None: no verdict)
     "insider_reachable": dict[str, bool],  # ROS 1, by port: the peer got in
+    "outsider_s": dict[str, float | None],  # ROS 1, by port: seconds until the port checker's verdict
     "cause": OutsiderCause | None,  # why it failed (None: it passed)
     "ssh_failures": dict[str, str],  # by peer: how SSH to it failed (as in security.ssh_auth) when the probe could not run there
 }, total=False)

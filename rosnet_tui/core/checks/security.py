@@ -395,11 +395,21 @@ async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
         rem = left()
         cmd = python_command(_CONNECT, target, f"{rem * 0.25:.2f}", *map(str, ports))
         peer = peers[0]
+        asked = loop.time()
+        answered: dict[int, float] = {}
+
+        async def ask_checker(p: int) -> Any:
+            ans = await http_get(f"{base}/port/{p}", min(t * 0.4, rem * 0.45))
+            answered[p] = round(loop.time() - asked, 3)
+            return ans
         res, *outs = await asyncio.gather(
             ssh_run(ctx.ssh, peer, cmd, timeout=rem * 0.85,
                     connect_timeout=min(t * 0.4, rem * 0.45), tcp_timeout=ctx.timeout_s),
-            *(http_get(f"{base}/port/{p}", min(t * 0.4, rem * 0.45)) for p in ports))
+            *(ask_checker(p) for p in ports))
     data["from"] = peer.name
+    # How long each of the checker's verdicts took: a refusal (the peers-only firewall resets a
+    # stranger) comes in round trips; a drop costs the checker's own connect timeout.
+    data["outsider_s"] = {str(p): answered.get(p) for p in ports}
     outside: dict[str, Any] = {}
     for p, ans in zip(ports, outs, strict=True):
         reach = None

@@ -449,6 +449,9 @@ class Settings:
         add("ros.domain_id", validate_domain_id(self.ros.domain_id))
         add("ros.security", validate_security(self.ros.security, self.ros.version))
         add("probe.port", validate_port(self.probe.port))
+        if self.probe.port == self.ros.port and not validate_port(self.probe.port):
+            add("probe.port", f"must differ from ros.port ({self.ros.port}): the test port is "
+                              "open to anyone on the internet, the ROS master's port is not")
         for url in self.probe.public_ip_urls:
             add("probe.public_ip_urls", validate_url(url))
         add("probe.port_check_url", validate_url(self.probe.port_check_url))

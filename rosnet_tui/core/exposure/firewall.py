@@ -18,7 +18,12 @@ sets of addresses and an input chain of its own, hooked before the distribution'
   previewed ruleset, so the digest covers it. It stays until the next ``firewall apply`` replaces
   the table (the sync service leaves it alone); ``[firewall] allow`` keeps an address for good.
 
-It drops the rest on those ports. Nothing outside that table is read or changed.
+It refuses the rest on those ports with a TCP reset (at most RESET_RATE of them; beyond it,
+during a scan, silence): a stranger learns "closed" at once, so ``security.outsider``'s port
+checker gives its verdict in one round trip instead of waiting out a silence, and a peer whose
+new address the table does not know yet is told so at once (the advisor names this table for a
+refusal from a peer's address that is not the one the table holds). docs/SECURITY.md weighs a
+reset against a silence. Nothing outside that table is read or changed.
 
 - :func:`render_ruleset` is the text applied; :func:`preview` compares it with what is loaded now.
 - :func:`apply` loads it as ONE ``nft -f`` transaction (create-delete-define: our table is
@@ -63,6 +68,7 @@ ALLOW4, ALLOW6 = "allow4", "allow6"
 SESSION4, SESSION6 = "session4", "session6"
 SET_NAMES = (SET4, SET6, LAN4, LAN6, ALLOW4, ALLOW6, SESSION4, SESSION6)
 CHAIN = "input"
+RESET_RATE = "limit rate 20/second burst 40 packets"   # resets to strangers; beyond: dropped
 PRIORITY = -10            # before the distribution's filter (priority 0)
 KIND = "nft_table"        # the journal entry's kind (managed_file's undo dispatches on it)
 NFT_TIMEOUT_S = 10.0
@@ -242,7 +248,8 @@ def render_ruleset(settings: Settings, adm: Admission) -> str:
         f"\t\tip6 saddr . tcp dport @{SESSION6} accept",
     ]
     lines += [f"\t\ttcp dport {p} accept" for p in open_ports(settings)]
-    lines += [f"\t\ttcp dport {{ {ports} }} drop", "\t}", "}"]
+    lines += [f"\t\ttcp dport {{ {ports} }} {RESET_RATE} reject with tcp reset",
+              f"\t\ttcp dport {{ {ports} }} drop", "\t}", "}"]
     return "\n".join(lines) + "\n"
 
 
@@ -435,7 +442,7 @@ def who_gets_in(settings: Settings, adm: Admission, profile: str | None = None,
     names = {peer_address(settings, p.name, profile): p.name for p in settings.peers}
     peers = ", ".join(f"{a} ({names[a]})" if a in names else a for a in adm.peers) or "none"
     out = [f"On TCP {', '.join(forwarded_ports(settings))} only these get in "
-           "(the rest is dropped there):",
+           "(the rest is refused there):",
            f"  the peers ({profile} profile; SSH and ROS): {peers}",
            f"  this machine's LAN (SSH and ROS): {', '.join(adm.lan) or 'none found'}",
            f"  [firewall] allow (SSH): {', '.join(adm.allow) or 'none'}"]

@@ -101,6 +101,16 @@ def _words(stmts: list[Stmt]) -> list[str]:
     return out
 
 
+def _verdict_words(words: list[str]) -> list[str]:
+    """*words* without the ``reset`` of the verdict ``reject with tcp reset`` (a rule's own
+    answer to strangers, not the ``reset`` command)."""
+    out = list(words)
+    for i in range(len(out) - 3):
+        if out[i:i + 4] == ["reject", "with", "tcp", "reset"]:
+            out[i + 3] = "tcp-reset"
+    return out
+
+
 def our_table_problem(text: str, table: str, chain: str, sets: set[str]) -> str | None:
     """Why *text* is not our table alone (None: it is): ``table <table> { ... }`` holding only
     the *sets* and the one *chain*, a filter chain on the input hook with policy accept."""
@@ -130,7 +140,7 @@ def our_table_problem(text: str, table: str, chain: str, sets: set[str]) -> str 
         for rule in body:
             if rule.words[:1] in (["type"], ["policy"]):
                 continue
-            bad = sorted(set(_words([rule])) & _FORBIDDEN)
+            bad = sorted(set(_verdict_words(_words([rule]))) & _FORBIDDEN)
             if bad:
                 return f"a rule of the chain {name} holds '{bad[0]}'"
     return None

@@ -1,13 +1,16 @@
 """What an outsider sees: the programs and verdicts behind ``security.ssh_auth`` and
 ``security.outsider`` (no Textual, no check registry; the checks live in core/checks/security.py).
 
-- The SSH audit program runs on a peer with the interpreter of the rosnet-tui installed there
-  (it needs paramiko): it opens an SSH transport to this component's public address, asks
-  ``auth_none(user)`` and reports the methods the server offers (``BadAuthenticationType``'s
-  ``allowed_types``), the same answer any stranger on the internet gets. It never logs in and
-  sends no secret: it does not verify the host key because it authenticates nothing. When no
-  TCP connection is made at all it says how it failed (``tcp``: refused, timeout, unreachable,
-  error): nothing there to offer strangers anything, or no verdict.
+- The SSH audit program runs on a peer with the interpreter of the rosnet-tui installed there:
+  for each user at once, it opens an SSH connection to this component's public address, asks
+  for the ``none`` method and reports the methods the server offers, the same answer any
+  stranger on the internet gets. It asks with cryptography's primitives (core/peer/sshnone.py:
+  curve25519 and chacha20-poly1305, OpenSSH's defaults), so it costs its round trips, not
+  paramiko's import; paramiko (``auth_none``) only for a server that offers neither, or a reply
+  that client misreads. It never logs in and sends no secret: it does not verify the host key
+  because it authenticates nothing. When no TCP connection is made at all it says how it failed
+  (``tcp``: refused, timeout, unreachable, error): nothing there to offer strangers anything, or
+  no verdict.
 - The TLS probe (standard library only) dials the master's Zenoh port with no client
   certificate, with a certificate from a throwaway CA made here (the "foreign" one, shipped in
   the program text on stdin; the probe writes it to a private temporary folder and removes it),
@@ -22,25 +25,24 @@ import base64
 import datetime as dt
 import json
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from rosnet_tui.core.jsonsafe import loads_bounded
+from rosnet_tui.core.peer import sshnone
 
 SSH_MARK = "ROSNET_SSHAUDIT "
 TLS_MARK = "ROSNET_OUTSIDER "
 PASSWORD_METHODS = ("password", "keyboard-interactive")
 
-SSH_AUDIT_PROGRAM = r"""
-import errno, json, socket, sys
+_AUDIT_MAIN = r"""
+import errno, json, socket, sys, threading
 MARK = "ROSNET_SSHAUDIT "
 host, port, t = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 users = sys.argv[4:]
-try:
-    import paramiko
-except ImportError:
-    print(MARK + json.dumps({"error": "no_paramiko", "python": sys.executable}))
-    sys.exit(3)
 out = {"users": {}, "python": sys.executable}
+got = {}
+lock = threading.Lock()
 
 def tcp_kind(e):
     if isinstance(e, ConnectionRefusedError):
@@ -51,18 +53,14 @@ def tcp_kind(e):
         return "unreachable"
     return "error"
 
-for user in users:
-    sock = tr = None
-    try:
-        sock = socket.create_connection((host, port), timeout=t)
-    except OSError as e:
-        if out.get("tcp") == "connected":     # an earlier user got through: this one's error
-            out["users"][user] = {"error": "%s: %s" % (type(e).__name__, e)}
-            continue
-        out["tcp"] = tcp_kind(e)    # no TCP at all: the other users would fare the same
-        out["tcp_error"] = "%s: %s" % (type(e).__name__, e)
-        break
-    out["tcp"] = "connected"
+def with_paramiko(user):
+    # a server that offers neither curve25519 nor chacha20-poly1305: paramiko asks instead
+    with lock:
+        if "invoke" not in sys.modules:
+            sys.modules["invoke"] = None   # paramiko's optional ssh_config helper, unused here
+        import paramiko
+    sock = socket.create_connection((host, port), timeout=t)
+    tr = None
     try:
         sock.settimeout(t)
         tr = paramiko.Transport(sock)
@@ -71,22 +69,64 @@ for user in users:
         out["banner"] = tr.remote_version
         try:
             tr.auth_none(user)
-            out["users"][user] = {"methods": ["none"]}
+            return {"methods": ["none"], "via": "paramiko"}
         except paramiko.BadAuthenticationType as e:
-            out["users"][user] = {"methods": list(e.allowed_types)}
-    except Exception as e:
-        out["users"][user] = {"error": "%s: %s" % (type(e).__name__, e)}
+            return {"methods": list(e.allowed_types), "via": "paramiko"}
     finally:
         for x in (tr, sock):
             try:
                 x is not None and x.close()
             except Exception:
                 pass
+
+def audit(user):
+    # sshd refuses another user name on the same connection: one connection per user, all at
+    # once, so the audit costs the round trips of one
+    try:
+        sock = socket.create_connection((host, port), timeout=t)
+    except OSError as e:
+        got[user] = ("tcp", e)
+        return
+    try:
+        sock.settimeout(t)
+        try:
+            methods, out["banner"] = none_methods(sock, user)
+            got[user] = ("ok", {"methods": methods, "via": "sshnone"})
+        except (Unsupported, ValueError, ConnectionError):   # or a server it misreads
+            sock.close()
+            got[user] = ("ok", with_paramiko(user))
+    except ImportError as e:   # cryptography, or paramiko for a server sshnone cannot ask
+        got[user] = ("ok", {"error": "no_module: %s" % e})
+    except Exception as e:
+        got[user] = ("ok", {"error": "%s: %s" % (type(e).__name__, e)})
+    finally:
+        sock.close()
+
+threads = [threading.Thread(target=audit, args=(u,), daemon=True) for u in users]
+for th in threads:
+    th.start()
+for th in threads:
+    th.join(4 * t + 1)
+reached = [u for u in users if got.get(u, ("",))[0] == "ok"]
+if reached:
+    out["tcp"] = "connected"
+for u in users:
+    kind, what = got.get(u, ("ok", {"error": "no answer within %.1f s" % (4 * t + 1)}))
+    if kind == "ok":
+        out["users"][u] = what
+    elif reached:          # another user got through: this one's own error
+        out["users"][u] = {"error": "%s: %s" % (type(what).__name__, what)}
+    elif "tcp" not in out:  # no TCP at all: the other users fared the same
+        out["tcp"] = tcp_kind(what)
+        out["tcp_error"] = "%s: %s" % (type(what).__name__, what)
 print(MARK + json.dumps(out))
 """
+SSH_AUDIT_PROGRAM = Path(sshnone.__file__).read_text() + _AUDIT_MAIN
+"""The SSH audit (fed on stdin): core/peer/sshnone.py asks sshd with cryptography's primitives;
+paramiko only for a server that offers neither curve25519 nor chacha20-poly1305."""
 
 _TLS_PROGRAM = r"""
-import base64, json, os, shutil, socket, ssl, sys, tempfile, time
+import base64, json, os, select, shutil, socket, ssl, sys, tempfile, time
 MARK = "ROSNET_OUTSIDER "
 host, port, t = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 wait = min(1.0, t)
@@ -129,23 +169,37 @@ def attempt(cert=None, key=None, ca=None, patient=True):
     out["tls"] = s.version()
     out["server_cert"] = base64.b64encode(s.getpeercert(True) or b"").decode()
     # TLS 1.3: the server's verdict on our certificate follows the handshake, half a round trip
-    # after our last message. Silence until the wait ends means the certificate was taken. A
-    # stranger (patient) waits the whole per-step timeout: its healthy answer is a refusal, which
-    # ends the wait at once, and a busy router's late refusal must not read as a session. The
-    # insider's healthy answer is silence: five handshake times (0.4 s to `wait`) are ample.
-    s.settimeout(t if patient else min(wait, max(0.4, 5 * (time.monotonic() - started))))
+    # after our last message: an alert refuses it; a session ticket, which a server sends only
+    # once it has taken the certificate (Zenoh's rustls sends two), accepts it. Either ends the
+    # wait at once, so a healthy verdict costs a round trip. A server that sends no ticket
+    # answers a taken certificate with silence: it reads as accepted when the wait ends. A
+    # stranger (patient) waits the whole per-step timeout (its healthy answer, a refusal, ends it
+    # at once, and a busy router's late refusal must not read as a session); the insider five
+    # handshake times (0.4 s to `wait`).
+    limit = t if patient else min(wait, max(0.4, 5 * (time.monotonic() - started)))
+    out.update(zip(("result", "detail"), verdict(s, limit)))
+    return out
+
+
+def verdict(s, limit):
+    end = time.monotonic() + limit
     try:
-        got = s.recv(1)
-        out["result"] = "accepted" if got else "closed"
-    except socket.timeout:
-        out["result"] = "accepted"
-    except ssl.SSLError as e:
-        out.update(result="alert", detail=str(e.reason or e)[:160])
-    except OSError as e:
-        out.update(result="closed", detail=str(e)[:160])
+        s.setblocking(False)
+        while True:
+            left = end - time.monotonic()
+            if not s.pending() and (left <= 0 or not select.select([s], [], [], left)[0]):
+                return "accepted", "no verdict within %.1f s: taken" % limit
+            try:
+                return ("accepted", "data") if s.recv(1) else ("closed", "the server hung up")
+            except ssl.SSLWantReadError:     # a handshake message, no data: a ticket?
+                if s.session is not None and s.session.has_ticket:
+                    return "accepted", "a session ticket came: the certificate was taken"
+            except ssl.SSLError as e:
+                return "alert", str(e.reason or e)[:160]
+            except OSError as e:
+                return "closed", str(e)[:160]
     finally:
         s.close()
-    return out
 
 import threading
 rep = {}
