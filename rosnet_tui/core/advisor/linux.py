@@ -75,7 +75,9 @@ def _peer_actions(ev: Evidence, name: str, causes: list[Cause], port: int) -> li
                    f"on {name}).",
         "address": f"Check our hosts line for {name}: `getent hosts {name}` must print its "
                    f"current public IP ({pub} in the settings; the ISP step on {name} shows the "
-                   f"address it has now). If it moved, `rosnet-tui sync` keeps it current.",
+                   f"address it has now). If it moved, `rosnet-tui sync` keeps it current"
+                   + (f" once {name}'s sync key is pinned here (`rosnet-tui sync pin {name}`)."
+                      if name in (ev.data("linux.resolve").get("unpinned") or ()) else "."),
     }
     return [words[c.key] for c in causes]
 
