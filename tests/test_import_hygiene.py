@@ -89,6 +89,8 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/cli/report.py", "rosnet_tui.cli.check"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/ros.py", "rosnet_tui.core.ros"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/ros.py", "asyncio"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
+    ("rosnet_tui/cli/ros_pair.py", "rosnet_tui.core.sync.pin"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
+    ("rosnet_tui/cli/ros_pair.py", "rosnet_tui.core.sync.signing"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/sync.py", "asyncio"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/sync.py", "rosnet_tui.core.sync.pin"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/sync.py", "rosnet_tui.core.sync.loop"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",

@@ -101,13 +101,16 @@ class Seat:
         self.tmp = tmp_path
 
     def pin(self, *args: str, answers: list[str] | None = None) -> tuple[int, str]:
+        return self.run("sync", "pin", *args, answers=answers)
+
+    def run(self, *args: str, answers: list[str] | None = None) -> tuple[int, str]:
         # turtlebot is 127.0.0.1 for this process alone: its own /etc/hosts, bound over the
         # real one in a mount namespace of its own.
         hosts = self.tmp / "etc_hosts"
         hosts.write_text("127.0.0.1\tlocalhost\n127.0.0.1\tturtlebot\n")
         argv = ["unshare", "-m", "sh", "-c", 'mount --bind "$0" /etc/hosts && exec "$@"',
-                str(hosts), sys.executable, "-m", "rosnet_tui", "sync", "pin", "--config",
-                str(self.config), *args]
+                str(hosts), sys.executable, "-m", "rosnet_tui", *args, "--config",
+                str(self.config)]
         env = {**os.environ, "HOME": str(self.home), "PYTHONPATH": str(REPO)}
         if answers is not None:
             return run_answering(argv, answers, env=env, cwd=REPO, timeout=60)
@@ -214,3 +217,66 @@ def test_what_a_peer_answers_is_read_strictly():
     assert "no `sync key`" in key_of("", "error: argument ACTION: invalid choice: 'key'", 2)[1]
     assert key_of('sync_key = "ed25519:AAAA"\n', "", 0)[0] == ""
     assert "exit status 1" in key_of("", "boom\x1b[2J", 1)[1]
+
+
+MEMBER = """\
+# sami, a ROS 2 member
+[this]
+name = "sami"
+role = "member"
+profile = "remote"
+local_ip = "192.168.1.10"
+public_ip = "198.51.100.2"
+
+[[peer]]
+name = "turtlebot"   # the master
+public_ip = "203.0.113.7"
+ssh_user = "root"
+ssh_port = {port}
+{pinned}
+[ros]
+version = 2
+master = "turtlebot"
+"""
+
+MASTER = """\
+[this]
+name = "turtlebot"
+role = "master"
+local_ip = "10.10.10.1"
+public_ip = "203.0.113.7"
+
+[[peer]]
+name = "sami"
+public_ip = "198.51.100.2"
+
+[ros]
+version = 2
+master = "turtlebot"
+"""
+
+
+def test_ros_pair_pins_the_masters_sync_key_in_the_same_session(tmp_path, robot):
+    """Under ROS 2 mutual TLS, `ros pair` on a member gets the master's sync key with its
+    certificate (the master's own `ros pair --serve`): pinned when none is; a different one is
+    never replaced there."""
+    master_cfg = robot.root.parent / "home" / ".config" / "rosnet-tui" / "config.toml"
+    master_cfg.write_text(MASTER)
+    try:
+        seat = Seat(tmp_path, robot)
+        seat.config.write_text(MEMBER.format(port=robot.port, pinned=""))
+        before = seat.config.read_text()
+        rc, out = seat.run("ros", "pair")
+        assert rc == 0 and "Paired with turtlebot's fleet CA" in out, out
+        key = sync_key_text("turtlebot")
+        assert f"Pinned turtlebot's sync key ({fingerprint(key)})" in out, out
+        assert seat.config.read_text() == before.replace(
+            f"ssh_port = {robot.port}\n", f'ssh_port = {robot.port}\nsync_key = "{key}"\n')
+        old = sync_key_text("impostor")
+        seat.config.write_text(MEMBER.format(port=robot.port, pinned=f'sync_key = "{old}"'))
+        before = seat.config.read_text()
+        rc, out = seat.run("ros", "pair", "--renew")
+        assert rc == 0 and "KEY CHANGED" in out and "not replaced" in out, out
+        assert seat.config.read_text() == before
+    finally:
+        master_cfg.unlink()

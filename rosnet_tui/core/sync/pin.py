@@ -170,3 +170,23 @@ def write_pins(path: Path, before: str, pins: dict[str, str]) -> None:
     st = os.stat(path)
     owner = (st.st_uid, st.st_gid) if os.geteuid() == 0 else None
     atomic_write_text(path, pinned_text(before, pins), mode=st.st_mode & 0o7777, owner=owner)
+
+
+def pin_from_pairing(path: Path, name: str, key: str) -> str:
+    """`ros pair` on a member: pin the master *name*'s sync key that came back in the same SSH
+    session as its signed certificate (host key verified), when none is pinned yet; a different
+    one is never replaced here. What happened, in words ("" when the key was already pinned).
+    Raises SettingsError, OSError."""
+    try:
+        fp = fingerprint(key)
+    except ValueError:
+        return f"{name}'s answer carried no usable sync key: `rosnet-tui sync pin {name}`"
+    before = read_for_pin(path)
+    peer = peer_named(parse_settings(before, path), name)
+    if peer is None or peer.sync_key == key:
+        return ""
+    if peer.sync_key:
+        return (f"KEY CHANGED: {name}'s sync key ({fp}) is not the one pinned here; not "
+                f"replaced: `rosnet-tui sync pin {name}` shows both and asks")
+    write_pins(path, before, {peer.name: key})
+    return f"Pinned {name}'s sync key ({fp}) in {path}: its sync records count here now."
