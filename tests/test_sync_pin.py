@@ -107,7 +107,7 @@ class Seat:
         # turtlebot is 127.0.0.1 for this process alone: its own /etc/hosts, bound over the
         # real one in a mount namespace of its own.
         hosts = self.tmp / "etc_hosts"
-        hosts.write_text("127.0.0.1\tlocalhost\n127.0.0.1\tturtlebot\n")
+        hosts.write_text("127.0.0.1\tlocalhost\n127.0.0.1\tturtlebot\n127.0.0.1\trover\n")
         argv = ["unshare", "-m", "sh", "-c", 'mount --bind "$0" /etc/hosts && exec "$@"',
                 str(hosts), sys.executable, "-m", "rosnet_tui", *args, "--config",
                 str(self.config)]
@@ -280,3 +280,25 @@ def test_ros_pair_pins_the_masters_sync_key_in_the_same_session(tmp_path, robot)
         assert seat.config.read_text() == before
     finally:
         master_cfg.unlink()
+
+
+def test_a_silent_peer_fails_within_its_time_and_the_others_are_pinned(tmp_path, robot):
+    """A peer whose port takes the connection and never speaks (a wedged sshd) gets a verdict
+    within --timeout; the good peer, asked at the same time, is pinned."""
+    import socket
+
+    quiet = socket.socket()
+    quiet.bind(("127.0.0.1", 0))
+    quiet.listen(8)                   # the kernel completes the handshake; nothing ever speaks
+    try:
+        seat = Seat(tmp_path, robot)
+        text = seat.config.read_text().replace('name = "rover.invalid"', 'name = "rover"')
+        seat.config.write_text(text.replace('ssh_user = "root"\n\n[ros]',
+                                            f'ssh_user = "root"\nssh_port = '
+                                            f'{quiet.getsockname()[1]}\n\n[ros]'))
+        rc, out = seat.run("sync", "pin", "--yes", "--timeout", "2")
+        assert rc == 1 and "rover: failed: SSH failed" in out, out
+        assert "Pinned the sync key of turtlebot" in out, out
+        assert sync_key_text("turtlebot") in seat.config.read_text()
+    finally:
+        quiet.close()

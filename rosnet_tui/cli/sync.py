@@ -225,7 +225,11 @@ def run_pin(args: argparse.Namespace) -> int:
               f"as {a.name}. Replace it only when you know which.")
     todo = {a.name: a.key for a in answers if a.state in ("new", "changed")}
     if todo:
-        after = pinned_text(before, todo)
+        try:
+            after = pinned_text(before, todo)
+        except SettingsError as exc:
+            say(f"rosnet-tui: {exc}")
+            return EXIT_USAGE
         print()
         sys.stdout.writelines(difflib.unified_diff(before.splitlines(True),
                                                    after.splitlines(True),

@@ -83,6 +83,8 @@ def choose_peers(s: Settings, names: list[str]) -> tuple[list[Peer], list[PeerKe
         if p is None:
             raise ValueError(f"{shown(n, 80)} is no peer in the settings "
                              f"(peers: {', '.join(q.name for q in s.peers) or 'none'})")
+        if any(q.name == p.name for q in chosen) or any(f.name == p.name for f in failed):
+            continue
         if not p.ssh_user:
             failed.append(PeerKey(p.name, p.sync_key, error="no ssh_user in its [[peer]] "
                                   "table: set it, or copy the line `rosnet-tui sync key` "
