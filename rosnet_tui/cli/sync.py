@@ -24,12 +24,13 @@ from rosnet_tui.cli.common import (
     add_config_option,
     add_state_dir_option,
     config_path,
+    interactive,
     number_in,
     say,
     state_dir_of,
     state_dir_problem,
 )
-from rosnet_tui.cli.writing import ask, confirm, interactive
+from rosnet_tui.cli.writing import ask, confirm
 from rosnet_tui.core.config.paths import Paths, xdg_config_home
 from rosnet_tui.core.config.settings_model import SettingsError
 from rosnet_tui.core.files import privilege
