@@ -123,6 +123,17 @@ def test_peer_unreachable_tells_ping_answering_modem_from_silence():
     assert "linux.peer.unreachable" not in ids(run(r))
 
 
+def test_a_stale_address_sync_cannot_follow_names_sync_pin():
+    """A peer whose sync_key is not pinned (linux.resolve's ``unpinned``): sync never follows
+    its address, and the action says which command fixes that (issue 35)."""
+    r, s = wrong()
+    ssh_shut_out(r, None, icmp=False)
+    assert "sync pin" not in only(run(r, s), "linux.peer.unreachable").actions[0]
+    put(r, "linux.resolve", "fail", unpinned=["turtlebot"])
+    act = only(run(r, s), "linux.peer.unreachable").actions[0]
+    assert "once turtlebot's sync key is pinned here (`rosnet-tui sync pin turtlebot`)" in act
+
+
 def test_peer_unreachable_on_a_lan_profile_does_not_talk_about_modems():
     r, _ = unreachable()
     s = laptop_settings(profile="office")

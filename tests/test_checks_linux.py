@@ -127,6 +127,19 @@ async def test_resolve_names_the_wrong_address(tmp_path):
     assert "localhost -> 127.0.0.1 (expected 127.0.0.2)" in r.summary
 
 
+async def test_resolve_names_sync_pin_for_a_peer_sync_cannot_follow(tmp_path):
+    """With [sync] on, a peer without a pinned sync_key never has its records counted (issue
+    35): a wrong address for it says which command pins the key."""
+    s = settings(peers=[Peer(name="localhost", public_ip="127.0.0.2")], local_ip="")
+    s.this.name, s.has_sync = "", True
+    r = await run("linux.resolve", ctx(s, tmp_path))
+    assert r.status is Status.FAIL and r.data["unpinned"] == ["localhost"]
+    assert "no sync key pinned; `rosnet-tui sync pin`" in r.summary, r.summary
+    s.has_sync = False
+    r = await run("linux.resolve", ctx(s, tmp_path))
+    assert "unpinned" not in r.data and "sync pin" not in r.summary
+
+
 # --------------------------------------------------------------------------- linux.ping
 @pytest.mark.skipif(shutil.which("ping") is None, reason="needs ping")
 async def test_ping_by_name_with_the_tcp_fallback_reported(tmp_path):

@@ -16,9 +16,17 @@ import asyncio
 import json
 import sys
 
-from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, add_config_option, say
+from rosnet_tui.cli.common import (
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_USAGE,
+    add_config_option,
+    config_path,
+    say,
+)
 from rosnet_tui.cli.writing import confirm, load_settings_for
 from rosnet_tui.core.config.paths import default_config_dir
+from rosnet_tui.core.config.settings_model import SettingsError
 from rosnet_tui.core.ros import fleet_tls, pair_access, pairing
 from rosnet_tui.core.ros.fleet_tls import TlsError
 
@@ -126,6 +134,16 @@ def run_pair(args: argparse.Namespace) -> int:
         return EXIT_FAIL
     print(f"{res.detail[:1].upper()}{res.detail[1:]} ({res.seconds:.1f} s). Restart the router "
           "to use it.")
+    if res.master_sync_key:
+        from rosnet_tui.core.sync.pin import pin_from_pairing
+
+        try:
+            said = pin_from_pairing(config_path(args).expanduser().absolute(),
+                                    settings.master_name, res.master_sync_key)
+        except (SettingsError, OSError) as exc:
+            said = f"the master's sync key was not pinned ({exc}): `rosnet-tui sync pin`"
+        if said:
+            print(said)
     return EXIT_OK
 
 
@@ -160,6 +178,13 @@ def _sign(args: argparse.Namespace, settings, paths) -> int:
 def _serve(args: argparse.Namespace, settings, paths) -> int:
     """--serve NAME (a member's forced command): one ROSNET_TLS line, never a question."""
     rep = pairing.serve(settings, paths, args.serve, sys.stdin.read(65536))
+    if "error" not in rep:
+        from rosnet_tui.core.sync.signing import key_path, load_or_make_key, public_text
+
+        try:        # the member pins it in the same session (an older member ignores it)
+            rep["sync_key"] = public_text(load_or_make_key(key_path(config_path(args))))
+        except (OSError, ValueError):
+            pass    # pairing does not depend on it: `sync pin` asks again
     print(fleet_tls.REPORT_PREFIX + json.dumps(rep), flush=True)
     return EXIT_FAIL if "error" in rep else EXIT_OK
 

@@ -24,13 +24,15 @@ from rosnet_tui.cli.common import (
     add_config_option,
     add_state_dir_option,
     config_path,
+    interactive,
     number_in,
     say,
     state_dir_of,
     state_dir_problem,
 )
-from rosnet_tui.cli.writing import confirm
+from rosnet_tui.cli.writing import ask, confirm
 from rosnet_tui.core.config.paths import Paths, xdg_config_home
+from rosnet_tui.core.config.settings_model import SettingsError
 from rosnet_tui.core.files import privilege
 
 UNIT_NAME = "rosnet-tui-sync.service"
@@ -83,6 +85,27 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "printed line into this component's [[peer]] table on each.")
     add_config_option(key)
     key.set_defaults(func=run_key)
+
+    pin = ss.add_parser("pin", help="ask the peers for their sync keys over SSH and pin them in "
+                                    "this component's settings",
+                        description="For each peer (default: every peer with an ssh_user), run "
+                                    "its own rosnet-tui's `sync key` over SSH (host key verified, "
+                                    "as for the checks), show its key and fingerprint and the "
+                                    "change to the settings, then write its sync_key (comments "
+                                    "and layout kept). A key that differs from the one pinned is "
+                                    "replaced only on an explicit yes (or --yes).",
+                        epilog="Exit codes: 0 every peer's key is pinned, 1 some peer failed "
+                               "(each says why), 2 usage or settings error.")
+    add_config_option(pin)
+    pin.add_argument("peers", nargs="*", metavar="PEER", help="the peers to ask (default: every "
+                                                              "peer with an ssh_user)")
+    pin.add_argument("--yes", "-y", action="store_true",
+                     help="write without asking, a changed key too (scripts)")
+    pin.add_argument("--dry-run", action="store_true", help="ask the peers and show the change; "
+                                                             "write nothing")
+    pin.add_argument("--timeout", type=number_in(1, 120), metavar="S", default=None,
+                     help="seconds for each peer, 1-120 (default 10)")
+    pin.set_defaults(func=run_pin)
 
     ins = ss.add_parser("install-service", help="write a systemd unit that runs the sync service",
                         description="Write a systemd unit (Restart=on-failure) that runs "
@@ -152,6 +175,99 @@ def run_key(args: argparse.Namespace) -> int:
     print(f'sync_key = "{public_text(key)}"')
     say(f"(the public half of {path}; put that line in this component's [[peer]] table on "
         "every peer)")
+    return EXIT_OK
+
+
+def run_pin(args: argparse.Namespace) -> int:
+    """`sync pin`: the peers' sync keys, asked over SSH, pinned in the settings."""
+    import asyncio
+
+    from rosnet_tui.core.saved.settings import parse_settings
+    from rosnet_tui.core.sync.pin import (
+        PIN_TIMEOUT_S,
+        ask_peers,
+        choose_peers,
+        pinned_text,
+        read_for_pin,
+        write_pins,
+    )
+
+    path = config_path(args).expanduser().absolute()
+    try:
+        before = read_for_pin(path)
+        settings = parse_settings(before, path)
+        peers, failed = choose_peers(settings, list(args.peers))
+    except SettingsError as exc:
+        say(f"rosnet-tui: {exc}")
+        return EXIT_USAGE
+    except ValueError as exc:
+        say(f"rosnet-tui sync pin: {exc}")
+        return EXIT_USAGE
+    if not peers and not failed:
+        say("rosnet-tui sync pin: no peer has an ssh_user in the settings: name one, or copy "
+            "the line `rosnet-tui sync key` prints on it")
+        return EXIT_USAGE
+    print(f"Asking {len(peers)} peer(s) for their sync keys over SSH ...")
+    got = asyncio.run(ask_peers(peers, timeout=args.timeout or PIN_TIMEOUT_S))
+    answers = sorted(got + failed, key=lambda a: a.name.lower())
+    words = {"same": "already pinned", "new": "not pinned here yet: to pin",
+             "changed": "KEY CHANGED"}
+    for a in answers:
+        if a.error:
+            print(f"  {a.name}: failed: {a.error}")
+        else:
+            print(f"  {a.name}: {a.key} ({a.fingerprint}): {words[a.state]}")
+    changed = [a for a in answers if a.state == "changed"]
+    for a in changed:
+        print(f"\nWARNING: {a.name}'s sync key is not the one pinned here.\n"
+              f"  pinned: {a.pinned} ({a.pinned_fingerprint})\n"
+              f"  now:    {a.key} ({a.fingerprint})\n"
+              f"  Its key file may have been made again (a reinstall), or someone else answers "
+              f"as {a.name}. Replace it only when you know which.")
+    todo = {a.name: a.key for a in answers if a.state in ("new", "changed")}
+    if todo:
+        try:
+            after = pinned_text(before, todo)
+        except SettingsError as exc:
+            say(f"rosnet-tui: {exc}")
+            return EXIT_USAGE
+        print()
+        sys.stdout.writelines(difflib.unified_diff(before.splitlines(True),
+                                                   after.splitlines(True),
+                                                   f"{path} (now)", f"{path} (after)"))
+    if args.dry_run:
+        print("Dry run: nothing was written.")
+        return EXIT_OK if all(a.state == "same" for a in answers) else EXIT_FAIL
+    for a in changed:
+        if args.yes:
+            print(f"--yes: replacing {a.name}'s pinned key.")
+        elif interactive() and ask(f"Replace the pinned sync key of {a.name} (KEY CHANGED)?"):
+            continue
+        else:
+            del todo[a.name]
+            a.error = "its key changed and was not replaced (say yes, or run with --yes)"
+            print(f"Not replacing {a.name}'s pinned key.")
+    if any(a.state == "new" for a in answers) and not args.yes:
+        stop = confirm(args, f"Pin these keys in {path}?", cancelled="Nothing was written.",
+                       no_terminal="rosnet-tui: not writing without a terminal to ask on; check "
+                                   "the keys above, then run the same command with --yes")
+        if stop is not None:
+            return stop
+    if todo:
+        try:
+            write_pins(path, before, todo)
+        except SettingsError as exc:
+            say(f"rosnet-tui: {exc}")
+            return EXIT_FAIL
+        except OSError as exc:
+            say(f"rosnet-tui: cannot write {path}: {exc.strerror}")
+            return EXIT_FAIL
+        print(f"Pinned the sync key of {', '.join(todo)} in {path}.")
+    bad = [a for a in answers if a.error]
+    if bad:
+        say(f"rosnet-tui sync pin: not pinned: {', '.join(a.name for a in bad)} (why: above)")
+        return EXIT_FAIL
+    print("Every asked peer's sync key is pinned here.")
     return EXIT_OK
 
 

@@ -76,7 +76,9 @@ def _peer_actions(ev: Evidence, name: str, causes: list[Cause], port: int) -> li
                    f"on {name}).",
         "address": f"Check our hosts line for {name}: `getent hosts {name}` must print its "
                    f"current public IP ({pub} in the settings; the ISP step on {name} shows the "
-                   f"address it has now). If it moved, `rosnet-tui sync` keeps it current.",
+                   f"address it has now). If it moved, `rosnet-tui sync` keeps it current"
+                   + (f" once {name}'s sync key is pinned here (`rosnet-tui sync pin {name}`)."
+                      if name in (ev.data("linux.resolve").get("unpinned") or ()) else "."),
         "firewall": firewall_action(ev, name),
     }
     return [words[c.key] for c in causes if c.key != "firewall" or c.score > 0]

@@ -199,6 +199,7 @@ class LinuxResolveData(TypedDict, total=False):
     names: dict[str, Resolved]  # every expected name, by name
     wrong: list[str]            # names that do not resolve, or resolve to another address
     loopback: list[str]         # names that resolve to a loopback address and should not
+    unpinned: list[str]         # peers sync cannot follow ([sync] on, no sync_key pinned)
 
 
 class PingPeer(TypedDict, total=False):

@@ -163,6 +163,10 @@ async def check_resolve(ctx: CheckContext) -> Outcome:
             data["loopback"].append(e.name)
         elif resolved != e.ip:
             data["wrong"].append(e.name)
+    if ctx.settings.has_sync:
+        data["unpinned"] = [p.name for p in ctx.settings.peers if not p.sync_key]
+        evidence += [f"{n}: sync cannot follow it here (no sync key pinned: `rosnet-tui sync "
+                     "pin`)" for n in data["unpinned"]]
     bad = [n for n in data["wrong"]] + data["loopback"]
     if not bad:
         return Outcome(Status.PASS, "every name resolves as expected ("
@@ -170,8 +174,10 @@ async def check_resolve(ctx: CheckContext) -> Outcome:
     parts = []
     for n in data["wrong"]:
         r = data["names"][n]
-        parts.append(f"{n} -> {r['resolved']} (expected {r['expected']})" if r["resolved"]
-                     else f"{n} does not resolve")
+        parts.append((f"{n} -> {r['resolved']} (expected {r['expected']})" if r["resolved"]
+                      else f"{n} does not resolve")
+                     + (" (sync cannot follow it: no sync key pinned; `rosnet-tui sync pin`)"
+                        if n in data.get("unpinned", ()) else ""))
     for n in data["loopback"]:
         parts.append(f"{n} -> {data['names'][n]['resolved']} (loopback)")
     return Outcome(Status.FAIL, "; ".join(parts), evidence, data)

@@ -41,6 +41,7 @@ class PairResult:
     detail: str
     summary: dict[str, Any] = field(default_factory=dict)
     seconds: float = 0.0
+    master_sync_key: str = ""   # the master's public sync key, when its answer carried it
 
 
 def _ca_words(paths: TlsPaths) -> str:
@@ -214,9 +215,10 @@ async def pair_over_ssh(s: Settings, paths: TlsPaths, opts: Any = None,
     except TlsError as exc:
         return PairResult(False, f"the answer from {peer.name} was not installed: {exc}",
                           seconds=took)
+    key = rep.get("sync_key")
     return PairResult(True, f"paired with {peer.name}'s fleet CA: {paths.node_crt} names "
                             f"{summ['cn']}, valid until {summ['not_after'][:10]}", summ,
-                      time.monotonic() - t0)
+                      time.monotonic() - t0, key if isinstance(key, str) else "")
 
 
 def report_of(text: str) -> dict[str, Any] | None:

@@ -409,6 +409,42 @@ def render_settings(s: Settings, previous_text: str | None = None) -> str:
     return doc.as_string()
 
 
+def with_peer_values(text: str, name: str, **values: str) -> str:
+    """*text* with *values* set in the ``[[peer]]`` table named *name* (names compare without
+    case); every other byte as it was (comments, layout): a key already there is changed in its
+    place, a new one goes right after the table's last key. Raises SettingsError."""
+    import tomlkit
+
+    try:
+        doc = tomlkit.parse(text)
+    except Exception as exc:  # noqa: BLE001 - tomlkit raises several kinds
+        raise SettingsError(f"the settings do not parse: {exc}") from None
+    tables = [t for t in (doc.get("peer") or []) if hasattr(t, "get")]
+    index = next((i for i, t in enumerate(tables)
+                  if str(t.get("name", "")).lower() == name.lower()), None)
+    if index is None:
+        raise SettingsError(f"no [[peer]] named {name} in the settings")
+    tbl = tables[index]
+    for k in [k for k in values if k in tbl]:
+        tbl[k] = values.pop(k)
+    text = doc.as_string()
+    if not values:
+        return text
+    header = _locate(text, "peer", None, index)
+    lines = text.split("\n")
+    if header is None:
+        raise SettingsError(f"cannot find the [[peer]] table of {name}")
+    last, n = header - 1, header
+    key_line = re.compile(r"^(\s*)[A-Za-z0-9_\"'.-]+\s*=")
+    while n < len(lines) and not re.match(r"^\s*\[", lines[n]):
+        if key_line.match(lines[n]):
+            last = n
+        n += 1
+    indent = key_line.match(lines[last]).group(1) if key_line.match(lines[last]) else ""
+    new = [f"{indent}{k} = {tomlkit.item(v).as_string()}" for k, v in values.items()]
+    return "\n".join(lines[:last + 1] + new + lines[last + 1:])
+
+
 def _merge_table(doc: Any, name: str, values: dict[str, Any]) -> None:
     import tomlkit
 

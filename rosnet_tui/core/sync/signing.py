@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import hashlib
 import json
 import os
 from collections.abc import Mapping
@@ -75,6 +76,15 @@ def parse_public(text: str) -> Ed25519PublicKey:
     return Ed25519PublicKey.from_public_bytes(base64.b64decode(text.split(":", 1)[1]))
 
 
+def fingerprint(text: str) -> str:
+    """A pinned key's short form to compare by eye: ``SHA256:`` and the base64 of its digest (as
+    ssh-keygen shows host keys). Raises ValueError."""
+    raw = base64.b64decode(text.split(":", 1)[1]) if SYNC_KEY_RE.match(text or "") else None
+    if raw is None:
+        raise ValueError("not a sync key (ed25519:...)")
+    return "SHA256:" + base64.b64encode(hashlib.sha256(raw).digest()).decode().rstrip("=")
+
+
 def canonical(rec: Record) -> bytes:
     body = rec.to_json()
     body.pop("sig", None)
@@ -90,7 +100,7 @@ def signature_problem(rec: Record, key: Ed25519PublicKey | None) -> str | None:
     """Why *rec* does not count as its owner's (None: it does)."""
     if key is None:
         return (f"no sync key of {rec.name} is pinned here (its [[peer]] sync_key): "
-                f"`rosnet-tui sync key` on {rec.name} prints it")
+                f"`rosnet-tui sync pin {rec.name}` fetches it over SSH")
     if not rec.sig:
         return f"unsigned: only a record signed by {rec.name}'s own key counts"
     try:
