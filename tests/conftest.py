@@ -2,7 +2,7 @@
 
 import os
 
-# Undeclared check-data keys raise in the whole suite (rosnet_tui/core/checks/data.py).
+# Undeclared check-data keys raise in the whole suite (rosnet_tui/core/checks/data/).
 os.environ.setdefault("ROSNET_TUI_STRICT_DATA", "1")
 
 pytest_plugins = ["tests.lab.fixtures", "tests.plugins.ssh", "tests.plugins.roscore",

@@ -1,4 +1,4 @@
-"""Advisor rules read only what the checks declare (rosnet_tui/core/checks/data.py).
+"""Advisor rules read only what the checks declare (rosnet_tui/core/checks/data/).
 
 Two guards, so a renamed key fails the ordinary test run instead of silently switching a rule
 off: every rule runs over every golden input with undeclared reads made fatal (the declared view

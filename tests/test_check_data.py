@@ -1,4 +1,4 @@
-"""The declared data of the checks (rosnet_tui/core/checks/data.py): the `check --json` contract.
+"""The declared data of the checks (rosnet_tui/core/checks/data/): the `check --json` contract.
 
 Every registered check id has a declaration and every declaration a check; each declared key is
 documented; docs/COMMANDS.md's table of the checks lists exactly the declared top-level keys;
@@ -37,7 +37,7 @@ from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 
 ROOT = Path(__file__).resolve().parent.parent
-DATA_PY = ROOT / "rosnet_tui" / "core" / "checks" / "data.py"
+DATA_DIR = ROOT / "rosnet_tui" / "core" / "checks" / "data"
 
 
 def _nested(tp: typing.Any) -> list[type]:
@@ -77,24 +77,24 @@ def test_declarations_are_optional_key_typeddicts_that_resolve():
 
 def test_every_declared_key_has_a_comment_saying_what_it_holds():
     """The comment on each key is its documentation (the `check --json` contract)."""
-    lines = DATA_PY.read_text().splitlines()
-    tree = ast.parse(DATA_PY.read_text())
     names = {td.__name__ for td in _all_declarations()}
     found: set[str] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ClassDef) and node.name in names:
-            found.add(node.name)
-            for item in node.body:
-                if isinstance(item, ast.AnnAssign):
-                    line = lines[item.lineno - 1]
-                    assert "#" in line, f"{node.name}: no comment on {line.strip()!r}"
-        # Functional syntax (for keys like "from"): Name = TypedDict("Name", {...}, total=False)
-        if (isinstance(node, ast.Call) and getattr(node.func, "id", "") == "TypedDict"
-                and isinstance(node.args[0], ast.Constant) and node.args[0].value in names):
-            found.add(node.args[0].value)
-            for key in node.args[1].keys:
-                line = lines[key.lineno - 1]
-                assert "#" in line, f"{node.args[0].value}: no comment on {line.strip()!r}"
+    for path in sorted(DATA_DIR.glob("*.py")):
+        lines = path.read_text().splitlines()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef) and node.name in names:
+                found.add(node.name)
+                for item in node.body:
+                    if isinstance(item, ast.AnnAssign):
+                        line = lines[item.lineno - 1]
+                        assert "#" in line, f"{node.name}: no comment on {line.strip()!r}"
+            # Functional syntax (for keys like "from"): Name = TypedDict("Name", {...}, ...)
+            if (isinstance(node, ast.Call) and getattr(node.func, "id", "") == "TypedDict"
+                    and isinstance(node.args[0], ast.Constant) and node.args[0].value in names):
+                found.add(node.args[0].value)
+                for key in node.args[1].keys:
+                    line = lines[key.lineno - 1]
+                    assert "#" in line, f"{node.args[0].value}: no comment on {line.strip()!r}"
     assert found == names
 
 
@@ -125,7 +125,7 @@ def test_readme_table_lists_exactly_the_declared_top_level_keys():
     assert sorted(table) == sorted(data.DATA), "docs/COMMANDS.md's table of the checks lists other ids"
     for cid, keys in table.items():
         declared = list(typing.get_type_hints(data.DATA[cid]))
-        assert keys == declared, (f"docs/COMMANDS.md's data column for {cid} drifted from data.py; "
+        assert keys == declared, (f"docs/COMMANDS.md's data column for {cid} drifted from checks/data/; "
                                   f"it should read: {expected_cell(cid)}")
         assert set(keys) == data.declared_keys(cid)
 

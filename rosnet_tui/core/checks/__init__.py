@@ -156,7 +156,7 @@ async def run_check(spec: CheckSpec, ctx: CheckContext) -> CheckResult:
     if extra and data_decl.strict():
         raise data_decl.UndeclaredKeyError(
             f"{spec.id} reported keys its declaration lacks: {', '.join(extra)} "
-            "(declare them in rosnet_tui/core/checks/data.py)")
+            "(declare them in rosnet_tui/core/checks/data/)")
     return CheckResult(spec.id, spec.step, outcome.status, outcome.summary,
                        list(outcome.evidence), time.monotonic() - start, timeout,
                        dict(outcome.data))
