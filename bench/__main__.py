@@ -79,9 +79,9 @@ def main(argv: list[str] | None = None) -> int:
     def log(msg: str) -> None:  # progress, on stderr
         print(f"[bench {time.monotonic() - t_start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
+    from bench.local_rows import run_local_rows
     from bench.report import markdown, metadata, print_table, write_json
     from bench.rows_lab import run_lab_rows
-    from bench.rows_local import run_local_rows
 
     log(f"rows {','.join(map(str, args.rows))}, {opts.reps} repetition(s)"
         + (", quick" if opts.quick else ""))

@@ -16,7 +16,6 @@ and the screen itself (rebuilt from the output with pyte when it is installed).
 from __future__ import annotations
 
 import re
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -231,11 +230,3 @@ def row7_bursts(world: LocalWorld, opts: Options) -> RowResult:
 
 
 ROWS: dict[int, Callable[[LocalWorld, Options], RowResult]] = {4: row4_bytes, 7: row7_bursts}
-
-
-def timed(func: Callable[[LocalWorld, Options], RowResult], world: LocalWorld, opts: Options
-          ) -> RowResult:
-    t0 = time.monotonic()
-    res = func(world, opts)
-    res.seconds = time.monotonic() - t0
-    return res

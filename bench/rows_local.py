@@ -1,12 +1,11 @@
-"""Rows 1 and 5 (and, from bench/rows_bytes.py, 4 and 7): the wizard under a pty against a bare
-Textual app. Run anywhere.
+"""Rows 1 and 5 (bench/local_rows.py runs them with rows 4 and 7): the wizard under a pty
+against a bare Textual app. Run anywhere.
 
 Every program runs in a loopback-only world (bench/local_env.py): nothing leaves 127.0.0.0/8.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -160,29 +159,3 @@ def row5_latency(world: LocalWorld, opts: Options) -> RowResult:
     res.lines = [ln]
     res.details = {"runs": runs}
     return res
-
-
-def run_local_rows(rows: list[int], opts: Options, log: Callable[[str], None]) -> list[RowResult]:
-    """Rows 1, 4, 5, 7 in one loopback world."""
-    from bench.local_env import local_world
-    from bench.rows_bytes import row4_bytes, row7_bursts
-
-    out: list[RowResult] = []
-    funcs = {1: row1_startup, 4: row4_bytes, 5: row5_latency, 7: row7_bursts}
-    wanted = [r for r in rows if r in funcs]
-    if not wanted:
-        return out
-    with local_world(compiled=True) as world:
-        for r in wanted:
-            log(f"row {r}: running")
-            t0 = time.monotonic()
-            try:
-                res = funcs[r](world, opts)
-            except Exception as exc:  # a row that cannot measure says why; the others go on
-                res = RowResult(r, {1: "Start-up", 4: "Terminal traffic",
-                                    5: "Responsiveness", 7: "Bursts of keys"}[r],
-                                status="error",
-                                reason=f"{type(exc).__name__}: {exc}")
-            res.seconds = time.monotonic() - t0
-            out.append(res)
-    return out
