@@ -79,7 +79,7 @@ def test_lab_rows(tmp_path):
     ok, why = lab_available()
     if not ok:
         pytest.skip(f"lab rows of the bench: {why}")
-    _r, doc, md = bench(tmp_path, "--rows", "2,3,6")
+    _r, doc, md = bench(tmp_path, "--rows", "2,3,6", timeout=600)   # a smoke test, not a timing: ~40 s quiet, 60+ s loaded
     rows = rows_by_number(doc)
     assert sorted(rows) == [2, 3, 6]
     if rows[2]["status"] == "skipped":  # e.g. roscore not installed: the reason is given
