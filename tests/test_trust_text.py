@@ -57,6 +57,10 @@ def test_the_outsider_probe_never_runs_a_module_planted_where_the_caller_stands(
     out, err = asyncio.run(run_here(outsider.tls_probe_program(),
                                     ["127.0.0.1", "9", "0.5"], 30))
     assert outsider.parse_marked(out, outsider.TLS_MARK) is not None, (out, err)
+    # so does the SSH audit, whose program opens with `from __future__` (it must stay first)
+    out, err = asyncio.run(run_here(outsider.SSH_AUDIT_PROGRAM.encode(),
+                                    ["127.0.0.1", "9", "0.5", "nobody"], 30))
+    assert outsider.parse_marked(out, outsider.SSH_MARK) is not None, (out, err)
     assert not marker.exists()
 
 

@@ -230,14 +230,18 @@ async def run_here(program: bytes, args: list[str], timeout: float) -> tuple[str
     Isolated (``python -I``: no PYTHON* variables, no user site, not the caller's folder on the
     path) and from a private folder of its own, so nothing planted where the caller stands
     (an ``ssl.py``) runs; it finds this run's rosnet_tui by the path put first in it."""
-    head = f"import sys; sys.path.insert(0, {_package_parent()!r})\n".encode()
+    # The program is compiled on its own (its `from __future__` lines stay first in it), after
+    # this run's rosnet_tui is put first on the path.
+    boot = (f"import sys; sys.path.insert(0, {_package_parent()!r}); "
+            "exec(compile(sys.stdin.read(), '<probe>', 'exec', dont_inherit=True), "
+            "{'__name__': '__main__'})")
     with tempfile.TemporaryDirectory(prefix="rosnet-probe-") as private:
         os.chmod(private, 0o700)
         proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-I", "-", *args, stdin=asyncio.subprocess.PIPE,
+            sys.executable, "-I", "-c", boot, *args, stdin=asyncio.subprocess.PIPE,
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, cwd=private)
         try:
-            out, err = await asyncio.wait_for(proc.communicate(head + program), timeout)
+            out, err = await asyncio.wait_for(proc.communicate(program), timeout)
         except asyncio.TimeoutError:
             return "", f"the probe gave no verdict within {timeout:.1f} s"
         finally:     # timed out, or the check itself was stopped: the program goes with it
