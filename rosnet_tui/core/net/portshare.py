@@ -28,6 +28,8 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from rosnet_tui.core.jsonsafe import loads_bounded
+
 MAX_GUESTS = 32
 LINE_LIMIT = 2048
 
@@ -200,7 +202,7 @@ async def follow(holder: Holder, on_seen: Callable[[str, str | None], None]) -> 
             if not line.startswith(b"SEEN "):
                 continue
             try:
-                address, text = json.loads(line[5:])
+                address, text = loads_bounded(line[5:].decode("utf-8", "replace"))
             except (ValueError, TypeError):
                 continue
             if isinstance(address, str) and (text is None or isinstance(text, str)):
