@@ -8,6 +8,8 @@ peer's address change with the set.
 from __future__ import annotations
 
 import json
+import os
+import signal
 import socket
 import time
 
@@ -332,9 +334,16 @@ def test_the_set_follows_a_peers_address_change_within_the_sync_latency(lab, tmp
         forged = sign_record(new_record("turtlebot", local_ip=ADDR.ROBOT_LOCAL,
                                         public_ip="198.51.100.99", role="master", seq=10**6),
                              sync_key("sami"))
-        (folder / "turtlebot.json").write_text(forged.to_text())
-        assert lab.wait_output(rig.procs["laptop"], r"refused the record turtlebot\.json .*not "
-                                                    r"by turtlebot's key", WAIT), rig.log("laptop")
+        # The robot's service is held still meanwhile: its next publish would overwrite the
+        # forged file before a busy laptop reads it (the test's race, not the product's).
+        robot_pid = rig.procs["robot"].pid          # `ip netns exec` execs the service itself
+        os.kill(robot_pid, signal.SIGSTOP)
+        try:
+            (folder / "turtlebot.json").write_text(forged.to_text())
+            assert lab.wait_output(rig.procs["laptop"], r"refused the record turtlebot\.json .*"
+                                   r"not by turtlebot's key", WAIT), rig.log("laptop")
+        finally:
+            os.kill(robot_pid, signal.SIGCONT)
         assert "198.51.100.99" not in allowed() and new_ip in allowed()
         lab.set_robot_wan("203.0.113.79")
         assert wait_for(lambda: "203.0.113.79" in allowed(), WAIT), rig.log("laptop")[-3000:]
