@@ -1,0 +1,94 @@
+"""Each piece of Table 1's evidence moves the ranking on its own, against the connection type's
+tie-break (home: the modem first; telecom: the carrier first) or against competing evidence: a
+weight that is zeroed or cut changes a ranking here (issue 36)."""
+
+from __future__ import annotations
+
+from rosnet_tui.core.advisor.evidence import Evidence
+from rosnet_tui.core.advisor.ranking import table1_causes
+from tests.builders import laptop_settings, put, t1
+
+HOME, TELECOM = laptop_settings(), laptop_settings(connection="telecom")
+
+
+def order(r, s=HOME) -> list[str]:
+    return [c.key for c in table1_causes(Evidence(r, s))]
+
+
+def closed(answer=None, ping=None, *others: dict):
+    r = t1(True, False)
+    put(r, "router.port_open", "fail", test_port=12345, public_ip_ping=ping,
+        ports=[{"port": 12345, "reachable": False, "listener": True, "via": "peer:sami",
+                "answer": answer}, *others])
+    return r
+
+
+def test_with_no_evidence_the_connection_type_decides():
+    assert order(closed()) == ["forwarding", "isp", "port_in_use"]
+    assert order(closed(), TELECOM) == ["isp", "forwarding", "port_in_use"]
+
+
+def test_a_refusal_puts_the_modem_before_the_carrier_on_a_carriers_line():
+    assert order(closed("refused"), TELECOM)[0] == "forwarding"
+
+
+def test_unreachable_puts_the_modem_first_on_a_carriers_line():
+    assert order(closed("unreachable"), TELECOM)[0] == "forwarding"
+
+
+def test_another_program_answering_puts_forwarding_first_unless_only_this_port_is_taken():
+    assert order(closed("other"), TELECOM)[0] == "forwarding"
+    tok = {"port": 40000, "reachable": True, "listener": True, "via": "peer:sami",
+           "answer": "token"}
+    assert order(closed("other", None, tok), TELECOM)[0] == "port_in_use"
+
+
+def test_silence_with_ping_is_the_modem_without_ping_the_carrier():
+    assert order(closed("timeout", True), TELECOM)[0] == "forwarding"
+    assert order(closed("timeout", False), HOME)[0] == "isp"
+
+
+def test_a_refusal_counts_against_a_held_port_and_the_carrier():
+    r = closed("refused")
+    put(r, "isp.cgnat", "warn", double_nat=True, wan_ip="192.168.0.2", method="upnp",
+        hop="192.168.0.2")
+    # double NAT behind our own router: the inner router first, the provider (if the outer one
+    # is its) second, a held port last: a service holding it would have accepted
+    assert order(r) == ["forwarding", "isp", "port_in_use"]
+
+
+def test_carrier_nat_outweighs_a_changed_local_ip_and_a_far_private_hop_outweighs_other_ports():
+    r = closed()
+    put(r, "isp.cgnat", "warn", cgnat=True, hop="100.64.0.1", method="traceroute")
+    put(r, "router.local_ip", "warn", local_ip="192.168.1.23", differs=True,
+        expected_ip="192.168.1.10")
+    assert order(r)[0] == "isp"
+    far = closed(None, None, {"port": 40000, "reachable": True, "listener": True, "via": "echoip"})
+    put(far, "isp.cgnat", "warn", double_nat=True, method="traceroute", hop="10.20.30.1",
+        hops=["192.168.1.254", "198.51.100.1", "10.20.30.1"])
+    assert order(far)[0] == "isp"
+
+
+def test_a_changed_local_ip_puts_forwarding_first_on_a_carriers_line():
+    r = closed()
+    put(r, "router.local_ip", "warn", local_ip="192.168.1.23", differs=True,
+        expected_ip="192.168.1.10")
+    assert order(r, TELECOM)[0] == "forwarding"
+    r = closed()
+    put(r, "router.local_ip", "pass", local_ip="192.168.1.23", changed=True,
+        previous_ip="192.168.1.10")
+    assert order(r, TELECOM)[0] == "forwarding"
+    r = closed()
+    put(r, "router.local_ip", "pass", local_ip="192.168.1.23",
+        history=[{"ip": "192.168.1.10"}, {"ip": "192.168.1.23"}])
+    assert order(r, TELECOM)[0] == "forwarding"
+    r = closed()
+    put(r, "router.local_ip", "pass", local_ip="192.168.1.10",
+        history=[{"ip": "192.168.1.10"}, {"ip": "192.168.1.10"}])
+    assert order(r, TELECOM)[0] == "isp"
+
+
+def test_a_held_port_outweighs_other_evidence_for_forwarding():
+    r = closed(None, None, {"port": 40000, "reachable": True, "listener": True, "via": "echoip"})
+    put(r, "router.port_free", "warn", in_use=True, process="sshd", pid=99)
+    assert order(r, TELECOM) == ["port_in_use", "forwarding", "isp"]
