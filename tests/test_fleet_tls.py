@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+import zenoh  # noqa: F401  a hard dependency: a broken install fails here, never skips
 
 from rosnet_tui.core.config.settings_model import RosSettings, Settings
 from rosnet_tui.core.ros import fleet_tls, ros2
@@ -182,7 +183,6 @@ def _wait_port(port: int, proc: subprocess.Popen, timeout: float = 15.0) -> None
 
 
 def test_a_real_router_with_the_masters_config_admits_only_the_fleet(tmp_path):
-    pytest.importorskip("zenoh")
     from rosnet_tui.core.peer import zenohproto
     from rosnet_tui.core.ros import pairing
 
