@@ -215,10 +215,10 @@ def test_a_real_router_with_the_masters_config_admits_only_the_fleet(tmp_path):
                     "verify_name_on_connect": True}
 
         t0 = time.monotonic()
-        sess = zenohproto.open_client(ep, 2.0, "client", tls_of(sp))
+        sess = zenohproto.open_client(ep, 10.0, "client", tls_of(sp))
         took = time.monotonic() - t0
         sess.close()
-        assert took < 1.5
+        assert took < 5.0       # admitted at once, not after the (long) timeout
         foreign = fleet_tls.make_test_ca(tmp_path / "f", "someone else")
         fp = fleet_tls.tls_paths(tmp_path / "fm")
         fleet_tls.issue_test_cert(foreign, fp, "sami")
