@@ -7,8 +7,19 @@ from __future__ import annotations
 import base64
 import hashlib
 import hmac
+import os
+import stat
 
-from rosnet_tui.core.ssh.known_hosts import host_key_name, known_host_keys
+import pytest
+
+from rosnet_tui.core.ssh.known_hosts import (
+    host_key_name,
+    key_fingerprint,
+    known_host_keys,
+    trust_host_key,
+    verify_commands,
+)
+from rosnet_tui.core.ssh.options import SshOptions
 
 
 def _blob(ktype: str = "ssh-ed25519", fill: int = 1) -> bytes:
@@ -106,3 +117,87 @@ def test_missing_files_are_skipped_and_later_files_still_read(tmp_path):
     f.write_text(_line("robot", 5) + "\n")
     k = known_host_keys([tmp_path / "missing", tmp_path, f], "robot")
     assert k.keys == {"ssh-ed25519": [_blob(fill=5)]}
+
+
+def test_base64_with_stray_characters_is_not_a_key_nor_a_hashed_name(tmp_path):
+    b64 = base64.b64encode(_blob()).decode()
+    stray = b64[:8] + "!" + b64[8:]            # lenient base64 would drop the "!" and read it
+    assert _keys(tmp_path, [f"robot ssh-ed25519 {stray}"], "robot").keys == {}
+    salt = bytes(range(20))
+    digest = base64.b64encode(hmac.new(salt, b"robot", hashlib.sha1).digest()).decode()
+    salt64 = base64.b64encode(salt).decode()
+    assert _keys(tmp_path, [_line(f"|1|{salt64}|{digest}")], "robot").keys
+    assert _keys(tmp_path, [_line(f"|1|{salt64[:4]}!{salt64[4:]}|{digest}")], "robot").keys == {}
+
+
+def test_a_blob_is_taken_when_anything_follows_its_type_name(tmp_path):
+    t = b"ssh-ed25519"
+    blob = len(t).to_bytes(4, "big") + t + b"\0"
+    line = f"robot ssh-ed25519 {base64.b64encode(blob).decode()}"
+    assert _keys(tmp_path, [line], "robot").keys == {"ssh-ed25519": [blob]}
+
+
+def test_fingerprints_are_openssh_sha256_and_filtered_by_type(tmp_path):
+    fp = key_fingerprint(_blob())
+    want = base64.b64encode(hashlib.sha256(_blob()).digest()).decode()
+    assert want.endswith("=") and fp == "SHA256:" + want.rstrip("=") and len(fp) == 50
+    k = _keys(tmp_path, [_line("robot", 1), _line("robot", 3, "ecdsa-sha2-nistp256")], "robot")
+    assert k.fingerprints("ecdsa-sha2-nistp256") == [key_fingerprint(_blob("ecdsa-sha2-nistp256",
+                                                                           3))]
+    assert k.fingerprints("ssh-rsa") == []
+    assert k.fingerprints() == [key_fingerprint(_blob()),
+                                key_fingerprint(_blob("ecdsa-sha2-nistp256", 3))]
+
+
+def _host_key(fill: int = 1, comment: str = "") -> str:
+    return f"ssh-ed25519 {base64.b64encode(_blob(fill=fill)).decode()}" + (
+        f" {comment}" if comment else "")
+
+
+def test_trusting_a_key_writes_one_private_line_in_a_private_folder(tmp_path):
+    opts = SshOptions(ssh_dir=tmp_path / "a" / "ssh")
+    path = trust_host_key(opts, "robot", 2222, _host_key(comment="root@robot"))
+    assert path == tmp_path / "a" / "ssh" / "known_hosts"
+    assert path.read_text() == f"[robot]:2222 {_host_key()}\n"   # the comment is not kept
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
+    assert stat.S_IMODE(os.stat(path.parent).st_mode) == 0o700
+    assert known_host_keys([path], "[robot]:2222").keys == {"ssh-ed25519": [_blob()]}
+    trust_host_key(opts, "robot", 22, _host_key(2))               # appended, port 22 plain
+    assert path.read_text().splitlines()[1] == f"robot {_host_key(2)}"
+
+
+def test_trusting_appends_after_a_last_line_without_newline(tmp_path):
+    (tmp_path / "known_hosts").write_text(_line("other"))
+    trust_host_key(SshOptions(ssh_dir=tmp_path), "robot", 22, _host_key())
+    assert (tmp_path / "known_hosts").read_text() == f"{_line('other')}\nrobot {_host_key()}\n"
+
+
+def test_trusting_refuses_garbage_a_second_key_and_what_is_not_a_file(tmp_path):
+    opts = SshOptions(ssh_dir=tmp_path)
+    with pytest.raises(ValueError):
+        trust_host_key(opts, "robot", 22, "ssh-ed25519 not*base64")
+    trust_host_key(opts, "robot", 22, _host_key(1))
+    with pytest.raises(ValueError, match="already has a ssh-ed25519 key for robot; remove it "
+                                         "first .ssh-keygen -R robot."):
+        trust_host_key(opts, "robot", 22, _host_key(2))
+    assert (tmp_path / "known_hosts").read_text().count("\n") == 1
+    fifo = tmp_path / "f"
+    fifo.mkdir()
+    os.mkfifo(fifo / "known_hosts")
+    with pytest.raises(ValueError, match=r"not a regular file \(a FIFO\?\); nothing was written"):
+        trust_host_key(SshOptions(ssh_dir=fifo), "robot", 22, _host_key())
+    dev = tmp_path / "d"
+    dev.mkdir()
+    (dev / "known_hosts").symlink_to("/dev/null")
+    with pytest.raises(ValueError, match="not a regular file; nothing was written"):
+        trust_host_key(SshOptions(ssh_dir=dev), "robot", 22, _host_key())
+
+
+def test_verify_commands_name_the_host_key_file_and_the_port():
+    v = verify_commands("robot", 2222, "ecdsa-sha2-nistp256", "ops")
+    assert "/etc/ssh/ssh_host_ecdsa_key.pub" in v and "ssh-keyscan -p 2222 robot" in v
+    assert "`ssh -p 2222 ops@robot`" in v
+    v = verify_commands("robot", 22, "ssh-rsa")
+    assert "ssh_host_rsa_key.pub" in v and "ssh-keyscan robot" in v and "`ssh robot`" in v
+    assert "ssh_host_ed25519_key.pub" in verify_commands("robot", 22, "ssh-unknown")
+    assert "ssh_host_dsa_key.pub" in verify_commands("robot", 22, "ssh-dss")
