@@ -67,3 +67,41 @@ def test_an_attachment_has_exactly_33_bytes_and_a_gid_of_16():
         with pytest.raises(ValueError, match="16 bytes"):
             z.encode_attachment(1, 1, bad)
     assert len(z.make_gid("x")) == 16 and z.make_gid("x") != z.make_gid("y")
+
+
+def test_every_field_of_a_token_is_read_from_its_own_place():
+    node = z.node_token(3, "zid1", "n7", "talker", "/robot1", "/enc")
+    assert z.parse_token(node) == {"domain": "3", "zid": "zid1", "nid": "n7", "id": "n7",
+                                   "kind": "NN", "enclave": "/enc", "namespace": "/robot1",
+                                   "name": "talker"}
+    ep = z.endpoint_token(4, "zid2", "n8", "e9", "MS", "listener", "/chatter",
+                          namespace="/ns", enclave="/e", qos="q1")
+    assert z.parse_token(ep) == {"domain": "4", "zid": "zid2", "nid": "n8", "id": "e9",
+                                 "kind": "MS", "enclave": "/e", "namespace": "/ns",
+                                 "name": "listener", "topic": "/chatter",
+                                 "type": "std_msgs/msg/String", "hash": z.STRING_HASH,
+                                 "qos": "q1"}
+    with pytest.raises(ValueError, match="unknown endpoint kind 'XX'"):
+        z.endpoint_token(0, "a", "1", "2", "XX", "n", "/t")
+
+
+@pytest.mark.parametrize(("wire", "ros"), [
+    ("pkg::dds_::msg::dds_::T_", "pkg/dds_/msg/T"),     # the last dds_ part is the DDS one
+    ("x::dds_::T_", "x/T"),                              # a two-letter name loses its "_"
+    ("x::dds_::_", "x/_"),                               # a lone "_" is the name itself
+])
+def test_the_dds_suffix_is_taken_from_the_last_part_only(wire, ros):
+    assert z.ros_type(wire) == ros
+
+
+def test_bytes_that_are_not_utf_8_are_replaced_not_raised():
+    bad = b"\x00\x01\x00\x00" + struct.pack("<I", 3) + b"a\xff\x00"
+    assert z.decode_string(bad) == "a\ufffd"
+
+
+def test_a_report_line_holds_an_object_or_counts_as_none():
+    assert z.parse_report(f"x\n{z.REPORT_MARK}{{\"ok\": true}}\n") == {"ok": True}
+    assert z.parse_report(f"{z.REPORT_MARK}[1, 2]\n") is None
+    assert z.parse_report(f"{z.REPORT_MARK}{{\"a\": 1}}\n{z.REPORT_MARK}{{\"a\": 2}}") == {"a": 2}
+    assert z.parse_report(f"{z.REPORT_MARK}{{bad\n") is None
+    assert z.parse_report("") is None
