@@ -498,3 +498,22 @@ def test_a_crash_inside_an_in_place_shrink_is_completed_by_the_next_read(tmp_pat
         assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
     finally:
         subprocess.run(["umount", str(dst)], timeout=10, check=False)
+
+
+def test_the_dominant_line_ending_needs_half_the_lines_or_more():
+    assert mt.detect_newline("a\r\nb\n") == "\r\n"          # half
+    assert mt.detect_newline("a\r\nb\nc\n") == "\n"         # a third
+    assert mt.detect_newline("abc") == "\n" and mt.detect_newline("") == "\n"
+    assert mt.detect_newline(None) == "\n"
+
+
+def test_a_block_keeps_its_begin_lines_ending_whatever_the_rest_of_the_file_uses():
+    text = f"a\nb\nc\n{B}\r\nold\n{E}\n"
+    assert mt.compose_block(text, ["new"]) == f"a\nb\nc\n{B}\r\nnew\r\n{E}\r\n"
+
+
+def test_bad_block_lines_and_positions_are_refused_in_words():
+    with pytest.raises(ValueError, match="may not hold a newline or a marker: 'a..rb'"):
+        mt.compose_block("", ["a\rb"])
+    with pytest.raises(ValueError, match="position must be 'top' or 'end', not 'middle'"):
+        mt.compose_block("x\n", ["y"], position="middle")
