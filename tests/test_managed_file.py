@@ -513,7 +513,7 @@ def test_a_block_keeps_its_begin_lines_ending_whatever_the_rest_of_the_file_uses
 
 
 def test_bad_block_lines_and_positions_are_refused_in_words():
-    with pytest.raises(ValueError, match="may not hold a newline or a marker: 'a..rb'"):
+    with pytest.raises(ValueError, match=r"may not hold a newline or a marker: 'a\\rb'"):
         mt.compose_block("", ["a\rb"])
     with pytest.raises(ValueError, match="position must be 'top' or 'end', not 'middle'"):
         mt.compose_block("x\n", ["y"], position="middle")
