@@ -4,9 +4,17 @@ weight that is zeroed or cut changes a ranking here (issue 36)."""
 
 from __future__ import annotations
 
+import pytest
+
 from rosnet_tui.core.advisor.evidence import Evidence
-from rosnet_tui.core.advisor.ranking import table1_causes
-from tests.builders import laptop_settings, put, t1
+from rosnet_tui.core.advisor.ranking import (
+    ago,
+    is_cgnat_ip,
+    is_private_ip,
+    master_answer,
+    table1_causes,
+)
+from tests.builders import healthy_laptop, laptop_settings, put, ros2_member, t1
 
 HOME, TELECOM = laptop_settings(), laptop_settings(connection="telecom")
 
@@ -92,3 +100,37 @@ def test_a_held_port_outweighs_other_evidence_for_forwarding():
     r = closed(None, None, {"port": 40000, "reachable": True, "listener": True, "via": "echoip"})
     put(r, "router.port_free", "warn", in_use=True, process="sshd", pid=99)
     assert order(r, TELECOM) == ["port_in_use", "forwarding", "isp"]
+
+
+@pytest.mark.parametrize(("seconds", "words"), [
+    (-5, "0 s"), (0.5, "0 s"), (89, "89 s"), (90, "2 min"), (5399, "90 min"), (5400, "2 h"),
+    (7200, "2 h"), (36 * 3600 - 1, "36 h"), (36 * 3600, "2 days"), (86400 * 12, "12 days"),
+])
+def test_an_age_in_words_changes_unit_at_90_s_90_min_and_36_h(seconds, words):
+    assert ago(seconds) == words
+
+
+@pytest.mark.parametrize(("ip", "private", "cgnat"), [
+    ("10.1.2.3", True, False), ("172.16.0.1", True, False), ("172.31.255.254", True, False),
+    ("172.32.0.1", False, False), ("192.168.1.1", True, False), ("198.51.100.1", False, False),
+    ("100.64.0.1", False, True), ("100.127.255.254", False, True), ("100.128.0.1", False, False),
+    ("not-an-address", False, False), ("", False, False),
+])
+def test_private_and_carrier_nat_addresses(ip, private, cgnat):
+    assert is_private_ip(ip) is private and is_cgnat_ip(ip) is cgnat
+
+
+def test_the_masters_answer_is_read_only_for_the_master_seen_from_another_seat():
+    r = healthy_laptop()
+    put(r, "ros.master", "fail", reachable=False, tcp="refused")
+    ev = Evidence(r, laptop_settings())
+    assert master_answer(ev, "turtlebot") == "refused"
+    assert master_answer(ev, "sami") is None                   # not the master
+    put(r, "ros.master", "pass", reachable=True, tcp="connected")
+    assert master_answer(Evidence(r, laptop_settings()), "turtlebot") == "connected"
+    s = ros2_member()
+    r2 = {"ros2.router": r["ros.master"]}
+    r2["ros2.router"].data = {"reachable": False, "failure": "refused"}
+    assert master_answer(Evidence(r2, s), "turtlebot") == "refused"
+    r2["ros2.router"].data = {"reachable": False, "failure": "tls"}
+    assert master_answer(Evidence(r2, s), "turtlebot") is None   # not a network answer
