@@ -12,8 +12,10 @@ from rosnet_tui.core.advisor.ranking import (
     is_cgnat_ip,
     is_private_ip,
     master_answer,
+    peer_causes,
     table1_causes,
 )
+from tests.advisor_support import ssh_shut_out
 from tests.builders import healthy_laptop, laptop_settings, put, ros2_member, t1
 
 HOME, TELECOM = laptop_settings(), laptop_settings(connection="telecom")
@@ -134,3 +136,50 @@ def test_the_masters_answer_is_read_only_for_the_master_seen_from_another_seat()
     assert master_answer(Evidence(r2, s), "turtlebot") == "refused"
     r2["ros2.router"].data = {"reachable": False, "failure": "tls"}
     assert master_answer(Evidence(r2, s), "turtlebot") is None   # not a network answer
+
+
+# --------------------------------------------------------------------------- a peer's address
+HOUR = 3600.0
+
+
+def silent_peer(*dated: dict, master: str = "timeout"):
+    """turtlebot drops everything and answers no ping (address +, offline +); *dated* rows."""
+    r = healthy_laptop()
+    r["linux.resolve"].data["names"]["turtlebot"]["dated"] = list(dated)
+    ssh_shut_out(r, "timeout", icmp=False, address="203.0.113.2")
+    put(r, "ros.master", "fail", reachable=master == "connected", topics=[], nodes=[],
+        tcp=master)
+    return r
+
+
+def peer_order(r) -> list[str]:
+    return [c.key for c in peer_causes(Evidence(r, laptop_settings()), "turtlebot")]
+
+
+def dated(by: str, age_s: float, ip: str = "203.0.113.2") -> dict:
+    return {"ip": ip, "by": by, "at": "2026-01-01T00:00:00+00:00", "age_s": age_s}
+
+
+def test_the_age_of_the_address_moves_the_address_against_the_modem_and_an_offline_peer():
+    # no ping: the address (+) and an offline peer (+) compete with the modem dropping it
+    assert peer_order(silent_peer())[0] == "address"                       # undated
+    assert peer_order(silent_peer(dated("settings", 0.2 * HOUR)))[0] == "forwarding"
+    # within a day: the address loses a little, the modem gains a little; the peer being off
+    # now leads, the modem before the address
+    assert peer_order(silent_peer(dated("settings", 5 * HOUR))) == [
+        "offline", "forwarding", "address", "sshd"]
+    assert peer_order(silent_peer(dated("settings", 30 * HOUR)))[0] == "address"
+    # a newer sync record of the peer with another address outweighs a fresh confirmation
+    r = silent_peer(dated("settings", 0.5 * HOUR), dated("sync", 0.1 * HOUR, "203.0.113.9"))
+    assert peer_order(r)[0] == "address"
+    # an older record of another address does not
+    r = silent_peer(dated("settings", 0.1 * HOUR), dated("sync", 0.5 * HOUR, "203.0.113.9"))
+    assert peer_order(r)[0] == "forwarding"
+
+
+def test_a_name_that_resolves_elsewhere_outweighs_the_masters_answer():
+    r = silent_peer(master="connected")        # the master answers: the modem drops port 22
+    assert peer_order(r)[0] == "forwarding"
+    r["linux.resolve"].data["names"]["turtlebot"].update(resolved="203.0.113.99",
+                                                          expected="203.0.113.2")
+    assert peer_order(r)[0] == "address"
