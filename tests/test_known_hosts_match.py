@@ -201,3 +201,36 @@ def test_verify_commands_name_the_host_key_file_and_the_port():
     assert "ssh_host_rsa_key.pub" in v and "ssh-keyscan robot" in v and "`ssh robot`" in v
     assert "ssh_host_ed25519_key.pub" in verify_commands("robot", 22, "ssh-unknown")
     assert "ssh_host_dsa_key.pub" in verify_commands("robot", 22, "ssh-dss")
+
+
+def test_lines_after_markers_other_hosts_and_bad_bytes_are_still_read(tmp_path):
+    f = tmp_path / "known_hosts"
+    f.write_bytes(b"\xff\xfe not utf-8\n" + "\n".join([
+        _line("robot", 1, marker="@cert-authority"), _line("robot", 2, marker="@cert-authority"),
+        _line("robot", 3), _line("other", 4), _line("robot", 5, marker="@revoked"),
+        _line("robot", 6, marker="@unknown"), "robot", "robot ssh-ed25519", _line("robot", 7),
+    ]).encode() + b"\n")
+    k = known_host_keys([f], "robot")
+    assert k.keys == {"ssh-ed25519": [_blob(fill=3), _blob(fill=7)]}   # revoked: never a key
+    assert k.revoked == {_blob(fill=5)}
+    assert k.notes == ["2 @cert-authority line(s) for this host not used (host certificates are "
+                       "not checked; the server's own key must be listed)",
+                       "3 malformed line(s) for this host skipped"]
+
+
+def test_a_hashed_name_with_stray_characters_in_its_digest_matches_nothing(tmp_path):
+    salt = bytes(range(20))
+    digest = base64.b64encode(hmac.new(salt, b"robot", hashlib.sha1).digest()).decode()
+    field = f"|1|{base64.b64encode(salt).decode()}|{digest[:4]}!{digest[4:]}"
+    assert _keys(tmp_path, [_line(field)], "robot").keys == {}
+
+
+def test_trusting_refuses_lenient_base64_and_ends_a_one_byte_file_first(tmp_path):
+    b64 = base64.b64encode(_blob()).decode()
+    with pytest.raises(ValueError):
+        trust_host_key(SshOptions(ssh_dir=tmp_path), "robot", 22,
+                       f"ssh-ed25519 {b64[:8]}!{b64[8:]}")
+    assert not (tmp_path / "known_hosts").exists()
+    (tmp_path / "known_hosts").write_text("#")
+    trust_host_key(SshOptions(ssh_dir=tmp_path), "robot", 22, _host_key())
+    assert (tmp_path / "known_hosts").read_text() == f"#\nrobot {_host_key()}\n"
