@@ -186,8 +186,9 @@ def blackholed_network():
 
 
 @pytest.mark.parametrize("step", ["3", "4"])
-def test_quit_while_checks_hang_on_a_dead_network_takes_under_a_second(world, step, tmp_path):
-    """SSH, ping and ROS to a peer whose packets are dropped: q leaves within 1 s (it took 10)."""
+def test_quit_while_checks_hang_on_a_dead_network_does_not_wait_for_them(world, step, tmp_path):
+    """SSH, ping and ROS to a peer whose packets are dropped: q leaves at once (it waited out the
+    checks: 10 s)."""
     with blackholed_network() as ns:
         s = Settings(this=ThisComponent(name="bhbox", role="master", connection="home",
                                         profile="remote", local_ip="203.0.113.1",
