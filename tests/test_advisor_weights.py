@@ -9,9 +9,11 @@ import pytest
 from rosnet_tui.core.advisor.evidence import Evidence
 from rosnet_tui.core.advisor.ranking import (
     ago,
+    chat_causes,
     is_cgnat_ip,
     is_private_ip,
     master_answer,
+    master_causes,
     peer_causes,
     table1_causes,
 )
@@ -183,3 +185,76 @@ def test_a_name_that_resolves_elsewhere_outweighs_the_masters_answer():
     r["linux.resolve"].data["names"]["turtlebot"].update(resolved="203.0.113.99",
                                                           expected="203.0.113.2")
     assert peer_order(r)[0] == "address"
+
+
+# --------------------------------------------------------------------------- the ROS master
+def master_order(r, s=HOME, name: str = "turtlebot") -> list[str]:
+    return [c.key for c in master_causes(Evidence(r, s), name)]
+
+
+def master_down(tcp: str, ssh: str | None):
+    """sami's round: the master's port answers *tcp*; SSH to turtlebot: "ok", or its port 22
+    answers *ssh* ("refused", "timeout") and SSH fails on the network."""
+    r = healthy_laptop()
+    put(r, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp=tcp)
+    if ssh != "ok":
+        ssh_shut_out(r, ssh, icmp=False)
+    return r
+
+
+def test_a_refused_master_port_is_roscore_when_ssh_answers_and_the_modem_when_both_refuse():
+    # (the tie-break puts roscore first: each case below is decided by the evidence)
+    assert master_order(master_down("refused", "refused"))[0] == "forwarding"
+    # refused here, SSH silent: roscore (nothing listens) before the modem, the peer last
+    assert master_order(master_down("refused", "timeout")) == [
+        "roscore", "forwarding", "peer", "address"]
+
+
+def test_a_silent_master_port_is_the_modem_when_ssh_answers_the_peer_when_ssh_fails_too():
+    assert master_order(master_down("timeout", "ok"))[0] == "forwarding"
+    assert master_order(master_down("unreachable", "ok"))[0] == "forwarding"
+    assert master_order(master_down("timeout", "timeout")) == [
+        "peer", "forwarding", "roscore", "address"]
+
+
+def test_a_master_name_that_leads_elsewhere_outweighs_the_rest():
+    r = master_down("timeout", "ok")
+    r["linux.resolve"].data["names"]["turtlebot"].update(resolved="203.0.113.99",
+                                                          expected="203.0.113.2")
+    assert master_order(r)[0] == "address"
+
+
+# --------------------------------------------------------------------------- the chats
+def chat_order(r, inbound: bool, s=HOME) -> list[str]:
+    return [c.key for c in chat_causes(Evidence(r, s), "turtlebot", inbound)]
+
+
+def chat_failed(inbound: bool, tcp: str | None, port_open: bool | None = None):
+    r = healthy_laptop()
+    cid = "linux.chat_in" if inbound else "linux.chat_out"
+    put(r, cid, "fail", peers={"turtlebot": {"ok": False, "tcp": tcp}})
+    put(r, "router.port_open", "pass" if port_open else "fail", test_port_open=port_open)
+    return r
+
+
+def test_a_refused_chat_is_the_modem_then_a_firewall():
+    assert chat_order(chat_failed(False, "refused"), False) == ["forwarding", "firewall", "hosts"]
+
+
+def test_an_open_test_port_clears_the_modem_and_points_at_the_name():
+    # turtlebot reached our port from outside in the port test, but not by our name
+    assert chat_order(chat_failed(True, None, True), True) == ["hosts", "firewall", "forwarding"]
+    assert chat_order(chat_failed(True, "timeout", False), True)[0] == "forwarding"
+
+
+def test_a_name_resolving_elsewhere_puts_the_hosts_entry_first():
+    r = chat_failed(False, "timeout")
+    r["linux.resolve"].data["names"]["turtlebot"].update(resolved="203.0.113.99",
+                                                          expected="203.0.113.2")
+    assert chat_order(r, False)[0] == "hosts"
+
+
+def test_on_a_lan_nothing_is_forwarded_whatever_the_chat_saw():
+    office = laptop_settings(profile="office")
+    assert chat_order(chat_failed(False, "timeout"), False, office) == [
+        "firewall", "hosts", "forwarding"]
