@@ -234,3 +234,10 @@ def test_trusting_refuses_lenient_base64_and_ends_a_one_byte_file_first(tmp_path
     (tmp_path / "known_hosts").write_text("#")
     trust_host_key(SshOptions(ssh_dir=tmp_path), "robot", 22, _host_key())
     assert (tmp_path / "known_hosts").read_text() == f"#\nrobot {_host_key()}\n"
+
+
+def test_a_key_type_that_is_not_ascii_is_a_malformed_line_not_a_crash(tmp_path):
+    b64 = base64.b64encode(_blob()).decode()
+    k = _keys(tmp_path, [f"robot ssh-ed25519\u00e9 {b64}", _line("robot", 2)], "robot")
+    assert k.keys == {"ssh-ed25519": [_blob(fill=2)]}
+    assert k.notes == ["1 malformed line(s) for this host skipped"]
