@@ -8,13 +8,16 @@ import pytest
 
 from rosnet_tui.core.advisor.evidence import Evidence
 from rosnet_tui.core.advisor.ranking import (
+    address_dates,
     ago,
     chat_causes,
+    dated_words,
     is_cgnat_ip,
     is_private_ip,
     master_answer,
     master_causes,
     peer_causes,
+    peer_check_ids,
     table1_causes,
 )
 from tests.advisor_support import ssh_shut_out
@@ -258,3 +261,60 @@ def test_on_a_lan_nothing_is_forwarded_whatever_the_chat_saw():
     office = laptop_settings(profile="office")
     assert chat_order(chat_failed(False, "timeout"), False, office) == [
         "firewall", "hosts", "forwarding"]
+
+
+def test_a_chat_says_who_refused_and_who_dropped():
+    out = chat_causes(Evidence(chat_failed(False, "refused"), HOME), "turtlebot", False)
+    assert "the connection to turtlebot was refused" in out[0].sentence()
+    assert "a firewall on turtlebot that rejects would refuse it too" in out[1].sentence()
+    inb = chat_causes(Evidence(chat_failed(True, "timeout", False), HOME), "turtlebot", True)
+    assert "the connection to sami got no answer (dropped)" in inb[0].sentence()
+    assert "the test port is closed from outside" in inb[0].sentence()
+    # the other direction's result is not read
+    assert "dropped" not in chat_causes(Evidence(chat_failed(True, "timeout"), HOME),
+                                        "turtlebot", False)[0].sentence()
+
+
+# --------------------------------------------------------------------------- dated addresses
+def test_dated_rows_newest_first_and_only_well_formed_ones():
+    r = silent_peer(dated("settings", 900), {"ip": "", "by": "sync", "age_s": 5},
+                    {"ip": "203.0.113.7", "by": "sync", "age_s": "old"},
+                    dated("sync", 900, "203.0.113.9"), dated("settings", 60))
+    same, other = address_dates(Evidence(r, HOME), "turtlebot", "203.0.113.2")
+    assert same["age_s"] == 60 and other is None          # 900 s is not newer than 60 s
+    same, other = address_dates(Evidence(r, HOME), "turtlebot", "203.0.113.9")
+    assert same["age_s"] == 900 and other["age_s"] == 60
+
+
+def test_dated_words_name_their_source():
+    ev = Evidence(silent_peer(), HOME)
+    assert dated_words(ev, "turtlebot", dated("sync", 60)) == (
+        "203.0.113.2 was confirmed 60 s ago (turtlebot's own sync record)")
+    assert dated_words(ev, "turtlebot", dated("settings", 60)).endswith("(settings saved)")
+    assert dated_words(ev, "turtlebot", dated("dns", 60)).endswith("(dns)")
+
+
+def test_an_hour_old_address_is_no_longer_fresh_and_a_day_old_one_is_old():
+    assert peer_order(silent_peer(dated("settings", HOUR))) == [
+        "offline", "forwarding", "address", "sshd"]
+    assert peer_order(silent_peer(dated("settings", 24 * HOUR)))[0] == "address"
+
+
+def test_the_port_and_address_a_peer_finding_names():
+    r = silent_peer()
+    r["linux.ssh"].data["peers"]["turtlebot"].pop("port", None)
+    r["linux.ping"].data["peers"]["turtlebot"]["port"] = 2222
+    r["linux.ssh"].data["peers"]["turtlebot"]["address"] = "203.0.113.5"
+    put(r, "ros.master", "pass", reachable=True, tcp="connected")
+    first = peer_causes(Evidence(r, HOME), "turtlebot")[0]
+    assert "answers at 203.0.113.5, but port 2222 is dropped" in first.sentence()
+
+
+def test_node_uris_joins_a_peer_finding_when_ssh_could_not_reach_the_peer():
+    r = silent_peer()
+    assert peer_check_ids(Evidence(r, HOME), "turtlebot") == [
+        "linux.ping", "linux.ssh", "linux.chat_out", "linux.chat_in"]
+    put(r, "ros.node_uris", "warn", unreachable=[], nodes=[{"name": "/x"}])
+    assert "ros.node_uris" in peer_check_ids(Evidence(r, HOME), "turtlebot")
+    r["linux.ssh"].data["peers"]["turtlebot"]["failure"] = "auth"
+    assert "ros.node_uris" not in peer_check_ids(Evidence(r, HOME), "turtlebot")
