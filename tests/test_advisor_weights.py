@@ -318,3 +318,28 @@ def test_node_uris_joins_a_peer_finding_when_ssh_could_not_reach_the_peer():
     assert "ros.node_uris" in peer_check_ids(Evidence(r, HOME), "turtlebot")
     r["linux.ssh"].data["peers"]["turtlebot"]["failure"] = "auth"
     assert "ros.node_uris" not in peer_check_ids(Evidence(r, HOME), "turtlebot")
+
+
+def test_every_observation_that_moves_a_cause_is_said_in_words():
+    """Each score change carries its words (the findings quote them): none is left blank."""
+    office = laptop_settings(profile="office")
+    rounds = [peer_causes(Evidence(silent_peer(dated("settings", age)), HOME), "turtlebot")
+              for age in (0.2 * HOUR, 5 * HOUR, 30 * HOUR)]
+    rounds.append(peer_causes(Evidence(silent_peer(dated("settings", 0.5 * HOUR),
+                                                   dated("sync", 60, "203.0.113.9")), HOME),
+                              "turtlebot"))
+    r = chat_failed(False, "timeout")
+    r["linux.resolve"].data["names"]["turtlebot"].update(resolved="203.0.113.99",
+                                                          expected="203.0.113.2")
+    rounds += [chat_causes(Evidence(r, office), "turtlebot", False),
+               chat_causes(Evidence(chat_failed(True, "refused", True), HOME), "turtlebot", True),
+               chat_causes(Evidence(chat_failed(True, "timeout", False), HOME), "turtlebot",
+                           True)]
+    master = healthy_laptop()
+    put(master, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp="refused")
+    rounds.append(master_causes(Evidence(master, laptop_settings(role="master")), "sami"))
+    for causes in rounds:
+        for c in causes:
+            assert all(isinstance(w, str) and w for w in c.seen_for + c.seen_against), c
+            assert c.sentence() == "" or c.sentence().endswith(".")
+    assert sum(len(c.evidence()) for causes in rounds for c in causes) >= 20
