@@ -8,6 +8,7 @@ import pytest
 
 from rosnet_tui.core.advisor.evidence import Evidence
 from rosnet_tui.core.advisor.ranking import (
+    Nat,
     address_dates,
     ago,
     chat_causes,
@@ -16,6 +17,7 @@ from rosnet_tui.core.advisor.ranking import (
     is_private_ip,
     master_answer,
     master_causes,
+    nat_seen,
     peer_causes,
     peer_check_ids,
     table1_causes,
@@ -343,3 +345,40 @@ def test_every_observation_that_moves_a_cause_is_said_in_words():
             assert all(isinstance(w, str) and w for w in c.seen_for + c.seen_against), c
             assert c.sentence() == "" or c.sentence().endswith(".")
     assert sum(len(c.evidence()) for causes in rounds for c in causes) >= 20
+
+
+# --------------------------------------------------------------------------- NAT on the way out
+def nat(**data) -> Nat:
+    r = healthy_laptop()
+    if data:
+        r["isp.cgnat"].data = data
+    else:
+        del r["isp.cgnat"]
+    return nat_seen(Evidence(r, HOME))
+
+
+def test_what_isp_cgnat_saw_is_read_as_carrier_inner_far_or_none():
+    assert nat() == Nat("")
+    assert nat(cgnat=True, wan_ip="100.64.0.2", method="upnp") == \
+        Nat("cgnat", "100.64.0.2", "100.64.0.2")
+    assert nat(double_nat=True, wan_ip="192.168.0.2", method="upnp") == \
+        Nat("inner", "192.168.0.2", "192.168.0.2")
+    assert nat(double_nat=True, wan_ip="192.168.0.2", hop="192.168.0.1", method="upnp") == \
+        Nat("inner", "192.168.0.1", "192.168.0.2")
+    hops = ["192.168.1.254", "10.0.0.1", "10.9.9.9"]
+    assert nat(double_nat=True, hop="10.0.0.1", hops=hops, method="traceroute") == \
+        Nat("inner", "10.0.0.1", None)
+    assert nat(double_nat=True, hop="10.9.9.9", hops=hops, wan_ip="198.51.100.7",
+               method="traceroute") == Nat("far", "10.9.9.9", "198.51.100.7")
+    assert nat(double_nat=True, hop="100.64.0.1", hops=["192.168.1.254", "100.64.0.1"],
+               method="traceroute") == Nat("far", "100.64.0.1", None)
+
+
+def test_no_nat_is_said_only_from_upnp_or_public_hops():
+    up = nat(wan_ip="198.51.100.2", method="upnp")
+    assert (up.kind, up.hop, up.wan_ip) == ("", None, "198.51.100.2")
+    assert "WAN address is the public IP 198.51.100.2" in up.no_nat
+    assert nat(wan_ip="198.51.100.2", method="traceroute") == Nat("")
+    tr = nat(method="traceroute", hops=["192.168.1.254", "198.51.100.1"])
+    assert (tr.kind, tr.hop, tr.wan_ip) == ("", None, None) and "no carrier NAT" in tr.no_nat
+    assert nat(method="traceroute", hops=["192.168.1.254"]) == Nat("")
