@@ -65,7 +65,12 @@ def test_table1_port_in_use_cause_names_the_process_and_comes_first():
     r = t1(True, False)
     put(r, "router.port_free", "warn", in_use=True, process="sshd", pid=99)
     put(r, "isp.cgnat", "pass", cgnat=False, double_nat=False, method="traceroute")
-    fs = run(r)
+    # competing evidence: another port gets through (forwarding +), on a carrier's line (the
+    # tie-break puts the carrier first): the held port still outweighs both
+    r["router.port_open"].data["ports"].append(
+        {"port": 40000, "reachable": True, "listener": True, "via": "echoip"})
+    fs = run(r, laptop_settings(connection="telecom"))
+    assert [f.rule for f in fs if f.rule.startswith(advisor.T1)][1] == f"{advisor.T1}.forwarding"
     f = first_failure(fs)
     assert f.rule == f"{advisor.T1}.port_in_use"
     assert "sshd (pid 99)" in f.meaning
@@ -133,16 +138,34 @@ def test_table1_changed_local_ip_makes_forwarding_first():
 
 
 def test_table1_no_carrier_nat_on_home_puts_forwarding_before_isp():
-    r = t1(True, False)   # healthy cgnat (traceroute, no NAT) and a free port
+    r = t1(True, False)   # the path probe's hops after the modem are public: no carrier NAT
+    put(r, "isp.cgnat", "pass", cgnat=False, double_nat=False, method="traceroute", hop=None,
+        hops=["192.168.1.254", "198.51.100.1", "203.0.113.9"])
     causes = [f for f in run(r) if f.rule.startswith(advisor.T1)]
-    assert ids(causes) == [f"{advisor.T1}.forwarding", f"{advisor.T1}.isp",
-                           f"{advisor.T1}.port_in_use"]
-    assert "Least likely here" in causes[2].meaning
+    # the provider moves down, below even the free port's "nothing else listens"
+    assert ids(causes) == [f"{advisor.T1}.forwarding", f"{advisor.T1}.port_in_use",
+                           f"{advisor.T1}.isp"]
+    assert "Less likely here: the path probe's hops after the modem are public (no carrier " \
+        "NAT)" in causes[2].meaning
+    # the evidence, not the tie-break: on a carrier's line (tie: the carrier first) it still
+    # moves the provider down
+    causes = [f for f in run(r, laptop_settings(connection="telecom"))
+              if f.rule.startswith(advisor.T1)]
+    assert ids(causes)[0] == f"{advisor.T1}.forwarding"
+    assert ids(causes)[2] == f"{advisor.T1}.isp"
+    # without hop data nothing says "no carrier NAT": the tie-break alone, the carrier first
+    put(r, "isp.cgnat", "pass", hops=[])
+    causes = [f for f in run(r, laptop_settings(connection="telecom"))
+              if f.rule.startswith(advisor.T1)]
+    assert ids(causes)[0] == f"{advisor.T1}.isp" and "no carrier NAT" not in causes[0].meaning
 
 
 def test_table1_corporate_keeps_the_administrator_before_forwarding():
-    r = t1(True, False)
+    r = t1(True, False)   # public hops: no carrier NAT, which does not clear a corporate firewall
+    put(r, "isp.cgnat", "pass", cgnat=False, double_nat=False, method="traceroute", hop=None,
+        hops=["192.168.1.254", "198.51.100.1", "203.0.113.9"])
     fs = run(r, laptop_settings(connection="corporate"))
+    assert "no carrier NAT" not in text(first_failure(fs))
     causes = [f for f in fs if f.rule.startswith(advisor.T1)]
     assert ids(causes)[0] == f"{advisor.T1}.isp"
     assert "network administrator" in text(causes[0])
@@ -153,7 +176,7 @@ def test_table1_other_ports_open_points_at_the_forwarding_rule():
     del r["isp.cgnat"]
     r["router.port_open"].data["ports"].append(
         {"port": 40000, "reachable": True, "listener": True, "via": "echoip"})
-    f = first_failure(run(r))
+    f = first_failure(run(r, laptop_settings(connection="telecom")))   # tie: carrier first
     assert f.rule == f"{advisor.T1}.forwarding"
     assert "40000" in f.meaning
 

@@ -183,9 +183,10 @@ async def test_master_answers(tmp_path: Path, roscore: RosCore):
 
 async def test_dead_master_fails_within_its_timeout(tmp_path: Path):
     port = free_port()
-    ctx = make_ctx(tmp_path, loopback_settings(port), timeout=1.0)
+    ctx = make_ctx(tmp_path, loopback_settings(port), timeout=10.0)
     r = await run(ctx, "ros.master")
-    assert r.status == Status.FAIL and "refused" in r.summary and r.duration_s < 1.0
+    # refused: at once, not after the timeout (a long one: a loaded machine stays far below)
+    assert r.status == Status.FAIL and "refused" in r.summary and r.duration_s < 5.0
     assert r.data["reachable"] is False
     with socket.socket() as silent:  # accepts connections, never answers
         silent.bind(("127.0.0.1", 0))
@@ -193,7 +194,7 @@ async def test_dead_master_fails_within_its_timeout(tmp_path: Path):
         ctx = make_ctx(tmp_path, loopback_settings(silent.getsockname()[1]), timeout=1.0)
         start = time.monotonic()
         r = await run(ctx, "ros.master")
-        assert time.monotonic() - start < 1.0 + 0.5
+        assert time.monotonic() - start < 2 * 1.0  # one wait, never two (bench row 3 times it)
     assert r.status == Status.FAIL and "timed out" in r.summary, r.summary
 
 

@@ -330,11 +330,12 @@ async def test_the_port_probe_knows_what_answers_where():
     with silent_listener() as quiet, ros_master_stand_in(ros_port):
         async with pool.hold(free_port()) as lst:
             got, took = await asyncio.to_thread(
-                run_probe, {lst.port: "line", quiet: "accept", ros_port: "xmlrpc"})
+                run_probe, {lst.port: "line", quiet: "accept", ros_port: "xmlrpc"}, 10.0)
     assert got[quiet] == ["open", ""]
     assert got[ros_port][0] == "open" and got[ros_port][1].startswith("HTTP/1."), got
     assert got[lst.port][0] == "open" and lst.token in got[lst.port][1]
-    assert took < 1.0, f"the probe took {took:.2f} s: it waited for a silent port"
+    # not the 10 s timeout: a loaded machine stays far below the bound
+    assert took < 5.0, f"the probe took {took:.2f} s: it waited for a silent port"
 
 
 async def test_port_open_from_the_peer_with_a_ros_master_running_here(ssh_client, web,
@@ -346,7 +347,7 @@ async def test_port_open_from_the_peer_with_a_ros_master_running_here(ssh_client
     ctx = ctx_for(tmp_path, peers=[ssh_client.peer()], urls=[web.url("/ip")], ros_port=ros_port,
                   ssh_options=SshOptions(ssh_dir=ssh_client.dir,
                                          known_hosts_files=(ssh_client.dir / "known_hosts",)),
-                  timeout=3.0)
+                  timeout=10.0)
     with ros_master_stand_in(ros_port):
         ctx.ssh_pool = None
         warm = await run("router.port_open", ctx)          # the SSH login, once
@@ -359,15 +360,18 @@ async def test_port_open_from_the_peer_with_a_ros_master_running_here(ssh_client
     assert row["reachable"] is True and row["answer"] == "token" and row["via"] == "peer:localhost"
     assert any(f":{ros_port}: open, getPid over XML-RPC answered 'HTTP/1." in e
                for e in r.evidence), r.evidence
-    assert took < 1.4, f"router.port_open took {took:.2f} s"
+    # no wait for a greeting (the 10 s timeout): a loaded machine stays far below the bound
+    assert took < 5.0, f"router.port_open took {took:.2f} s"
 
 
 async def test_a_port_the_verdict_does_not_need_is_not_waited_for():
     """Under ROS 2 only zenoh_port decides; the test port (not forwarded on a ROS 2 modem) is
     given as long again as the needed port took (at least 0.25 s), then reported pending."""
     with silent_listener() as needed, dropping_port() as dropped:
-        got, took = await asyncio.to_thread(run_probe, {needed: "accept", dropped: "accept?"})
+        got, took = await asyncio.to_thread(run_probe, {needed: "accept", dropped: "accept?"},
+                                            10.0)
         assert got[needed] == ["open", ""] and got[dropped][0] == "pending", got
-        assert took < 1.0, f"the probe took {took:.2f} s"
+        # not the 10 s timeout: a loaded machine stays far below it
+        assert took < 5.0, f"the probe took {took:.2f} s"
         got, took = await asyncio.to_thread(run_probe, {dropped: "accept"}, 1.0)
     assert got[dropped][0] == "timeout" and took >= 1.0     # a needed port gets its whole time

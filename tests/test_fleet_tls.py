@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+import zenoh  # noqa: F401  a hard dependency: a broken install fails here, never skips
 
 from rosnet_tui.core.config.settings_model import RosSettings, Settings
 from rosnet_tui.core.ros import fleet_tls, ros2
@@ -187,7 +188,6 @@ def _wait_port(port: int, proc: subprocess.Popen, timeout: float = 15.0) -> None
 
 
 def test_a_real_router_with_the_masters_config_admits_only_the_fleet(tmp_path):
-    pytest.importorskip("zenoh")
     from rosnet_tui.core.peer import zenohproto
     from rosnet_tui.core.ros import pairing
 
@@ -220,10 +220,10 @@ def test_a_real_router_with_the_masters_config_admits_only_the_fleet(tmp_path):
                     "verify_name_on_connect": True}
 
         t0 = time.monotonic()
-        sess = zenohproto.open_client(ep, 2.0, "client", tls_of(sp))
+        sess = zenohproto.open_client(ep, 10.0, "client", tls_of(sp))
         took = time.monotonic() - t0
         sess.close()
-        assert took < 1.5
+        assert took < 5.0       # admitted at once, not after the (long) timeout
         foreign = fleet_tls.make_test_ca(tmp_path / "f", "someone else")
         fp = fleet_tls.tls_paths(tmp_path / "fm")
         fleet_tls.issue_test_cert(foreign, fp, "sami")

@@ -91,17 +91,26 @@ def test_names_equal_but_for_case_are_the_same_name(tmp_path, text, line):
 
 
 # --------------------------------------------------------------------------- line numbers
-@pytest.mark.parametrize("sep", ["\u2028", "\u2029", "\x85", "\x0b", "\x0c", "\x1c", "\x1d",
-                                 "\x1e"])
+@pytest.mark.parametrize("sep", ["\u2028", "\u2029", "\x85"])
 def test_unicode_line_separators_in_comments_do_not_shift_the_line(tmp_path, sep):
+    """TOML allows these in a comment and ends a line only at LF: a later problem keeps its line."""
     text = f'# a comment{sep}with a separator\n[this]\n# {sep}{sep}\nname = "bad name"\n'
-    try:
-        parse_settings(text)
-    except SettingsError as exc:
-        if "not valid TOML" in str(exc):
-            pytest.skip("this character is not allowed in a TOML comment")
     err = refused(text, tmp_path)
     assert err.line == 4 and err.key == "this.name"
+    tally(AREA, 1, 1, "line separators")
+
+
+@pytest.mark.parametrize("sep", ["\x0b", "\x0c", "\x1c", "\x1d", "\x1e"])
+def test_control_characters_that_python_counts_as_line_ends_are_refused_on_their_own_line(
+        tmp_path, sep):
+    """TOML refuses these anywhere (no comment or string can hold them), so no later problem can
+    follow them: the refusal itself names the line that holds one, counted by LF only (Python's
+    splitlines would count one more line per character)."""
+    err = refused(f'[this]\nname = "sami"\n# x{sep}y{sep}\n# {sep}\n', tmp_path)
+    assert err.line == 3 and "not valid TOML" in str(err)
+    err = refused(f'# {sep}{sep}{sep}\n[this]\nname = "sami"\n', tmp_path)
+    assert err.line == 1
+    tally(AREA, 1, 1, "line separators")
     tally(AREA, 1, 1, "line separators")
 
 

@@ -112,9 +112,9 @@ def test_refused_and_silent_are_told_apart_within_the_timeout(server):
     assert not a.ok and a.error == "connection refused"
     silent = server(None)
     t0 = time.monotonic()
-    a = asyncio.run(http_get(silent.url(), 0.6))
+    a = asyncio.run(http_get(silent.url(), 1.0))
     assert not a.ok and a.error == "connected, but no reply in time"
-    assert time.monotonic() - t0 < 1.2
+    assert time.monotonic() - t0 < 2 * 1.0  # one wait, never two (bench row 3 times it)
 
 
 def test_not_http_is_refused_in_words():

@@ -103,17 +103,40 @@ def test_block_at_end_of_file_without_final_newline_stays_so():
     assert mt.compose_block(text, ["n"]) == f"a\n{mt.BEGIN_MARKER}\nn\n{mt.END_MARKER}"
 
 
-@pytest.mark.parametrize("text", [
-    f"{mt.BEGIN_MARKER}\nx\n",                                             # no END
-    f"{mt.END_MARKER}\n",                                                  # END only
-    f"{mt.BEGIN_MARKER}\n{mt.END_MARKER}\n{mt.BEGIN_MARKER}\n{mt.END_MARKER}\n",  # two blocks
+B, E = mt.BEGIN_MARKER, mt.END_MARKER
+
+
+@pytest.mark.parametrize(("text", "why"), [
+    (f"a\n{B}\nx\n", "block that starts at line 2 has no '# END rosnet-tui' line"),
+    (f"a\n{E}\n", "line 2 ends a rosnet-tui block that never began"),
+    (f"{B}\n{E}\n{B}\n{E}\n", "line 3 starts a second rosnet-tui block .the first starts at "
+                              "line 1."),                                     # two blocks
+    (f"{B}\nx\n{B}\ny\n{E}\n", "line 3 starts a second rosnet-tui block"),  # half-deleted
+    (f"{B}\n{E}\nx\n{E}\n", "line 4 ends the rosnet-tui block a second time"),
 ])
-def test_damaged_block_is_refused_and_the_file_is_left_alone(tmp_path, text):
+def test_damaged_block_is_refused_and_the_file_is_left_alone(tmp_path, text, why):
     f = tmp_path / "hosts"
     f.write_text(text)
-    with pytest.raises(mt.DamagedBlockError, match="by hand"):
+    with pytest.raises(mt.DamagedBlockError, match=why) as e:
         mf.preview_block(f, ["x"])
+    assert "by hand" in str(e.value)
     assert f.read_text() == text
+    with pytest.raises(mt.DamagedBlockError, match=why):
+        mt.extract_block(text)
+
+
+def test_a_line_inside_our_block_is_not_replaced_as_a_line_outside_it():
+    text = f"a\n{B}\nx\n{E}\nb\n"
+    for i in (1, 2, 3):                       # BEGIN, a body line, END
+        with pytest.raises(ValueError, match=f"line index {i} is not a line outside"):
+            mt.compose_block(text, ["y"], replace_lines={i: "# z"})
+    for i in (-1, 5):
+        with pytest.raises(ValueError, match="not a line outside"):
+            mt.compose_block(text, ["y"], replace_lines={i: "# z"})
+    assert mt.compose_block(text, ["y"], replace_lines={0: "# a", 4: "# b"}) == \
+        f"# a\n{B}\ny\n{E}\n# b\n"
+    with pytest.raises(ValueError, match="newline"):
+        mt.compose_block(text, ["y"], replace_lines={0: "a\rb"})
 
 
 def test_block_lines_cannot_smuggle_newlines_or_markers():
@@ -475,3 +498,22 @@ def test_a_crash_inside_an_in_place_shrink_is_completed_by_the_next_read(tmp_pat
         assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".inplace")]
     finally:
         subprocess.run(["umount", str(dst)], timeout=10, check=False)
+
+
+def test_the_dominant_line_ending_needs_half_the_lines_or_more():
+    assert mt.detect_newline("a\r\nb\n") == "\r\n"          # half
+    assert mt.detect_newline("a\r\nb\nc\n") == "\n"         # a third
+    assert mt.detect_newline("abc") == "\n" and mt.detect_newline("") == "\n"
+    assert mt.detect_newline(None) == "\n"
+
+
+def test_a_block_keeps_its_begin_lines_ending_whatever_the_rest_of_the_file_uses():
+    text = f"a\nb\nc\n{B}\r\nold\n{E}\n"
+    assert mt.compose_block(text, ["new"]) == f"a\nb\nc\n{B}\r\nnew\r\n{E}\r\n"
+
+
+def test_bad_block_lines_and_positions_are_refused_in_words():
+    with pytest.raises(ValueError, match=r"may not hold a newline or a marker: 'a\\rb'"):
+        mt.compose_block("", ["a\rb"])
+    with pytest.raises(ValueError, match="position must be 'top' or 'end', not 'middle'"):
+        mt.compose_block("x\n", ["y"], position="middle")

@@ -165,7 +165,7 @@ async def test_a_websocket_that_never_answers_is_the_bridge_hop_within_the_timeo
         port = server.sockets[0].getsockname()[1]
         r = await run(member(port=port), timeout=1.0)
     assert r.data["failed_hop"] == "bridge" and r.data["upgraded"] is True, r.summary
-    assert r.duration_s <= 1.0 + 0.5
+    assert r.duration_s < 2 * 1.0  # one wait, never two (bench row 3 times it)
 
 
 async def test_topics_but_no_message_back_is_the_round_trip_hop():
@@ -181,7 +181,7 @@ async def test_topics_but_no_message_back_is_the_round_trip_hop():
         r = await run(member(port=port), timeout=1.0)
     assert r.data["failed_hop"] == "round_trip", r.summary
     assert r.data["rosapi"] is True and r.data["topics"] == ["/rosout"]
-    assert r.duration_s <= 1.0 + 0.5
+    assert r.duration_s < 2 * 1.0  # one wait, never two (bench row 3 times it)
 
 
 async def test_the_whole_path_passes_against_a_loopback_bridge():

@@ -126,9 +126,9 @@ def test_dead_master_is_refused_at_once():
     uri = f"http://127.0.0.1:{free_port()}"
     start = time.monotonic()
     with pytest.raises(OSError) as err:
-        rosproto.MasterClient(uri, "/t", 1.0).get_system_state()
+        rosproto.MasterClient(uri, "/t", 10.0).get_system_state()
     assert rosproto.describe_error(err.value)[0] == "refused"
-    assert time.monotonic() - start < 1.0
+    assert time.monotonic() - start < 5.0       # at once: not after the (long) timeout
     rep = rosproto.run_subscriber(uri, unique_topic(), 2.0, env=LOOPBACK_ENV)
     assert rep.failed_hop == "registration" and rep.uri == uri and not rep.ok
     assert "refused" in rep.hops[-1].detail
@@ -146,7 +146,7 @@ def test_silent_master_times_out_within_its_timeout():
         took = time.monotonic() - start
     assert rosproto.describe_error(err.value, 0.8) == ("timeout",
                                                        "no answer within 0.8 s (timed out)")
-    assert 0.7 < took < 0.8 + 0.5
+    assert 0.7 < took < 2 * 0.8  # one wait, never two (bench row 3 times it)
 
 
 # --------------------------------------------------------------------------- pub/sub with real ROS

@@ -19,13 +19,13 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+import zenoh  # noqa: F401  a hard dependency: a broken install fails here, never skips
 
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
 from rosnet_tui.core.config.settings_model import Peer, RosSettings, Settings, ThisComponent
 from rosnet_tui.core.exposure import outsider
 
 ZROUTER = Path(__file__).resolve().parent / "lab" / "ros2_scripts" / "zrouter.py"
-pytest.importorskip("zenoh")
 
 
 # --------------------------------------------------------------------------- certificates

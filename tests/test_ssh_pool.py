@@ -77,14 +77,14 @@ async def test_sessions_beyond_maxsessions_get_their_own_connection(ssh_client, 
 
 async def test_a_refusing_peer_is_one_shared_verdict(ssh_client):
     pool = SshPool()
-    opts = pooled(ssh_client, pool, timeout_s=2.0)
+    opts = pooled(ssh_client, pool, timeout_s=10.0)
     peer = ssh_client.peer(ssh_port=free_port())          # nothing listens there
     t0 = time.monotonic()
     try:
-        got = await asyncio.gather(*(ssh_run(opts, peer, "true", timeout=5) for _ in range(4)))
+        got = await asyncio.gather(*(ssh_run(opts, peer, "true", timeout=20) for _ in range(4)))
     finally:
         pool.close()
-    assert time.monotonic() - t0 < 1.0
+    assert time.monotonic() - t0 < 5.0      # at once: not after the (long) timeout
     assert all(r.failure == "network" and r.tcp == "refused" for r in got)
     assert all("it may listen on another port" in r.detail for r in got)
 
@@ -106,7 +106,7 @@ async def test_a_peer_that_answered_may_use_the_longer_budget(ssh_client):
         silent.close()
     took = time.monotonic() - t0
     assert not r.ok and r.tcp == "connected", r
-    assert 0.5 < took < 2.6, took
+    assert 0.5 < took < 2 * 1.5, took  # one wait, never two (bench row 3 times it)
 
 
 def test_close_ends_the_connections_and_later_sessions_still_work(ssh_client):
