@@ -50,6 +50,7 @@ from rosnet_tui.core.files.bashrc import (
 )
 from rosnet_tui.core.files.hosts import WriterSettingsError
 from rosnet_tui.core.ros import ros2
+from rosnet_tui.core.ssh.options import options_for
 
 HELP = "write the ROS environment for this component's role (ROS 1 or 2) into ~/.bashrc"
 
@@ -256,7 +257,7 @@ def _fleet_tls(settings) -> int:
         if why is None:
             return EXIT_OK
         print(f"Pairing with the master ({why}):")
-        res = asyncio.run(pairing.pair_over_ssh(settings, paths))
+        res = asyncio.run(pairing.pair_over_ssh(settings, paths, options_for(settings.relay)))
     except (fleet_tls.TlsError, OSError) as exc:
         say(f"rosnet-tui: {exc}")
         return EXIT_FAIL

@@ -310,7 +310,10 @@ async def check_ssh(ctx: CheckContext) -> Outcome:
         where = f"{p.ssh_user}@{p.name}" + (f":{p.ssh_port}" if p.ssh_port != 22 else "")
         if ran:
             host = r.stdout.replace("rosnet-tui-ssh-ok", "").strip()
-            evidence.append(f"ssh {where} ({r.address}): ok, host key {r.fingerprint}, "
+            route = ctx.ssh.relay
+            how = (f"through the relay {route.host}" if route and route.tunnel_port(p.name)
+                   else r.address)
+            evidence.append(f"ssh {where} ({how}): ok, host key {r.fingerprint}, "
                             f"remote hostname {host!r}")
             good.append(p.name)
         else:

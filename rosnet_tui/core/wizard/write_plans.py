@@ -22,6 +22,7 @@ from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files.managed_write import read_text
 from rosnet_tui.core.ros import fleet_tls, pairing, ros2
+from rosnet_tui.core.ssh.options import options_for
 
 
 class Severity(str, Enum):
@@ -167,7 +168,7 @@ async def after_ros2_write(settings: Settings, opts: Any = None) -> Said | None:
             return Said("Made " + "; ".join(made) + ".") if made else None
         if pairing.needs_pairing(settings, paths) is None:
             return None
-        res = await pairing.pair_over_ssh(settings, paths, opts)
+        res = await pairing.pair_over_ssh(settings, paths, opts or options_for(settings.relay))
     except (fleet_tls.TlsError, OSError) as exc:
         return Said(f"Mutual TLS: {exc}", Severity.ERROR)
     if res.ok:

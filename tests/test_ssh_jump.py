@@ -1,0 +1,227 @@
+"""SSH to a peer nobody can reach, with the relay as the jump host: two real sshd on 127.0.0.1
+(the relay's and the component's), the component's reachable only through a reverse tunnel that
+a real OpenSSH client keeps on the relay's loopback (as `rosnet-tui relay tunnel` does)."""
+
+from __future__ import annotations
+
+import getpass
+import os
+import shutil
+import socket
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from rosnet_tui.core.checks import CheckContext
+from rosnet_tui.core.checks.linux import check_ssh
+from rosnet_tui.core.config.settings_model import Peer, RelaySettings, Settings
+from rosnet_tui.core.results import Status
+from rosnet_tui.core.ssh.options import SshOptions, relay_route
+from rosnet_tui.core.ssh.pool import SshPool
+from rosnet_tui.core.ssh.session import ssh_run
+from tests.builders import free_port
+from tests.lab import procs
+from tests.plugins.ssh import SSHD, Sshd, keygen
+
+pytestmark = pytest.mark.skipif(not os.path.exists(SSHD) or not shutil.which("ssh"),
+                                reason="needs OpenSSH (sshd, ssh, ssh-keygen)")
+
+NAME = "turtlebot"      # the component behind the relay: its name resolves nowhere here
+
+
+def wait_banner(port: int, within: float) -> bool:
+    """Whether an SSH banner answers at 127.0.0.1:*port* within *within* seconds."""
+    end = time.monotonic() + within
+    while time.monotonic() < end:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.5) as s:
+                s.settimeout(0.5)
+                if s.recv(64).startswith(b"SSH-"):
+                    return True
+        except OSError:
+            pass
+        time.sleep(0.05)
+    return False
+
+
+@dataclass
+class Fleet:
+    relay: Sshd
+    robot: Sshd
+    tunnel_port: int
+    dot_ssh: Path            # the operator's side: its key, known_hosts for both hops
+    tunnel: subprocess.Popen
+    tunnel_key: Path
+    user: str
+
+    def relay_settings(self, **kw) -> RelaySettings:
+        kw.setdefault("host", "localhost")
+        kw.setdefault("ssh_user", self.user)
+        kw.setdefault("ssh_port", self.relay.port)
+        kw.setdefault("tunnels", {NAME: self.tunnel_port})
+        return RelaySettings(**kw)
+
+    def opts(self, known_hosts: Path | None = None, **kw) -> SshOptions:
+        return SshOptions(ssh_dir=self.dot_ssh, ssh_agent=False,
+                          known_hosts_files=(known_hosts or self.dot_ssh / "known_hosts",),
+                          relay=relay_route(self.relay_settings(**kw)))
+
+    def peer(self) -> Peer:
+        return Peer(name=NAME, ssh_user=self.user, ssh_port=22)
+
+    def known_hosts(self, path: Path, relay_pub: str | None = None,
+                    robot_pub: str | None = None, robot_as: str = NAME) -> Path:
+        path.write_text(
+            f"[localhost]:{self.relay.port} {(relay_pub or self.relay.host_pub).rsplit(' ', 1)[0]}\n"
+            f"{robot_as} {(robot_pub or self.robot.host_pub).rsplit(' ', 1)[0]}\n")
+        return path
+
+
+def tunnel_argv(relay: Sshd, key: Path, known: Path, port: int, target: int,
+                user: str) -> list[str]:
+    return ["ssh", "-N", "-F", "/dev/null", "-i", str(key), "-o", "IdentitiesOnly=yes",
+            "-o", "BatchMode=yes", "-o", "StrictHostKeyChecking=yes",
+            "-o", f"UserKnownHostsFile={known}", "-o", "ExitOnForwardFailure=yes",
+            "-o", "ServerAliveInterval=5", "-o", "ServerAliveCountMax=2", "-p", str(relay.port),
+            "-R", f"127.0.0.1:{port}:127.0.0.1:{target}", f"{user}@localhost"]
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    root = tmp_path_factory.mktemp("jump")
+    user = getpass.getuser()
+    relay, robot = Sshd(root / "relay"), Sshd(root / "robot")
+    dot_ssh = root / "dot_ssh"
+    dot_ssh.mkdir(mode=0o700)
+    op_pub = keygen(dot_ssh / "id_ed25519")
+    tkey = root / "tunnel_key"
+    t_pub = keygen(tkey)
+    port = free_port()
+    # The relay's account: the tunnel's key may only listen at its port, the operator's key may
+    # only open that port (docs/SECURITY.md's lines).
+    relay.authorized.write_text(
+        f'restrict,port-forwarding,permitlisten="127.0.0.1:{port}" {t_pub}\n'
+        f'restrict,port-forwarding,permitopen="127.0.0.1:{port}" {op_pub}\n')
+    robot.authorized.write_text(op_pub + "\n")
+    relay.start()
+    robot.start()
+    tknown = root / "tunnel_known_hosts"
+    tknown.write_text(f"[localhost]:{relay.port} {relay.host_pub.rsplit(' ', 1)[0]}\n")
+    tunnel = subprocess.Popen(tunnel_argv(relay, tkey, tknown, port, robot.port, user),
+                              stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+    f = Fleet(relay, robot, port, dot_ssh, tunnel, tkey, user)
+    f.known_hosts(dot_ssh / "known_hosts")
+    try:
+        assert wait_banner(port, 10), "the reverse tunnel did not come up"
+        yield f
+    finally:
+        procs.stop(tunnel, 5)
+        relay.stop()
+        robot.stop()
+
+
+async def test_a_peer_with_a_tunnel_is_reached_through_the_relay(fleet):
+    with pytest.raises(OSError):
+        socket.getaddrinfo(NAME, 22)      # no direct way: the name does not even resolve
+    res = await ssh_run(fleet.opts(), fleet.peer(), "echo through; cat", stdin="ok\n",
+                        timeout=10)
+    assert res.ok and res.exit_status == 0, res.detail
+    assert res.stdout == "through\nok\n"
+    assert res.fingerprint == fleet.robot.fingerprint       # the far host's key, not the relay's
+    assert res.address is None            # its name was not resolved here
+
+
+async def test_linux_ssh_and_the_pool_take_the_relay_from_the_settings(fleet):
+    s = Settings(peers=[fleet.peer()], relay=fleet.relay_settings())
+    pool = SshPool()
+    ctx = CheckContext(settings=s, timeout_s=3.0, upnp=False, ssh_pool=pool,
+                       ssh_options=SshOptions(ssh_dir=fleet.dot_ssh, ssh_agent=False,
+                                              known_hosts_files=(fleet.dot_ssh / "known_hosts",)))
+    try:
+        out = await check_ssh(ctx)
+        assert out.status == Status.PASS, out.evidence
+        assert "through the relay localhost" in out.evidence[0]
+        shared = await ssh_run(ctx.ssh, fleet.peer(), "echo again", timeout=10)
+        assert shared.ok and shared.stdout == "again\n"
+        assert len(pool._conns) == 1            # one connection through the relay, shared
+    finally:
+        pool.close()
+
+
+async def test_the_far_key_is_checked_under_the_component_s_name(fleet, tmp_path):
+    # Known only under the address it is reached at on the relay: that is not its name.
+    kh = fleet.known_hosts(tmp_path / "kh", robot_as=f"[127.0.0.1]:{fleet.tunnel_port}")
+    res = await ssh_run(fleet.opts(kh), fleet.peer(), "echo no", timeout=10)
+    assert res.failure == "host_key_unknown" and not res.stdout
+    assert res.fingerprint == fleet.robot.fingerprint
+
+
+async def test_a_changed_key_at_the_far_host_is_refused(fleet, tmp_path):
+    other = keygen(tmp_path / "other")
+    kh = fleet.known_hosts(tmp_path / "kh", robot_pub=other)
+    res = await ssh_run(fleet.opts(kh), fleet.peer(), "echo no", timeout=10)
+    assert res.failure == "host_key_changed" and not res.stdout
+    assert "CHANGED" in res.detail
+
+
+async def test_a_changed_key_at_the_relay_is_refused_before_any_login(fleet, tmp_path):
+    other = keygen(tmp_path / "other")
+    kh = fleet.known_hosts(tmp_path / "kh", relay_pub=other)
+    before = fleet.relay.log.read_text()
+    res = await ssh_run(fleet.opts(kh), fleet.peer(), "echo no", timeout=10)
+    assert res.failure == "relay" and not res.stdout
+    assert "CHANGED" in res.detail and "relay localhost" in res.detail
+    assert res.host_key is None          # never offered for trust under the component's name
+    time.sleep(0.2)
+    assert "publickey" not in fleet.relay.log.read_text()[len(before):]
+
+
+async def test_an_unknown_relay_key_is_not_offered_as_the_component_s(fleet, tmp_path):
+    kh = tmp_path / "kh"
+    kh.write_text(f"{NAME} {fleet.robot.host_pub.rsplit(' ', 1)[0]}\n")
+    res = await ssh_run(fleet.opts(kh), fleet.peer(), "echo no", timeout=10)
+    assert res.failure == "relay" and "not in known_hosts" in res.detail
+    assert res.host_key is None and res.fingerprint is None
+
+
+async def test_a_tunnel_that_is_down_is_told_apart_from_the_relay(fleet):
+    gone = free_port()
+    t0 = time.monotonic()
+    res = await ssh_run(fleet.opts(tunnels={NAME: gone}), fleet.peer(), "true", timeout=5)
+    assert res.failure == "relay"     # the relay's account may open only the tunnel's port
+    assert "does not let" in res.detail
+    assert time.monotonic() - t0 < 5.5
+
+
+async def test_a_silent_relay_gives_a_verdict_within_the_timeout(fleet):
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(4)
+    try:
+        t0 = time.monotonic()
+        res = await ssh_run(fleet.opts(ssh_port=srv.getsockname()[1]), fleet.peer(), "true",
+                            timeout=1.0)
+        took = time.monotonic() - t0
+    finally:
+        srv.close()
+    assert not res.ok and res.failure in ("relay", "timeout")
+    assert took < 1.5
+
+
+async def test_nothing_at_the_relay_is_a_relay_failure(fleet):
+    res = await ssh_run(fleet.opts(ssh_port=free_port()), fleet.peer(), "true", timeout=3)
+    assert res.failure == "relay" and "refused" in res.detail
+
+
+async def test_a_tunnel_that_is_down_says_so(fleet):
+    procs.stop(fleet.tunnel, 5)
+    end = time.monotonic() + 10
+    while wait_banner(fleet.tunnel_port, 0.1) and time.monotonic() < end:
+        time.sleep(0.05)
+    res = await ssh_run(fleet.opts(), fleet.peer(), "true", timeout=5)
+    assert res.failure == "network" and res.tcp == "refused"
+    assert "tunnel is down" in res.detail and "relay tunnel" in res.detail
