@@ -1,18 +1,21 @@
 """SSH to a peer nobody can reach, with the relay as the jump host: two real sshd on 127.0.0.1
-(the relay's and the component's), the component's reachable only through a reverse tunnel that
-a real OpenSSH client keeps on the relay's loopback (as `rosnet-tui relay tunnel` does)."""
+(the relay's and the component's), the component's reachable only through the reverse tunnel
+that `rosnet-tui relay tunnel`'s keeper holds on the relay's loopback with OpenSSH's client."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import getpass
 import os
 import shutil
 import socket
-import subprocess
+import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+import psutil
 import pytest
 
 from rosnet_tui.core.checks import CheckContext
@@ -22,8 +25,8 @@ from rosnet_tui.core.results import Status
 from rosnet_tui.core.ssh.options import SshOptions, relay_route
 from rosnet_tui.core.ssh.pool import SshPool
 from rosnet_tui.core.ssh.session import ssh_run
+from rosnet_tui.core.ssh.tunnel import TunnelKeeper, tunnel_argv
 from tests.builders import free_port
-from tests.lab import procs
 from tests.plugins.ssh import SSHD, Sshd, keygen
 
 pytestmark = pytest.mark.skipif(not os.path.exists(SSHD) or not shutil.which("ssh"),
@@ -53,9 +56,25 @@ class Fleet:
     robot: Sshd
     tunnel_port: int
     dot_ssh: Path            # the operator's side: its key, known_hosts for both hops
-    tunnel: subprocess.Popen
-    tunnel_key: Path
+    tunnel_ssh: Path         # the robot's side: the tunnel's key and the relay's known_hosts
     user: str
+    keeper: TunnelKeeper | None = None
+    thread: threading.Thread | None = None
+    said: list[str] = field(default_factory=list)
+
+    def start_tunnel(self) -> None:
+        opts = SshOptions(ssh_dir=self.tunnel_ssh, ssh_agent=False,
+                          known_hosts_files=(self.tunnel_ssh / "known_hosts",))
+        argv = tunnel_argv(self.relay_settings(), NAME, self.robot.port, opts)
+        self.keeper = TunnelKeeper(argv, self.said.append)
+        self.thread = threading.Thread(target=self.keeper.run, daemon=True)
+        self.thread.start()
+
+    def stop_tunnel(self) -> None:
+        if self.keeper is not None and self.thread is not None:
+            self.keeper.stop.set()
+            self.thread.join(10)
+            assert not self.thread.is_alive()
 
     def relay_settings(self, **kw) -> RelaySettings:
         kw.setdefault("host", "localhost")
@@ -80,15 +99,6 @@ class Fleet:
         return path
 
 
-def tunnel_argv(relay: Sshd, key: Path, known: Path, port: int, target: int,
-                user: str) -> list[str]:
-    return ["ssh", "-N", "-F", "/dev/null", "-i", str(key), "-o", "IdentitiesOnly=yes",
-            "-o", "BatchMode=yes", "-o", "StrictHostKeyChecking=yes",
-            "-o", f"UserKnownHostsFile={known}", "-o", "ExitOnForwardFailure=yes",
-            "-o", "ServerAliveInterval=5", "-o", "ServerAliveCountMax=2", "-p", str(relay.port),
-            "-R", f"127.0.0.1:{port}:127.0.0.1:{target}", f"{user}@localhost"]
-
-
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory):
     root = tmp_path_factory.mktemp("jump")
@@ -97,8 +107,9 @@ def fleet(tmp_path_factory):
     dot_ssh = root / "dot_ssh"
     dot_ssh.mkdir(mode=0o700)
     op_pub = keygen(dot_ssh / "id_ed25519")
-    tkey = root / "tunnel_key"
-    t_pub = keygen(tkey)
+    tunnel_ssh = root / "tunnel_ssh"
+    tunnel_ssh.mkdir(mode=0o700)
+    t_pub = keygen(tunnel_ssh / "id_ed25519")
     port = free_port()
     # The relay's account: the tunnel's key may only listen at its port, the operator's key may
     # only open that port (docs/SECURITY.md's lines).
@@ -108,18 +119,16 @@ def fleet(tmp_path_factory):
     robot.authorized.write_text(op_pub + "\n")
     relay.start()
     robot.start()
-    tknown = root / "tunnel_known_hosts"
-    tknown.write_text(f"[localhost]:{relay.port} {relay.host_pub.rsplit(' ', 1)[0]}\n")
-    tunnel = subprocess.Popen(tunnel_argv(relay, tkey, tknown, port, robot.port, user),
-                              stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL)
-    f = Fleet(relay, robot, port, dot_ssh, tunnel, tkey, user)
+    (tunnel_ssh / "known_hosts").write_text(
+        f"[localhost]:{relay.port} {relay.host_pub.rsplit(' ', 1)[0]}\n")
+    f = Fleet(relay, robot, port, dot_ssh, tunnel_ssh, user)
     f.known_hosts(dot_ssh / "known_hosts")
     try:
-        assert wait_banner(port, 10), "the reverse tunnel did not come up"
+        f.start_tunnel()
+        assert wait_banner(port, 10), f"the reverse tunnel did not come up: {f.said}"
         yield f
     finally:
-        procs.stop(tunnel, 5)
+        f.stop_tunnel()
         relay.stop()
         robot.stop()
 
@@ -217,11 +226,31 @@ async def test_nothing_at_the_relay_is_a_relay_failure(fleet):
     assert res.failure == "relay" and "refused" in res.detail
 
 
+async def test_a_tunnel_killed_on_the_relay_is_back_within_10_s(fleet):
+    assert fleet.keeper is not None and fleet.keeper.ups >= 1, fleet.said
+    ups = fleet.keeper.ups
+    relay_side = psutil.Process(fleet.relay.proc.pid).children(recursive=True)
+    assert relay_side                   # the tunnel's session on the relay
+    t0 = time.monotonic()
+    for p in relay_side:
+        with contextlib.suppress(psutil.Error):
+            p.kill()
+    while time.monotonic() - t0 < 10 and fleet.keeper.ups == ups:
+        await asyncio.sleep(0.05)
+    assert fleet.keeper.ups == ups + 1, fleet.said
+    res = await ssh_run(fleet.opts(), fleet.peer(), "echo back", timeout=5)
+    assert res.ok and res.stdout == "back\n", res.detail
+    assert time.monotonic() - t0 < 10
+    assert any(line.startswith("the tunnel dropped") for line in fleet.said), fleet.said
+
+
 async def test_a_tunnel_that_is_down_says_so(fleet):
-    procs.stop(fleet.tunnel, 5)
+    fleet.stop_tunnel()
+    assert fleet.said[-1] == "tunnel closed"
     end = time.monotonic() + 10
     while wait_banner(fleet.tunnel_port, 0.1) and time.monotonic() < end:
         time.sleep(0.05)
     res = await ssh_run(fleet.opts(), fleet.peer(), "true", timeout=5)
     assert res.failure == "network" and res.tcp == "refused"
     assert "tunnel is down" in res.detail and "relay tunnel" in res.detail
+    fleet.start_tunnel()
