@@ -10,6 +10,7 @@ import getpass
 import os
 import shutil
 import socket
+import subprocess
 import threading
 import time
 from dataclasses import dataclass, field
@@ -20,8 +21,10 @@ import pytest
 
 from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.checks.linux import check_ssh
-from rosnet_tui.core.config.settings_model import Peer, RelaySettings, Settings
+from rosnet_tui.core.config.settings_model import Peer, RelaySettings, Settings, ThisComponent
+from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.results import Status
+from rosnet_tui.core.ssh.client_config import preview_ssh_config
 from rosnet_tui.core.ssh.options import SshOptions, relay_route
 from rosnet_tui.core.ssh.pool import SshPool
 from rosnet_tui.core.ssh.session import ssh_run
@@ -224,6 +227,45 @@ async def test_a_silent_relay_gives_a_verdict_within_the_timeout(fleet):
 async def test_nothing_at_the_relay_is_a_relay_failure(fleet):
     res = await ssh_run(fleet.opts(ssh_port=free_port()), fleet.peer(), "true", timeout=3)
     assert res.failure == "relay" and "refused" in res.detail
+
+
+def test_plain_ssh_reaches_the_component_through_the_config_block(fleet, tmp_path):
+    cfg = tmp_path / "config"
+    # The user's own lines: global ones first (they must keep applying to every host).
+    mine = (f"IdentityFile {fleet.dot_ssh / 'id_ed25519'}\nIdentitiesOnly yes\n"
+            f"UserKnownHostsFile {fleet.dot_ssh / 'known_hosts'}\n"
+            "GlobalKnownHostsFile /dev/null\nBatchMode yes\nStrictHostKeyChecking yes\n"
+            "Host *\n    ConnectTimeout 5\n")
+    cfg.write_text(mine)
+    cfg.chmod(0o600)                                   # OpenSSH refuses one others may write
+    s = Settings(this=ThisComponent(name="sami"), peers=[fleet.peer()],
+                 relay=fleet.relay_settings(tunnels={NAME: fleet.tunnel_port, "sami": 1}))
+    preview = preview_ssh_config(s, cfg, state_dir=tmp_path / "state")
+    assert preview is not None and "+Host turtlebot" in preview.diff()
+    assert "Host sami" not in preview.diff()          # not a jump to itself
+    mf.apply_preview(preview, state_dir=tmp_path / "state")
+    text = cfg.read_text()
+    assert text.endswith(mine) and text.startswith("# BEGIN rosnet-tui")
+    assert (cfg.stat().st_mode & 0o777) == 0o600
+    run = subprocess.run(["ssh", "-F", str(cfg), NAME, "echo via-openssh"], capture_output=True,
+                         text=True, timeout=30, stdin=subprocess.DEVNULL)
+    assert run.returncode == 0 and run.stdout == "via-openssh\n", run.stderr
+    # The far key is checked under its name: a wrong one there is refused by OpenSSH too.
+    kh = fleet.known_hosts(tmp_path / "kh", robot_pub=keygen(tmp_path / "other"))
+    bad = subprocess.run(["ssh", "-F", str(cfg), "-o", f"UserKnownHostsFile={kh}", NAME, "true"],
+                         capture_output=True, text=True, timeout=30, stdin=subprocess.DEVNULL)
+    assert bad.returncode != 0 and "HOST IDENTIFICATION HAS CHANGED" in bad.stderr
+    mf.undo_last(tmp_path / "state")
+    assert cfg.read_text() == mine
+
+
+def test_no_tunnel_to_jump_to_writes_nothing(fleet, tmp_path):
+    s = Settings(this=ThisComponent(name=NAME), relay=fleet.relay_settings())
+    assert preview_ssh_config(s, tmp_path / "config") is None
+    assert preview_ssh_config(Settings(), tmp_path / "config") is None
+    made = preview_ssh_config(Settings(peers=[fleet.peer()], relay=fleet.relay_settings()),
+                              tmp_path / "config")
+    assert made is not None and made.old is None and made.new_mode == 0o600
 
 
 async def test_a_tunnel_killed_on_the_relay_is_back_within_10_s(fleet):

@@ -50,6 +50,7 @@ from rosnet_tui.core.files.bashrc import (
 )
 from rosnet_tui.core.files.hosts import WriterSettingsError
 from rosnet_tui.core.ros import ros2
+from rosnet_tui.core.ssh.client_config import ssh_config_previews
 from rosnet_tui.core.ssh.options import options_for
 
 HELP = "write the ROS environment for this component's role (ROS 1 or 2) into ~/.bashrc"
@@ -176,6 +177,8 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
     try:
         previews = ros2.previews(settings, path, client=args.client, router_config_path=rc,
                                  state_dir=state_dir_of(args))
+        jumps, notes = ssh_config_previews(settings, state_dir=state_dir_of(args))
+        previews += jumps
         lines = ros2.shell_lines(settings, client=args.client)
     except WriterSettingsError as exc:
         return report_settings_problems(exc)
@@ -187,6 +190,8 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
     print(f"ROS 2 (rmw_zenoh) settings for {settings.this.name}, {role}:")
     for p in previews:
         show_preview(p)
+    for n in notes:
+        print(f"note: {n}")
     tls = _tls_plan(settings) if ros2.mtls(settings) else ""
     if tls:
         print(tls)
