@@ -5,6 +5,7 @@ that `rosnet-tui relay tunnel`'s keeper holds on the relay's loopback with OpenS
 from __future__ import annotations
 
 import asyncio
+import base64
 import contextlib
 import getpass
 import os
@@ -29,6 +30,7 @@ from rosnet_tui.core.ssh.options import SshOptions, relay_route
 from rosnet_tui.core.ssh.pool import SshPool
 from rosnet_tui.core.ssh.session import ssh_run
 from rosnet_tui.core.ssh.tunnel import TunnelKeeper, tunnel_argv
+from rosnet_tui.core.ssh.tunnel_probe import own_host_keys, probe_tunnel
 from tests.builders import free_port
 from tests.plugins.ssh import SSHD, Sshd, keygen
 
@@ -229,6 +231,42 @@ async def test_nothing_at_the_relay_is_a_relay_failure(fleet):
     assert res.failure == "relay" and "refused" in res.detail
 
 
+def key_blob(pub: str) -> bytes:
+    return base64.b64decode(pub.split()[1])
+
+
+async def test_the_tunnel_probe_sees_this_machine_s_key_through_the_relay(fleet, tmp_path):
+    route = relay_route(fleet.relay_settings())
+    own = {key_blob(fleet.robot.host_pub)}
+    st = await probe_tunnel(fleet.opts(), route, fleet.tunnel_port, own, 3.0)
+    assert st.up and st.failure is None and st.fingerprint == fleet.robot.fingerprint
+    other = await probe_tunnel(fleet.opts(), route, fleet.tunnel_port,
+                               {key_blob(fleet.relay.host_pub)}, 3.0)
+    assert not other.up and other.failure == "other_host"
+    folder = tmp_path / "etc_ssh"
+    folder.mkdir()
+    (folder / "ssh_host_ed25519_key.pub").write_text(fleet.robot.host_pub + "\n")
+    (folder / "ssh_host_rsa_key.pub").write_text("garbage\n")
+    assert own_host_keys(folder) == own
+
+
+async def test_the_tunnel_probe_gives_bad_news_within_its_timeout(fleet):
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(4)
+    try:
+        route = relay_route(fleet.relay_settings(ssh_port=srv.getsockname()[1]))
+        t0 = time.monotonic()
+        st = await probe_tunnel(fleet.opts(), route, fleet.tunnel_port, set(), 1.0)
+        took = time.monotonic() - t0
+    finally:
+        srv.close()
+    assert not st.up and st.failure in ("relay", "timeout") and took < 1.5
+    gone = relay_route(fleet.relay_settings(ssh_port=free_port()))
+    st = await probe_tunnel(fleet.opts(), gone, fleet.tunnel_port, set(), 1.0)
+    assert st.failure == "relay" and "refused" in st.detail
+
+
 def test_plain_ssh_reaches_the_component_through_the_config_block(fleet, tmp_path):
     cfg = tmp_path / "config"
     # The user's own lines: global ones first (they must keep applying to every host).
@@ -295,4 +333,7 @@ async def test_a_tunnel_that_is_down_says_so(fleet):
     res = await ssh_run(fleet.opts(), fleet.peer(), "true", timeout=5)
     assert res.failure == "network" and res.tcp == "refused"
     assert "tunnel is down" in res.detail and "relay tunnel" in res.detail
+    st = await probe_tunnel(fleet.opts(), relay_route(fleet.relay_settings()), fleet.tunnel_port,
+                            {key_blob(fleet.robot.host_pub)}, 3.0)
+    assert not st.up and st.failure == "down"
     fleet.start_tunnel()
