@@ -20,9 +20,16 @@ from pathlib import Path
 import psutil
 import pytest
 
-from rosnet_tui.core.checks import CheckContext
+from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
 from rosnet_tui.core.checks.linux import check_ssh
-from rosnet_tui.core.config.settings_model import Peer, RelaySettings, Settings, ThisComponent
+from rosnet_tui.core.config.paths import Paths
+from rosnet_tui.core.config.settings_model import (
+    Peer,
+    RelaySettings,
+    RosSettings,
+    Settings,
+    ThisComponent,
+)
 from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.ssh.client_config import preview_ssh_config
@@ -265,6 +272,50 @@ async def test_the_tunnel_probe_gives_bad_news_within_its_timeout(fleet):
     gone = relay_route(fleet.relay_settings(ssh_port=free_port()))
     st = await probe_tunnel(fleet.opts(), gone, fleet.tunnel_port, set(), 1.0)
     assert st.failure == "relay" and "refused" in st.detail
+
+
+def tunnel_ctx(fleet, tmp_path, keys: str, timeout: float = 2.0) -> CheckContext:
+    folder = tmp_path / "etc_ssh"
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "ssh_host_ed25519_key.pub").write_text(keys + "\n")
+    s = Settings(this=ThisComponent(name=NAME), ros=RosSettings(version=2),
+                 relay=fleet.relay_settings())
+    return CheckContext(settings=s, timeout_s=timeout, upnp=False,
+                        paths=Paths(state_dir=tmp_path / "state", hosts_path=tmp_path / "hosts",
+                                    bashrc_path=tmp_path / "bashrc", sshd_dir=folder),
+                        ssh_options=SshOptions(ssh_dir=fleet.dot_ssh, ssh_agent=False,
+                                               known_hosts_files=(fleet.dot_ssh / "known_hosts",)))
+
+
+async def test_relay_tunnel_passes_when_the_port_leads_here(fleet, tmp_path):
+    load_builtin_checks()
+    res = await run_check(REGISTRY["relay.tunnel"], tunnel_ctx(fleet, tmp_path,
+                                                                fleet.robot.host_pub))
+    assert res.status == Status.PASS, res.evidence
+    assert res.data["up"] is True and res.data["fingerprint"] == fleet.robot.fingerprint
+    wrong = await run_check(REGISTRY["relay.tunnel"], tunnel_ctx(fleet, tmp_path / "w",
+                                                                  fleet.relay.host_pub))
+    assert wrong.status == Status.FAIL and wrong.data["failure"] == "other_host"
+    elsewhere = tunnel_ctx(fleet, tmp_path / "x", fleet.robot.host_pub)
+    elsewhere.settings.this.name = "sami"                 # no tunnel for this component
+    skipped = await run_check(REGISTRY["relay.tunnel"], elsewhere)
+    assert skipped.status == Status.SKIP
+
+
+async def test_relay_tunnel_bad_news_within_the_timeout(fleet, tmp_path):
+    load_builtin_checks()
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(4)
+    try:
+        ctx = tunnel_ctx(fleet, tmp_path, fleet.robot.host_pub, timeout=1.0)
+        ctx.settings.relay.ssh_port = srv.getsockname()[1]      # a relay that never answers
+        t0 = time.monotonic()
+        res = await run_check(REGISTRY["relay.tunnel"], ctx)
+        took = time.monotonic() - t0
+    finally:
+        srv.close()
+    assert res.status == Status.FAIL and took < 1.0 + 0.5, (took, res.summary)
 
 
 def test_plain_ssh_reaches_the_component_through_the_config_block(fleet, tmp_path):

@@ -59,6 +59,7 @@ RULE_ORDER: tuple[str, ...] = (
     "linux.chat.in_fails",
     "linux.chat.out_fails",
     "linux.chat.both_fail",
+    "relay.tunnel.down",                    # ROS 2 with a relay: this component's tunnel
     "security.firewall.stale",              # ROS 1: the peers-only table (linux.firewall)
     "security.firewall.lockout",
     "security.firewall.missing",

@@ -215,7 +215,7 @@ class LinuxPingData(TypedDict, total=False):
 class SshPeer(TypedDict, total=False):
     ok: bool                # a command ran over SSH (key login, host key verified)
     failure: str | None     # why not: network, resolve, host_key_unknown, host_key_changed,
-    #                         auth, sshd, timeout, no_user (no ssh_user in the settings)
+    #                         auth, sshd, timeout, relay (at the relay), no_user (none set)
     fingerprint: str | None  # SHA256:... of the peer's host key, when seen
     host_key: str | None    # "<type> <base64>" of that key (for trusting it after a comparison)
     address: str | None     # the address the peer's name resolved to here
@@ -475,35 +475,31 @@ SecurityOutsiderData = TypedDict("SecurityOutsiderData", {
 }, total=False)
 
 
+class RelayTunnelData(TypedDict, total=False):  # relay.tunnel (checks/relay_tunnel.py)
+    relay: str               # the relay's name ([relay] host)
+    port: int                # this component's port on the relay's loopback ([relay.tunnels])
+    up: bool | None          # the port answers with this machine's sshd key (None: not known)
+    failure: Literal["relay", "down", "other_host", "not_sshd", "timeout", "own_keys"] | None  # why not
+    fingerprint: str | None  # SHA256:... of the key that answered at the port, when one did
+    detail: str              # what happened, in words
+
+
 DATA: dict[str, type] = {
-    "isp.internet": IspInternetData,
-    "isp.public_ip": IspPublicIpData,
-    "isp.cgnat": IspCgnatData,
-    "router.local_ip": RouterLocalIpData,
-    "router.port_free": RouterPortFreeData,
-    "router.listener": RouterListenerData,
-    "router.port_open": RouterPortOpenData,
+    "isp.internet": IspInternetData, "isp.public_ip": IspPublicIpData, "isp.cgnat": IspCgnatData,
+    "router.local_ip": RouterLocalIpData, "router.port_free": RouterPortFreeData,
+    "router.listener": RouterListenerData, "router.port_open": RouterPortOpenData,
     "router.upnp": RouterUpnpData,
-    "linux.hosts": LinuxHostsData,
-    "linux.resolve": LinuxResolveData,
-    "linux.ping": LinuxPingData,
-    "linux.ssh": LinuxSshData,
-    "linux.chat_out": LinuxChatData,
-    "linux.chat_in": LinuxChatData,
+    "linux.hosts": LinuxHostsData, "linux.resolve": LinuxResolveData,
+    "linux.ping": LinuxPingData, "linux.ssh": LinuxSshData,
+    "linux.chat_out": LinuxChatData, "linux.chat_in": LinuxChatData,
     "linux.firewall": LinuxFirewallData,
-    "ros.env": RosEnvData,
-    "ros.master": RosMasterData,
-    "ros.node_uris": RosNodeUrisData,
-    "ros.pubsub_out": RosPubsubData,
-    "ros.pubsub_in": RosPubsubData,
-    "ros2.env": Ros2EnvData,
-    "ros2.router": Ros2RouterData,
-    "ros2.graph": Ros2GraphData,
-    "ros2.pubsub_out": Ros2PubsubData,
-    "ros2.pubsub_in": Ros2PubsubData,
+    "ros.env": RosEnvData, "ros.master": RosMasterData, "ros.node_uris": RosNodeUrisData,
+    "ros.pubsub_out": RosPubsubData, "ros.pubsub_in": RosPubsubData,
+    "ros2.env": Ros2EnvData, "ros2.router": Ros2RouterData, "ros2.graph": Ros2GraphData,
+    "ros2.pubsub_out": Ros2PubsubData, "ros2.pubsub_in": Ros2PubsubData,
     "ros.rosbridge": RosRosbridgeData,
-    "security.ssh_auth": SecuritySshAuthData,
-    "security.outsider": SecurityOutsiderData,
+    "security.ssh_auth": SecuritySshAuthData, "security.outsider": SecurityOutsiderData,
+    "relay.tunnel": RelayTunnelData,
 }
 
 

@@ -1,0 +1,48 @@
+"""relay.tunnel's advice (the check against real sshd: tests/test_ssh_jump.py)."""
+
+from __future__ import annotations
+
+from rosnet_tui.core.advisor import advise
+from rosnet_tui.core.config.settings_model import RelaySettings
+from rosnet_tui.core.results import CheckResult, Status
+from tests.builders import robot_settings
+
+
+def _settings():
+    s = robot_settings()
+    s.ros.version = 2
+    s.relay = RelaySettings(host="relay", ssh_user="tunnel", tunnels={s.this.name: 2201})
+    return s
+
+
+def _case(failure: str):
+    def build():
+        d = {"relay": "relay", "port": 2201, "up": False, "failure": failure,
+             "fingerprint": None, "detail": f"{failure} at 127.0.0.1:2201"}
+        r = CheckResult("relay.tunnel", "linux", Status.FAIL, "the tunnel does not reach", [],
+                        0.1, 3.0, d)
+        return {"relay.tunnel": r}, _settings()
+    return build
+
+
+# The advisor's rule cases (tests/test_advisor_rules.py runs every rule on its case).
+RELAY_TUNNEL_CASES = {"relay.tunnel.down": _case("down")}
+
+
+def test_each_cause_gets_its_own_first_action():
+    firsts = {}
+    for why in ("down", "other_host", "not_sshd", "relay", "timeout"):
+        results, s = _case(why)()
+        f = next(f for f in advise(results, s, strict=True) if f.rule == "relay.tunnel.down")
+        assert f.severity == "fail" and "2201" in f.meaning
+        firsts[why] = f.actions[0]
+    assert "`rosnet-tui relay tunnel`" in firsts["down"]
+    assert "sudo ss -tlnp" in firsts["other_host"] and "known_hosts" in firsts["relay"]
+    assert len(set(firsts.values())) == 5
+
+
+def test_a_passing_tunnel_says_nothing():
+    results, s = _case("down")()
+    results["relay.tunnel"].status = Status.PASS
+    results["relay.tunnel"].data.update(up=True, failure=None)
+    assert not [f for f in advise(results, s, strict=True) if f.rule.startswith("relay.")]
