@@ -11,8 +11,20 @@ from tests.builders import robot_settings
 def _settings():
     s = robot_settings()
     s.ros.version = 2
-    s.relay = RelaySettings(host="relay", ssh_user="tunnel", tunnels={s.this.name: 2201})
+    s.ros.security = "mtls"
+    s.relay = RelaySettings(host="relay", ssh_user="tunnel",
+                            tunnels={s.this.name: 2201, "sami": 2202})
     return s
+
+
+def _ssh_case(failure: str, tcp: str | None):
+    def build():
+        peer = {"ok": False, "failure": failure, "fingerprint": None, "host_key": None,
+                "address": None, "detail": f"{failure} on the way", "tcp": tcp, "port": 22}
+        r = CheckResult("linux.ssh", "linux", Status.FAIL, "no SSH to sami", [], 0.1, 3.0,
+                        {"peers": {"sami": peer}})
+        return {"linux.ssh": r}, _settings()
+    return build
 
 
 def _case(failure: str):
@@ -26,7 +38,24 @@ def _case(failure: str):
 
 
 # The advisor's rule cases (tests/test_advisor_rules.py runs every rule on its case).
-RELAY_TUNNEL_CASES = {"relay.tunnel.down": _case("down")}
+RELAY_TUNNEL_CASES = {"relay.tunnel.down": _case("down"),
+                      "linux.ssh.relay": _ssh_case("network", "refused")}
+
+
+def test_a_peer_behind_the_relay_is_not_sent_to_its_modem():
+    for failure, tcp, words in (("network", "refused", "`rosnet-tui relay tunnel`"),
+                                ("relay", None, "`ssh tunnel@relay`")):
+        results, s = _ssh_case(failure, tcp)()
+        fs = advise(results, s, strict=True)
+        rules = [f.rule for f in fs]
+        assert "linux.ssh.relay" in rules
+        assert not {"linux.ssh.refused", "linux.peer.unreachable"} & set(rules), rules
+        f = next(f for f in fs if f.rule == "linux.ssh.relay")
+        assert words in f.actions[0] and "modem" not in " ".join(f.actions)
+    # Without the relay, the same failure is the direct path's: the modem is named again.
+    results, s = _ssh_case("network", "refused")()
+    s.relay = RelaySettings()
+    assert "linux.ssh.refused" in [f.rule for f in advise(results, s, strict=True)]
 
 
 def test_each_cause_gets_its_own_first_action():

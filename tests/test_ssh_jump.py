@@ -384,6 +384,11 @@ async def test_a_tunnel_that_is_down_says_so(fleet):
     res = await ssh_run(fleet.opts(), fleet.peer(), "true", timeout=5)
     assert res.failure == "network" and res.tcp == "refused"
     assert "tunnel is down" in res.detail and "relay tunnel" in res.detail
+    ctx = CheckContext(settings=Settings(peers=[fleet.peer()], relay=fleet.relay_settings()),
+                       timeout_s=3.0, upnp=False, ssh_options=fleet.opts())
+    out = await check_ssh(ctx)
+    assert out.status == Status.FAIL and "its tunnel on the relay is down" in out.summary
+    assert "modem" not in out.summary
     st = await probe_tunnel(fleet.opts(), relay_route(fleet.relay_settings()), fleet.tunnel_port,
                             {key_blob(fleet.robot.host_pub)}, 3.0)
     assert not st.up and st.failure == "down"

@@ -49,6 +49,7 @@ RULE_ORDER: tuple[str, ...] = (
     "linux.hosts.duplicates",
     "linux.ping.icmp_filtered",
     "linux.peer.unreachable",
+    "linux.ssh.relay",                      # a peer behind the relay: the relay or its tunnel
     "linux.ssh.refused",
     "linux.ssh.host_key_changed",
     "linux.ssh.host_key_unknown",

@@ -319,13 +319,15 @@ async def check_ssh(ctx: CheckContext) -> Outcome:
         else:
             evidence.append(f"ssh {where}: {failure}: {r.detail}"
                             + (f" [{r.stderr.strip()[:120]}]" if r.stderr.strip() else ""))
-            bad.append((p.name, f"refused:{p.ssh_port or 22}" if r.tcp == "refused"
-                        else failure))
+            relayed = ctx.ssh.relay is not None and ctx.ssh.relay.tunnel_port(p.name)
+            bad.append((p.name, ("tunnel_down" if failure == "network" else failure) if relayed
+                        else f"refused:{p.ssh_port or 22}" if r.tcp == "refused" else failure))
     if bad:
         words = {"network": "not reachable", "resolve": "name does not resolve",
                  "host_key_unknown": "host key not yet trusted (compare the fingerprint)",
                  "host_key_changed": "HOST KEY CHANGED, refused", "auth": "key login refused",
-                 "sshd": "sshd problem", "timeout": "timed out"}
+                 "sshd": "sshd problem", "timeout": "timed out",
+                 "relay": "the relay turned us away", "tunnel_down": "its tunnel on the relay is down"}
         for _, f in bad:
             if f and f.startswith("refused:"):
                 words[f] = (f"port {f[8:]} refused: sshd does not listen there (it may listen "
