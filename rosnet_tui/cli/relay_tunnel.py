@@ -22,6 +22,7 @@ from rosnet_tui.cli.sync import package_root, systemd_quote
 from rosnet_tui.cli.writing import confirm, load_settings_for
 from rosnet_tui.core.files import privilege
 from rosnet_tui.core.saved.settings import atomic_write_text
+from rosnet_tui.core.ssh.options import SshOptions
 from rosnet_tui.core.ssh.tunnel import TunnelKeeper, tunnel_argv
 
 UNIT_NAME = "rosnet-tui-tunnel.service"
@@ -39,6 +40,9 @@ def register(cmds: argparse._SubParsersAction) -> None:
     add_config_option(p)
     p.add_argument("--sshd-port", type=int, default=22, metavar="PORT",
                    help="the port of this machine's sshd the tunnel leads to (default: 22)")
+    p.add_argument("--ssh-dir", type=Path, default=None, metavar="DIR",
+                   help="the folder with the key and known_hosts the tunnel uses (default: "
+                        "~/.ssh of the user running it)")
     p.add_argument("--install-service", action="store_true",
                    help="write a systemd unit that keeps the tunnel, instead of running it here")
     p.add_argument("--yes", "-y", action="store_true",
@@ -59,7 +63,8 @@ def run_tunnel(args: argparse.Namespace) -> int:
     if settings is None:
         return EXIT_USAGE
     try:
-        argv = tunnel_argv(settings.relay, settings.this.name, args.sshd_port)
+        opts = SshOptions(ssh_dir=args.ssh_dir.expanduser().absolute()) if args.ssh_dir else None
+        argv = tunnel_argv(settings.relay, settings.this.name, args.sshd_port, opts)
     except ValueError as exc:
         say(f"rosnet-tui: {exc}")
         return EXIT_USAGE
@@ -85,6 +90,8 @@ def unit_text(args: argparse.Namespace) -> str:
     cfg = config_path(args).absolute()
     argv = privilege.self_argv(["--config", str(cfg), "relay", "tunnel",
                                 "--sshd-port", str(args.sshd_port)])
+    if getattr(args, "ssh_dir", None):
+        argv += ["--ssh-dir", str(Path(args.ssh_dir).expanduser().absolute())]
     root = package_root()
     lines = ["# Written by 'rosnet-tui relay tunnel --install-service'.",
              "[Unit]",
