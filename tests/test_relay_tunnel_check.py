@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 from rosnet_tui.core.advisor import advise
+from rosnet_tui.core.checks import CheckContext
+from rosnet_tui.core.checks.linux import check_ping
+from rosnet_tui.core.checks.linux_chat import check_chat_in, check_chat_out
 from rosnet_tui.core.config.settings_model import RelaySettings
 from rosnet_tui.core.results import CheckResult, Status
 from tests.builders import robot_settings
@@ -75,3 +78,12 @@ def test_a_passing_tunnel_says_nothing():
     results["relay.tunnel"].status = Status.PASS
     results["relay.tunnel"].data.update(up=True, failure=None)
     assert not [f for f in advise(results, s, strict=True) if f.rule.startswith("relay.")]
+
+
+async def test_direct_paths_the_relay_makes_unnecessary_are_not_tested():
+    ctx = CheckContext(settings=_settings(), timeout_s=1.0, upnp=False)
+    ping = await check_ping(ctx)
+    assert ping.status == Status.SKIP and "sami is reached through the relay relay" in ping.summary
+    for chat in (check_chat_out, check_chat_in):
+        out = await chat(ctx)
+        assert out.status == Status.SKIP and "dials the relay relay" in out.summary

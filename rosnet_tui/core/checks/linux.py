@@ -240,8 +240,15 @@ async def tcp_connect(host: str, port: int, timeout: float) -> tuple[str, str]:
 
 @check("linux.ping", "linux", "Peers answer ping by name", 1.0)
 async def check_ping(ctx: CheckContext) -> Outcome:
-    peers = ctx.settings.peers
+    route = ctx.ssh.relay
+    relayed = [p.name for p in ctx.settings.peers if route and route.tunnel_port(p.name)]
+    peers = [p for p in ctx.settings.peers if p.name not in relayed]
     data: dict[str, Any] = {"peers": {}}
+    if relayed and route is not None:
+        why = (f"{', '.join(relayed)} {'is' if len(relayed) == 1 else 'are'} reached through the "
+               f"relay {route.host} (linux.ssh tests that way): no direct path is needed")
+        if not peers:
+            return Outcome(Status.SKIP, why, data=data)
     if not peers:
         return Outcome(Status.SKIP, "no peers in the settings", data=data)
     t = budget(ctx, "linux.ping") * 0.8
@@ -252,7 +259,7 @@ async def check_ping(ctx: CheckContext) -> Outcome:
         return icmp, kind, [line, tline]
 
     got = await each_peer(peers, one)
-    evidence: list[str] = []
+    evidence: list[str] = [why] if relayed else []
     ok: list[str] = []
     tcp_only: list[str] = []
     down: list[str] = []
