@@ -7,6 +7,7 @@ from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.checks.linux import check_ping
 from rosnet_tui.core.checks.linux_chat import check_chat_in, check_chat_out
 from rosnet_tui.core.config.settings_model import RelaySettings
+from rosnet_tui.core.files.hosts import hosts_entries
 from rosnet_tui.core.results import CheckResult, Status
 from tests.builders import robot_settings
 
@@ -87,3 +88,11 @@ async def test_direct_paths_the_relay_makes_unnecessary_are_not_tested():
     for chat in (check_chat_out, check_chat_in):
         out = await chat(ctx)
         assert out.status == Status.SKIP and "dials the relay relay" in out.summary
+
+
+def test_no_hosts_entry_sends_a_relayed_peer_to_a_carrier_address():
+    s = _settings()
+    assert [e.name for e in hosts_entries(s, "remote")] == ["turtlebot"]
+    assert [e.name for e in hosts_entries(s, "office")] == ["turtlebot", "sami"]   # same LAN
+    s.relay = RelaySettings(host="relay")                  # a relay, but no tunnel for sami
+    assert [e.name for e in hosts_entries(s, "remote")] == ["turtlebot", "sami"]
