@@ -22,6 +22,7 @@ import pytest
 
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
 from rosnet_tui.core.checks.linux import check_ssh
+from rosnet_tui.core.checks.runner import RunOptions, make_context, prestart_ssh
 from rosnet_tui.core.config.paths import Paths
 from rosnet_tui.core.config.settings_model import (
     Peer,
@@ -171,6 +172,21 @@ async def test_linux_ssh_and_the_pool_take_the_relay_from_the_settings(fleet):
         assert len(pool._conns) == 1            # one connection through the relay, shared
     finally:
         pool.close()
+
+
+async def test_a_round_prestarted_by_rosnet_tui_check_jumps_too(fleet, tmp_path):
+    s = Settings(peers=[fleet.peer()], relay=fleet.relay_settings())
+    o = RunOptions(timeout_s=3.0, upnp=False, paths=Paths(state_dir=tmp_path / "state",
+                                                          bashrc_path=tmp_path / "bashrc"),
+                   ssh=SshOptions(ssh_dir=fleet.dot_ssh, ssh_agent=False,
+                                  known_hosts_files=(fleet.dot_ssh / "known_hosts",)))
+    o = prestart_ssh(s, o)                # connects before the checks are even imported
+    ctx = make_context(s, o)
+    try:
+        out = await check_ssh(ctx)
+        assert out.status == Status.PASS, out.evidence
+    finally:
+        ctx.ssh_pool.close()
 
 
 async def test_the_far_key_is_checked_under_the_component_s_name(fleet, tmp_path):
