@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import getpass
+import shutil
 import signal
 import sys
 import threading
@@ -70,6 +71,10 @@ def run_tunnel(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     if args.install_service:
         return install(args)
+    if shutil.which(argv[0]) is None:
+        say("rosnet-tui: the tunnel needs OpenSSH's client (ssh): sudo apt install "
+            "openssh-client")
+        return EXIT_FAIL
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
