@@ -40,13 +40,14 @@ from tests.test_advisor_ros2 import ROS2_CASES
 from tests.test_advisor_security import SECURITY_CASES
 from tests.test_advisor_upnp import UPNP_CASES
 from tests.test_firewall import FIREWALL_CASES
+from tests.test_relay_tunnel_check import RELAY_TUNNEL_CASES
 from tests.test_rosbridge import ROSBRIDGE_CASES
 
 ROOT = Path(__file__).resolve().parents[1]
 
 CASES: dict[str, Case] = {**ISP_CASES, **ROUTER_CASES, **LINUX_CASES, **ROS_CASES, **GENERAL_CASES,
                           **ROS2_CASES, **UPNP_CASES, **ROSBRIDGE_CASES,
-                          **SECURITY_CASES, **FIREWALL_CASES}
+                          **SECURITY_CASES, **FIREWALL_CASES, **RELAY_TUNNEL_CASES}
 
 
 def test_healthy_network_has_no_failures_or_warnings():

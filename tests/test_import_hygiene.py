@@ -142,6 +142,7 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/core/ssh/connection.py", "paramiko"): "start-up cost: paramiko kept off the start-up path",
     ("rosnet_tui/core/ssh/origin.py", "psutil"): "start-up cost: psutil kept off the start-up path",
     ("rosnet_tui/core/ssh/session.py", "paramiko"): "start-up cost: paramiko kept off the start-up path",
+    ("rosnet_tui/core/ssh/tunnel_probe.py", "paramiko"): "start-up cost: paramiko kept off the start-up path",
     ("rosnet_tui/core/files/undo_journal.py", "shutil"): "start-up cost: stdlib module loaded when used",
     ("rosnet_tui/core/peer/zenohproto.py", "zenoh"): "start-up cost: zenoh kept off the start-up path",
     ("rosnet_tui/ui/app.py", "textual.filter"): "start-up cost: textual kept off the start-up path",

@@ -50,6 +50,8 @@ from rosnet_tui.core.files.bashrc import (
 )
 from rosnet_tui.core.files.hosts import WriterSettingsError
 from rosnet_tui.core.ros import ros2
+from rosnet_tui.core.ssh.client_config import ssh_config_previews
+from rosnet_tui.core.ssh.options import options_for
 
 HELP = "write the ROS environment for this component's role (ROS 1 or 2) into ~/.bashrc"
 
@@ -175,6 +177,8 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
     try:
         previews = ros2.previews(settings, path, client=args.client, router_config_path=rc,
                                  state_dir=state_dir_of(args))
+        jumps, notes = ssh_config_previews(settings, state_dir=state_dir_of(args))
+        previews += jumps
         lines = ros2.shell_lines(settings, client=args.client)
     except WriterSettingsError as exc:
         return report_settings_problems(exc)
@@ -186,6 +190,8 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
     print(f"ROS 2 (rmw_zenoh) settings for {settings.this.name}, {role}:")
     for p in previews:
         show_preview(p)
+    for n in notes:
+        print(f"note: {n}")
     tls = _tls_plan(settings) if ros2.mtls(settings) else ""
     if tls:
         print(tls)
@@ -256,7 +262,7 @@ def _fleet_tls(settings) -> int:
         if why is None:
             return EXIT_OK
         print(f"Pairing with the master ({why}):")
-        res = asyncio.run(pairing.pair_over_ssh(settings, paths))
+        res = asyncio.run(pairing.pair_over_ssh(settings, paths, options_for(settings.relay)))
     except (fleet_tls.TlsError, OSError) as exc:
         say(f"rosnet-tui: {exc}")
         return EXIT_FAIL

@@ -29,6 +29,7 @@ from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import SettingsError
 from rosnet_tui.core.ros import fleet_tls, pair_access, pairing
 from rosnet_tui.core.ros.fleet_tls import TlsError
+from rosnet_tui.core.ssh.options import options_for
 
 
 def register(rs: argparse._SubParsersAction) -> None:
@@ -122,7 +123,8 @@ def run_pair(args: argparse.Namespace) -> int:
             print(f"Already paired: {paths.node_crt} names {s['cn']}, valid until "
                   f"{s['not_after'][:10]} (--renew signs a new one).")
             return EXIT_OK
-        res = asyncio.run(pairing.pair_over_ssh(settings, paths, timeout=args.timeout))
+        res = asyncio.run(pairing.pair_over_ssh(settings, paths, options_for(settings.relay),
+                                                timeout=args.timeout))
     except TlsError as exc:
         say(f"rosnet-tui: {exc}")
         return EXIT_USAGE if args.sign or args.install or args.admit else EXIT_FAIL
@@ -240,7 +242,9 @@ def _remove(args: argparse.Namespace, settings, paths) -> int:
         print(f"  {keys} holds other keys too: if one is {args.remove}'s (its checks' SSH), "
               "delete that line by hand; a password login on this account is another way in.")
     rc = EXIT_OK
-    results = asyncio.run(pairing.repair_members(settings, paths, others, timeout=args.timeout))
+    results = asyncio.run(pairing.repair_members(settings, paths, others,
+                                                 options_for(settings.relay),
+                                                 timeout=args.timeout))
     for name, ok, detail in results:
         print(f"  {name}: {'re-paired' if ok else 'NOT re-paired'}: {detail}")
         rc = rc if ok else EXIT_FAIL

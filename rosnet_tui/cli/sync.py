@@ -328,7 +328,7 @@ def run_status(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------- install-service
-def _systemd_quote(arg: str) -> str:
+def systemd_quote(arg: str) -> str:
     """One ExecStart word: as is when plain, else in double quotes with \\ and " escaped."""
     if arg and all(c.isalnum() or c in "/._-=:+@,%" for c in arg):
         return arg
@@ -343,7 +343,7 @@ def _owner_home(path: Path) -> Path | None:
         return None
 
 
-def _package_root() -> Path:
+def package_root() -> Path:
     return Path(rosnet_tui.__file__).resolve().parent.parent
 
 
@@ -382,7 +382,7 @@ def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
     if user and not args.hosts_file:
         notes.append("a user service cannot write /etc/hosts: the hosts set will fail to apply "
                      "(use the system unit, without --user)")
-    root = _package_root()
+    root = package_root()
     site = any(part in ("site-packages", "dist-packages") for part in root.parts)
     lines = [
         "# Written by 'rosnet-tui sync install-service'.",
@@ -394,13 +394,13 @@ def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
         "",
         "[Service]",
         "Type=simple",
-        "ExecStart=" + " ".join(_systemd_quote(a) for a in argv),
+        "ExecStart=" + " ".join(systemd_quote(a) for a in argv),
         "Restart=on-failure",
         "RestartSec=10",
         "Environment=PYTHONUNBUFFERED=1",
     ]
     if not site:
-        lines.append("Environment=" + _systemd_quote(f"PYTHONPATH={root}"))
+        lines.append("Environment=" + systemd_quote(f"PYTHONPATH={root}"))
     lines += ["", "[Install]", f"WantedBy={'default.target' if user else 'multi-user.target'}", ""]
     return "\n".join(lines), notes
 

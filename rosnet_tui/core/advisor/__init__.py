@@ -11,7 +11,8 @@ Where things live:
   for web clients): the rules, one module per step,
   named like the checks whose data they read (Table 1 and security.exposed are the router's;
   :mod:`.router_upnp` reads router.upnp, the modem's own word; :mod:`.security` reads
-  security.ssh_auth and security.outsider, what a stranger gets);
+  security.ssh_auth and security.outsider, what a stranger gets; :mod:`.relay_tunnel` reads
+  relay.tunnel, this component's SSH tunnel on the relay);
 - :mod:`.order`: :data:`RULE_ORDER`, the one list that orders findings, docs and ``--ids``;
 - :mod:`.docs`: docs/TROUBLESHOOTING.md (:func:`render_rules_markdown`);
 - ``__main__``: ``python -m rosnet_tui.core.advisor [--markdown | --ids]``.
@@ -26,6 +27,7 @@ from rosnet_tui.core.advisor import (  # noqa: F401  (declare the rules)
     isp,
     linux,
     names,
+    relay_tunnel,
     ros,
     ros2,
     ros2_tls,

@@ -249,6 +249,12 @@ def linux_peers(ev: Evidence) -> list[str]:
     return list(names)
 
 
+def behind_relay(ev: Evidence, name: str) -> bool:
+    """*name* is reached through the relay (a tunnel under [relay.tunnels]), not at its own
+    address: the direct path's advice (forwards, the peer's modem) does not apply to it."""
+    return bool(ev.s.relay.host) and name != ev.s.this.name and name in ev.s.relay.tunnels
+
+
 def is_unreachable(ev: Evidence, name: str) -> bool:
     st = peer_state(ev, name)
     if st["ssh_ok"] is True or st["out"] is True:

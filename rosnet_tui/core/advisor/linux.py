@@ -9,6 +9,7 @@ from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import (
     FORWARD_RANGE,
     Evidence,
+    behind_relay,
     is_unreachable,
     linux_peers,
     peer_state,
@@ -128,7 +129,8 @@ def _peer_hit(ev: Evidence, name: str, meaning: str) -> Hit:
 def _peer_unreachable(ev: Evidence) -> list[Hit]:
     hits = []
     for name in linux_peers(ev):
-        if not is_unreachable(ev, name) or (ev.remote and ssh_refused_first(ev, name)):
+        if not is_unreachable(ev, name) or (ev.remote and ssh_refused_first(ev, name)) \
+                or behind_relay(ev, name):
             continue
         st = peer_state(ev, name)
         ip = (ev.data("linux.resolve").get("names") or {}).get(name, {}).get("resolved") \
@@ -171,7 +173,7 @@ def _peer_unreachable(ev: Evidence) -> list[Hit]:
 def _ssh_refused(ev: Evidence) -> list[Hit]:
     hits = []
     for name in linux_peers(ev):
-        if not ssh_refused_first(ev, name):
+        if not ssh_refused_first(ev, name) or behind_relay(ev, name):
             continue
         ssh = (ev.data("linux.ssh").get("peers") or {}).get(name) or {}
         port = int(ssh.get("port") or 22)

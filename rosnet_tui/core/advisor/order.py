@@ -49,6 +49,7 @@ RULE_ORDER: tuple[str, ...] = (
     "linux.hosts.duplicates",
     "linux.ping.icmp_filtered",
     "linux.peer.unreachable",
+    "linux.ssh.relay",                      # a peer behind the relay: the relay or its tunnel
     "linux.ssh.refused",
     "linux.ssh.host_key_changed",
     "linux.ssh.host_key_unknown",
@@ -59,6 +60,7 @@ RULE_ORDER: tuple[str, ...] = (
     "linux.chat.in_fails",
     "linux.chat.out_fails",
     "linux.chat.both_fail",
+    "relay.tunnel.down",                    # ROS 2 with a relay: this component's tunnel
     "security.firewall.stale",              # ROS 1: the peers-only table (linux.firewall)
     "security.firewall.lockout",
     "security.firewall.missing",

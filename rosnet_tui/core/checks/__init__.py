@@ -19,7 +19,7 @@ from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.net.listener import ListenerPool
 from rosnet_tui.core.procedure import STEP_IDS
 from rosnet_tui.core.results import CheckResult, Outcome, Status
-from rosnet_tui.core.ssh.options import SshOptions
+from rosnet_tui.core.ssh.options import SshOptions, relay_route
 
 
 @dataclass
@@ -51,11 +51,13 @@ class CheckContext:
 
     @property
     def ssh(self) -> SshOptions:
-        """The SSH options with this round's timeout (and its shared connections)."""
+        """The SSH options with this round's timeout, its shared connections and the relay of
+        the settings (the jump host to the peers with a tunnel there)."""
         o = self.ssh_options
-        if o.timeout_s == self.timeout_s and o.pool is self.ssh_pool:
+        route = relay_route(self.settings.relay)
+        if o.timeout_s == self.timeout_s and o.pool is self.ssh_pool and o.relay == route:
             return o
-        return replace(o, timeout_s=self.timeout_s, pool=self.ssh_pool)
+        return replace(o, timeout_s=self.timeout_s, pool=self.ssh_pool, relay=route)
 
 
 CheckFunc = Callable[[CheckContext], Awaitable[Outcome]]

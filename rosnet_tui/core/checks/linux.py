@@ -246,8 +246,15 @@ async def tcp_connect(host: str, port: int, timeout: float) -> tuple[str, str]:
 
 @check("linux.ping", "linux", "Peers answer ping by name", 1.0)
 async def check_ping(ctx: CheckContext) -> Outcome:
-    peers = ctx.settings.peers
+    route = ctx.ssh.relay
+    relayed = [p.name for p in ctx.settings.peers if route and route.tunnel_port(p.name)]
+    peers = [p for p in ctx.settings.peers if p.name not in relayed]
     data: dict[str, Any] = {"peers": {}}
+    if relayed and route is not None:
+        why = (f"{', '.join(relayed)} {'is' if len(relayed) == 1 else 'are'} reached through the "
+               f"relay {route.host} (linux.ssh tests that way): no direct path is needed")
+        if not peers:
+            return Outcome(Status.SKIP, why, data=data)
     if not peers:
         return Outcome(Status.SKIP, "no peers in the settings", data=data)
     t = budget(ctx, "linux.ping") * 0.8
@@ -258,7 +265,7 @@ async def check_ping(ctx: CheckContext) -> Outcome:
         return icmp, kind, [line, tline]
 
     got = await each_peer(peers, one)
-    evidence: list[str] = []
+    evidence: list[str] = [why] if relayed else []
     ok: list[str] = []
     tcp_only: list[str] = []
     down: list[str] = []
@@ -316,19 +323,24 @@ async def check_ssh(ctx: CheckContext) -> Outcome:
         where = f"{p.ssh_user}@{p.name}" + (f":{p.ssh_port}" if p.ssh_port != 22 else "")
         if ran:
             host = r.stdout.replace("rosnet-tui-ssh-ok", "").strip()
-            evidence.append(f"ssh {where} ({r.address}): ok, host key {r.fingerprint}, "
+            route = ctx.ssh.relay
+            how = (f"through the relay {route.host}" if route and route.tunnel_port(p.name)
+                   else r.address)
+            evidence.append(f"ssh {where} ({how}): ok, host key {r.fingerprint}, "
                             f"remote hostname {host!r}")
             good.append(p.name)
         else:
             evidence.append(f"ssh {where}: {failure}: {r.detail}"
                             + (f" [{r.stderr.strip()[:120]}]" if r.stderr.strip() else ""))
-            bad.append((p.name, f"refused:{p.ssh_port or 22}" if r.tcp == "refused"
-                        else failure))
+            relayed = ctx.ssh.relay is not None and ctx.ssh.relay.tunnel_port(p.name)
+            bad.append((p.name, ("tunnel_down" if failure == "network" else failure) if relayed
+                        else f"refused:{p.ssh_port or 22}" if r.tcp == "refused" else failure))
     if bad:
         words = {"network": "not reachable", "resolve": "name does not resolve",
                  "host_key_unknown": "host key not yet trusted (compare the fingerprint)",
                  "host_key_changed": "HOST KEY CHANGED, refused", "auth": "key login refused",
-                 "sshd": "sshd problem", "timeout": "timed out"}
+                 "sshd": "sshd problem", "timeout": "timed out",
+                 "relay": "the relay turned us away", "tunnel_down": "its tunnel on the relay is down"}
         for _, f in bad:
             if f and f.startswith("refused:"):
                 words[f] = (f"port {f[8:]} refused: sshd does not listen there (it may listen "

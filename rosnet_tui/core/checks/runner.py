@@ -24,7 +24,7 @@ from rosnet_tui.core.config.paths import Paths
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.files.managed_write import settle
 from rosnet_tui.core.results import CheckResult
-from rosnet_tui.core.ssh.options import SshOptions
+from rosnet_tui.core.ssh.options import SshOptions, relay_route
 from rosnet_tui.core.ssh.pool import SshPool
 
 
@@ -86,7 +86,8 @@ def prestart_ssh(settings: Settings, options: RunOptions | None = None,
         return o
     timeout = float(o.timeout_s if o.timeout_s is not None else settings.checks.timeout_s)
     pool = o.ssh_pool or SshPool()
-    pool.prestart(replace(o.ssh, timeout_s=timeout), [p for p in settings.peers if p.ssh_user])
+    pool.prestart(replace(o.ssh, timeout_s=timeout, relay=relay_route(settings.relay)),
+                  [p for p in settings.peers if p.ssh_user])
     return replace(o, ssh_pool=pool)
 
 

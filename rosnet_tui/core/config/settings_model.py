@@ -333,6 +333,18 @@ class SyncSettings:
     tsig_key_file: str = ""          # dns store: BIND-style TSIG key file
 
 
+@dataclass
+class RelaySettings:
+    # ROS 2 with both sites behind carrier NAT: a public server every component's router dials
+    # out to (docs/SETTINGS.md "A relay"); host "" means no relay.
+    host: str = ""                   # the relay's name (DNS or hosts file), also its certificate's
+    ssh_user: str = ""               # the account on the relay ("": the user running rosnet-tui)
+    ssh_port: int = 22               # the relay's sshd
+    zenoh_port: int = ZENOH_PORT_DEFAULT  # the relay router's TCP port (mutual TLS)
+    # component name -> the relay's loopback port at which that component's sshd is reached
+    tunnels: dict[str, int] = field(default_factory=dict)
+
+
 class Gap(str, Enum):
     """A problem that is a value not given yet, rather than a wrong one."""
 
@@ -350,6 +362,7 @@ class Settings:
     sync: SyncSettings = field(default_factory=SyncSettings)
     rosbridge: RosbridgeSettings = field(default_factory=RosbridgeSettings)
     firewall: FirewallSettings = field(default_factory=FirewallSettings)
+    relay: RelaySettings = field(default_factory=RelaySettings)
     # Whether the file had a [sync] table (so saving does not add one the user never asked for).
     has_sync: bool = field(default=False, compare=False, repr=False)
     # When the settings file holding these values was saved (its modification time, seconds since

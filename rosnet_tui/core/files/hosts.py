@@ -51,14 +51,19 @@ def hosts_entries(settings: Settings, profile: str | None = None) -> list[HostsE
     """This component's entries for *profile* (default: the active one).
 
     Own name -> own local IP; each peer -> its public IP on the remote profile, its LAN address on
-    the office and portable profiles. Entries with no known address are left out.
+    the office and portable profiles. Entries with no known address are left out, and on the
+    remote profile so are the peers reached through the relay ([relay.tunnels]): nothing of
+    theirs answers at a carrier's address, and SSH reaches them without their name resolving.
     """
     profile = profile or settings.this.profile
     out: list[HostsEntry] = []
     mine = own_ip(settings, profile)
     if settings.this.name and mine:
         out.append(HostsEntry(mine, settings.this.name, "this component, its own local IP"))
+    relayed = settings.relay.tunnels if settings.relay.host and profile == "remote" else {}
     for p in settings.peers:
+        if p.name in relayed:
+            continue
         ip = _peer_ip(p, profile)
         if ip:
             where = "public IP (its modem)" if profile == "remote" else f"address on the {profile} LAN"

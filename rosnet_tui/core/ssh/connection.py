@@ -22,7 +22,7 @@ from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.connect import tcp_failure_kind
 from rosnet_tui.core.ssh.known_hosts import host_key_name, known_host_keys, verify_commands
-from rosnet_tui.core.ssh.options import SshOptions, known_hosts_files, ssh_dir
+from rosnet_tui.core.ssh.options import RelayRoute, SshOptions, known_hosts_files, ssh_dir
 
 if TYPE_CHECKING:
     import paramiko
@@ -31,7 +31,9 @@ if TYPE_CHECKING:
 logging.getLogger("paramiko").addHandler(logging.NullHandler())
 
 FAILURES = ("network", "resolve", "host_key_unknown", "host_key_changed", "auth", "sshd",
-            "no_user", "timeout")
+            "no_user", "timeout", "relay")
+"""Why SSH failed. "relay": at the relay on the way to a peer behind it (its name, TCP, host key,
+login or forwarding); the peer's own "network" through the relay: its tunnel is down."""
 KEY_FILES = ("id_ed25519", "id_ecdsa", "id_rsa")
 
 T = TypeVar("T")
@@ -147,46 +149,52 @@ def _load_keys(opts: SshOptions | None) -> tuple[list[paramiko.PKey], list[str]]
 _ALGOS_FOR_TYPE = {"ssh-rsa": ("rsa-sha2-512", "rsa-sha2-256", "ssh-rsa")}
 
 
-def connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
-                      holder: Holder, tcp_deadline: float | None = None) -> Conn:
-    import paramiko
-
-    name, port, user = peer.name, int(peer.ssh_port or 22), peer.ssh_user
-
-    def left() -> float:
-        return max(deadline - time.monotonic(), 0.05)
-
-    if not user:
-        return failed("no_user", f"no SSH user is set for {name} in the settings", tcp=None)
+def _tcp(name: str, port: int, deadline: float, holder: Holder,
+         tcp_deadline: float | None) -> tuple[socket.socket | None, str | None, Conn | None]:
+    """Resolve *name* and open TCP to its *port*: (socket, address, None) or (None, address, the
+    failure)."""
     try:
         addrs = _getaddrinfo_v4(name, port)
     except OSError as exc:
-        return failed("resolve", f"{name} does not resolve here "
-                                f"({getattr(exc, 'strerror', None) or exc})", tcp=None)
+        return None, None, failed("resolve", f"{name} does not resolve here "
+                                  f"({getattr(exc, 'strerror', None) or exc})", tcp=None)
     if not addrs:
-        return failed("resolve", f"{name} has no IPv4 address here", tcp=None)
+        return None, None, failed("resolve", f"{name} has no IPv4 address here", tcp=None)
     addr = addrs[0]
-    tcp_left = left() if tcp_deadline is None else \
-        max(min(tcp_deadline, deadline) - time.monotonic(), 0.05)
+    tcp_left = max((deadline if tcp_deadline is None else min(tcp_deadline, deadline))
+                   - time.monotonic(), 0.05)
     try:
         sock = socket.create_connection((addr, port), timeout=tcp_left)
     except TimeoutError:
-        return failed("network", f"no answer from {name} ({addr}) on TCP {port} within "
-                                f"{tcp_left:.1f} s: the packets are dropped (no port forwarding, "
-                                "a firewall, or nobody at that address)", address=addr,
-                     tcp="timeout")
+        return None, addr, failed(
+            "network", f"no answer from {name} ({addr}) on TCP {port} within {tcp_left:.1f} s: "
+            "the packets are dropped (no port forwarding, a firewall, or nobody at that address)",
+            address=addr, tcp="timeout")
     except OSError as exc:
         why = {errno.ECONNREFUSED: f"connection refused: {addr} answers and rejects port {port}"
                                    " (sshd does not listen there - it may listen on another "
                                    "port, see ssh_port - or the modem does not forward it)",
                errno.EHOSTUNREACH: "no route to the host",
                errno.ENETUNREACH: "the network is unreachable"}.get(exc.errno or 0, str(exc))
-        return failed("network", f"cannot reach {name} ({addr}) on TCP {port}: {why}", address=addr,
-                     tcp=tcp_failure_kind(exc))
+        return None, addr, failed("network", f"cannot reach {name} ({addr}) on TCP {port}: {why}",
+                                  address=addr, tcp=tcp_failure_kind(exc))
     holder.sock = sock
     if holder.cancelled:
         sock.close()
-        return failed("timeout", "cancelled", address=addr)
+        return None, addr, failed("timeout", "cancelled", address=addr)
+    return sock, addr, None
+
+
+def _login(opts: SshOptions | None, sock: object, name: str, port: int, user: str,
+           addr: str | None, where: str, deadline: float, holder: Holder) -> Conn:
+    """SSH over *sock* (a socket, or a channel through the relay): the server's key checked
+    against known_hosts under *name*:*port* (whatever *sock* leads to, as OpenSSH's
+    HostKeyAlias), then a key login as *user*. *where* names the server in messages."""
+    import paramiko
+
+    def left() -> float:
+        return max(deadline - time.monotonic(), 0.05)
+
     info = known_host_keys(known_hosts_files(opts), host_key_name(name, port))
     known = info.keys
     said = f" (known_hosts: {'; '.join(info.notes)})" if info.notes else ""
@@ -205,15 +213,16 @@ def connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
             sec.key_types = [a for a in first if a in avail] + [a for a in avail if a not in first]
         t.start_client(timeout=left())
     except Exception as exc:  # noqa: BLE001 - paramiko raises many kinds here
-        sock.close()
+        with contextlib.suppress(Exception):
+            sock.close()  # type: ignore[attr-defined]
         msg = str(exc) or type(exc).__name__
-        return failed("sshd", f"{name} ({addr}) port {port} accepted the connection but did not speak "
+        return failed("sshd", f"{where} port {port} accepted the connection but did not speak "
                              f"SSH properly: {msg}", address=addr)
     try:
         key = t.get_remote_server_key()  # start_client returns quietly on a timeout
     except paramiko.SSHException:
         t.close()
-        return failed("sshd", f"{name} ({addr}) port {port} accepted the connection but no SSH "
+        return failed("sshd", f"{where} port {port} accepted the connection but no SSH "
                              "handshake came within the timeout (not sshd, or a stuck one)",
                      address=addr)
     fp, ktype = key.fingerprint, key.get_name()
@@ -274,7 +283,7 @@ def connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
             break
         if t.is_authenticated():
             return Conn(SshResult(True, None, "", "", None,
-                                   f"logged in to {name} ({addr}) as {user} with a key" + said,
+                                   f"logged in to {where} as {user} with a key" + said,
                                    fp, key_text, addr, "connected"), t, said)
     t.close()
     if holder.cancelled or time.monotonic() >= deadline:
@@ -283,6 +292,90 @@ def connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
     return failed("auth", f"{name} refused our SSH keys for user {user} ({last}): copy a key with "
                          f"ssh-copy-id {user}@{name}" + (f"; {'; '.join(notes)}" if notes else ""),
                  fingerprint=fp, host_key=key_text, address=addr)
+
+
+class JumpSock:
+    """A ``direct-tcpip`` channel on the relay's connection, as the socket of the connection to
+    the peer behind it: closing it closes the relay's connection too."""
+
+    def __init__(self, chan: paramiko.Channel, relay: paramiko.Transport) -> None:
+        self.chan, self.relay = chan, relay
+
+    def __getattr__(self, attr: str) -> object:
+        return getattr(self.chan, attr)
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.chan.close()
+        with contextlib.suppress(Exception):
+            self.relay.close()
+
+
+CHANNEL_CONNECT_FAILED = 2   # RFC 4254 7.1: nothing accepted the connection at the far end
+
+
+def _jump(opts: SshOptions | None, route: RelayRoute, tunnel: int, peer: Peer, deadline: float,
+          holder: Holder, tcp_deadline: float | None) -> Conn:
+    """*peer* through the relay: log in to the relay (its host key checked as any other), open
+    a ``direct-tcpip`` channel to the relay's 127.0.0.1:*tunnel*, where *peer*'s reverse tunnel
+    ends, and speak SSH to *peer* over it (its key checked under its own name)."""
+    import paramiko
+
+    name, port, user = peer.name, int(peer.ssh_port or 22), peer.ssh_user
+    via = f"the relay {route.host}"
+    sock, addr, bad = _tcp(route.host, route.port, deadline, holder, tcp_deadline)
+    if sock is None:
+        assert bad is not None
+        return failed("relay", f"{name} is reached through {via}, and {bad.result.detail}",
+                     tcp=None)
+    hop = _login(opts, sock, route.host, route.port, route.user, addr, f"{route.host} ({addr})",
+                 deadline, holder)
+    relay_t = hop.transport
+    if relay_t is None:
+        return failed("relay", f"{name} is reached through {via}, and there: "
+                               f"{hop.result.detail}", tcp=None)
+    try:
+        chan = relay_t.open_channel("direct-tcpip", ("127.0.0.1", tunnel), ("127.0.0.1", 0),
+                                    timeout=max(deadline - time.monotonic(), 0.05))
+    except paramiko.ChannelException as exc:
+        relay_t.close()
+        if exc.code == CHANNEL_CONNECT_FAILED:
+            return failed("network", f"{name}'s tunnel is down: nothing answers at "
+                                     f"127.0.0.1:{tunnel} on {via} (`rosnet-tui relay tunnel` "
+                                     f"keeps it up on {name})", tcp="refused")
+        return failed("relay", f"{via} does not let {route.user} reach 127.0.0.1:{tunnel} "
+                               f"({exc.text or exc.code}): its sshd's AllowTcpForwarding, or "
+                               "permitopen in its authorized_keys", tcp=None)
+    except Exception as exc:  # noqa: BLE001 - the relay's connection died or did not answer
+        relay_t.close()
+        if holder.cancelled or time.monotonic() >= deadline:
+            return failed("timeout", f"no SSH connection to {name} through {via} within the "
+                                     "timeout", tcp=None)
+        return failed("relay", f"{via} did not open a way to {name}: "
+                               f"{str(exc) or type(exc).__name__}", tcp=None)
+    if holder.cancelled:
+        relay_t.close()
+        return failed("timeout", "cancelled", tcp=None)
+    return _login(opts, JumpSock(chan, relay_t), name, port, user, None,
+                  f"{name} (through {via}, 127.0.0.1:{tunnel})", deadline, holder)
+
+
+def connect_blocking(opts: SshOptions | None, peer: Peer, deadline: float,
+                      holder: Holder, tcp_deadline: float | None = None) -> Conn:
+    """Connect and log in to *peer* by the one way every SSH use takes: directly, or through
+    the relay when *opts* has a relay with a tunnel for *peer*. Never raises for the network."""
+    name, port, user = peer.name, int(peer.ssh_port or 22), peer.ssh_user
+    if not user:
+        return failed("no_user", f"no SSH user is set for {name} in the settings", tcp=None)
+    route = getattr(opts, "relay", None)
+    tunnel = route.tunnel_port(name) if route is not None else None
+    if route is not None and tunnel is not None:
+        return _jump(opts, route, tunnel, peer, deadline, holder, tcp_deadline)
+    sock, addr, bad = _tcp(name, port, deadline, holder, tcp_deadline)
+    if sock is None:
+        assert bad is not None
+        return bad
+    return _login(opts, sock, name, port, user, addr, f"{name} ({addr})", deadline, holder)
 
 
 async def connect(opts: SshOptions | None, peer: Peer, timeout: float,

@@ -28,15 +28,20 @@ from rosnet_tui.core.ssh.connection import Conn, Holder, connect_blocking, faile
 from rosnet_tui.core.ssh.options import SshOptions
 
 
-def _key(peer: Peer) -> tuple[str, int, str]:
-    return peer.name, int(peer.ssh_port or 22), peer.ssh_user
+def _key(opts: SshOptions | None, peer: Peer) -> tuple[object, ...]:
+    """A connection's identity: the peer, and the way to it (directly, or through the relay
+    to a tunnel port), so that a connection made one way is never handed out for the other."""
+    route = getattr(opts, "relay", None)
+    port = route.tunnel_port(peer.name) if route is not None else None
+    via = (route.host, route.port, route.user, port) if route is not None and port else None
+    return peer.name, int(peer.ssh_port or 22), peer.ssh_user, via
 
 
 class SshPool:
-    """Shared SSH connections of one round, by (name, port, user)."""
+    """Shared SSH connections of one round, by (name, port, user, the way to it)."""
 
     def __init__(self) -> None:
-        self._conns: dict[tuple[str, int, str], tuple[concurrent.futures.Future, Any]] = {}
+        self._conns: dict[tuple[object, ...], tuple[concurrent.futures.Future, Any]] = {}
         self._lock = threading.Lock()
         self.closed = False
 
@@ -47,7 +52,7 @@ class SshPool:
         check's own budget), *tcp_timeout* its TCP part (default: the round's timeout)."""
         base = float(getattr(opts, "timeout_s", 3.0) or 3.0)
         with self._lock:
-            old = self._conns.get(_key(peer))
+            old = self._conns.get(_key(opts, peer))
             if old is not None:
                 fut = old[0]
                 if not fut.done():
@@ -76,7 +81,7 @@ class SshPool:
                     conn.transport.close()
 
             if not self.closed:
-                self._conns[_key(peer)] = (fut, holder)
+                self._conns[_key(opts, peer)] = (fut, holder)
             threading.Thread(target=connect, daemon=True, name=f"rosnet-ssh-{peer.name}").start()
             return fut
 
@@ -95,7 +100,7 @@ class SshPool:
         may wait the rest of *timeout* for the SSH handshake.
         """
         fut = self.start(opts, peer, timeout)
-        holder = self._conns.get(_key(peer), (None, None))[1]
+        holder = self._conns.get(_key(opts, peer), (None, None))[1]
         loop = asyncio.get_running_loop()
         end = loop.time() + timeout
         first = min(timeout, tcp_timeout) if tcp_timeout is not None else timeout

@@ -22,6 +22,8 @@ from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files.managed_write import read_text
 from rosnet_tui.core.ros import fleet_tls, pairing, ros2
+from rosnet_tui.core.ssh.client_config import jump_hosts_block, ssh_config_previews
+from rosnet_tui.core.ssh.options import options_for
 
 
 class Severity(str, Enum):
@@ -136,14 +138,18 @@ def ros2_plan(settings: Settings, paths: Paths) -> WritePlan:
     """ROS 2: the ~/.bashrc block and the Zenoh router's config file, in one apply; under
     mutual TLS then the fleet CA (master) or pairing with the master over SSH (member)."""
     def make(client: bool) -> list[mf.Preview]:
-        return ros2.previews(settings, paths.bashrc_path, client=client,
-                             state_dir=paths.state_dir)
+        return (ros2.previews(settings, paths.bashrc_path, client=client,
+                              state_dir=paths.state_dir)
+                + ssh_config_previews(settings, state_dir=paths.state_dir)[0])
 
     member = not settings.is_master
     return WritePlan(
         title=f"Write the ROS 2 environment to {paths.bashrc_path}",
         explain="A marked block at the end of the file, and the router's own config file "
-                f"({ros2.default_router_config_path()}); one undo restores both:",
+                f"({ros2.default_router_config_path()})"
+                + ("; with the relay, a block at the top of ~/.ssh/config so that `ssh NAME` "
+                   "jumps through it" if jump_hosts_block(settings) else "")
+                + "; one undo restores them all:",
         make_preview=lambda client: make(client)[0],
         companions=lambda client: make(client)[1:],
         option_label=("no router on this machine: its nodes connect to the master's router in "
@@ -167,7 +173,7 @@ async def after_ros2_write(settings: Settings, opts: Any = None) -> Said | None:
             return Said("Made " + "; ".join(made) + ".") if made else None
         if pairing.needs_pairing(settings, paths) is None:
             return None
-        res = await pairing.pair_over_ssh(settings, paths, opts)
+        res = await pairing.pair_over_ssh(settings, paths, opts or options_for(settings.relay))
     except (fleet_tls.TlsError, OSError) as exc:
         return Said(f"Mutual TLS: {exc}", Severity.ERROR)
     if res.ok:

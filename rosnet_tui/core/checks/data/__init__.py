@@ -7,7 +7,7 @@ fails the ordinary test run instead of silently switching a rule off. Producers 
 same declarations by :func:`undeclared` (the check runner calls it in strict mode, which the
 test suite turns on).
 
-The declarations live by step (isp_router, linux, ros, security; shared kinds in kinds); this
+The declarations live by step (isp_router, linux, ros, security, relay; shared kinds in kinds); this
 module holds the table of them all (DATA) and the mechanism. Standard library only: the advisor
 depends on it, not on any check module.
 """
@@ -20,7 +20,7 @@ import typing
 from collections.abc import Iterator, Mapping
 from typing import Any
 
-from rosnet_tui.core.checks.data import isp_router, linux, ros, security
+from rosnet_tui.core.checks.data import isp_router, linux, relay, ros, security
 
 STRICT_ENV = "ROSNET_TUI_STRICT_DATA"
 
@@ -35,7 +35,8 @@ def strict() -> bool:
 # :func:`view` and :func:`undeclared` follow. The comment on each key is its documentation;
 # docs/COMMANDS.md's table of the checks lists the top-level keys. Values are JSON (dict keys: str).
 
-DATA: dict[str, type] = {**isp_router.DATA, **linux.DATA, **ros.DATA, **security.DATA}
+DATA: dict[str, type] = {**isp_router.DATA, **linux.DATA, **ros.DATA, **security.DATA,
+                         **relay.DATA}
 
 
 # --------------------------------------------------------------------------- the mechanism

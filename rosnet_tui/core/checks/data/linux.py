@@ -60,7 +60,7 @@ class LinuxPingData(TypedDict, total=False):
 class SshPeer(TypedDict, total=False):
     ok: bool                # a command ran over SSH (key login, host key verified)
     failure: str | None     # why not: network, resolve, host_key_unknown, host_key_changed,
-    #                         auth, sshd, timeout, no_user (no ssh_user in the settings)
+    #                         auth, sshd, timeout, relay (at the relay), no_user (none set)
     fingerprint: str | None  # SHA256:... of the peer's host key, when seen
     host_key: str | None    # "<type> <base64>" of that key (for trusting it after a comparison)
     address: str | None     # the address the peer's name resolved to here
