@@ -6,15 +6,13 @@ from __future__ import annotations
 
 import pytest
 
+from rosnet_tui.core.addresses import is_private, is_shared
 from rosnet_tui.core.advisor.evidence import Evidence
 from rosnet_tui.core.advisor.ranking import (
     Nat,
     address_dates,
-    ago,
     chat_causes,
     dated_words,
-    is_cgnat_ip,
-    is_private_ip,
     master_answer,
     master_causes,
     nat_seen,
@@ -22,6 +20,7 @@ from rosnet_tui.core.advisor.ranking import (
     peer_check_ids,
     table1_causes,
 )
+from rosnet_tui.core.words import age
 from tests.advisor_support import ssh_shut_out
 from tests.builders import healthy_laptop, laptop_settings, put, ros2_member, t1
 
@@ -116,7 +115,7 @@ def test_a_held_port_outweighs_other_evidence_for_forwarding():
     (7200, "2 h"), (36 * 3600 - 1, "36 h"), (36 * 3600, "2 days"), (86400 * 12, "12 days"),
 ])
 def test_an_age_in_words_changes_unit_at_90_s_90_min_and_36_h(seconds, words):
-    assert ago(seconds) == words
+    assert age(seconds) == words
 
 
 @pytest.mark.parametrize(("ip", "private", "cgnat"), [
@@ -126,7 +125,7 @@ def test_an_age_in_words_changes_unit_at_90_s_90_min_and_36_h(seconds, words):
     ("not-an-address", False, False), ("", False, False),
 ])
 def test_private_and_carrier_nat_addresses(ip, private, cgnat):
-    assert is_private_ip(ip) is private and is_cgnat_ip(ip) is cgnat
+    assert is_private(ip) is private and is_shared(ip) is cgnat
 
 
 def test_the_masters_answer_is_read_only_for_the_master_seen_from_another_seat():
@@ -173,8 +172,9 @@ def test_the_age_of_the_address_moves_the_address_against_the_modem_and_an_offli
     assert peer_order(silent_peer(dated("settings", 0.2 * HOUR)))[0] == "forwarding"
     # within a day: the address loses a little, the modem gains a little; the peer being off
     # now leads, the modem before the address
+    # (the firewall cause trails: nothing says this machine's address moved)
     assert peer_order(silent_peer(dated("settings", 5 * HOUR))) == [
-        "offline", "forwarding", "address", "sshd"]
+        "offline", "forwarding", "address", "sshd", "firewall"]
     assert peer_order(silent_peer(dated("settings", 30 * HOUR)))[0] == "address"
     # a newer sync record of the peer with another address outweighs a fresh confirmation
     r = silent_peer(dated("settings", 0.5 * HOUR), dated("sync", 0.1 * HOUR, "203.0.113.9"))
@@ -211,15 +211,16 @@ def test_a_refused_master_port_is_roscore_when_ssh_answers_and_the_modem_when_bo
     # (the tie-break puts roscore first: each case below is decided by the evidence)
     assert master_order(master_down("refused", "refused"))[0] == "forwarding"
     # refused here, SSH silent: roscore (nothing listens) before the modem, the peer last
+    # (the peer's firewall, which resets strangers, trails: nothing says this machine moved)
     assert master_order(master_down("refused", "timeout")) == [
-        "roscore", "forwarding", "peer", "address"]
+        "roscore", "forwarding", "peer", "address", "firewall"]
 
 
 def test_a_silent_master_port_is_the_modem_when_ssh_answers_the_peer_when_ssh_fails_too():
     assert master_order(master_down("timeout", "ok"))[0] == "forwarding"
     assert master_order(master_down("unreachable", "ok"))[0] == "forwarding"
     assert master_order(master_down("timeout", "timeout")) == [
-        "peer", "forwarding", "roscore", "address"]
+        "peer", "forwarding", "roscore", "address", "firewall"]
 
 
 def test_a_master_name_that_leads_elsewhere_outweighs_the_rest():
@@ -244,6 +245,21 @@ def chat_failed(inbound: bool, tcp: str | None, port_open: bool | None = None):
 
 def test_a_refused_chat_is_the_modem_then_a_firewall():
     assert chat_order(chat_failed(False, "refused"), False) == ["forwarding", "firewall", "hosts"]
+
+
+def test_a_refusal_is_the_peers_firewall_only_when_this_machines_address_moved():
+    """ROS 1's peers-only table resets the addresses it does not hold: a refusal is its doing
+    when this machine's public IP is not the one the peers were given; when it is, the table
+    lets this machine in (the firewall moves down)."""
+    r = chat_failed(False, "refused")
+    same = {c.key: c for c in chat_causes(Evidence(r, HOME), "turtlebot", False)}
+    assert any("lets this machine in" in w for w in same["firewall"].seen_against)
+    r["isp.public_ip"].data.update(public_ip="198.51.100.77")
+    moved = chat_causes(Evidence(r, HOME), "turtlebot", False)
+    assert moved[0].key == "firewall" and "198.51.100.77" in moved[0].sentence()
+    r["isp.public_ip"].data.pop("public_ip")              # nothing says: no weight either way
+    unknown = {c.key: c for c in chat_causes(Evidence(r, HOME), "turtlebot", False)}
+    assert unknown["firewall"].score == unknown["forwarding"].score
 
 
 def test_an_open_test_port_clears_the_modem_and_points_at_the_name():
@@ -298,7 +314,7 @@ def test_dated_words_name_their_source():
 
 def test_an_hour_old_address_is_no_longer_fresh_and_a_day_old_one_is_old():
     assert peer_order(silent_peer(dated("settings", HOUR))) == [
-        "offline", "forwarding", "address", "sshd"]
+        "offline", "forwarding", "address", "sshd", "firewall"]
     assert peer_order(silent_peer(dated("settings", 24 * HOUR)))[0] == "address"
 
 

@@ -348,7 +348,8 @@ def firewall_refusal(ev: Evidence, name: str, cause: Cause) -> None:
     refused. ROS 1's table answers every address it does not hold with a TCP reset
     (core/exposure/firewall.py), so a refusal is its doing when this machine's public IP is not
     the one *name* was given (the settings' [this] public_ip, which the peers' tables and sync
-    records follow): then it comes first."""
+    records follow): then it comes first. When it is that one, the table lets this machine in:
+    the firewall moves down; when nothing says, it carries no weight."""
     if ev.s.ros2 or ev.s.ros.security != "firewall" or not ev.remote:
         cause.down(100, "no peers-only firewall on ROS 1 here")
         return
@@ -358,9 +359,12 @@ def firewall_refusal(ev: Evidence, name: str, cause: Cause) -> None:
         cause.up(70, f"this machine's public IP is {seen} now, not {said} as the settings say: "
                      f"{name}'s peers-only firewall lets in the addresses it was given and "
                      f"refuses {seen} (a TCP reset) until its set follows")
-    else:
-        cause.up(10, f"{name}'s peers-only firewall refuses (resets) every address it does "
-                     "not hold")
+    elif seen and said:
+        cause.down(10, f"this machine's public IP is still {said}, the address {name}'s "
+                       "peers-only firewall was given: it lets this machine in")
+    else:      # nothing says whether this machine's address moved: a note, no weight
+        cause.up(0, f"{name}'s peers-only firewall refuses (resets) every address it does "
+                    "not hold")
 
 
 def peer_causes(ev: Evidence, name: str) -> list[Cause]:
