@@ -17,7 +17,7 @@ from rosnet_tui.cli.common import EXIT_USAGE, add_config_option, complete_cut_wr
 
 # Sub-command modules, in the order --help lists them.
 SUBCOMMAND_MODULES = ("check", "hosts", "ros", "router", "firewall", "undo", "report", "sync",
-                      "probe_server")
+                      "relay", "probe_server")
 # What `rosnet-tui --help` says of each without importing it (a test keeps these equal to the
 # modules' own help): only the command being run is imported, so start-up stays light.
 SUBCOMMAND_HELP = {
@@ -30,6 +30,7 @@ SUBCOMMAND_HELP = {
     "report": "write a shareable report: settings, results and advice",
     "sync": "keep hosts entries (and ROS 1's ROS_MASTER_URI) right when public IPs change; "
             "renew forwards and certificates (a service)",
+    "relay": "ROS 2 across carrier NAT: the relay's Zenoh router every component dials out to",
     "probe_server": "run your own what-is-my-IP and port-check service (echoip-compatible)",
 }
 
