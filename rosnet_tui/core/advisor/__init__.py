@@ -26,6 +26,7 @@ from rosnet_tui.core.advisor import (  # noqa: F401  (declare the rules)
     isp,
     linux,
     names,
+    relay,
     ros,
     ros2,
     ros2_tls,

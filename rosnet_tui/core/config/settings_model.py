@@ -344,6 +344,11 @@ class RelaySettings:
     # component name -> the relay's loopback port at which that component's sshd is reached
     tunnels: dict[str, int] = field(default_factory=dict)
 
+    @property
+    def enabled(self) -> bool:
+        """A relay is in use (its checks run): [relay] host is set."""
+        return bool(self.host)
+
 
 class Gap(str, Enum):
     """A problem that is a value not given yet, rather than a wrong one."""
