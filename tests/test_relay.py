@@ -50,6 +50,14 @@ def test_every_router_dials_the_relay_and_listens_on_loopback_only(tmp_path):
         ["tls/relay:7447"]
 
 
+def test_under_a_relay_no_modem_forwards_anything():
+    from rosnet_tui.core.exposure.forwarding import required_ports
+
+    assert [p.ports for p in required_ports(ros2_master())] == ["7447"]
+    assert required_ports(relayed(ros2_master())) == []
+    assert required_ports(relayed(ros2_member())) == []
+
+
 def test_the_relays_router_config_takes_fleet_certificates_only(tmp_path):
     p = fleet_tls.tls_paths(tmp_path)
     cfg = relay.relay_router_config("relay", 7448, p)

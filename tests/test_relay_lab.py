@@ -43,6 +43,8 @@ def test_both_sites_meet_at_the_relay_and_strangers_do_not(relay_world):
     for tls in (False, True):
         got = outsider.zenoh_session(w.lab, ADDR.RELAY_IP, 7447, tls=tls)
         assert got["session"] is False, got
+    port = w.check("robot", step="router")["router.port_open"]   # the master forwards nothing
+    assert port["status"] == "skip" and "relay" in port["summary"], port
 
 
 def test_a_stopped_relay_fails_within_the_timeout_and_is_named_first(relay_world):
