@@ -226,3 +226,13 @@ def test_relay_serve_joins_two_dialling_routers_and_admits_only_the_fleet(tmp_pa
             if proc.poll() is None:
                 proc.kill()
             proc.wait(5)
+
+
+def test_the_steps_say_what_the_relay_needs():
+    from rosnet_tui.core.wizard import steps
+
+    for s in (relayed(ros2_master()), relayed(ros2_member())):
+        text = steps.configure_router_ros2(s)
+        assert "Nothing to forward" in text and "TCP 7447 open" in text, text
+        assert "tls/relay:7447" in steps.configure_ros2(s)
+        assert "relay" in steps.step_for("router", s).expected
