@@ -93,6 +93,14 @@ def test_relay_router_passes_with_the_fleet_certificate_and_says_why_not(fleet):
     assert "relay's router refused" in res.summary
 
 
+def test_security_outsider_under_a_relay_judges_the_relay(fleet):
+    res = run(ctx_of(fleet.tmp, fleet.settings, 3.0), "security.outsider")
+    assert res.status is Status.PASS, (res.summary, res.evidence)
+    assert res.data["target"] == f"localhost:{fleet.port}" and res.data["from"] == "here"
+    assert {k: a["result"] != "accepted" for k, a in res.data["attempts"].items()} == \
+        {"no_cert": True, "foreign": True, "plain": True, "insider": False}
+
+
 def test_ros2_router_under_a_relay_checks_the_path_to_the_relay(fleet):
     s = fleet.settings
     env = {"ZENOH_CONFIG_OVERRIDE": ros2.client_override(s, fleet.mine)}   # a lone node here

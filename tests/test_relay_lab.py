@@ -40,6 +40,9 @@ def test_both_sites_meet_at_the_relay_and_strangers_do_not(relay_world):
         assert router["status"] == "pass", explain(results)
         assert router["data"]["endpoint"] == f"tls/{ADDR.RELAY_NAME}:7447"
         assert router["data"]["local_router"]["routers"], explain(results)   # linked to the relay
+        stranger = results["security.outsider"]       # what a stranger gets at the relay
+        assert stranger["status"] == "pass", explain(results)
+        assert stranger["data"]["target"] == f"{ADDR.RELAY_NAME}:7447"
     for tls in (False, True):
         got = outsider.zenoh_session(w.lab, ADDR.RELAY_IP, 7447, tls=tls)
         assert got["session"] is False, got
