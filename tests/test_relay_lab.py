@@ -50,6 +50,25 @@ def test_both_sites_meet_at_the_relay_and_strangers_do_not(relay_world):
     assert port["status"] == "skip" and "relay" in port["summary"], port
 
 
+def test_the_robot_behind_carrier_nat_still_meets_the_laptop_at_the_relay(relay_world):
+    """The robot's modem moved behind the carrier's NAT (a new, shared public address): its
+    router dials the relay again through it, and messages cross again, bounded."""
+    w = relay_world
+    w.lab._set_cgnat(True)
+    try:
+        results = w.check("robot")
+        assert results["relay.router"]["status"] == "pass", explain(results)
+        listener = w.node("laptop", "listener", name="relay_listener")
+        talker = w.node("robot", "talker", name="relay_talker")
+        assert w.lab.wait_output(listener, r"heard: hello from turtlebot \d+", timeout=40), \
+            w.lab.output(listener)
+        w.lab.kill(talker)
+        w.lab.kill(listener)
+    finally:
+        w.lab._set_cgnat(False)
+        w.start_router("robot")        # a fresh link from the robot's own address again
+
+
 def test_a_stopped_relay_fails_within_the_timeout_and_is_named_first(relay_world):
     w = relay_world
     w.stop_relay()
