@@ -560,7 +560,7 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
     data: dict[str, Any] = {"ports": [], "test_port": test_port, "public_ip": None,
                             "zenoh_port": zport, "zenoh_port_open": None, "zenoh_listener": "none"}
     if s.relayed or not s.is_master:
-        who = (f"under the relay {s.relay.host} every router connects out to it" if s.relayed
+        who = (f"every router connects out to the relay ({s.relay.host})" if s.relayed
                else f"{s.this.name or 'this component'} is a ROS 2 member: its router connects "
                "out to the master's")
         return Outcome(Status.SKIP, f"skipped: {who}, so its modem needs no forwarding at all",
