@@ -10,6 +10,7 @@ serve``), and rmw_zenohd or zenohd read the same file.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,7 @@ from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import ZENOH_PORT_DEFAULT
 from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
 from rosnet_tui.core.ros.fleet_tls import TlsPaths, tls_paths
-from rosnet_tui.core.ros.ros2 import LEASE_MS, config_value, loads_json5, render_json5
+from rosnet_tui.core.ros.ros2 import LEASE_MS, MANAGED_HEADER, config_value, loads_json5
 
 CONFIG_NAME = "zenoh-relay.json5"
 
@@ -58,10 +59,13 @@ def relay_router_config(name: str, port: int = ZENOH_PORT_DEFAULT,
 
 def render_relay_config(name: str, port: int = ZENOH_PORT_DEFAULT,
                         tls: TlsPaths | None = None) -> str:
-    return render_json5(relay_router_config(name, port, tls), [
-        f"Zenoh router of the relay {name}: every component's router dials in here with its "
-        "fleet certificate (mutual TLS); nothing else gets a session.",
-        "Start it with: rosnet-tui relay serve (or zenohd / rmw_zenohd with this file)."])
+    head = [MANAGED_HEADER + " (`rosnet-tui relay apply` on the master): the whole file is",
+            "// rewritten; change [relay] in the master's settings instead of editing it.",
+            f"// Zenoh router of the relay {name}: every component's router dials in here with",
+            "// its fleet certificate (mutual TLS); nothing else gets a session.",
+            "// Start it with: rosnet-tui relay serve (or zenohd / rmw_zenohd with this file)."]
+    return "\n".join(head) + "\n" + json.dumps(relay_router_config(name, port, tls),
+                                                indent=2) + "\n"
 
 
 def tls_files(config: dict[str, Any]) -> dict[str, str]:
