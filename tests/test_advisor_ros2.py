@@ -179,7 +179,26 @@ ROS2_CASES = {
     "ros2.tls.wrong_name": _case(member, r("ros2.router", "fail", {
         "security": "mtls", "endpoint": "tls/turtlebot:7447",
         "tls": {"problem": None, "cn": "sami", "handshake": "wrong_name"}})),
+    "relay.router.down": _case(lambda: relayed(member()), r("relay.router", "fail", {
+        "failure": "timeout", "endpoint": "tls/relay:7447", "address": "198.51.100.9"})),
 }
+
+
+def relayed(s):
+    """*s* with both sites meeting at a relay ([relay] host = "relay")."""
+    from rosnet_tui.core.config.settings_model import RelaySettings
+
+    s.relay = RelaySettings(host="relay", ssh_user="root")
+    return s
+
+
+def test_a_relay_that_does_not_answer_comes_first_and_says_what_to_open():
+    fs = advise([r("relay.router", "fail", {"failure": "timeout", "endpoint": "tls/relay:7447"}),
+                 r("ros2.router", "fail", {"failure": "timeout", "endpoint": "tls/relay:7447"}),
+                 r("router.port_open", "fail", {}, step="router")], relayed(master()))
+    assert ids(fs)[0] == "relay.router.down"
+    assert "TCP 7447" in fs[0].actions[0] and "ros2.router" in fs[0].check_ids
+    assert "ros2.port.not_forwarded" not in ids(fs)
 
 
 def test_mtls_closes_the_exposure_finding_and_security_none_keeps_it():

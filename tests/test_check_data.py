@@ -63,7 +63,7 @@ def _all_declarations() -> set[type]:
 # --------------------------------------------------------------------------- ids
 def test_every_registered_check_has_a_declaration_and_every_declaration_a_check():
     ids = [c.id for c in checks_for()]
-    assert len(ids) == 29  # issue 22: security.ssh_auth, security.outsider, linux.firewall; 30: relay.tunnel
+    assert len(ids) == 30  # issue 22: security.ssh_auth, security.outsider, linux.firewall; 30: relay.router, relay.tunnel
     assert sorted(ids) == sorted(data.DATA)
 
 

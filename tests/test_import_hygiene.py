@@ -145,6 +145,8 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/core/ssh/tunnel_probe.py", "paramiko"): "start-up cost: paramiko kept off the start-up path",
     ("rosnet_tui/core/files/undo_journal.py", "shutil"): "start-up cost: stdlib module loaded when used",
     ("rosnet_tui/core/peer/zenohproto.py", "zenoh"): "start-up cost: zenoh kept off the start-up path",
+    ("rosnet_tui/core/ros/relay.py", "zenoh"): "start-up cost: zenoh kept off the start-up path",
+    ("rosnet_tui/cli/relay.py", "rosnet_tui.core.ros"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/ui/app.py", "textual.filter"): "start-up cost: textual kept off the start-up path",
     ("rosnet_tui/ui/app.py", "rosnet_tui.ui.setup_screen"): "start-up cost: loaded when the screen or feature is used",
     ("rosnet_tui/ui/app.py", "asyncio"): "start-up cost: loaded when the screen or feature is used",

@@ -162,8 +162,10 @@ def _sign(args: argparse.Namespace, settings, paths) -> int:
     pairing.prepare_master(settings, paths)
     req = fleet_tls.read_request(text, master=settings.this.name,
                                  members=pairing.member_names(settings),
-                                 removed=fleet_tls.removed_members(paths))
-    say(f"The request names {req.name}, a member in the settings; its key's fingerprint:\n"
+                                 removed=fleet_tls.removed_members(paths),
+                                 relay=settings.relay.host)
+    what = "the relay in the settings" if req.role == "relay" else "a member in the settings"
+    say(f"The request names {req.name}, {what}; its key's fingerprint:\n"
         f"  {req.fingerprint}\n(`ros pair --print-request` on {req.name} printed the same.)")
     stop = confirm(args, f"Sign a certificate for {req.name}?", cancelled="Not signed.",
                    no_terminal=NOT_SIGNING)

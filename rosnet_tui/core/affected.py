@@ -6,7 +6,7 @@ from __future__ import annotations
 HOSTS = ("linux.hosts", "linux.resolve")          # the hosts file's marked block
 ROS_ENV = ("ros.env",)                            # the ROS block of ~/.bashrc
 ROS2_ENV = ("ros2.env",)                          # ROS 2: that block and the router's config
-ROS2_TLS = ("ros2.router",)                       # ROS 2 under mTLS: the fleet certificates
+ROS2_TLS = ("ros2.router", "relay.router")       # ROS 2 under mTLS: the fleet certificates
 FORWARD = ("router.upnp", "router.port_open")     # a forward mapped on (or removed from) the modem
 FIREWALL = ("linux.firewall",)                    # our nftables table (ROS 1's peers-only set)
 UNDO = (*HOSTS, *ROS_ENV, *ROS2_ENV, "router.upnp", *FIREWALL)   # an undo in the wizard: any of

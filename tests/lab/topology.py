@@ -8,10 +8,12 @@ plus the private LANs of the procedure and 100.64.0.0/10 behind the carrier in t
                                  carrier 203.0.113.3 (cgnat only) --'            198.51.100.1
     laptop 192.168.1.10 - laptop_modem 192.168.1.254 | 198.51.100.2 ---  services 192.0.2.10/.53
       (sami)                                                            |
-                                    outsider 192.0.2.66 (no peer) ------'
+                                    outsider 192.0.2.66 (no peer) ------|
+                                    relay 192.0.2.77 (a VPS) -----------'
 
 The outsider is an address on the internet that is no peer (issue 22): what a stranger tries
-against the forwarded ports comes from there (tests/lab/outsider.py).
+against the forwarded ports comes from there (tests/lab/outsider.py). The relay is a public
+server of the user's own (issue 30): both sites' routers dial out to it (tests/lab/relay.py).
 
 In the double_nat variant a travel router of the user's own sits between the robot and its modem:
 robot 10.10.10.1 - travel_router 10.10.10.254 | 192.168.0.2 - robot_modem 192.168.0.1 | public.
@@ -47,6 +49,9 @@ class Addresses:
     ROBOT_SSHD_PORT: str = "2222"                # where the robot's sshd listens (sshd_port)
     OUTSIDER_IP: str = "192.0.2.66"              # a stranger on the internet (no peer)
     OUTSIDER_GW: str = "192.0.2.65"              # the internet's end of the outsider's link
+    RELAY_IP: str = "192.0.2.77"                 # the relay, a public server (issue 30)
+    RELAY_GW: str = "192.0.2.76"                 # the internet's end of the relay's link
+    RELAY_NAME: str = "relay"
     PROBE_NAME: str = "probe.lab.test"
     PROBE_URL: str = "http://probe.lab.test"
     PUBLIC_IP_URL: str = "http://probe.lab.test/ip"
@@ -58,11 +63,11 @@ class Addresses:
 ADDR = Addresses()
 
 HOSTS = ("robot", "laptop", "robot_modem", "laptop_modem", "internet", "carrier", "travel_router",
-         "outsider")
+         "outsider", "relay")
 COMPUTERS = ("robot", "laptop")          # the hosts with a name, sshd, HOME and ROS
 HOSTNAMES = {"robot": ADDR.ROBOT_NAME, "laptop": ADDR.LAPTOP_NAME, "robot_modem": "robot-modem",
              "laptop_modem": "laptop-modem", "internet": "internet", "carrier": "carrier",
-             "travel_router": "travel-router", "outsider": "outsider"}
+             "travel_router": "travel-router", "outsider": "outsider", "relay": ADDR.RELAY_NAME}
 PEER = {"robot": "laptop", "laptop": "robot"}
 MODEM = {"robot": "robot_modem", "laptop": "laptop_modem"}
 LOCAL_IP = {"robot": ADDR.ROBOT_LOCAL, "laptop": ADDR.LAPTOP_LOCAL}
@@ -82,6 +87,7 @@ LINKS = (
     ("laptop_modem", "wan0", "internet", "l-wan"),
     ("carrier", "wan0", "internet", "c-wan"),
     ("outsider", "eth0", "internet", "o-wan"),
+    ("relay", "eth0", "internet", "v-wan"),
 )
 OUTSIDER_LINK = ("outsider", "eth0", "internet", "o-wan")
 
@@ -108,9 +114,13 @@ def ip_batch(host: str, robot_wan: str = ADDR.ROBOT_PUBLIC) -> list[str]:
                   f"addr add {ADDR.INTERNET_ROBOT_SIDE}/24 dev r-wan", "link set r-wan up",
                   f"addr add {ADDR.INTERNET_LAPTOP_SIDE}/24 dev l-wan", "link set l-wan up",
                   f"addr add {ADDR.INTERNET_ROBOT_SIDE}/32 dev c-wan", "link set c-wan up",
-                  f"route add {ADDR.CARRIER_PUBLIC}/32 dev c-wan", *outsider_internet_lines()]
+                  f"route add {ADDR.CARRIER_PUBLIC}/32 dev c-wan", *outsider_internet_lines(),
+                  *relay_internet_lines()]
     elif host == "outsider":
         lines += outsider_lines()
+    elif host == "relay":
+        lines += [f"addr add {ADDR.RELAY_IP}/32 dev eth0", "link set eth0 up",
+                  f"route add {ADDR.RELAY_GW}/32 dev eth0", f"route add default via {ADDR.RELAY_GW}"]
     elif host == "carrier":
         lines += [f"addr add {ADDR.CARRIER_PUBLIC}/32 dev wan0", "link set wan0 up",
                   f"route add {ADDR.INTERNET_ROBOT_SIDE}/32 dev wan0",
@@ -129,6 +139,12 @@ def outsider_internet_lines() -> list[str]:
     """The internet's end of the outsider's link (``o-wan``)."""
     return [f"addr add {ADDR.OUTSIDER_GW}/32 dev o-wan", "link set o-wan up",
             f"route add {ADDR.OUTSIDER_IP}/32 dev o-wan"]
+
+
+def relay_internet_lines() -> list[str]:
+    """The internet's end of the relay's link (``v-wan``)."""
+    return [f"addr add {ADDR.RELAY_GW}/32 dev v-wan", "link set v-wan up",
+            f"route add {ADDR.RELAY_IP}/32 dev v-wan"]
 
 
 def sysctl_script(host: str) -> str:

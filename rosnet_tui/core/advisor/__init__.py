@@ -27,6 +27,7 @@ from rosnet_tui.core.advisor import (  # noqa: F401  (declare the rules)
     isp,
     linux,
     names,
+    relay,
     relay_tunnel,
     ros,
     ros2,

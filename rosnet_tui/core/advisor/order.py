@@ -22,6 +22,8 @@ RULE_ORDER: tuple[str, ...] = (
     "isp.public_ip.disagree",
     "isp.public_ip.changed",
     "isp.public_ip.differs",
+    # ROS 2 under a relay: the relay's router carries every link (before the modem's rules)
+    "relay.router.down",
     # step 2: Table 1 (the port test)
     "table1.open",
     "table1.no_listener",

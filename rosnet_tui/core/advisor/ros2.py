@@ -125,7 +125,7 @@ def _domain(ev: Evidence) -> list[Hit]:
       "component's nodes sit on their own router. Without it nothing is discovered or delivered.",
       "Start `ros2 run rmw_zenoh_cpp rmw_zenohd` with ZENOH_ROUTER_CONFIG_URI set (`rosnet-tui "
       "ros apply` writes it).",
-      "ros", "fail")
+      "ros", "fail", superseded_by=("relay.router.down",))
 def _not_running(ev: Evidence) -> list[Hit]:
     if not _on(ev):
         return []
@@ -212,9 +212,9 @@ def _cgnat_master(ev: Evidence) -> bool:
       "master's SSH is shut out too (the whole site takes no connection).",
       "Forward TCP <zenoh_port> (only that port) to the master's local IP, reserve that IP by "
       "DHCP; on the master, its ISP step tells carrier-grade NAT.",
-      "router", "fail")
+      "router", "fail", superseded_by=("relay.router.down",))
 def _not_forwarded(ev: Evidence) -> list[Hit]:
-    if not _on(ev) or _cgnat_master(ev):
+    if not _on(ev) or ev.s.relayed or _cgnat_master(ev):
         return []
     p, r = ev.data("router.port_open"), ev.data("ros2.router")
     port = _port(ev)
@@ -292,6 +292,11 @@ def _cgnat(ev: Evidence) -> list[Hit]:
     d = ev.data("isp.cgnat")
     if not _on(ev) or not d.get("cgnat"):
         return []
+    if ev.s.relayed:
+        return [Hit(f"{ev.me} is behind carrier-grade NAT, which the relay {ev.s.relay.host} "
+                    "carries: every router dials out to it, so nothing needs to reach "
+                    f"{ev.me}.", ["Nothing to do here."], severity="info", goto_step=None,
+                    evidence=["isp.cgnat: cgnat=True (under a relay)"])]
     if not ev.s.is_master:
         return [Hit(f"{ev.me} is behind carrier-grade NAT, which does not matter under ROS 2: its "
                     f"router connects out to {_master(ev)}'s, and nothing needs to reach {ev.me}.",

@@ -26,6 +26,7 @@ from rosnet_tui.core.checks.probes.ros2 import (
     open_zenoh,
     ros2_peers,
     router_links,
+    tcp_reach,
     zenoh_env,
     zenoh_peer_problem,
 )
@@ -34,7 +35,6 @@ from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import read_text
 from rosnet_tui.core.net.blocking import run_blocking
-from rosnet_tui.core.net.connect import close_writer
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ros import fleet_tls, ros2, tls_handshake
@@ -190,25 +190,6 @@ async def check_env(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- ros2.router
-async def _tcp(host: str, port: int, t: float) -> tuple[str | None, str]:
-    """(None, 'connected') or (failure kind, words) of a plain TCP connect."""
-    writer = None
-    try:
-        _r, writer = await asyncio.wait_for(asyncio.open_connection(host, port), t)
-        return None, "connected"
-    except asyncio.TimeoutError:
-        return "timeout", f"no answer within {t:.1f} s (dropped: no forwarding, or a firewall)"
-    except ConnectionRefusedError:
-        return "refused", "connection refused (forwarded, but nothing listens there)"
-    except OSError as exc:
-        kind = "unreachable" if "unreachable" in str(exc).lower() or "no route" in str(exc).lower() \
-            else "refused"
-        return kind, exc.strerror or str(exc)
-    finally:
-        if writer is not None:
-            await close_writer(writer, 0.3)
-
-
 def _listening(port: int) -> list[str]:
     try:
         conns = psutil.net_connections(kind="tcp")
@@ -237,8 +218,13 @@ async def check_router(ctx: CheckContext) -> Outcome:
     s = ctx.settings
     t = budget(ctx, "ros2.router")
     deadline = time.monotonic() + t - 0.1
-    name, port = s.master_name, s.ros.zenoh_port
-    endpoint = ros2.master_endpoint(s)
+    # Under a relay the path checked is this component's router to the relay's (the master's
+    # router dials it too); else the master's router, the hub listening for the members.
+    hub_here = s.is_master and not s.relayed
+    hub = "the relay" if s.relayed else "the master"
+    name, port = ((s.relay.host, s.relay.zenoh_port) if s.relayed
+                  else (s.master_name, s.ros.zenoh_port))
+    endpoint = ros2.hub_endpoint(s)
     role = "master" if s.is_master else "member"
     ipv6 = ros2.ipv6_available()
     data: dict[str, Any] = {"role": role, "endpoint": endpoint, "reachable": False,
@@ -253,9 +239,9 @@ async def check_router(ctx: CheckContext) -> Outcome:
     ev: list[str] = []
     node_ep, how = node_endpoint(ctx)
     local_task = None
-    if not s.is_master and how == "router":
+    if not hub_here and how == "router":
         local_task = asyncio.ensure_future(open_zenoh(node_ep, max(0.2, t * 0.3)))
-    if s.is_master:
+    if hub_here:
         data["listening"] = lst = await run_blocking(_listening, port, timeout=1.0)
         ev.append(f"TCP {port} listened on here: {', '.join(lst) or 'nothing'}")
         # Known before the name is looked up: a name missing from /etc/hosts must not hide it.
@@ -277,13 +263,13 @@ async def check_router(ctx: CheckContext) -> Outcome:
             data["local_router"] = await _local_router(local_task, node_ep, ev)
             if not data["local_router"]["reachable"]:
                 also = f"; this machine's own router does not answer at {node_ep} either"
-        elif s.is_master and data["listen_problem"] == "not_running":
+        elif hub_here and data["listen_problem"] == "not_running":
             also = f"; nothing listens on TCP {port} here either (is rmw_zenohd running?)"
-        return Outcome(Status.FAIL, f"the master's name {name} does not resolve here ({err}): add "
+        return Outcome(Status.FAIL, f"{hub}'s name {name} does not resolve here ({err}): add "
                                     f"it to /etc/hosts (Linux step){also}", ev, data)
     data["address"] = addrs[0]
     ev.append(f"{name} resolves to {addrs[0]}")
-    kind, words = await _tcp(addrs[0], port, max(0.2, min(t * 0.4, deadline - time.monotonic())))
+    kind, words = await tcp_reach(addrs[0], port, max(0.2, min(t * 0.4, deadline - time.monotonic())))
     ev.append(f"TCP {addrs[0]}:{port}: {words}")
     session = info = None
     if kind is None:
@@ -303,7 +289,8 @@ async def check_router(ctx: CheckContext) -> Outcome:
     if info:
         data.update(reachable=True, router_zid=info.get("zid"), router_version=info.get("version"),
                     locators=info.get("locators") or [])
-        mine = {s.this.local_ip} if s.is_master else {(s.peer(name) or Peer(name)).local_ip}
+        mine = ({s.this.local_ip} if s.is_master else
+                {(s.peer(name) or Peer(name)).local_ip}) if not s.relayed else set()
         data["remote_peers"] = _remote_peers(info, {m for m in mine if m})
         ev.append(f"Zenoh router {info.get('zid')} answers at {endpoint}"
                   + (f", version {info['version']}" if info.get("version") else
@@ -313,50 +300,53 @@ async def check_router(ctx: CheckContext) -> Outcome:
     elif kind is None:
         data.update(reachable=True, router_zid=None)
     if not data["reachable"]:
-        where = "here" if s.is_master else f"on {name}"
-        hint = {"refused": f"is rmw_zenohd running {where}?",
-                "timeout": f"is TCP {port} forwarded to {name} on its modem?",
+        where = "here" if hub_here else f"on {name}"
+        hint = {"refused": (f"is `rosnet-tui relay serve` running on {name}?" if s.relayed
+                            else f"is rmw_zenohd running {where}?"),
+                "timeout": (f"is TCP {port} open on the relay {name}?" if s.relayed
+                            else f"is TCP {port} forwarded to {name} on its modem?"),
                 "unreachable": "no route to that address",
                 "not_zenoh": "something else answers on that port"}.get(kind or "", "")
         if kind == "not_zenoh" and ros2.mtls(s):   # TCP answered: name what TLS refused
             problem, hint = await run_blocking(
                 tls_handshake.handshake, addrs[0], port, name, tls_paths,
                 max(0.2, min(1.0, deadline - time.monotonic())),
-                timeout=max(0.3, min(1.2, deadline - time.monotonic() + 0.2)))
+                "relay" if s.relayed else "master", timeout=max(0.3, min(1.2, deadline - time.monotonic() + 0.2)))
             data["tls"]["handshake"] = problem
             ev.append(f"TLS handshake with {name} ({addrs[0]}:{port}): {hint}")
-        if s.is_master and data.get("listen_problem") == "ipv6_only":
+        if hub_here and data.get("listen_problem") == "ipv6_only":
             hint = (f"the router's config listens on tcp/[::]:{port} and this host has no IPv6, "
                     f"so rmw_zenohd cannot start: listen on tcp/0.0.0.0:{port}")
         return Outcome(Status.FAIL, f"no Zenoh router at {endpoint} ({addrs[0]}): {words}"
                                     + (f"; {hint}" if hint else ""), ev, data)
-    if s.is_master and data.get("listen_problem") == "loopback":
+    if hub_here and data.get("listen_problem") == "loopback":
         return Outcome(Status.FAIL, f"the router listens on loopback only ({', '.join(data['listening'])}"
                                     f"): the modem's forward of TCP {port} cannot reach it; "
                                     f"listen on tcp/0.0.0.0:{port}", ev, data)
     if local_task is not None and not local["reachable"]:
-        return Outcome(Status.FAIL, f"the master's router answers at {endpoint}, but this "
+        return Outcome(Status.FAIL, f"{hub}'s router answers at {endpoint}, but this "
                                     f"machine's own router does not ({local['failure']}): start "
                                     "it (ros2 run rmw_zenoh_cpp rmw_zenohd), or run the nodes "
                                     "here in client mode", ev, data)
     if local_task is not None and data.get("router_zid") and \
             data["router_zid"] not in local["routers"]:
-        return Outcome(Status.FAIL, f"this machine's router is not linked to the master's router "
+        return Outcome(Status.FAIL, f"this machine's router is not linked to {hub}'s router "
                                     f"({data['router_zid']}): its config must connect to "
                                     f"{endpoint} (ZENOH_ROUTER_CONFIG_URI; `rosnet-tui ros apply`)",
                        ev, data)
     if data["remote_peers"]:
-        return Outcome(Status.WARN, "the master's router has node(s) attached in peer mode from "
+        return Outcome(Status.WARN, f"{hub}'s router has node(s) attached in peer mode from "
                                     f"another machine ({', '.join(data['remote_peers'])}): they "
                                     "see the graph but get no data; run them in client mode, "
                                     "or give their machine a router", ev, data)
     ver = f" ({data['router_version']})" if data.get("router_version") else ""
     if (data.get("tls") or {}).get("problem") == "expiring":
-        return Outcome(Status.WARN, f"the master's Zenoh router{ver} answers at {endpoint}, but "
+        return Outcome(Status.WARN, f"{hub}'s Zenoh router{ver} answers at {endpoint}, but "
                                     f"{tls_handshake.PROBLEM_WORDS['expiring']} (it expires "
                                     f"{data['tls']['not_after'][:10]})", ev, data)
-    return Outcome(Status.PASS, f"the master's Zenoh router{ver} answers at {endpoint} "
-                                f"({addrs[0]})", ev, data)
+    how_far = " (the relay carries the link)" if s.relayed else ""
+    return Outcome(Status.PASS, f"{hub}'s Zenoh router{ver} answers at {endpoint} "
+                                f"({addrs[0]}){how_far}", ev, data)
 
 
 async def _local_router(task: asyncio.Future, endpoint: str, ev: list[str]) -> dict[str, Any]:

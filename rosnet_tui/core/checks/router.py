@@ -559,10 +559,12 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
     zport, test_port = s.ros.zenoh_port, s.probe.port
     data: dict[str, Any] = {"ports": [], "test_port": test_port, "public_ip": None,
                             "zenoh_port": zport, "zenoh_port_open": None, "zenoh_listener": "none"}
-    if not s.is_master:
-        return Outcome(Status.SKIP, f"skipped: {s.this.name or 'this component'} is a ROS 2 "
-                                    "member: its router connects out to the master's, so its "
-                                    "modem needs no forwarding at all", [], data)
+    if s.relayed or not s.is_master:
+        who = (f"every router connects out to the relay ({s.relay.host})" if s.relayed
+               else f"{s.this.name or 'this component'} is a ROS 2 member: its router connects "
+               "out to the master's")
+        return Outcome(Status.SKIP, f"skipped: {who}, so its modem needs no forwarding at all",
+                       [], data)
     total = budget(ctx, "router.port_open") * 0.9
     loop = asyncio.get_running_loop()
     start = loop.time()

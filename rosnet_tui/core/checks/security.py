@@ -252,14 +252,19 @@ async def run_here(program: bytes, args: list[str], timeout: float) -> tuple[str
     return out.decode(errors="replace"), err.decode(errors="replace").strip()[-200:]
 
 
+def _hub(s: Settings) -> tuple[str, int]:
+    """The router the internet can reach: the relay's under a relay, else the master's."""
+    return (s.relay.host, s.relay.zenoh_port) if s.relayed else (s.master_name, s.ros.zenoh_port)
+
+
 async def _outsider_ros2(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
     s = ctx.settings
-    master, port = s.master_name, s.ros.zenoh_port
+    master, port = _hub(s)
     t = budget(ctx, "security.outsider")
     data["target"] = f"{master}:{port}"
     args = [master, str(port), f"{min(2.0, t * 0.2):.1f}"]
     program = outsider.tls_probe_program()
-    if s.is_master:
+    if s.is_master and not s.relayed:   # under a relay, the relay is outside every component
         members = [p for p in ssh_peers(s) if p.name != master]
         if not members:
             return Outcome(Status.SKIP, "skipped: no member has an SSH user in the settings, so "
@@ -292,7 +297,7 @@ _ATTEMPT_WORDS = {"no_cert": "without a certificate", "foreign": "with a foreign
 
 def ros2_verdict(s: Settings, rep: dict[str, Any], data: dict[str, Any]) -> Outcome:
     """The verdict on the TLS probe's report *rep* (any shape: a peer's output)."""
-    master, port = s.master_name, s.ros.zenoh_port
+    master, port = _hub(s)
     no_cert = outsider.as_dict(rep.get("no_cert"))
     attempts = {"no_cert": no_cert, "foreign": outsider.as_dict(rep.get("foreign")),
                 "plain": outsider.plain_attempt(no_cert),
@@ -307,7 +312,7 @@ def ros2_verdict(s: Settings, rep: dict[str, Any], data: dict[str, Any]) -> Outc
     if facts is not None:
         data["master_cert"] = {"names": facts.names, "not_after": facts.not_after,
                                "expired": facts.expired}
-        ev.append(f"the master's certificate names {', '.join(facts.names) or 'nothing'}; "
+        ev.append(f"{master}'s certificate names {', '.join(facts.names) or 'nothing'}; "
                   f"valid until {facts.not_after}")
     if no_cert.get("result") == "closed" and attempts["insider"].get("result") != "accepted":
         data["cause"] = "unreachable"

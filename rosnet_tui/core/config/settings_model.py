@@ -344,6 +344,11 @@ class RelaySettings:
     # component name -> the relay's loopback port at which that component's sshd is reached
     tunnels: dict[str, int] = field(default_factory=dict)
 
+    @property
+    def enabled(self) -> bool:
+        """A relay is in use (its checks run): [relay] host is set."""
+        return bool(self.host)
+
 
 class Gap(str, Enum):
     """A problem that is a value not given yet, rather than a wrong one."""
@@ -381,6 +386,11 @@ class Settings:
     def ros2(self) -> bool:
         """True when this network runs ROS 2 over rmw_zenoh ([ros] version = 2)."""
         return self.ros.version == 2
+
+    @property
+    def relayed(self) -> bool:
+        """True when every component's router dials the relay ([relay] host set; ROS 2 only)."""
+        return bool(self.relay.host)
 
     @property
     def master_name(self) -> str:
@@ -480,6 +490,7 @@ class Settings:
                 add("rosbridge.host", f"'{shown(b.host)}' is neither this component nor a peer")
         for entry in self.firewall.allow:
             add("firewall.allow", validate_network(entry))
+        out.extend(self._relay_checked(seen))
         y = self.sync
         add("sync.store", None if y.store in SYNC_STORES
             else f"must be one of {', '.join(SYNC_STORES)}")
@@ -491,6 +502,53 @@ class Settings:
             zone = y.zone.rstrip(".")
             add("sync.zone", validate_name(zone) if zone else "a zone name is required",
                 None if zone else Gap.BLANK)
+        return out
+
+    def _relay_checked(self, components: set[str]) -> list[tuple[str, str, Gap | None]]:
+        """What is wrong with [relay]: nothing when the section is left out."""
+        r = self.relay
+        if r == RelaySettings():
+            return []
+        out: list[tuple[str, str, Gap | None]] = []
+
+        def add(key: str, why: str | None) -> None:
+            if why:
+                out.append((key, why, None))
+
+        if self.ros.version != 2:
+            add("relay.host", "a relay carries ROS 2 only (ROS 1 nodes connect to each other "
+                              "directly, both ways, which one relay port cannot carry): set "
+                              "[ros] version = 2, or remove [relay]")
+            return out
+        if not r.host:
+            add("relay.host", "the relay's name is required with the other [relay] keys")
+        else:
+            add("relay.host", validate_name(r.host))
+            if r.host.lower() in components:
+                add("relay.host", f"'{shown(r.host)}' is a component's name: the relay is a "
+                                  "server of its own, with a name of its own")
+        if self.ros.security != "mtls":
+            add("ros.security", "a relay on the internet takes only fleet certificates: "
+                                "security must be \"mtls\" with [relay]")
+        add("relay.ssh_user", validate_ssh_user(r.ssh_user))
+        add("relay.ssh_port", validate_port(r.ssh_port, lo=1, hi=65535))
+        add("relay.zenoh_port", validate_port(r.zenoh_port))
+        if not isinstance(r.tunnels, dict):
+            add("relay.tunnels", "must be a table of component name = port")
+            return out
+        ports: dict[int, str] = {}
+        for name, port in r.tunnels.items():
+            key = f"relay.tunnels.{name}"
+            why = validate_name(name)
+            if not why and name.lower() not in components:
+                why = f"'{shown(name)}' is neither this component nor a peer"
+            add(key, why)
+            why = validate_port(port, lo=PORT_MIN, hi=65535)
+            if not why and port in ports:
+                why = f"port {port} is {ports[port]}'s too: one port per component"
+            add(key, why)
+            if isinstance(port, int):
+                ports.setdefault(port, name)
         return out
 
     @property

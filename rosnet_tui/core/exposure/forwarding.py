@@ -31,7 +31,8 @@ def ports_to_forward(settings: Settings) -> list[ForwardPort]:
     """The forwards this component's modem needs (required ones first), each to its local IP.
 
     ROS 1: TCP 1024-65000 (UDP optional), TCP 22 for SSH (optional). ROS 2 master: TCP
-    ``zenoh_port`` only (and 22 for SSH, optional). ROS 2 member: nothing is required. The
+    ``zenoh_port`` only (and 22 for SSH, optional). ROS 2 member, and every component under a
+    relay ([relay] host: every router dials out to it): nothing is required. The
     component running rosbridge ([rosbridge] enabled) forwards its port too, under ROS 2 (and
     under ROS 1 when the port is outside the range).
     """
@@ -47,7 +48,7 @@ def ports_to_forward(settings: Settings) -> list[ForwardPort]:
                 ForwardPort("UDP", PORT_MIN, PORT_MAX, False,
                             "only for UDP transports; ROS 1 topics use TCP"),
                 ssh]
-    if settings.is_master:
+    if settings.is_master and not settings.relayed:
         port = settings.ros.zenoh_port
         return [ForwardPort("TCP", port, port, True, "the Zenoh router of the ROS 2 master "
                                                      "(rmw_zenohd); every member connects here"),

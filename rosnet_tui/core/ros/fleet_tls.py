@@ -9,9 +9,9 @@ every component (``~/.config/rosnet-tui/tls/``).
   (digitalSignature; keyEncipherment too for RSA) and the extended key usages serverAuth and
   clientAuth (a router that connects with mTLS needs clientAuth).
 - The CA signs only a request whose signature verifies, whose key is EC P-256 (or RSA of 2048
-  bits up), and which names a member in the master's own settings: a host name, compared
-  case-insensitively, never an address, the master's name or a removed member's
-  (:func:`read_request`).
+  bits up), and which names a member in the master's own settings, or the relay its ``[relay]
+  host`` names: a host name, compared case-insensitively, never an address, the master's name or
+  a removed member's (:func:`read_request`).
 
 This module needs only the standard library and ``cryptography``, and runs as a program: the
 master re-pairing its members feeds it on stdin to each member's installed rosnet-tui
@@ -339,13 +339,16 @@ class Request:
     csr: Any
     name: str
     fingerprint: str
+    role: str = "member"       # "member", or "relay" (the master's [relay] host)
 
 
-def read_request(csr_pem: str, *, master: str, members: Any, removed: Any = ()) -> Request:
+def read_request(csr_pem: str, *, master: str, members: Any, removed: Any = (),
+                 relay: str = "") -> Request:
     """A member's request, checked: it parses, its signature verifies, its key is strong enough,
     and it names a member of the fleet: a host name in *members* (the master's own settings,
-    compared case-insensitively), never *master*, never one of *removed*. Raises TlsError with
-    the reason (never anything else, whatever the request holds)."""
+    compared case-insensitively), or *relay* (the master's [relay] host: role "relay"), never
+    *master*, never one of *removed*. Raises TlsError with the reason (never anything else,
+    whatever the request holds)."""
     from cryptography import x509
     from cryptography.x509.oid import NameOID
 
@@ -380,14 +383,16 @@ def read_request(csr_pem: str, *, master: str, members: Any, removed: Any = ()) 
     if low in {r.lower() for r in removed}:
         raise TlsError(f"{cn} was taken out of the fleet (`ros pair --remove`); it is not signed "
                        "again")
+    if relay and low == relay.lower():
+        return Request(csr, low, key_fingerprint(public_key), "relay")
     if low not in {m.lower() for m in members}:
         raise TlsError(f"{cn} is not a member in this master's settings (no [[peer]] of that "
-                       "name): add it there first")
+                       "name, and not its [relay] host): add it there first")
     return Request(csr, low, key_fingerprint(public_key))
 
 
 def sign_request(paths: TlsPaths, csr_pem: str, *, master: str, members: Any,
-                 removed: Any = (), days: int = CERT_DAYS) -> tuple[str, str]:
+                 removed: Any = (), days: int = CERT_DAYS, relay: str = "") -> tuple[str, str]:
     """On the master: sign a member's request checked by :func:`read_request` (the members
     removed before, from the TLS folder, are refused too). Returns (CA certificate PEM,
     certificate PEM)."""
@@ -395,7 +400,7 @@ def sign_request(paths: TlsPaths, csr_pem: str, *, master: str, members: Any,
         raise TlsError(f"no fleet CA here ({paths.ca_key} is missing): run `rosnet-tui ros "
                        "apply` on the master first")
     req = read_request(csr_pem, master=master, members=members,
-                       removed=[*removed, *removed_members(paths)])
+                       removed=[*removed, *removed_members(paths)], relay=relay)
     return sign_checked(paths, req, days=days)
 
 

@@ -174,7 +174,8 @@ def serve(s: Settings, paths: TlsPaths, name: str, csr_pem: str) -> dict[str, An
     try:
         prepare_master(s, paths)
         req = fleet_tls.read_request(csr_pem, master=s.this.name, members=member_names(s),
-                                     removed=fleet_tls.removed_members(paths))
+                                     removed=fleet_tls.removed_members(paths),
+                                     relay=s.relay.host)
         if req.name != name.lower():
             raise TlsError(f"this way in signs only for {name}; the request names {req.name}")
         ca, cert = fleet_tls.sign_checked(paths, req)

@@ -8,6 +8,10 @@ connects out to ``tcp/<master name>:<zenoh_port>`` (the hosts file maps the name
 public IP, and address sync keeps that line right), so members need no forwarding. Nodes stay on
 their local router (``tcp/localhost:7447``, rmw_zenoh's default); a lone node without a router
 connects to the master in client mode.
+
+Under a relay (``[relay] host``, both sites behind carrier NAT) every router, the master's
+included, connects out to ``tls/<relay>:<relay zenoh_port>`` with its fleet certificate and
+listens on loopback only; the relay's own router is :mod:`.relay`'s.
 """
 
 from __future__ import annotations
@@ -45,6 +49,22 @@ def master_endpoint(s: Settings) -> str:
     return f"{'tls' if mtls(s) else 'tcp'}/{s.master_name or 'MASTER'}:{s.ros.zenoh_port}"
 
 
+def relay_endpoint(s: Settings) -> str:
+    """``tls/<relay host>:<relay zenoh_port>``: where every router dials under a relay."""
+    return f"tls/{s.relay.host}:{s.relay.zenoh_port}"
+
+
+def hub_endpoint(s: Settings) -> str:
+    """Where this component's router (or a lone node) dials: the relay under a relay, else
+    the master's router."""
+    return relay_endpoint(s) if s.relayed else master_endpoint(s)
+
+
+def hub_words(s: Settings) -> str:
+    """The hub of *s* in words: "the relay's router" or "the master's router"."""
+    return "the relay's router" if s.relayed else "the master's router"
+
+
 def local_endpoint() -> str:
     """Where this machine's nodes find their local router (rmw_zenoh's default, IPv4 spelled out)."""
     return f"tcp/127.0.0.1:{NODE_ROUTER_PORT}"
@@ -52,7 +72,10 @@ def local_endpoint() -> str:
 
 def listen_endpoints(s: Settings) -> list[str]:
     """What this component's router listens on: IPv4 everywhere, the forwarded port on the master
-    (plus 7447 on loopback for its own nodes when the forwarded port is another one)."""
+    (plus 7447 on loopback for its own nodes when the forwarded port is another one); under a
+    relay, loopback only (every router dials out, none takes connections from the internet)."""
+    if s.relayed:
+        return [local_endpoint()]
     if s.is_master and mtls(s):
         # TLS for the forward, plain TCP on loopback for this machine's nodes. Both on one port
         # cannot be (a wildcard listener takes loopback too): on rmw_zenoh's port the TLS
@@ -72,14 +95,17 @@ def listen_endpoints(s: Settings) -> list[str]:
 
 
 def connect_endpoints(s: Settings) -> list[str]:
-    """What this component's router connects to: nothing on the master, the master on a member."""
+    """What this component's router connects to: nothing on the master, the master on a member;
+    the relay on every component under a relay."""
+    if s.relayed:
+        return [relay_endpoint(s)]
     return [] if s.is_master else [master_endpoint(s)]
 
 
 def client_override(s: Settings, tls: TlsPaths | None = None) -> str:
     """ZENOH_CONFIG_OVERRIDE of a lone node (no router here): client mode, straight to the master
     (with its certificate under mTLS)."""
-    out = f'mode="client";connect/endpoints={json.dumps([master_endpoint(s)])}'
+    out = f'mode="client";connect/endpoints={json.dumps([hub_endpoint(s)])}'
     for key, value in tls_settings(s, tls, listen=False).items():
         out += f";transport/link/tls/{key}={json.dumps(value)}"
     return out
@@ -118,7 +144,7 @@ def router_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
     mTLS the TLS files under *tls* (default: this user's ~/.config/rosnet-tui/tls)."""
     link: dict[str, Any] = {"tx": {"lease": LEASE_MS, "keep_alive": 4}}
     if mtls(s):
-        link["tls"] = tls_settings(s, tls, listen=s.is_master)
+        link["tls"] = tls_settings(s, tls, listen=s.is_master and not s.relayed)
     return {
         "mode": "router",
         "connect": {"endpoints": connect_endpoints(s)},
@@ -138,7 +164,7 @@ def router_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
 def session_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
     """A lone node's session configuration: client mode, connected to the master's router (with
     this component's certificate under mTLS)."""
-    out: dict[str, Any] = {"mode": "client", "connect": {"endpoints": [master_endpoint(s)]},
+    out: dict[str, Any] = {"mode": "client", "connect": {"endpoints": [hub_endpoint(s)]},
                            "scouting": {"multicast": {"enabled": False}}}
     if mtls(s):
         out["transport"] = {"link": {"tls": tls_settings(s, tls, listen=False)}}
@@ -146,6 +172,10 @@ def session_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
 
 
 def _role_words(s: Settings) -> str:
+    if s.relayed:
+        return (f"{s.this.name}, {'the ROS 2 master' if s.is_master else 'a member'}: connects "
+                f"out to the relay's router {relay_endpoint(s)} (nothing forwarded, nothing "
+                "listening on the internet)")
     if s.is_master:
         return (f"{s.this.name}, the ROS 2 master: listens on TCP {s.ros.zenoh_port} for every "
                 "member (its modem forwards that port here)")
@@ -169,7 +199,7 @@ def render_router_config(s: Settings, tls: TlsPaths | None = None) -> str:
 def render_session_config(s: Settings, tls: TlsPaths | None = None) -> str:
     return render_json5(session_config(s, tls), [
         f"ROS 2 nodes of {s.this.name} without a router of their own: client mode, straight to "
-        f"the master's router {master_endpoint(s)}."])
+        f"{hub_words(s)} {hub_endpoint(s)}."])
 
 
 def is_managed(text: str | None) -> bool:
@@ -342,12 +372,12 @@ def override_problems(s: Settings, values: dict[str, Any]) -> list[str]:
                 f"client mode (mode=\"client\") or run a router here"]
     if values.get("mode") != "client":
         return []
-    if s.is_master:
+    if s.is_master and not s.relayed:
         return ["ZENOH_CONFIG_OVERRIDE puts the master's nodes in client mode; the master runs "
                 "the router the others connect to"]
-    if master_endpoint(s) not in eps:
-        return [f"client mode connects to {', '.join(eps) or 'nothing'}, not the master's router "
-                f"{master_endpoint(s)} (by name, so address sync keeps it right)"]
+    if hub_endpoint(s) not in eps:
+        return [f"client mode connects to {', '.join(eps) or 'nothing'}, not {hub_words(s)} "
+                f"{hub_endpoint(s)} (by name, so address sync keeps it right)"]
     return []
 
 
@@ -355,6 +385,11 @@ def router_config_problems(s: Settings, listen: list[str], connect: list[str],
                            ipv6: bool) -> list[str]:
     """What keeps a router with these endpoints from doing this component's job."""
     port = s.ros.zenoh_port
+    if s.relayed:
+        if relay_endpoint(s) not in connect:
+            return [f"this router connects to {', '.join(connect) or 'nothing'}; under a relay it "
+                    f"must connect to the relay's router {relay_endpoint(s)}"]
+        return []
     if not s.is_master:
         if master_endpoint(s) not in connect:
             return [f"this member's router connects to {', '.join(connect) or 'nothing'}; it must "
@@ -377,7 +412,7 @@ def router_config_problems(s: Settings, listen: list[str], connect: list[str],
 def writer_problems(s: Settings) -> list[tuple[str, str]]:
     """Why the ROS 2 configuration cannot be written from *s* (empty: it can)."""
     relevant = re.compile(r"^(this\.(name|role)|ros\.(master|version|zenoh_port|domain_id)|"
-                          r"peer\[\d+\]\.name)$")
+                          r"peer\[\d+\]\.name|relay\..+)$")
     out = [(k, why) for k, why in s.problems() if relevant.match(k)]
     if not out and not s.master_name:
         out.append(("ros.master", "the name of the master (the hub every router links to) is "
@@ -389,7 +424,13 @@ def bashrc_block(s: Settings, *, client: bool = False, router_config_path: Path 
                  session_config_path: Path | None = None, distro: str = "") -> list[str]:
     """The lines of our ~/.bashrc block under ROS 2 (between the markers)."""
     lone = client and not s.is_master
-    if s.is_master:
+    if s.relayed and not lone:
+        who = (f"{s.this.name}'s router connects out to the relay {relay_endpoint(s)}; nothing "
+               "is forwarded or listens on the internet here")
+    elif s.relayed:
+        who = (f"{s.this.name} runs no router: its nodes connect to the relay "
+               f"{relay_endpoint(s)} in client mode")
+    elif s.is_master:
         who = (f"{s.this.name} is the master: its router is the hub, listening on TCP "
                f"{s.ros.zenoh_port} (forwarded by its modem)")
     elif lone:

@@ -55,13 +55,21 @@ def local_state(s: Settings, paths: TlsPaths) -> dict[str, Any]:
     return out
 
 
+FAR_WORDS = {   # whose router is dialled: (its name in words, what makes its certificate)
+    "master": ("the master", "`rosnet-tui ros apply` on the master"),
+    "relay": ("the relay", "`rosnet-tui relay apply` on the master"),
+}
+
+
 def handshake(address: str, port: int, server_name: str, paths: TlsPaths,
-              timeout: float) -> tuple[str | None, str]:
-    """A TLS handshake with the master's router as a member's router makes it (this component's
-    certificate; the fleet CA; the name dialled checked). (problem, words): problem None when the
-    router accepted it; else "wrong_name" (its certificate does not name *server_name*),
-    "master_foreign_ca" (its certificate is not from this fleet CA), "rejected_expired",
-    "rejected_foreign" (it refused this component's certificate), "no_tls", "unreachable"."""
+              timeout: float, far: str = "master") -> tuple[str | None, str]:
+    """A TLS handshake with the master's router (*far* "relay": the relay's) as a member's router
+    makes it (this component's certificate; the fleet CA; the name dialled checked).
+    (problem, words): problem None when the router accepted it; else "wrong_name" (its
+    certificate does not name *server_name*), "master_foreign_ca" (its certificate is not from
+    this fleet CA), "rejected_expired", "rejected_foreign" (it refused this component's
+    certificate), "no_tls", "unreachable"."""
+    who, maker = FAR_WORDS[far]
     ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
     try:
         ctx.load_verify_locations(cafile=str(paths.ca_crt))
@@ -80,28 +88,28 @@ def handshake(address: str, port: int, server_name: str, paths: TlsPaths,
                 tls.recv(1)
             except TimeoutError:
                 pass
-            return None, "the master's router accepted this component's certificate"
+            return None, f"{who}'s router accepted this component's certificate"
     except ssl.SSLCertVerificationError as exc:
         if exc.verify_code == 62:
-            return "wrong_name", (f"the master's certificate does not name {server_name}, the "
-                                  "name members dial: run `rosnet-tui ros apply` on the master")
-        return "master_foreign_ca", (f"the master's certificate is not from the fleet CA "
+            return "wrong_name", (f"{who}'s certificate does not name {server_name}, the "
+                                  f"name dialled: run {maker}")
+        return "master_foreign_ca", (f"{who}'s certificate is not from the fleet CA "
                                      f"installed here ({exc.verify_message}): pair again "
                                      "(`rosnet-tui ros pair --renew`)")
     except ssl.SSLError as exc:
         text = str(exc).upper()
         if "EXPIRED" in text:
-            return "rejected_expired", ("the master's router refused this component's "
+            return "rejected_expired", (f"{who}'s router refused this component's "
                                         "certificate: it has expired (`rosnet-tui ros pair "
                                         "--renew`)")
         if any(w in text for w in ("UNKNOWN_CA", "CERTIFICATE_UNKNOWN", "BAD_CERTIFICATE",
                                    "CERTIFICATE_REQUIRED", "DECRYPT_ERROR")):
-            return "rejected_foreign", ("the master's router refused this component's "
+            return "rejected_foreign", (f"{who}'s router refused this component's "
                                         "certificate: it is not from the master's fleet CA (a "
                                         "member paired with another CA): pair again "
                                         "(`rosnet-tui ros pair --renew`)")
         if "WRONG_VERSION" in text or "RECORD_LAYER" in text or "UNEXPECTED_EOF" in text:
-            return "no_tls", "the master's port does not speak TLS (is its security \"none\"?)"
+            return "no_tls", f"{who}'s port does not speak TLS (is its security \"none\"?)"
         return "rejected_foreign", f"the TLS handshake failed ({exc.reason or exc})"
     except OSError as exc:
         return "unreachable", f"TLS to {address}:{port}: {exc}"

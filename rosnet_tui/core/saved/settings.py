@@ -21,6 +21,7 @@ from rosnet_tui.core.config.settings_model import (
     FirewallSettings,
     Gap,
     Peer,
+    RelaySettings,
     RosbridgeSettings,
     Settings,
     SettingsError,
@@ -50,9 +51,11 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
              "zone": str, "tsig_key_file": str},
     "rosbridge": {"enabled": bool, "port": int, "host": str},
     "firewall": {"allow": list},
+    "relay": {"host": str, "ssh_user": str, "ssh_port": int, "zenoh_port": int, "tunnels": dict},
 }
 _TYPE_WORDS = {str: "a string in quotes", int: "a whole number", list: "a list [ ... ]",
-               (int, float): "a number", bool: "true or false"}
+               (int, float): "a number", bool: "true or false",
+               dict: "a table ([relay.tunnels], one name = port a line)"}
 
 
 def _lines(text: str) -> list[str]:
@@ -255,6 +258,17 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
     if "firewall" in raw:
         _check_table(text, path, "firewall", raw["firewall"])
         s.firewall = replace(s.firewall, **raw["firewall"])
+    if "relay" in raw:
+        _check_table(text, path, "relay", raw["relay"])
+        tunnels = raw["relay"].get("tunnels", {})
+        for name, port in tunnels.items():
+            if not isinstance(port, int) or isinstance(port, bool):
+                raise SettingsError("must be a port number (the relay's loopback port for "
+                                    "this component's sshd)", path=path,
+                                    line=_locate(text, "relay.tunnels", name),
+                                    key=f"relay.tunnels.{name}")
+        s.relay = replace(s.relay, **raw["relay"])
+        s.relay.tunnels = dict(tunnels)
 
     for key, why in s.errors(allow=(Gap.BLANK,)):   # incomplete is fine (the wizard fills it in)
         table, _, rest = key.partition(".")
@@ -262,7 +276,10 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
         m = re.match(r"peer\[(\d+)\]", table)
         if m:
             table, index = "peer", int(m.group(1)) - 1
-        line = _locate(text, table, rest.split(".")[-1], index)
+        if key.startswith("relay.tunnels."):
+            table, rest = "relay.tunnels", key[len("relay.tunnels."):]
+        line = _locate(text, table, rest if table == "relay.tunnels" else rest.split(".")[-1],
+                       index)
         raise SettingsError(why, path=path, line=line, key=f"{table}.{rest}")
     return s
 
@@ -342,8 +359,14 @@ def _table_values(s: Settings) -> dict[str, dict[str, Any]]:
     rosbridge: dict[str, Any] = {"enabled": b.enabled, "port": b.port}
     if b.host:
         rosbridge["host"] = b.host
+    r = s.relay
+    relay: dict[str, Any] = {"host": r.host}
+    if r.ssh_user:
+        relay["ssh_user"] = r.ssh_user
+    relay.update(ssh_port=r.ssh_port, zenoh_port=r.zenoh_port)
     return {"this": this, "ros": ros, "probe": probe, "checks": {"timeout_s": s.checks.timeout_s},
-            "sync": sync, "rosbridge": rosbridge, "firewall": {"allow": list(s.firewall.allow)}}
+            "sync": sync, "rosbridge": rosbridge, "firewall": {"allow": list(s.firewall.allow)},
+            "relay": relay}
 
 
 def _peer_values(p: Peer) -> dict[str, Any]:
@@ -395,6 +418,8 @@ def render_settings(s: Settings, previous_text: str | None = None) -> str:
         _merge_table(doc, "rosbridge", values["rosbridge"])
     if "firewall" in doc or s.firewall != FirewallSettings():
         _merge_table(doc, "firewall", values["firewall"])
+    if "relay" in doc or s.relay != RelaySettings():
+        _merge_relay(doc, values["relay"], s.relay.tunnels)
     if s.peers:
         # Keep peers before [ros] when writing fresh, as in the documented example.
         body = doc.as_string()
@@ -458,6 +483,38 @@ def _merge_table(doc: Any, name: str, values: dict[str, Any]) -> None:
     for k, v in values.items():
         if tbl.get(k) != v:
             tbl[k] = v
+
+
+def _merge_relay(doc: Any, values: dict[str, Any], tunnels: dict[str, int]) -> None:
+    """[relay], and under it [relay.tunnels] (a table of its own) when any tunnel is set."""
+    import tomlkit
+
+    tbl = doc.get("relay")
+    if tbl is None:
+        tbl = tomlkit.table()
+        doc["relay"] = tbl
+    for k in list(tbl.keys()):
+        if k not in values and k != "tunnels":
+            del tbl[k]
+    for k, v in values.items():
+        if tbl.get(k) != v:
+            tbl[k] = v
+    if not tunnels:
+        if "tunnels" in tbl:
+            del tbl["tunnels"]
+        return
+    old = tbl.get("tunnels")
+    if not isinstance(old, dict):
+        if old is not None:
+            del tbl["tunnels"]
+        old = tomlkit.table()
+        tbl["tunnels"] = old
+    for k in list(old.keys()):
+        if k not in tunnels:
+            del old[k]
+    for k, v in tunnels.items():
+        if old.get(k) != v:
+            old[k] = v
 
 
 def atomic_write_text(path: Path, text: str, mode: int | None = None,

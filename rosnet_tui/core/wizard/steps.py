@@ -272,6 +272,16 @@ def configure_router_ros2(s: Settings) -> str:
     from rosnet_tui.core.ros import ros2  # not on the start-up path (ROS 1 never needs it)
 
     port = s.ros.zenoh_port
+    if s.relayed:
+        return (f"**Nothing to forward on {_name(s)}'s modem.** Every component's router, the "
+                f"master's included, connects out to the relay *{s.relay.host}* "
+                f"(`{ros2.relay_endpoint(s)}`, mutual TLS), so carrier-grade NAT on any site "
+                "does not matter. Leave forwarding and DMZ off here.\n\n"
+                f"**The relay needs** a public address its name resolves to, TCP "
+                f"{s.relay.zenoh_port} open in its firewall (and its provider's), SSH, and "
+                "`rosnet-tui relay serve` running there.\n\n"
+                "**To verify:** the port test is skipped; relay.router (ROS step) proves the "
+                "relay's port.")
     if not s.is_master:
         return (f"**Nothing to forward on {_name(s)}'s modem.** Under ROS 2 over rmw_zenoh only "
                 f"the master's modem forwards a port (TCP {port}); a member's router connects "
@@ -307,7 +317,12 @@ def configure_ros2(s: Settings) -> str:
     head = ["**ROS 2 over rmw_zenoh**: a Zenoh router on every component, one TCP port on the "
             "master. DDS (ROS 2's default) cannot cross the modems: its discovery is multicast "
             "and its data goes to private addresses."]
-    if s.is_master:
+    if s.relayed:
+        head.append(f"**Through the relay** *{s.relay.host}*: every router, the master's "
+                    f"included, connects out to `{ros2.relay_endpoint(s)}` with this machine's "
+                    "fleet certificate and listens on loopback only (its own nodes). The fleet "
+                    "CA stays on the master, which also signs the relay's certificate.")
+    elif s.is_master:
         eps = " and ".join(f"`{e}`" for e in ros2.listen_endpoints(s))
         head.append(f"*{_name(s)}* is the master: its router listens on {eps} (IPv4: "
                     "rmw_zenohd's default `tcp/[::]` fails on hosts without IPv6) and every "
@@ -368,7 +383,8 @@ STEP_CHECKS: dict[str, tuple[tuple[str, int | None, str | None], ...]] = {
               ("relay.tunnel", 2, None)),
     "ros": (("ros.env", 1, None), ("ros.master", 1, None), ("ros.node_uris", 1, None),
             ("ros.pubsub_out", 1, None), ("ros.pubsub_in", 1, None),
-            ("ros2.env", 2, None), ("ros2.router", 2, None), ("ros2.graph", 2, None),
+            ("ros2.env", 2, None), ("ros2.router", 2, None), ("relay.router", 2, "relay"),
+            ("ros2.graph", 2, None),
             ("ros2.pubsub_out", 2, None), ("ros2.pubsub_in", 2, None),
             ("security.outsider", None, None), ("ros.rosbridge", None, "rosbridge")),
 }
@@ -429,8 +445,12 @@ def _step_for_version(step_id: str, settings: Settings) -> Step:
     step = STEP_BY_ID[step_id]
     if not settings.ros2:
         return step
-    master = settings.is_master
+    master = settings.is_master and not settings.relayed   # the one that takes connections
     port = settings.ros.zenoh_port
+    if step_id == "router" and settings.relayed:
+        return replace(step, expected=(
+            f"Nothing to forward: every router connects out to the relay {settings.relay.host}, "
+            f"whose TCP {settings.relay.zenoh_port} is open to the internet."))
     if step_id == "isp":
         return replace(step, expected=(
             f"The provider allows one incoming TCP port ({port}) and the modem has a public IP "

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from typing import Literal, TypedDict
 
+from rosnet_tui.core.checks.data.ros import Ros2RouterData
+
 
 class RelayTunnelData(TypedDict, total=False):  # relay.tunnel (checks/relay_tunnel.py)
     relay: str               # the relay's name ([relay] host)
@@ -18,5 +20,6 @@ class RelayTunnelData(TypedDict, total=False):  # relay.tunnel (checks/relay_tun
 
 
 DATA: dict[str, type] = {
+    "relay.router": Ros2RouterData,   # the relay's router, as this component's router dials it
     "relay.tunnel": RelayTunnelData,
 }

@@ -100,13 +100,12 @@ class FleetTls(TypedDict, total=False):
     sans: list[str]           # the names (and addresses) it carries
     not_after: str            # when it expires (ISO 8601, UTC)
     days_left: float          # days until then (warned at 30 and fewer)
-    handshake: TlsHandshake | None  # why a TLS handshake with the master failed (asked
-    #                           only when its Zenoh session did)
+    handshake: TlsHandshake | None  # why a TLS handshake failed (asked when no session opened)
 
 
 class Ros2RouterData(TypedDict, total=False):
     role: Literal["master", "member"]  # this component's role
-    endpoint: str             # tcp/<master>:<zenoh_port>
+    endpoint: str             # the router dialled: tls/<master or relay>:<port> (tcp/: no mTLS)
     address: str | None       # the master's name resolved here (None: it does not resolve)
     reachable: bool           # a Zenoh session opened on the master's router
     failure: Literal["resolve", "refused", "timeout", "unreachable", "not_zenoh", "open"] | None  # why not reachable

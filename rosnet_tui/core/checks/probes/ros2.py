@@ -14,6 +14,7 @@ from rosnet_tui.core.checks.probes.peers import ssh_peers
 from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.net.blocking import run_blocking
+from rosnet_tui.core.net.connect import close_writer
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.peer.commands import PEER_INSTALL_PLACES, README_INSTALL
 from rosnet_tui.core.ros import fleet_tls, ros2
@@ -98,3 +99,23 @@ def zenoh_peer_problem(res: SshResult, peer: Peer, rep: dict | None) -> str | No
 def router_links(info: dict) -> list[str]:
     """Ids of the routers a router (its admin space *info*) has sessions with."""
     return [x["zid"] for x in info.get("sessions") or [] if x.get("whatami") == "router"]
+
+
+async def tcp_reach(host: str, port: int, t: float) -> tuple[str | None, str]:
+    """(None, 'connected') or (failure kind, words) of a plain TCP connect to a router's port
+    (ros2.router, relay.router)."""
+    writer = None
+    try:
+        _r, writer = await asyncio.wait_for(asyncio.open_connection(host, port), t)
+        return None, "connected"
+    except asyncio.TimeoutError:
+        return "timeout", f"no answer within {t:.1f} s (dropped: no forwarding, or a firewall)"
+    except ConnectionRefusedError:
+        return "refused", "connection refused (forwarded, but nothing listens there)"
+    except OSError as exc:
+        kind = "unreachable" if "unreachable" in str(exc).lower() or "no route" in str(exc).lower() \
+            else "refused"
+        return kind, exc.strerror or str(exc)
+    finally:
+        if writer is not None:
+            await close_writer(writer, 0.3)
