@@ -149,7 +149,7 @@ async def test_every_check_reports_only_declared_keys_when_there_is_nothing_to_c
     """Empty settings: each check's skip or early-failure branch, nothing leaves the machine."""
     s = Settings(probe=ProbeSettings(port=free_port(), public_ip_urls=[], port_check_url=""))
     got = await _run_all(_ctx(tmp_path, s))
-    assert len(got) == 29
+    assert len(got) == 30
     for cid, r in got.items():
         assert not r.summary.startswith("the check failed unexpectedly"), (cid, r.summary)
         assert data.undeclared(cid, r.data) == [], (cid, r.data)
@@ -167,7 +167,7 @@ async def test_every_check_reports_only_declared_keys_against_dead_loopback_serv
                  ros=RosSettings(master="localhost", port=dead))
     (tmp_path / "hosts").write_text("127.0.0.1 localhost\n")
     got = await _run_all(_ctx(tmp_path, s))
-    assert len(got) == 29
+    assert len(got) == 30
     for cid, r in got.items():
         assert not r.summary.startswith("the check failed unexpectedly"), (cid, r.summary)
         assert data.undeclared(cid, r.data) == [], (cid, r.data)

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-from rosnet_tui.cli import relay_tunnel
 import signal
 import threading
 from pathlib import Path
 
+from rosnet_tui.cli import relay_tunnel
 from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, say
 
 
@@ -19,7 +19,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "component's Zenoh router dials out to a relay: a small public server you "
                     "own. The settings' [relay] section names it (docs/SETTINGS.md).")
     cmds = p.add_subparsers(dest="relay_command", metavar="COMMAND", required=True)
-    relay_tunnel.register(cmds)
     serve = cmds.add_parser(
         "serve", help="run the relay's Zenoh router in the foreground (on the relay)",
         description="Run the relay's Zenoh router (eclipse-zenoh in router mode: the real "
@@ -29,6 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="the relay's router config (default: "
                             "~/.config/rosnet-tui/zenoh-relay.json5)")
     serve.set_defaults(func=run_serve)
+    relay_tunnel.register(cmds)
 
 
 def run_serve(args: argparse.Namespace) -> int:

@@ -188,6 +188,7 @@ SHORT_TITLES = {
     "ros2.pubsub_in": "Peer publishes, we hear",
     "ros.rosbridge": "Browser path (rosbridge)",
     "security.ssh_auth": "SSH offers no password",
+    "relay.router": "The relay's Zenoh router",
     "relay.tunnel": "Our tunnel on the relay",
     "security.outsider": "Outsider refused",
 }
