@@ -100,6 +100,7 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/cli/sync.py", "rosnet_tui.core.sync.signing"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/sync.py", "rosnet_tui.core.files.regular_file"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/sync.py", "rosnet_tui.core.saved.settings"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
+    ("rosnet_tui/cli/sync.py", "rosnet_tui.core.ssh.options"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/undo.py", "rosnet_tui.cli.common"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/wizard.py", "rosnet_tui.core.saved.settings"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/cli/wizard.py", "rosnet_tui.core.config.settings_model"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",

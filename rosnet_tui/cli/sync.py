@@ -183,6 +183,7 @@ def run_pin(args: argparse.Namespace) -> int:
     import asyncio
 
     from rosnet_tui.core.saved.settings import parse_settings
+    from rosnet_tui.core.ssh.options import options_for
     from rosnet_tui.core.sync.pin import (
         PIN_TIMEOUT_S,
         ask_peers,
@@ -208,7 +209,8 @@ def run_pin(args: argparse.Namespace) -> int:
             "the line `rosnet-tui sync key` prints on it")
         return EXIT_USAGE
     print(f"Asking {len(peers)} peer(s) for their sync keys over SSH ...")
-    got = asyncio.run(ask_peers(peers, timeout=args.timeout or PIN_TIMEOUT_S))
+    got = asyncio.run(ask_peers(peers, options_for(settings.relay),
+                                timeout=args.timeout or PIN_TIMEOUT_S))
     answers = sorted(got + failed, key=lambda a: a.name.lower())
     words = {"same": "already pinned", "new": "not pinned here yet: to pin",
              "changed": "KEY CHANGED"}

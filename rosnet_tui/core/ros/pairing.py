@@ -29,6 +29,7 @@ from rosnet_tui.core.peer.commands import installed_python_command, zenoh_peer_c
 from rosnet_tui.core.ros import fleet_tls
 from rosnet_tui.core.ros.fleet_tls import TlsError, TlsPaths
 from rosnet_tui.core.ros.ros2 import mtls
+from rosnet_tui.core.ssh.options import options_for
 from rosnet_tui.core.ssh.session import ssh_run
 
 PAIR_TIMEOUT_S = 5.0
@@ -196,6 +197,8 @@ async def pair_over_ssh(s: Settings, paths: TlsPaths, opts: Any = None,
         return PairResult(False, f"no SSH user for the master {s.master_name} in the settings: "
                                  "set it, or pair by text (`rosnet-tui ros pair --print-request`"
                                  " here, `--sign` on the master, `--install` here)")
+    if getattr(opts, "relay", None) is None:      # a master behind the relay: through it
+        opts = options_for(s.relay, opts)
     csr = fleet_tls.make_request(paths, s.this.name)
     res = await ssh_run(opts, peer, serve_command(s.this.name), stdin=csr, timeout=timeout)
     took = time.monotonic() - t0
