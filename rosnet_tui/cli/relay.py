@@ -47,7 +47,7 @@ def run_serve(args: argparse.Namespace) -> int:
         say(f"rosnet-tui: Zenoh did not start the relay's router: {exc}")
         return EXIT_FAIL
     try:
-        listen = relay.read_relay_config(path)["listen"]["endpoints"]
+        listen = relay.listen_endpoints(path)
         print(f"Relay router {session.zid()} listening on {', '.join(listen)} (mutual TLS, "
               "fleet certificates only). Ctrl-C stops it.", flush=True)
         stop.wait()

@@ -92,6 +92,8 @@ class CheckSpec:
         """Why the check is skipped under *settings* (the SKIP result's summary)."""
         if self.switched_off(settings) and self.switch == "relay":
             return "skipped: no relay in the settings ([relay] host)"
+        if self.switched_off(settings) and self.switch == "relay":
+            return "skipped: no relay in the settings ([relay] host is not set)"
         if self.switched_off(settings):
             return (f"skipped: [{self.switch}] enabled = false in the settings (set it to true "
                     "to check this)")

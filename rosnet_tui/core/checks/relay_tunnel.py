@@ -22,7 +22,8 @@ WHY = {
 }
 
 
-@check("relay.tunnel", "linux", "This component's SSH tunnel answers on the relay", 1.5, ros=2)
+@check("relay.tunnel", "linux", "This component's SSH tunnel answers on the relay", 1.5, ros=2,
+       switch="relay")
 async def check_relay_tunnel(ctx: CheckContext) -> Outcome:
     s = ctx.settings
     route = relay_route(s.relay)

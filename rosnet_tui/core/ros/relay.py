@@ -118,6 +118,11 @@ def read_relay_config(path: Path) -> dict[str, Any]:
     return config
 
 
+def listen_endpoints(path: Path) -> list[str]:
+    """Where the relay's router at *path* listens (its config's listen/endpoints)."""
+    return [str(e) for e in config_value(read_relay_config(path), "listen/endpoints") or []]
+
+
 def open_relay(path: Path) -> Any:
     """The relay's router, started from the config at *path* (checked first): a router-mode
     Zenoh session, the real Rust router. Raises RelayConfigError, RelayStartError."""

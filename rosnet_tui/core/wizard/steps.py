@@ -380,7 +380,7 @@ STEP_CHECKS: dict[str, tuple[tuple[str, int | None, str | None], ...]] = {
               ("linux.ping", None, None), ("linux.ssh", None, None),
               ("linux.chat_out", None, None), ("linux.chat_in", None, None),
               ("linux.firewall", 1, None), ("security.ssh_auth", None, None),
-              ("relay.tunnel", 2, None)),
+              ("relay.tunnel", 2, "relay")),
     "ros": (("ros.env", 1, None), ("ros.master", 1, None), ("ros.node_uris", 1, None),
             ("ros.pubsub_out", 1, None), ("ros.pubsub_in", 1, None),
             ("ros2.env", 2, None), ("ros2.router", 2, None), ("relay.router", 2, "relay"),

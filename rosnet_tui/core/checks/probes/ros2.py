@@ -14,7 +14,7 @@ from rosnet_tui.core.checks.probes.peers import ssh_peers
 from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.net.blocking import run_blocking
-from rosnet_tui.core.net.connect import close_writer
+from rosnet_tui.core.net.connect import close_writer, tcp_failure_kind
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.peer.commands import PEER_INSTALL_PLACES, README_INSTALL
 from rosnet_tui.core.ros import fleet_tls, ros2
@@ -113,8 +113,7 @@ async def tcp_reach(host: str, port: int, t: float) -> tuple[str | None, str]:
     except ConnectionRefusedError:
         return "refused", "connection refused (forwarded, but nothing listens there)"
     except OSError as exc:
-        kind = "unreachable" if "unreachable" in str(exc).lower() or "no route" in str(exc).lower() \
-            else "refused"
+        kind = "unreachable" if tcp_failure_kind(exc) == "unreachable" else "refused"
         return kind, exc.strerror or str(exc)
     finally:
         if writer is not None:
