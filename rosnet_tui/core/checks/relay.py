@@ -14,10 +14,9 @@ from typing import Any
 
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.budget import budget
-from rosnet_tui.core.checks.probes.ros2 import close_zenoh, open_zenoh, tcp_reach
+from rosnet_tui.core.checks.probes.ros2 import dial_router
 from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.net.blocking import run_blocking
-from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ros import fleet_tls, ros2, tls_handshake
 from rosnet_tui.core.ssh.connection import resolve_ipv4
@@ -52,21 +51,8 @@ async def check_relay_router(ctx: CheckContext) -> Outcome:
                                     "give it a DNS record, or add it to /etc/hosts", ev, data)
     data["address"] = addrs[0]
     ev.append(f"{name} resolves to {addrs[0]}")
-    kind, words = await tcp_reach(addrs[0], port,
-                                  max(0.2, min(t * 0.35, deadline - time.monotonic())))
-    ev.append(f"TCP {addrs[0]}:{port}: {words}")
-    info = None
-    if kind is None:
-        session, why = await open_zenoh(endpoint,
-                                        max(0.2, min(t * 0.4, deadline - time.monotonic())))
-        if session is None:
-            kind = "not_zenoh"
-            ev.append(f"Zenoh session on {endpoint} with this component's certificate: {why}")
-        else:
-            info = await run_blocking(zenohproto.router_info, session,
-                                      max(0.1, min(0.8, deadline - time.monotonic())),
-                                      timeout=max(0.2, deadline - time.monotonic()))
-            await close_zenoh(session)
+    kind, words, info = await dial_router(addrs[0], port, endpoint, t, deadline, ev,
+                                   " with this component's certificate")
     data["failure"] = kind
     if kind is not None:
         hint = HINTS.get(kind, "").format(port=port)

@@ -22,11 +22,11 @@ from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import each_peer
 from rosnet_tui.core.checks.probes.ros2 import (
     close_zenoh,
+    dial_router,
     node_endpoint,
     open_zenoh,
     ros2_peers,
     router_links,
-    tcp_reach,
     zenoh_env,
     zenoh_peer_problem,
 )
@@ -269,19 +269,7 @@ async def check_router(ctx: CheckContext) -> Outcome:
                                     f"it to /etc/hosts (Linux step){also}", ev, data)
     data["address"] = addrs[0]
     ev.append(f"{name} resolves to {addrs[0]}")
-    kind, words = await tcp_reach(addrs[0], port, max(0.2, min(t * 0.4, deadline - time.monotonic())))
-    ev.append(f"TCP {addrs[0]}:{port}: {words}")
-    session = info = None
-    if kind is None:
-        session, why = await open_zenoh(endpoint, max(0.2, min(t * 0.4, deadline - time.monotonic())))
-        if session is None:
-            kind = "not_zenoh"
-            ev.append(f"Zenoh session on {endpoint}: {why}")
-        else:
-            info = await run_blocking(zenohproto.router_info, session,
-                                      max(0.1, min(0.8, deadline - time.monotonic())),
-                                      timeout=max(0.2, deadline - time.monotonic()))
-    await close_zenoh(session)
+    kind, words, info = await dial_router(addrs[0], port, endpoint, t, deadline, ev)
     data["failure"] = kind
     local: dict[str, Any] = {}
     if local_task is not None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import sys
+import time
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext
@@ -118,3 +119,26 @@ async def tcp_reach(host: str, port: int, t: float) -> tuple[str | None, str]:
     finally:
         if writer is not None:
             await close_writer(writer, 0.3)
+
+
+async def dial_router(address: str, port: int, endpoint: str, t: float, deadline: float,
+                      ev: list[str], how: str = "") -> tuple[str | None, str, Any]:
+    """Reach a Zenoh router as this component's router would (ros2.router, relay.router): TCP
+    to *address*:*port*, then a session on *endpoint* and the router's own account of itself.
+    (failure kind or None, the TCP attempt in words, the router's info or None); what was seen
+    goes to *ev* (*how* says with what the session was opened)."""
+    kind, words = await tcp_reach(address, port,
+                                  max(0.2, min(t * 0.4, deadline - time.monotonic())))
+    ev.append(f"TCP {address}:{port}: {words}")
+    if kind is not None:
+        return kind, words, None
+    session, why = await open_zenoh(endpoint, max(0.2, min(t * 0.4, deadline - time.monotonic())))
+    if session is None:
+        ev.append(f"Zenoh session on {endpoint}{how}: {why}")
+        return "not_zenoh", words, None
+    try:
+        return None, words, await run_blocking(zenohproto.router_info, session,
+                                        max(0.1, min(0.8, deadline - time.monotonic())),
+                                        timeout=max(0.2, deadline - time.monotonic()))
+    finally:
+        await close_zenoh(session)
