@@ -98,7 +98,7 @@ def test_the_sudo_command_runs_without_the_users_path(tmp_path):
     assert Path(argv[1]).is_absolute() and argv[1] == sys.executable and argv[2:4] == [
         "-m", "rosnet_tui"]
     r = subprocess.run(argv[1:], env={"PATH": SECURE_PATH, "HOME": str(tmp_path)},
-                       cwd=privilege._package_root(), capture_output=True, text=True, timeout=60,
+                       cwd=privilege.package_root(), capture_output=True, text=True, timeout=60,
                        stdin=subprocess.DEVNULL)
     assert r.returncode == 0 and r.stdout.strip() == VERSION_LINE, r.stderr
 
@@ -146,7 +146,7 @@ def test_the_sudo_line_for_the_unit_names_the_users_settings(tmp_path, monkeypat
     root_home = tmp_path / "roothome"
     root_home.mkdir()
     r = subprocess.run(argv[1:], env={"PATH": SECURE_PATH, "HOME": str(root_home)},
-                       cwd=privilege._package_root(), capture_output=True, text=True,
+                       cwd=privilege.package_root(), capture_output=True, text=True,
                        timeout=60, stdin=subprocess.DEVNULL)
     assert r.returncode == 0, r.stderr
     unit = (units / sync_cli.UNIT_NAME).read_text()

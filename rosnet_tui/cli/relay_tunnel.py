@@ -7,7 +7,6 @@ import argparse
 import getpass
 import shutil
 import signal
-import sys
 import threading
 from pathlib import Path
 
@@ -19,10 +18,9 @@ from rosnet_tui.cli.common import (
     config_path,
     say,
 )
-from rosnet_tui.cli.sync import package_root, systemd_quote
-from rosnet_tui.cli.writing import confirm, load_settings_for
+from rosnet_tui.cli.units import exec_lines, install_unit
+from rosnet_tui.cli.writing import load_settings_for
 from rosnet_tui.core.files import privilege
-from rosnet_tui.core.saved.settings import atomic_write_text
 from rosnet_tui.core.ssh.options import SshOptions
 from rosnet_tui.core.ssh.tunnel import TunnelKeeper, tunnel_argv
 
@@ -97,7 +95,6 @@ def unit_text(args: argparse.Namespace) -> str:
                                 "--sshd-port", str(args.sshd_port)])
     if getattr(args, "ssh_dir", None):
         argv += ["--ssh-dir", str(Path(args.ssh_dir).expanduser().absolute())]
-    root = package_root()
     lines = ["# Written by 'rosnet-tui relay tunnel --install-service'.",
              "[Unit]",
              "Description=rosnet-tui reverse SSH tunnel: this component's sshd on the relay",
@@ -107,35 +104,15 @@ def unit_text(args: argparse.Namespace) -> str:
              "[Service]",
              "Type=simple",
              f"User={getpass.getuser()}",
-             "ExecStart=" + " ".join(systemd_quote(a) for a in argv),
+             *exec_lines(argv),
              "Restart=always",
-             "RestartSec=5",
-             "Environment=PYTHONUNBUFFERED=1"]
-    if not any(part in ("site-packages", "dist-packages") for part in root.parts):
-        lines.append("Environment=" + systemd_quote(f"PYTHONPATH={root}"))
+             "RestartSec=5"]
     lines += ["", "[Install]", "WantedBy=multi-user.target", ""]
     return "\n".join(lines)
 
 
 def install(args: argparse.Namespace) -> int:
-    text = unit_text(args)
     path = (args.unit_dir or Path("/etc/systemd/system")).expanduser().absolute() / UNIT_NAME
-    print(f"The systemd unit {path}:")
-    sys.stdout.writelines(f"  {line}\n" for line in text.splitlines())
-    then = f"Then: systemctl daemon-reload && systemctl enable --now {UNIT_NAME}"
-    stop = confirm(args, f"Write {path}?", dry_run="nothing was written",
-                   cancelled="Nothing was written.",
-                   no_terminal="rosnet-tui: not writing without a terminal to ask on; read the "
-                               "unit above, then run the same command with --yes")
-    if stop is not None:
-        return stop
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(path, text, mode=0o644)
-    except OSError as exc:
-        say(f"rosnet-tui: cannot write {path}: {exc.strerror or exc} (the system folder needs "
-            "root: sudo, keeping the same --config)")
-        return EXIT_FAIL
-    print(f"Wrote {path}.")
-    print(then)
-    return EXIT_OK
+    return install_unit(args, path, unit_text(args), denied=lambda: (
+        f"rosnet-tui: this user may not write {path} (the system folder needs root: sudo, "
+        "keeping the same --config)"))

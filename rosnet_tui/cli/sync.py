@@ -16,7 +16,6 @@ import sys
 import time
 from pathlib import Path
 
-import rosnet_tui
 from rosnet_tui.cli.common import (
     EXIT_FAIL,
     EXIT_OK,
@@ -30,6 +29,7 @@ from rosnet_tui.cli.common import (
     state_dir_of,
     state_dir_problem,
 )
+from rosnet_tui.cli.units import exec_lines, install_unit
 from rosnet_tui.cli.writing import ask, confirm
 from rosnet_tui.core.config.paths import Paths, xdg_config_home
 from rosnet_tui.core.config.settings_model import SettingsError
@@ -330,23 +330,12 @@ def run_status(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------- install-service
-def systemd_quote(arg: str) -> str:
-    """One ExecStart word: as is when plain, else in double quotes with \\ and " escaped."""
-    if arg and all(c.isalnum() or c in "/._-=:+@,%" for c in arg):
-        return arg
-    return '"' + arg.replace("\\", "\\\\").replace('"', '\\"').replace("%", "%%") + '"'
-
-
 def _owner_home(path: Path) -> Path | None:
     """HOME of the user owning *path* (the settings file says whose component this is)."""
     try:
         return Path(pwd.getpwuid(path.stat().st_uid).pw_dir)
     except (OSError, KeyError):
         return None
-
-
-def package_root() -> Path:
-    return Path(rosnet_tui.__file__).resolve().parent.parent
 
 
 def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
@@ -384,8 +373,6 @@ def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
     if user and not args.hosts_file:
         notes.append("a user service cannot write /etc/hosts: the hosts set will fail to apply "
                      "(use the system unit, without --user)")
-    root = package_root()
-    site = any(part in ("site-packages", "dist-packages") for part in root.parts)
     lines = [
         "# Written by 'rosnet-tui sync install-service'.",
         "[Unit]",
@@ -396,13 +383,10 @@ def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
         "",
         "[Service]",
         "Type=simple",
-        "ExecStart=" + " ".join(systemd_quote(a) for a in argv),
+        *exec_lines(argv),
         "Restart=on-failure",
         "RestartSec=10",
-        "Environment=PYTHONUNBUFFERED=1",
     ]
-    if not site:
-        lines.append("Environment=" + systemd_quote(f"PYTHONPATH={root}"))
     lines += ["", "[Install]", f"WantedBy={'default.target' if user else 'multi-user.target'}", ""]
     return "\n".join(lines), notes
 
@@ -440,56 +424,14 @@ def _unit_dir(args: argparse.Namespace) -> Path:
 
 
 def run_install(args: argparse.Namespace) -> int:
-    from rosnet_tui.core.files.regular_file import FileRefusedError, read_regular
-    from rosnet_tui.core.saved.settings import atomic_write_text
-
     text, notes = unit_text(args, user=args.user)
     path = _unit_dir(args) / UNIT_NAME
-    try:   # without blocking: a FIFO or a device there is refused, not waited on
-        old = read_regular(path, 1 << 20).decode("utf-8", "replace")
-    except FileNotFoundError:
-        old = None
-    except FileRefusedError as exc:
-        say(f"rosnet-tui: {exc}")
-        return EXIT_FAIL
-    except OSError as exc:
-        say(f"rosnet-tui: cannot read {path}: {exc.strerror}")
-        return EXIT_FAIL
-    print(f"The systemd unit {path}:")
-    if old is None:
-        for line in text.splitlines():
-            print(f"  {line}")
-    elif old == text:
-        print("  (already there, exactly this content; nothing to write)")
-    else:
-        sys.stdout.writelines(difflib.unified_diff(old.splitlines(True), text.splitlines(True),
-                                                   f"{path} (now)", f"{path} (after)"))
-    for n in notes:
-        print(f"note: {n}")
-    ctl = "systemctl --user" if args.user else "systemctl"
-    then = f"Then: {ctl} daemon-reload && {ctl} enable --now {UNIT_NAME}"
-    if old == text:
-        print(then)
-        return EXIT_OK
-    stop = confirm(args, f"Write {path}?", dry_run="nothing was written",
-                   cancelled="Nothing was written.",
-                   no_terminal="rosnet-tui: not writing without a terminal to ask on; read the "
-                               "unit above, then run the same command with --yes")
-    if stop is not None:
-        return stop
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(path, text, mode=0o644)
-    except PermissionError:
+
+    def denied() -> str:
         if args.user:
-            say(f"rosnet-tui: this user may not write {path}")
-        else:
-            say(f"rosnet-tui: this user may not write {path}; run it with sudo: "
-                 f"{privilege.format_command(sudo_install_argv(args))}")
-        return EXIT_FAIL
-    except OSError as exc:
-        say(f"rosnet-tui: cannot write {path}: {exc.strerror}")
-        return EXIT_FAIL
-    print(f"Wrote {path}.")
-    print(then)
-    return EXIT_OK
+            return f"rosnet-tui: this user may not write {path}"
+        return (f"rosnet-tui: this user may not write {path}; run it with sudo: "
+                f"{privilege.format_command(sudo_install_argv(args))}")
+
+    return install_unit(args, path, text, ctl="systemctl --user" if args.user else "systemctl",
+                        notes=notes, denied=denied)

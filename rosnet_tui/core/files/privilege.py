@@ -36,7 +36,8 @@ def sudo_available() -> bool:
     return shutil.which(SUDO) is not None
 
 
-def _package_root() -> Path:
+def package_root() -> Path:
+    """The folder holding the rosnet_tui package (a checkout's top, or site-packages)."""
     return Path(rosnet_tui.__file__).resolve().parent.parent
 
 
@@ -115,7 +116,7 @@ def run_privileged(argv: Sequence[str], *, interactive: bool = True,
         if not interactive:
             argv.insert(1, "-n")
     try:
-        return subprocess.run(argv, cwd=_package_root(), timeout=timeout_s).returncode
+        return subprocess.run(argv, cwd=package_root(), timeout=timeout_s).returncode
     except subprocess.TimeoutExpired:
         return 124
     except OSError:
