@@ -101,6 +101,10 @@ def test_cgnat_names_the_carrier_nat_first(ros1_lab, tmp_path):
     assert "Carrier-grade NAT" in first["meaning"] and "100.64." in first["meaning"], first
     assert "isp.cgnat" in first["check_ids"]
     assert any("public IP" in a for a in first["actions"])
+    # ROS 1: forwarding cannot cross it anywhere; the ways out are named (issue 30)
+    assert "Under ROS 1 no forwarding" in first["meaning"], first
+    assert any("relay" in a for a in first["actions"]) and \
+        any("VPN" in a for a in first["actions"]), first
 
 
 def test_ros_ip_on_the_laptop_says_unset_it_on_sami(ros1_lab, tmp_path):

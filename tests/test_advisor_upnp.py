@@ -92,3 +92,7 @@ def test_isp_cgnat_from_the_modems_empty_address_is_worded_as_such():
     ros1 = Settings(this=ThisComponent(name="turtlebot", role="master"))
     f = only(advise([res], ros1), "isp.cgnat")
     assert "the modem itself reports no public address" in f.meaning, f.meaning
+    # ROS 1 (issue 30): no forward crosses it, and the ways out are named
+    assert "Under ROS 1 no forwarding anywhere gets around it" in f.meaning, f.meaning
+    said = " ".join(f.actions)
+    assert "public IP" in said and "relay" in said and "Tailscale" in said, f.actions

@@ -197,6 +197,16 @@ def cgnat_text(ev: Evidence) -> tuple[str, list[str], list[str]]:
                 "another carrier that gives public addresses.",
                 "Until then, this component can only connect out: it cannot be the side the "
                 "others connect to (not the ROS master, not reachable by SSH from outside)."]
+        if not ev.s.ros2:
+            meaning += (" Under ROS 1 no forwarding anywhere gets around it: ROS 1 nodes connect "
+                        "to each other directly, in both directions (XML-RPC and TCPROS), so "
+                        "every component must be reachable from every other.")
+            acts[2:] = ["Or move the fleet to ROS 2 over rmw_zenoh with a relay you own (a small "
+                        "public server every component dials out to: [relay] in the settings, "
+                        "docs/SETTINGS.md); only the relay takes connections.",
+                        "Or join the components with a VPN (Tailscale, Husarnet, ZeroTier) and "
+                        "give the ROS names its addresses (the office profile's addresses, or "
+                        "the hosts entries)."]
     else:
         seen = (f"the modem's WAN address is {wan}" if wan else
                 f"a private address ({hop}) sits on the route out beyond the modem" if hop else
