@@ -247,3 +247,16 @@ def test_the_zenoh_peer_program_runs_with_the_peers_site_packages(tmp_path):
                        cwd=tmp_path, env={"HOME": str(tmp_path), "PATH": path})
     rep = zenohproto.parse_report(r.stdout)
     assert rep is not None and rep.get("error") != "no_zenoh", (r.stdout, r.stderr)
+
+
+@pytest.mark.parametrize("value", ["\u00b9", "\u0663", "7x", ""])
+def test_a_domain_id_that_is_no_ascii_number_falls_back_to_the_settings(tmp_path, value):
+    """ROS_DOMAIN_ID from the environment: '¹' and Arabic-Indic digits are digits to Python,
+    which int() then refuses; the nodes' domain is the settings' (ros2.env names the
+    mismatch), never a crash of the checks that read it."""
+    from rosnet_tui.core.checks import CheckContext
+    from rosnet_tui.core.checks.probes.ros2 import node_domain
+
+    ctx = CheckContext(settings=member(domain_id=5), paths=Paths(bashrc_path=tmp_path / "rc"),
+                       env={"ROS_DOMAIN_ID": value})
+    assert node_domain(ctx) == (0 if value == "" else 5)

@@ -53,3 +53,24 @@ def test_the_forward_journal_registers_its_undo():
     from rosnet_tui.core.upnp import journal
 
     assert uj._UNDO_HANDLERS[journal.KIND] is not None
+
+
+@pytest.mark.parametrize("stored_id", ["\u00b9", "../../victim", "000007"])
+def test_an_entry_is_known_by_its_file_name_only(tmp_path, stored_id):
+    """The journal is the user's to write: an entry whose stored id is not its file's name (a
+    superscript digit int() refuses, a path out of the state dir, another entry's number) is
+    damaged and skipped, so the next id never crashes and pruning never deletes by it."""
+    import json
+
+    sd = tmp_path / "state"
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "keep").write_text("mine")
+    good = _entry_with(sd, [])
+    bad = {"version": 1, "id": stored_id, "created": "2026-01-01T00:00:00Z", "label": "x",
+           "undone": None, "files": []}
+    (sd / "journal" / "000002.json").write_text(json.dumps(bad))
+    assert [e.id for e in uj.journal_entries(sd)] == [good.id]
+    assert uj.next_id(sd) == "000003"          # the damaged file's number is not reused
+    uj.prune(sd, keep=0)
+    assert (victim / "keep").read_text() == "mine"

@@ -156,8 +156,22 @@ def journal_entries(state_dir: Path | None = None) -> list[JournalEntry]:
     """Every recorded apply, oldest first (undone ones included, marked)."""
     folder = state_dir_path(state_dir) / "journal"
     out = []
+    names = _entry_names(folder)
+    for n in names:
+        try:
+            raw = read_regular(folder / n, MAX_FILE_BYTES).decode("utf-8")
+            entry = JournalEntry.from_json(loads_bounded(raw, unique_keys=False))
+        except (OSError, ValueError, TypeError, KeyError, AttributeError):
+            continue  # a damaged entry is skipped, never trusted
+        if entry.id == n[:-len(".json")]:    # known by its file's name only (ids make paths)
+            out.append(entry)
+    return out
+
+
+def _entry_names(folder: Path) -> list[str]:
+    """The journal's entry files, oldest first: ``NNNNNN.json``, ASCII digits."""
     try:
-        names = sorted(n for n in os.listdir(folder) if re.fullmatch(r"\d{6,}\.json", n))
+        return sorted(n for n in os.listdir(folder) if re.fullmatch(r"[0-9]{6,}\.json", n))
     except FileNotFoundError:
         return []
     except NotADirectoryError:
@@ -165,18 +179,11 @@ def journal_entries(state_dir: Path | None = None) -> list[JournalEntry]:
                                "dir") from None
     except OSError as exc:
         raise ManagedFileError(f"cannot read the journal in {folder}: {exc.strerror}") from None
-    for n in names:
-        try:
-            raw = read_regular(folder / n, MAX_FILE_BYTES).decode("utf-8")
-            out.append(JournalEntry.from_json(loads_bounded(raw, unique_keys=False)))
-        except (OSError, ValueError, TypeError, KeyError, AttributeError):
-            continue  # a damaged entry is skipped, never trusted
-    return out
 
 
 def next_id(state_dir: Path) -> str:
-    entries = journal_entries(state_dir)
-    n = max((int(e.id) for e in entries if e.id.isdigit()), default=0) + 1
+    names = _entry_names(state_dir_path(state_dir) / "journal")   # damaged ones too: never reused
+    n = max((int(name[:-len(".json")]) for name in names), default=0) + 1
     return f"{n:06d}"
 
 

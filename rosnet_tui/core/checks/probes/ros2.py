@@ -30,7 +30,7 @@ def zenoh_env(ctx: CheckContext) -> dict[str, str]:
 def node_domain(ctx: CheckContext) -> int:
     """The ROS_DOMAIN_ID nodes started here use (unset: 0); ros2.env compares it with the settings."""
     value = zenoh_env(ctx).get("ROS_DOMAIN_ID", "").strip() or "0"
-    return int(value) if value.isdigit() else ctx.settings.ros.domain_id
+    return int(value) if value.isascii() and value.isdigit() else ctx.settings.ros.domain_id
 
 
 def node_endpoint(ctx: CheckContext) -> tuple[str, str]:
