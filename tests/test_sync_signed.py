@@ -196,3 +196,36 @@ def test_the_dns_store_refuses_to_run_without_tsig(tmp_path):
         make_store(s)
     with pytest.raises(StoreConfigError, match="TSIG"):
         DnsStore("192.0.2.53", "fleet.example", None)
+
+
+def test_the_sync_key_file_is_read_as_a_regular_file_only(tmp_path):
+    """A FIFO where the key should be (the root service reads the owner's folder) is refused at
+    once, never waited on; a link there is not followed."""
+    import threading
+
+    from rosnet_tui.core.sync.signing import load_or_make_key
+
+    fifo = tmp_path / "config.sync.key"
+    os.mkfifo(fifo)
+    got: list[BaseException | None] = []
+
+    def load() -> None:
+        try:
+            load_or_make_key(fifo)
+            got.append(None)
+        except (OSError, ValueError) as exc:
+            got.append(exc)
+
+    th = threading.Thread(target=load, daemon=True)
+    th.start()
+    th.join(5.0)
+    if th.is_alive():                       # unblock the reader before failing
+        os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        th.join(5.0)
+        pytest.fail("load_or_make_key waited on a FIFO")
+    assert isinstance(got[0], OSError), got
+    fifo.unlink()
+    (tmp_path / "elsewhere.key").write_bytes(b"x")
+    fifo.symlink_to(tmp_path / "elsewhere.key")
+    with pytest.raises(OSError):
+        load_or_make_key(fifo)

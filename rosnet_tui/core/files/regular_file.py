@@ -27,11 +27,13 @@ class FileRefusedError(OSError):
         return f"{self.filename}: {self.why}"
 
 
-def read_regular(path: Path | str, max_bytes: int) -> bytes:
-    """The bytes of the regular file *path* (links followed). FileNotFoundError when it is
-    missing; FileRefusedError for a FIFO, a device, a socket or a folder, and for a file over
-    *max_bytes* (also one that grows past it while being read); other OSErrors as they come."""
-    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC)
+def read_regular(path: Path | str, max_bytes: int, *, follow: bool = True) -> bytes:
+    """The bytes of the regular file *path* (links followed unless not *follow*: then a link
+    there is an OSError, ELOOP). FileNotFoundError when it is missing; FileRefusedError for a
+    FIFO, a device, a socket or a folder, and for a file over *max_bytes* (also one that grows
+    past it while being read); other OSErrors as they come."""
+    flags = os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC
+    fd = os.open(path, flags if follow else flags | os.O_NOFOLLOW)
     try:
         st = os.fstat(fd)
         if stat.S_ISDIR(st.st_mode):

@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import base64
 import binascii
-import hashlib
 import json
-import os
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
@@ -30,7 +28,9 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey,
 
 from rosnet_tui.core.config.settings_model import SYNC_KEY_RE, Settings
 from rosnet_tui.core.files.managed_write import atomic_write
+from rosnet_tui.core.files.regular_file import read_regular
 from rosnet_tui.core.saved.sync_records import Record
+from rosnet_tui.core.ssh.known_hosts import key_fingerprint
 
 PREFIX = b"rosnet-tui sync record v1\n"
 KEY_SUFFIX = ".sync.key"
@@ -46,16 +46,14 @@ def key_path(config_path: Path) -> Path:
 def load_or_make_key(path: Path) -> Ed25519PrivateKey:
     """This component's signing key, made (0600) when there is none yet. Raises OSError or
     ValueError (a file that is not one)."""
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
+    try:    # a regular file only (a FIFO is refused, never waited on), never through a link
+        data = read_regular(path, 4096, follow=False)
     except FileNotFoundError:
         key = Ed25519PrivateKey.generate()
         path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
         atomic_write(path, key.private_bytes(ser.Encoding.PEM, ser.PrivateFormat.PKCS8,
                                              ser.NoEncryption()), create_mode=0o600, mode=0o600)
         return key
-    with os.fdopen(fd, "rb") as f:
-        data = f.read(4096)
     key = ser.load_pem_private_key(data, password=None)
     if not isinstance(key, Ed25519PrivateKey):
         raise ValueError(f"{path} is not an Ed25519 key")
@@ -79,10 +77,9 @@ def parse_public(text: str) -> Ed25519PublicKey:
 def fingerprint(text: str) -> str:
     """A pinned key's short form to compare by eye: ``SHA256:`` and the base64 of its digest (as
     ssh-keygen shows host keys). Raises ValueError."""
-    raw = base64.b64decode(text.split(":", 1)[1]) if SYNC_KEY_RE.match(text or "") else None
-    if raw is None:
+    if not SYNC_KEY_RE.match(text or ""):
         raise ValueError("not a sync key (ed25519:...)")
-    return "SHA256:" + base64.b64encode(hashlib.sha256(raw).digest()).decode().rstrip("=")
+    return key_fingerprint(base64.b64decode(text.split(":", 1)[1]))
 
 
 def canonical(rec: Record) -> bytes:
