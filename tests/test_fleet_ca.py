@@ -204,3 +204,18 @@ def test_forced_line_refuses_what_authorized_keys_cannot_hold():
         pair_access.forced_line("sami", PUB, python='/opt/"x"/python')
     with pytest.raises(pair_access.AccessError):
         pair_access.parse_public_key("ssh-dss AAAA")
+
+
+def test_an_authorized_keys_that_is_no_regular_file_is_refused_not_waited_on(tmp_path):
+    """A FIFO at ~/.ssh/authorized_keys: --admit and --remove say so (no hang, no traceback)."""
+    import os
+
+    home = _home(tmp_path)
+    keys = home / ".ssh" / "authorized_keys"
+    keys.parent.mkdir()
+    os.mkfifo(keys)
+    r = _cli(home, "ros", "pair", "--admit", "sami", stdin=PUB)
+    assert r.returncode == 2 and "cannot read" in r.stderr and "Traceback" not in r.stderr, r
+    r = _cli(home, "ros", "pair", "--remove", "sami", "--yes", "--timeout", "1")
+    assert r.returncode == 1 and "were not removed" in r.stderr, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr

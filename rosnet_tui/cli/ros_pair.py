@@ -237,10 +237,16 @@ def _remove(args: argparse.Namespace, settings, paths) -> int:
     fleet_tls.rotate_ca(paths, settings.this.name)
     pairing.prepare_master(settings, paths)
     keys = pair_access.authorized_keys_path()
-    gone = pair_access.revoke(args.remove, path=keys)
+    try:
+        gone = pair_access.revoke(args.remove, path=keys)
+        others_in = pair_access.other_keys(keys)
+    except pair_access.AccessError as exc:
+        say(f"rosnet-tui: {exc}; {args.remove}'s pairing lines there were not removed: delete "
+            "the lines ending in its name by hand")
+        return EXIT_FAIL
     print(f"Removed {gone} pairing key(s) of {args.remove} from {keys}; this CA never signs for "
           f"{args.remove} again (its name is in {paths.dir / fleet_tls.REMOVED_FILE}).")
-    if pair_access.other_keys(keys):
+    if others_in:
         print(f"  {keys} holds other keys too: if one is {args.remove}'s (its checks' SSH), "
               "delete that line by hand; a password login on this account is another way in.")
     rc = EXIT_OK

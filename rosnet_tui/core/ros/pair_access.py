@@ -18,11 +18,15 @@ import sys
 from pathlib import Path
 
 from rosnet_tui.core.files.managed_write import atomic_write
+from rosnet_tui.core.files.regular_file import read_regular
 
 TAG = "rosnet-tui-pair:"
 KEY_TYPES = ("ssh-ed25519", "ecdsa-sha2-nistp256", "ecdsa-sha2-nistp384", "ecdsa-sha2-nistp521",
              "ssh-rsa", "sk-ssh-ed25519@openssh.com", "sk-ecdsa-sha2-nistp256@openssh.com")
 _B64 = re.compile(r"^[A-Za-z0-9+/]+={0,2}$")
+
+
+MAX_KEYS_BYTES = 1 << 20    # an authorized_keys file far bigger than any real one is refused
 
 
 class AccessError(ValueError):
@@ -63,10 +67,14 @@ def _owned_by(line: str, name: str) -> bool:
 
 
 def _read(path: Path) -> list[str]:
+    """authorized_keys' lines: a regular file only (a FIFO there is refused, not waited on)."""
     try:
-        return path.read_text(encoding="utf-8", errors="surrogateescape").splitlines()
+        data = read_regular(path, MAX_KEYS_BYTES)
     except FileNotFoundError:
         return []
+    except OSError as exc:
+        raise AccessError(f"cannot read {path}: {exc.strerror or exc}") from None
+    return data.decode("utf-8", errors="surrogateescape").splitlines()
 
 
 def _write(path: Path, lines: list[str]) -> None:
@@ -76,7 +84,10 @@ def _write(path: Path, lines: list[str]) -> None:
     except FileNotFoundError:
         mode = 0o600
     data = "".join(x + "\n" for x in lines).encode("utf-8", errors="surrogateescape")
-    atomic_write(path, data, create_mode=0o600, mode=mode)
+    try:
+        atomic_write(path, data, create_mode=0o600, mode=mode)
+    except OSError as exc:
+        raise AccessError(f"cannot write {path}: {exc.strerror or exc}") from None
 
 
 def admit(name: str, public_key: str, *, path: Path, config: Path | None = None,
