@@ -35,6 +35,24 @@ def test_every_members_router_is_linked_to_the_masters(ros2):
     assert ros2.linked() == {"sami": True, "member2": True}
 
 
+def test_from_the_master_ros2_router_lists_both_members_routers_with_their_public_addresses(ros2):
+    """Issue 31: the master's ros2.router reads its own router's admin space (no SSH) and lists
+    the members' routers linked right now, each with its Zenoh version and the address it came
+    from: that member's modem, its public side."""
+    fleet = ros2.lab
+    results = ros2.check(fleet.master)
+    router = results["ros2.router"]
+    assert router["status"] == "pass", explain(results)
+    members = {m["name"]: m for m in router["data"]["member_routers"]}
+    assert sorted(members) == sorted(fleet.members), explain(results)
+    for name, m in members.items():
+        assert m["address"].rsplit(":", 1)[0] == fleet.public_ip(name), explain(results)
+        assert m["version"] == router["data"]["router_version"], explain(results)
+    assert router["data"]["version_skew"] == []
+    line = next(e for e in router["evidence"] if e.startswith("member routers linked now: 2"))
+    assert all(f"{n} ({fleet.public_ip(n)}:" in line for n in fleet.members), line
+
+
 def test_a_healthy_three_site_network_passes_every_ros2_check_20_runs_from_each_seat(ros2):
     fleet = ros2.lab
     ros2.node(fleet.master, "talker")

@@ -31,11 +31,12 @@ from rosnet_tui.core.checks.probes.ros2 import (
     zenoh_peer_problem,
 )
 from rosnet_tui.core.config.paths import default_config_dir
-from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.config.settings_model import Peer, Settings
 from rosnet_tui.core.files.managed_text import ManagedFileError
 from rosnet_tui.core.files.managed_write import read_text
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import zenohproto
+from rosnet_tui.core.printable import printable
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ros import fleet_tls, ros2, tls_handshake
 from rosnet_tui.core.ssh.connection import resolve_ipv4
@@ -213,6 +214,48 @@ def _remote_peers(info: dict, local: set[str]) -> list[str]:
     return [f"{n} from {h}" for h, n in count.items()]
 
 
+def zenoh_release(version: str | None) -> str | None:
+    """The release part of a router's version ("v1.8.0" of "v1.8.0-3f2a..."; None: unknown)."""
+    return version.split("-", 1)[0] if version else None
+
+
+def linked_members(info: dict, s: Settings) -> list[dict[str, Any]]:
+    """The member routers the master's router (its admin space *info*, read with *others*) has
+    sessions with right now: id, name (what its config's metadata says, else the peer whose
+    public IP it came from; None: neither), Zenoh version (None: not told), and the address
+    and port it came from as the master's router sees it (the member modem's public side)."""
+    known = {z.lstrip("0"): v for z, v in (info.get("routers") or {}).items()}
+    by_ip = {p.public_ip: p.name for p in s.peers if p.public_ip}
+    out = []
+    for x in info.get("sessions") or []:
+        if x.get("whatami") != "router":
+            continue
+        zid = str(x.get("zid", ""))
+        seen = known.get(zid.lstrip("0")) or {}
+        link = next((ln for ln in x.get("links") or [] if ln), "")
+        address = printable(link.split("/", 1)[-1], 80) or None
+        host = (address or "").rsplit(":", 1)[0].strip("[]")
+        meta = seen.get("metadata") or {}
+        name = printable(meta.get("name"), 64) if isinstance(meta.get("name"), str) else ""
+        out.append({"zid": printable(zid, 40), "name": name or by_ip.get(host),
+                    "version": printable(seen["version"], 80) if seen.get("version") else None,
+                    "address": address})
+    return out
+
+
+def member_label(m: dict[str, Any]) -> str:
+    """A linked member router in words: its name, else its id and where it came from."""
+    return m.get("name") or f"router {str(m.get('zid'))[:8]} from {m.get('address') or '?'}"
+
+
+def version_skew(members: list[dict[str, Any]], version: str | None) -> list[str]:
+    """Labels of the *members* whose router runs another Zenoh release than *version* (the
+    master's); an unknown version on either side is no skew."""
+    mine = zenoh_release(version)
+    return [member_label(m) for m in members
+            if mine and zenoh_release(m.get("version")) not in (None, mine)]
+
+
 @check("ros2.router", "ros", "The master's Zenoh router answers by name", FACTOR_ROUTER, ros=2)
 async def check_router(ctx: CheckContext) -> Outcome:
     s = ctx.settings
@@ -269,7 +312,8 @@ async def check_router(ctx: CheckContext) -> Outcome:
                                     f"it to /etc/hosts (Linux step){also}", ev, data)
     data["address"] = addrs[0]
     ev.append(f"{name} resolves to {addrs[0]}")
-    kind, words, info = await dial_router(addrs[0], port, endpoint, t, deadline, ev)
+    kind, words, info = await dial_router(addrs[0], port, endpoint, t, deadline, ev,
+                                          others=hub_here)
     data["failure"] = kind
     local: dict[str, Any] = {}
     if local_task is not None:
@@ -285,6 +329,8 @@ async def check_router(ctx: CheckContext) -> Outcome:
                      " (admin space off: no version)")
                   + (f", listening on {', '.join(info.get('locators') or [])}"
                      if info.get("locators") else ""))
+        if hub_here and info.get("version"):
+            _members_evidence(s, info, data, ev)
     elif kind is None:
         data.update(reachable=True, router_zid=None)
     if not data["reachable"]:
@@ -322,6 +368,12 @@ async def check_router(ctx: CheckContext) -> Outcome:
                                     f"({data['router_zid']}): its config must connect to "
                                     f"{endpoint} (ZENOH_ROUTER_CONFIG_URI; `rosnet-tui ros apply`)",
                        ev, data)
+    if data.get("version_skew"):
+        return Outcome(Status.WARN, f"member router(s) on another Zenoh version than this "
+                                    f"router's {zenoh_release(data['router_version'])}: "
+                                    f"{', '.join(_skew_words(data))}; mixed versions can drop "
+                                    "data without a word: install the same rmw_zenoh version "
+                                    "(the same distro's release) everywhere", ev, data)
     if data["remote_peers"]:
         return Outcome(Status.WARN, f"{hub}'s router has node(s) attached in peer mode from "
                                     f"another machine ({', '.join(data['remote_peers'])}): they "
@@ -335,6 +387,25 @@ async def check_router(ctx: CheckContext) -> Outcome:
     how_far = " (the relay carries the link)" if s.relayed else ""
     return Outcome(Status.PASS, f"{hub}'s Zenoh router{ver} answers at {endpoint} "
                                 f"({addrs[0]}){how_far}", ev, data)
+
+
+def _members_evidence(s: Settings, info: dict, data: dict[str, Any], ev: list[str]) -> None:
+    """The master: which member routers are linked now (``member_routers``) and which run
+    another Zenoh release (``version_skew``), from its router's admin space."""
+    data["member_routers"] = members = linked_members(info, s)
+    data["version_skew"] = version_skew(members, info.get("version"))
+    ev.append(f"member routers linked now: {len(members)}" + "".join(
+        f"; {member_label(m)}" + (f" ({m['address']})" if m.get("name") else "")
+        + f", Zenoh {m.get('version') or 'version not told'}" for m in members))
+    named = {m.get("name") for m in members}
+    absent = [p.name for p in s.peers if p.name != s.this.name and p.name not in named]
+    if absent and all(named):
+        ev.append(f"not linked now: {', '.join(absent)}")
+
+
+def _skew_words(data: dict[str, Any]) -> list[str]:
+    by_label = {member_label(m): m for m in data.get("member_routers") or []}
+    return [f"{n} runs {zenoh_release(by_label[n].get('version'))}" for n in data["version_skew"]]
 
 
 async def _local_router(task: asyncio.Future, endpoint: str, ev: list[str]) -> dict[str, Any]:

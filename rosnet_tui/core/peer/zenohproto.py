@@ -268,9 +268,22 @@ def open_client(endpoint: str, timeout: float, mode: str = "client",
         raise OpenFailed(text or type(exc).__name__) from None
 
 
-def router_info(session: Any, timeout: float) -> dict[str, Any]:
+def _admin_body(reply: Any) -> dict[str, Any] | None:
+    """A router's admin space reply as a JSON object (None: an error, or not one)."""
+    if reply.ok is None:
+        return None
+    try:   # stdlib only (this also runs on peers): too deep is a decode error
+        body = json.loads(reply.ok.payload.to_bytes().decode("utf-8", "replace"))
+    except (ValueError, RecursionError):
+        return None
+    return body if isinstance(body, dict) else None
+
+
+def router_info(session: Any, timeout: float, *, others: bool = False) -> dict[str, Any]:
     """What the router(s) this session is attached to say in their admin space (id, version,
-    listen locators, attached sessions); {} when they do not answer (admin space disabled)."""
+    metadata, listen locators, attached sessions); {} when they do not answer (admin space
+    disabled). With *others*, ``routers`` also maps every router reachable through it (its
+    linked routers, theirs...) to its ``version`` and ``metadata``."""
     out: dict[str, Any] = {}
     try:
         zids = [str(z) for z in session.info.routers_zid()]
@@ -280,22 +293,38 @@ def router_info(session: Any, timeout: float) -> dict[str, Any]:
         out["zid"] = zid
         try:
             for reply in session.get(f"@/{zid}/router", timeout=timeout):
-                if reply.ok is None:
-                    continue
-                try:   # stdlib only (this also runs on peers): too deep is a decode error
-                    body = json.loads(reply.ok.payload.to_bytes().decode("utf-8", "replace"))
-                except (ValueError, RecursionError):
-                    continue
-                if not isinstance(body, dict):
+                body = _admin_body(reply)
+                if body is None:
                     continue
                 out["version"] = str(body.get("version", "")).split(" ")[0]
+                out["metadata"] = body.get("metadata") if isinstance(body.get("metadata"),
+                                                                     dict) else None
                 out["locators"] = [str(x) for x in body.get("locators") or []]
                 out["sessions"] = [{"zid": str(x.get("peer", "")), "whatami": x.get("whatami"),
                                     "links": [str(ln.get("dst", "")) for ln in x.get("links") or []]}
                                    for x in body.get("sessions") or [] if isinstance(x, dict)]
         except Exception:  # noqa: BLE001 - a router without admin space still routes
             pass
+    if others and out.get("version"):
+        out["routers"] = _other_routers(session, out["zid"], timeout)
     return out
+
+
+def _other_routers(session: Any, own: str, timeout: float) -> dict[str, dict[str, Any]]:
+    """{zid: {version, metadata}} of every other router answering ``@/*/router``."""
+    found: dict[str, dict[str, Any]] = {}
+    try:
+        for reply in session.get("@/*/router", timeout=timeout):
+            body = _admin_body(reply)
+            zid = str((body or {}).get("zid", ""))
+            if body is None or not zid or zid.lstrip("0") == own.lstrip("0"):
+                continue
+            meta = body.get("metadata")
+            found[zid] = {"version": str(body.get("version", "")).split(" ")[0] or None,
+                          "metadata": meta if isinstance(meta, dict) else None}
+    except Exception:  # noqa: BLE001 - what answered so far is what is known
+        pass
+    return found
 
 
 def graph(session: Any, domain: int, timeout: float) -> list[dict[str, Any]]:

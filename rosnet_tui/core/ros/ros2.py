@@ -158,6 +158,8 @@ def router_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
         "routing": {"router": {"peers_failover_brokering": False}},
         "transport": {"link": link},
         "adminspace": {"enabled": True, "permissions": {"read": True, "write": False}},
+        # Echoed in the admin space: the master's ros2.router names the linked members by it.
+        "metadata": {"name": s.this.name, "role": "master" if s.is_master else "member"},
     }
 
 

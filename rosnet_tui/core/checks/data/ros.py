@@ -103,6 +103,15 @@ class FleetTls(TypedDict, total=False):
     handshake: TlsHandshake | None  # why a TLS handshake failed (asked when no session opened)
 
 
+class MemberRouter(TypedDict, total=False):
+    zid: str                  # its Zenoh id
+    name: str | None          # the component: its config's metadata name, else the peer whose
+    #                           public IP it came from (None: neither tells)
+    version: str | None       # its Zenoh version (from its admin space; None: not told)
+    address: str | None       # the address and port it came from, as the master's router sees
+    #                           it (the member's modem, its public side)
+
+
 class Ros2RouterData(TypedDict, total=False):
     role: Literal["master", "member"]  # this component's role
     endpoint: str             # the router dialled: tls/<master or relay>:<port> (tcp/: no mTLS)
@@ -118,6 +127,9 @@ class Ros2RouterData(TypedDict, total=False):
     remote_peers: list[str]   # sessions in *peer* mode attached to the master's router from
     #                           another machine (lone nodes that should be clients)
     local_router: LocalRouter  # this machine's own router (every component runs one)
+    member_routers: list[MemberRouter]  # master: the members' routers linked to it right now
+    version_skew: list[str]   # master: those running another Zenoh release (name, else id and
+    #                           address), which can drop data silently
     security: Literal["mtls", "firewall", "none"]  # [ros] security
     tls: FleetTls             # under mTLS: this component's fleet certificate
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import sys
 import time
 from typing import Any
@@ -122,9 +123,11 @@ async def tcp_reach(host: str, port: int, t: float) -> tuple[str | None, str]:
 
 
 async def dial_router(address: str, port: int, endpoint: str, t: float, deadline: float,
-                      ev: list[str], how: str = "") -> tuple[str | None, str, Any]:
+                      ev: list[str], how: str = "", *, others: bool = False
+                      ) -> tuple[str | None, str, Any]:
     """Reach a Zenoh router as this component's router would (ros2.router, relay.router): TCP
-    to *address*:*port*, then a session on *endpoint* and the router's own account of itself.
+    to *address*:*port*, then a session on *endpoint* and the router's own account of itself
+    (with *others*, the other routers' too: zenohproto.router_info).
     (failure kind or None, the TCP attempt in words, the router's info or None); what was seen
     goes to *ev* (*how* says with what the session was opened)."""
     kind, words = await tcp_reach(address, port,
@@ -137,8 +140,13 @@ async def dial_router(address: str, port: int, endpoint: str, t: float, deadline
         ev.append(f"Zenoh session on {endpoint}{how}: {why}")
         return "not_zenoh", words, None
     try:
-        return None, words, await run_blocking(zenohproto.router_info, session,
-                                        max(0.1, min(0.8, deadline - time.monotonic())),
-                                        timeout=max(0.2, deadline - time.monotonic()))
+        left = deadline - time.monotonic()   # two questions with *others*: half each
+        try:
+            return None, words, await run_blocking(
+                functools.partial(zenohproto.router_info, others=others), session,
+                max(0.1, min(0.8, left / (2 if others else 1))), timeout=max(0.2, left))
+        except asyncio.TimeoutError:    # the session opened: a router, silent on itself
+            ev.append(f"Zenoh router at {endpoint}: its admin space gave no answer in time")
+            return None, words, {}
     finally:
         await close_zenoh(session)
