@@ -13,13 +13,14 @@ if str(REPO) not in sys.path:  # `tests.lab` and `rosnet_tui` import from the re
 
 from bench.model import Options  # noqa: E402
 
-ALL_ROWS = (1, 2, 3, 4, 5, 6, 7, 8)
+ALL_ROWS = (1, 2, 3, 4, 5, 6, 7, 8, 9)
 ROW_NAMES = {1: "start-up time and peak RSS", 2: "full verification on the lab",
              3: "bad news fast (master down, no forwarding, peer unplugged)",
              4: "terminal traffic (bytes per screen, both terminals, both sizes)",
              5: "responsiveness while checks run", 6: "address sync (from the sync service)",
              7: "a burst of keys equals the same keys typed slowly",
-             8: "the fleet grows (1 to 8 members) and the sync fan-out"}
+             8: "the fleet grows (1 to 8 members) and the sync fan-out",
+             9: "a dead link seen in seconds, and data again after it returns (ROS 2)"}
 DEFAULT_JSON = REPO / "bench" / "results" / "latest.json"
 
 
@@ -50,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Measure rosnet-tui against baselines measured in the same run and print a "
                     "table (median of the repetitions). Rows: "
                     + "; ".join(f"{k} {v}" for k, v in ROW_NAMES.items())
-                    + ". Rows 1, 4, 5, 7 run anywhere (loopback only); rows 2, 3, 6, 8 need root and "
+                    + ". Rows 1, 4, 5, 7 run anywhere (loopback only); rows 2, 3, 6, 8, 9 need root and "
                       "network namespaces (the network lab of tests/lab) and are skipped, with "
                       "the reason, otherwise.",
         epilog="Exit code 0 when every selected row ran or was skipped with a reason (goals not "

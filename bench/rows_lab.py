@@ -1,4 +1,4 @@
-"""Rows 2, 3 and 6: on the network lab (tests/lab: root + network namespaces; skipped otherwise).
+"""Rows 2, 3, 6 and 9 (bench/deadlink_row.py): on the network lab (tests/lab: root + network namespaces; skipped otherwise).
 
 All traffic stays inside the lab's namespaces. Every command runs through ``lab.run`` (bounded,
 its process tree killed on timeout); the lab is destroyed at the end, whatever happens.
@@ -17,6 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from bench import deadlink_row
 from bench.compiled import compiled_copy, run_compiled
 from bench.model import BenchError, Line, Options, RowResult, goal_ratio, median
 
@@ -26,7 +27,8 @@ CHECK_TIMEOUT = 120.0       # the bound of one `rosnet-tui check` run
 _COMPILED: Path | None = None   # a byte-compiled copy of the package (compiled_copy)
 TITLES = {2: "Full verification on the lab's healthy network, from a member and the master",
           3: "Bad news fast: every verdict within its timeout",
-          6: "Address sync: master address change to member updated"}
+          6: "Address sync: master address change to member updated",
+          9: "A dead link seen in seconds, and data again after it returns (ROS 2)"}
 
 
 def rosnet_check(lab: Any, host: str, state: Path, *extra: str, config: Path | None = None,
@@ -430,7 +432,7 @@ def _skipped(rows: list[int], why: str, status: str = "skipped") -> list[RowResu
 
 
 def run_lab_rows(rows: list[int], opts: Options, log: Callable[[str], None]) -> list[RowResult]:
-    wanted = [r for r in (2, 3, 6) if r in rows]
+    wanted = [r for r in (2, 3, 6, 9) if r in rows]
     if not wanted:
         return []
     try:
@@ -441,7 +443,7 @@ def run_lab_rows(rows: list[int], opts: Options, log: Callable[[str], None]) -> 
     if not ok:
         return _skipped(wanted, why)
     out: list[RowResult] = []
-    ros_rows = wanted  # row 6 too: the sync services re-run ros.master
+    ros_rows = [r for r in wanted if r != 9]  # row 6 too: the sync services re-run ros.master
     if shutil.which("roscore") is None:
         out += _skipped(ros_rows, "roscore is not installed (Debian package ros-core)")
         wanted = [r for r in wanted if r not in ros_rows]
@@ -454,7 +456,8 @@ def run_lab_rows(rows: list[int], opts: Options, log: Callable[[str], None]) -> 
             wanted.remove(6)
     if not wanted:
         return out
-    funcs = {2: row2_full, 3: row3_bad_news, 6: row6_sync}
+    funcs = {2: row2_full, 3: row3_bad_news, 6: row6_sync,
+             9: lambda lab, opts, _state: deadlink_row.run(lab, opts, log)}
     lab = Lab()
     state = Path(tempfile.mkdtemp(prefix="rosnet-bench-state-"))
     global _COMPILED

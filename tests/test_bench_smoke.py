@@ -46,9 +46,9 @@ def test_help_lists_the_flags():
 
 
 def test_usage_errors_exit_2():
-    r = subprocess.run([str(RUN), "--rows", "9"], cwd=REPO, capture_output=True, text=True,
+    r = subprocess.run([str(RUN), "--rows", "10"], cwd=REPO, capture_output=True, text=True,
                        timeout=30, env=dict(os.environ, PYTHON=sys.executable))
-    assert r.returncode == 2 and "rows are 1-8" in r.stderr
+    assert r.returncode == 2 and "rows are 1-9" in r.stderr
 
 
 def test_rows_that_run_anywhere(tmp_path):

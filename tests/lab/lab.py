@@ -825,10 +825,19 @@ class Lab:
             raise RuntimeError(f"forwarding on {MODEM[side]}: {r.stderr.strip()}")
         self._state["forward"][side] = mode
 
-    def _unplug_rule(self, modem: str, on: bool) -> None:
-        """The modem drops what it would forward to its LAN (a computer that is gone, silently)."""
-        rules = "\n".join(["*filter", "-F RNL_UNPLUG",
-                           *(["-A RNL_UNPLUG -o lan0 -j DROP"] if on else []), "COMMIT", ""])
+    def cut_uplink(self, side: str, on: bool = True) -> None:
+        """*side*'s modem silently drops everything it would forward, both ways (its uplink
+        dead: no reset, no ICMP; the far end learns it only from its lease); ``on=False`` (or
+        reset()) ends it. Not a variant: the links stay up, so ending it is instant."""
+        self._unplug_rule(MODEM[side], on, both=True)
+        self._state["unplugged"] = self._state["unplugged"] or (side if on else False)
+
+    def _unplug_rule(self, modem: str, on: bool, both: bool = False) -> None:
+        """The modem drops what it would forward to its LAN (a computer that is gone, silently);
+        with *both*, what comes from it too."""
+        drop = ["-A RNL_UNPLUG -o lan0 -j DROP"] + (["-A RNL_UNPLUG -i lan0 -j DROP"] if both
+                                                    else [])
+        rules = "\n".join(["*filter", "-F RNL_UNPLUG", *(drop if on else []), "COMMIT", ""])
         r = subprocess.run(["ip", "netns", "exec", self.ns(modem), "iptables-restore",
                             "--noflush"], input=rules, text=True, capture_output=True, timeout=10)
         if r.returncode != 0:

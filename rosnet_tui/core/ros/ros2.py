@@ -30,7 +30,14 @@ from rosnet_tui.core.ros.fleet_tls import TlsPaths, tls_paths
 
 RMW_ZENOH = "rmw_zenoh_cpp"
 NODE_ROUTER_PORT = 7447          # where rmw_zenoh's nodes look for their local router
-LEASE_MS = 10_000                # a link whose far end vanished is dropped (and re-dialled) after this
+# A dead link (issue 31). LEASE_MS: a link whose far end fell silent is dropped after this (and
+# re-dialled), keep-alives every LEASE_MS / KEEP_ALIVE; Zenoh's own default, where rmw_zenohd's
+# config has 60 s / 2 (for 100+ nodes starting at once), which leaves a dead link listed for a
+# minute. CONNECT_RETRY: a member's router re-dials the master's 1 s after a loss, backing off
+# to every 4 s, so data flows again within seconds of the link's return.
+LEASE_MS = 10_000
+KEEP_ALIVE = 4
+CONNECT_RETRY = {"period_init_ms": 1000, "period_max_ms": 4000, "period_increase_factor": 2}
 MANAGED_HEADER = "// Managed by rosnet-tui"
 DISTROS_WITHOUT_OVERRIDE = ("humble",)   # rmw_zenoh < 0.1.2 ignores ZENOH_CONFIG_OVERRIDE
 HUMBLE_HASH = "TypeHashNotSupported"     # what Humble's rmw_zenoh puts where a type hash goes
@@ -142,12 +149,12 @@ def default_session_config_path() -> Path:
 def router_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
     """The router's configuration for this component's role (rmw_zenohd reads it whole); under
     mTLS the TLS files under *tls* (default: this user's ~/.config/rosnet-tui/tls)."""
-    link: dict[str, Any] = {"tx": {"lease": LEASE_MS, "keep_alive": 4}}
+    link: dict[str, Any] = {"tx": {"lease": LEASE_MS, "keep_alive": KEEP_ALIVE}}
     if mtls(s):
         link["tls"] = tls_settings(s, tls, listen=s.is_master and not s.relayed)
     return {
         "mode": "router",
-        "connect": {"endpoints": connect_endpoints(s)},
+        "connect": {"endpoints": connect_endpoints(s), "retry": dict(CONNECT_RETRY)},
         "listen": {"endpoints": listen_endpoints(s)},
         "scouting": {"multicast": {"enabled": False},
                      "gossip": {"enabled": True, "multihop": False,
