@@ -53,6 +53,14 @@ def test_from_the_master_ros2_router_lists_both_members_routers_with_their_publi
     assert all(f"{n} ({fleet.public_ip(n)}:" in line for n in fleet.members), line
 
 
+def test_from_the_master_a_member_whose_router_is_down_is_named_as_not_linked(ros2):
+    ros2.stop_router("member2")
+    results = ros2.check(ros2.lab.master)
+    router = results["ros2.router"]
+    assert [m["name"] for m in router["data"]["member_routers"]] == ["sami"], explain(results)
+    assert "not linked now: member2" in router["evidence"], explain(results)
+
+
 def test_a_healthy_three_site_network_passes_every_ros2_check_20_runs_from_each_seat(ros2):
     fleet = ros2.lab
     ros2.node(fleet.master, "talker")
