@@ -396,7 +396,7 @@ def _members_evidence(s: Settings, info: dict, data: dict[str, Any], ev: list[st
     data["version_skew"] = version_skew(members, info.get("version"))
     ev.append(f"member routers linked now: {len(members)}" + "".join(
         f"; {member_label(m)}" + (f" ({m['address']})" if m.get("name") else "")
-        + f", Zenoh {m.get('version') or 'version not told'}" for m in members))
+        + f", Zenoh {zenoh_release(m.get('version')) or 'version not told'}" for m in members))
     named = {m.get("name") for m in members}
     absent = [p.name for p in s.peers if p.name != s.this.name and p.name not in named]
     if absent and all(named):
