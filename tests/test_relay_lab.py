@@ -46,8 +46,9 @@ def test_both_sites_meet_at_the_relay_and_strangers_do_not(relay_world):
     for tls in (False, True):
         got = outsider.zenoh_session(w.lab, ADDR.RELAY_IP, 7447, tls=tls)
         assert got["session"] is False, got
-    port = w.check("robot", step="router")["router.port_open"]   # the master forwards nothing
-    assert port["status"] == "skip" and "relay" in port["summary"], port
+    port = w.check("robot", step="router")["router.port_open"]   # the master forwards nothing:
+    assert port["status"] == "pass" and "the relay's TCP 7447" in port["summary"], port  # the
+    assert port["data"]["public_ip"] == ADDR.RELAY_IP, port       # relay's port is the one open
     for host in ("robot", "laptop"):   # every step: nothing fails, `check` exits 0
         r = w.lab.rosnet(host, "check", "--config", str(w.config_path(host)), env=w.env(host),
                          timeout=90)
