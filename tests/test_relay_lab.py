@@ -63,6 +63,9 @@ def test_the_robot_behind_carrier_nat_still_meets_the_laptop_at_the_relay(relay_
     try:
         results = w.check("robot")
         assert results["relay.router"]["status"] == "pass", explain(results)
+        nat = w.check("robot", step="isp")["isp.cgnat"]     # seen, and no problem here:
+        assert nat["status"] == "pass" and nat["data"]["cgnat"], nat   # the relay carries it
+        assert "carrier-grade NAT" in nat["summary"] and "relay" in nat["summary"], nat
         listener = w.node("laptop", "listener", name="relay_listener")
         talker = w.node("robot", "talker", name="relay_talker")
         assert w.lab.wait_output(listener, r"heard: hello from turtlebot \d+", timeout=40), \

@@ -83,3 +83,17 @@ async def test_the_set_up_screen_asks_for_a_relay_under_ros2(tmp_path):
         await pilot.pause()
         card = str(app.screen.query_one("#router-card").render())
         assert "The relay: what it needs" in card and "TCP 7447" in card
+
+
+def test_the_isp_step_under_a_relay_asks_no_public_ip_of_the_master():
+    """The ISP step's configuration told a relayed master its connection must accept TCP 7447
+    and needs a public IP; under the relay nothing reaches any site."""
+    from rosnet_tui.core.wizard.steps import configure_isp_ros2
+
+    s = ros2_master(security="mtls")
+    plain = configure_isp_ros2(s)
+    assert "needs a public IP" in plain and "use a relay" in plain
+    s.relay = RelaySettings(host="relay.example.org")
+    text = " ".join(configure_isp_ros2(s).split())
+    assert "needs a public IP" not in text and "no port forwarding and no public IP" in text
+    assert "Only the relay needs a public address" in text
