@@ -21,7 +21,7 @@ from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import ssh_peers
 from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, round_public_ip
-from rosnet_tui.core.checks.relay import relay_port_open
+from rosnet_tui.core.checks.probes.relay_port import relay_port_open
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.net.blocking import run_blocking
