@@ -156,10 +156,40 @@ def row2_full(lab: Any, opts: Options, state: Path) -> RowResult:
         bad = sorted({k for r in master_runs for k, v in r["statuses"].items() if v != "pass"})
         seat.note += f"; not all good on the master: {bad}"
     tls, tls_details = _row2_tls(lab, opts, state)
-    res.lines = [ln, seat, *tls]
+    relay, relay_details = _row2_relay(lab, opts, state, tls_details["ros2_mtls_runs"])
+    res.lines = [ln, seat, *tls, relay]
     res.details = {"app_runs": app_runs, "base_runs": base_runs, "master_runs": master_runs,
-                   **tls_details}
+                   **tls_details, **relay_details}
     return res
+
+
+def _row2_relay(lab: Any, opts: Options, state: Path, direct: list[dict[str, Any]]
+                ) -> tuple[Line, dict[str, Any]]:
+    """ROS 2 through the relay (issue 30, tests/lab/relay.py): the member's full verification
+    when both sites meet at the relay against the direct, forwarded case (*direct*: the same
+    seat's runs with mutual TLS); at most 1.5x."""
+    from tests.lab.relay import RelayWorld
+
+    runs: list[dict[str, Any]] = []
+    with RelayWorld(lab) as w:
+        for _ in range(opts.reps):
+            runs.append(rosnet_check(lab, "laptop", state / "relay", config=w.config_path("laptop"),
+                                     env=w.env("laptop")))
+    line = Line(2, "Full verification from a member through the relay, ROS 2 (wall time)", "s",
+                [r["wall_s"] for r in runs], [r["wall_s"] for r in direct],
+                baseline="the same seat, the master's port forwarded (no relay)", goal="<= 1.5x")
+    goal_ratio(line, 1.5)
+    bad = sorted({k for r in runs for k, v in r["statuses"].items() if v not in ("pass", "skip")})
+    run = _median_run(runs) if runs else None
+    line.note = (f"all steps from the laptop (a member) with both routers dialling the relay "
+                 f"(mutual TLS; no Zenoh port forwarded): {len(runs[0]['statuses']) if runs else 0}"
+                 f" checks; every check passing: {'yes' if not bad else 'NO'}"
+                 + (f"; slowest check {run['slowest_check']} {run['slowest_check_s']:.2f} s"
+                    if run else "") + f"; {_waits_note(runs)}")
+    if bad:
+        line.status = "error"
+        line.note += f"; not passing: {bad}"
+    return line, {"ros2_relay_runs": runs}
 
 
 def _waits_note(runs: list[dict[str, Any]]) -> str:

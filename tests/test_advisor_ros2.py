@@ -256,3 +256,19 @@ def test_a_fresh_master_gets_advice_for_every_failed_check():
     advice = advice_by_check(fs)
     assert [f.rule for f in advice["ros2.graph"]] == ["ros2.router.not_running"]
     assert "Nothing listens on TCP 7447 on turtlebot" in advice["ros2.graph"][0].meaning
+
+
+def test_a_master_behind_carrier_nat_is_led_to_a_relay_by_its_commands():
+    """Without a relay, the master's carrier NAT led with "make another component the master"
+    (nothing here says another site can forward) and then hand-written Zenoh config for a VPS;
+    now the relay comes first, by the commands that set it up, and the other master is offered
+    on the condition that its own ISP step passes."""
+    cg = r("isp.cgnat", "warn", {"cgnat": True, "double_nat": False, "hop": "100.64.0.1",
+                                 "method": "traceroute"}, "isp")
+    f = next(f for f in advise([cg], master()) if f.rule == "ros2.cgnat")
+    first = f.actions[0]
+    for cmd in ("`rosnet-tui relay apply --yes`", "`rosnet-tui relay serve`",
+                "`rosnet-tui relay tunnel`", "`rosnet-tui ros apply --yes`"):
+        assert cmd in first, first
+    assert "connect/endpoints" not in " ".join(f.actions)
+    assert "its own ISP step passes" in f.actions[1]

@@ -436,3 +436,38 @@ def test_commands_hosts_prints_to_run_next_name_the_same_files(box):
     assert argv[argv.index("--config") + 1] == str(box.cfg)
     done = run(box, *argv[1:], "--yes", "--no-checks")
     assert done.returncode == 0 and b"rosnet-tui" in box.hosts.read_bytes(), done.stderr
+
+
+def test_ros_apply_takes_out_the_relay_block_once_the_relay_is_gone(box):
+    """[relay] (or the peers' tunnels) removed from the settings: `ros apply` took the old
+    ~/.ssh/config block out of nothing, so `ssh sami` kept jumping through a relay no longer
+    there. Now the preview shows it going, the user's lines stay byte for byte, and undo puts
+    it back."""
+    from rosnet_tui.core.config.settings_model import RelaySettings
+    from rosnet_tui.core.saved.settings import render_settings
+
+    mine = b"Host *\r\n    ServerAliveInterval 30\nIdentityFile ~/.ssh/other\n"
+    cfg = box.home / ".ssh" / "config"
+    cfg.parent.mkdir(mode=0o700)
+    cfg.write_bytes(mine)
+    s = ros2_master(security="mtls")
+    s.relay = RelaySettings(host="relay", ssh_user="jump", tunnels={"sami": 2202})
+    box.cfg.write_text(render_settings(s))
+    done = run(box, "ros", "apply", "--yes", "--no-checks")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert cfg.read_bytes().startswith(b"# BEGIN rosnet-tui") and cfg.read_bytes().endswith(mine)
+    for gone in (RelaySettings(host="relay", ssh_user="jump"), RelaySettings()):
+        s.relay = gone
+        box.cfg.write_text(render_settings(s))
+        dry = run(box, "ros", "apply", "--dry-run")
+        assert dry.returncode == 0, dry.stderr
+        assert "-Host sami" in dry.stdout and "-    ProxyJump jump@relay" in dry.stdout, dry.stdout
+        assert cfg.read_bytes() != mine                     # a dry run writes nothing
+    done = run(box, "ros", "apply", "--yes", "--no-checks")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert cfg.read_bytes() == mine
+    again = run(box, "ros", "apply", "--dry-run")             # nothing left to take out
+    assert "Host sami" not in again.stdout
+    undone = run(box, "undo", "--yes")
+    assert undone.returncode == 0, undone.stdout + undone.stderr
+    assert b"Host sami" in cfg.read_bytes() and cfg.read_bytes().endswith(mine)

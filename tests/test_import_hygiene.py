@@ -147,6 +147,7 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/core/ssh/tunnel_probe.py", "paramiko"): "start-up cost: paramiko kept off the start-up path",
     ("rosnet_tui/core/files/undo_journal.py", "shutil"): "start-up cost: stdlib module loaded when used",
     ("rosnet_tui/core/peer/zenohproto.py", "zenoh"): "start-up cost: zenoh kept off the start-up path",
+    ("rosnet_tui/core/peer/tunnelproto.py", "paramiko"): "start-up cost: paramiko kept off the peer agent's start (it loads this every ROS 2 round)",
     ("rosnet_tui/core/ros/relay.py", "zenoh"): "start-up cost: zenoh kept off the start-up path",
     ("rosnet_tui/cli/relay.py", "rosnet_tui.core.ros"): "start-up cost: a subcommand's core is loaded when it runs, not for --help",
     ("rosnet_tui/ui/app.py", "textual.filter"): "start-up cost: textual kept off the start-up path",

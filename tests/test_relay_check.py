@@ -133,3 +133,40 @@ def test_a_stopped_relay_fails_within_the_timeout_and_is_named_first(fleet):
                    for f in findings)
     nat = next(f for f in findings if f.rule == "ros2.cgnat")
     assert nat.severity == "info" and "relay" in nat.meaning
+
+
+def test_router_port_open_under_a_relay_tests_the_relay_s_port(fleet):
+    """Under a relay no modem forwards anything (the master's neither): router.port_open was
+    skipped, so a relay with its port shut in its provider's firewall went untested in the
+    Router step. It now tests the relay's zenoh_port by name from here, master or member."""
+    for s in (fleet.settings, ros2_master(security="mtls")):
+        s.relay = RelaySettings(host="localhost", zenoh_port=fleet.port)
+        res = run(ctx_of(fleet.tmp, s), "router.port_open")
+        assert res.status is Status.PASS, (res.summary, res.evidence)
+        assert res.data["zenoh_port_open"] is True and res.data["public_ip"] == "127.0.0.1"
+        assert f"the relay's TCP {fleet.port} (localhost" in res.summary
+        assert "no modem of the fleet forwards anything" in res.summary
+    fleet.proc.send_signal(signal.SIGTERM)
+    assert fleet.proc.wait(10) == 0
+    res = run(ctx_of(fleet.tmp, fleet.settings, 1.0), "router.port_open")
+    assert res.status is Status.FAIL and res.data["zenoh_port_open"] is False, res.summary
+    assert "relay serve" in res.summary
+    relay_res = run(ctx_of(fleet.tmp, fleet.settings, 1.0), "relay.router")
+    first = advise([res, relay_res], fleet.settings)[0]
+    assert first.rule == "relay.router.down" and "router.port_open" in first.check_ids
+
+
+def test_router_upnp_does_not_call_a_relayed_master_a_member(tmp_path):
+    """Under a relay the master's modem forwards nothing either: router.upnp's skip said "turtlebot
+    is a ROS 2 member" of the master."""
+    s = ros2_master(security="mtls")
+    s.relay = RelaySettings(host="relay")
+    ctx = ctx_of(tmp_path, s)
+    ctx.upnp = True                  # skipped before any modem is asked
+    res = run(ctx, "router.upnp")
+    assert res.status is Status.SKIP and "member" not in res.summary, res.summary
+    assert "under the relay every router connects out to relay, turtlebot's too" in res.summary
+    ctx = ctx_of(tmp_path, ros2_member())       # a member without a relay: as before
+    ctx.upnp = True
+    plain = run(ctx, "router.upnp")
+    assert plain.status is Status.SKIP and "sami is a ROS 2 member" in plain.summary

@@ -46,8 +46,9 @@ def test_both_sites_meet_at_the_relay_and_strangers_do_not(relay_world):
     for tls in (False, True):
         got = outsider.zenoh_session(w.lab, ADDR.RELAY_IP, 7447, tls=tls)
         assert got["session"] is False, got
-    port = w.check("robot", step="router")["router.port_open"]   # the master forwards nothing
-    assert port["status"] == "skip" and "relay" in port["summary"], port
+    port = w.check("robot", step="router")["router.port_open"]   # the master forwards nothing:
+    assert port["status"] == "pass" and "the relay's TCP 7447" in port["summary"], port  # the
+    assert port["data"]["public_ip"] == ADDR.RELAY_IP, port       # relay's port is the one open
     for host in ("robot", "laptop"):   # every step: nothing fails, `check` exits 0
         r = w.lab.rosnet(host, "check", "--config", str(w.config_path(host)), env=w.env(host),
                          timeout=90)
@@ -62,6 +63,9 @@ def test_the_robot_behind_carrier_nat_still_meets_the_laptop_at_the_relay(relay_
     try:
         results = w.check("robot")
         assert results["relay.router"]["status"] == "pass", explain(results)
+        nat = w.check("robot", step="isp")["isp.cgnat"]     # seen, and no problem here:
+        assert nat["status"] == "pass" and nat["data"]["cgnat"], nat   # the relay carries it
+        assert "carrier-grade NAT" in nat["summary"] and "relay" in nat["summary"], nat
         listener = w.node("laptop", "listener", name="relay_listener")
         talker = w.node("robot", "talker", name="relay_talker")
         assert w.lab.wait_output(listener, r"heard: hello from turtlebot \d+", timeout=40), \

@@ -12,14 +12,16 @@ import os
 import shutil
 import socket
 import subprocess
+import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import psutil
 import pytest
 
+from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
 from rosnet_tui.core.checks.linux import check_ssh
 from rosnet_tui.core.checks.runner import RunOptions, make_context, prestart_ssh
@@ -409,3 +411,103 @@ async def test_a_tunnel_that_is_down_says_so(fleet):
                             {key_blob(fleet.robot.host_pub)}, 3.0)
     assert not st.up and st.failure == "down"
     fleet.start_tunnel()
+
+
+# --------------------------------------------------------------------------- the peer's side
+def readme_like_install(home: Path) -> None:
+    """rosnet-tui as pipx lays it out in *home*: a virtual environment whose Python has this
+    one's packages (paramiko), its launcher in ~/.local/bin (the peer agent's install finder)."""
+    v = home / ".local/share/pipx/venvs/rosnet-tui"
+    v.parent.mkdir(parents=True, exist_ok=True)
+    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", "--without-pip",
+                    str(v)], check=True, timeout=60)
+    (v / "bin" / "rosnet-tui").write_text(f"#!{v}/bin/python\nimport sys\n")
+    (v / "bin" / "rosnet-tui").chmod(0o755)
+    (home / ".local/bin").mkdir(parents=True, exist_ok=True)
+    (home / ".local/bin/rosnet-tui").symlink_to(v / "bin" / "rosnet-tui")
+
+
+@dataclass
+class PeerSide:
+    sshd: Sshd               # the peer (sami): its sshd, where the check runs its side
+    home: Path               # the peer user's home there: its keys, its known_hosts
+    known_hosts: Path        # ours: the relay, the component and the peer
+
+    def trust_relay(self, fleet: Fleet, yes: bool = True) -> None:
+        line = f"[localhost]:{fleet.relay.port} {fleet.relay.host_pub.rsplit(' ', 1)[0]}\n"
+        (self.home / ".ssh" / "known_hosts").write_text(line if yes else "")
+
+
+@pytest.fixture(scope="module")
+def peer_side(fleet, tmp_path_factory):
+    root = tmp_path_factory.mktemp("peer")
+    home = root / "home"
+    (home / ".ssh").mkdir(parents=True, mode=0o700)
+    readme_like_install(home)
+    pub = keygen(home / ".ssh" / "id_ed25519")
+    sshd = Sshd(root / "sshd", extra_config=f"SetEnv HOME={home}\n")
+    sshd.authorized.write_text((fleet.dot_ssh / "id_ed25519.pub").read_text())
+    with fleet.relay.authorized.open("a") as f:   # the peer's key may open the tunnel's port
+        f.write(f'restrict,port-forwarding,permitopen="127.0.0.1:{fleet.tunnel_port}" {pub}\n')
+    known = root / "known_hosts"
+    fleet.known_hosts(known)
+    with known.open("a") as f:
+        f.write(f"[localhost]:{sshd.port} {sshd.host_pub.rsplit(' ', 1)[0]}\n")
+    side = PeerSide(sshd, home, known)
+    side.trust_relay(fleet)
+    sshd.start()
+    try:
+        yield side
+    finally:
+        sshd.stop()
+
+
+def peer_ctx(fleet, side: PeerSide, tmp_path: Path, timeout: float = 3.0) -> CheckContext:
+    ctx = tunnel_ctx(fleet, tmp_path, fleet.robot.host_pub, timeout)
+    ctx.settings.peers = [Peer(name="localhost", ssh_user=fleet.user, ssh_port=side.sshd.port)]
+    ctx.ssh_options = replace(ctx.ssh_options, known_hosts_files=(side.known_hosts,))
+    return ctx
+
+
+async def test_relay_tunnel_is_asked_from_the_peer_s_side_too(fleet, peer_side, tmp_path):
+    """The peer logs in to the relay with its own key and its own known_hosts, and finds this
+    machine's sshd at the tunnel's port: a pass naming it. The relay's key unknown to the peer:
+    the tunnel is up from here, and still a failure, since that peer cannot SSH here."""
+    load_builtin_checks()
+    assert wait_banner(fleet.tunnel_port, 10), fleet.said
+    res = await run_check(REGISTRY["relay.tunnel"], peer_ctx(fleet, peer_side, tmp_path))
+    assert res.status == Status.PASS, (res.summary, res.evidence)
+    seen = res.data["peers"]["localhost"]
+    assert seen["up"] is True and seen["fingerprint"] == fleet.robot.fingerprint, seen
+    assert "localhost reaches it through the relay" in res.summary
+    peer_side.trust_relay(fleet, yes=False)
+    try:
+        res = await run_check(REGISTRY["relay.tunnel"], peer_ctx(fleet, peer_side,
+                                                                  tmp_path / "b"))
+    finally:
+        peer_side.trust_relay(fleet)
+    assert res.status == Status.FAIL and res.data["up"] is True, res.summary
+    assert res.data["failure"] == "peer" and res.data["peers"]["localhost"]["failure"] == "relay"
+    assert "localhost cannot reach this machine through it" in res.summary
+    results = {"relay.tunnel": res}
+    f = next(f for f in advise(results, res_settings(fleet), strict=True)
+             if f.rule == "relay.tunnel.down")
+    assert "On localhost: run `ssh" in f.actions[0] and "permitopen" in f.actions[0]
+
+
+async def test_a_peer_s_side_that_cannot_run_is_a_warning_not_a_pass(fleet, peer_side, tmp_path):
+    """No SSH to the peer (its host key unknown here): the tunnel is up from here, but nobody
+    looked from a peer's side, within the check's budget."""
+    load_builtin_checks()
+    ctx = peer_ctx(fleet, peer_side, tmp_path, timeout=1.5)
+    ctx.ssh_options = replace(ctx.ssh_options, known_hosts_files=(fleet.dot_ssh / "known_hosts",))
+    t0 = time.monotonic()
+    res = await run_check(REGISTRY["relay.tunnel"], ctx)
+    assert time.monotonic() - t0 < 1.5 * 2.0 + 0.5
+    assert res.status == Status.WARN and res.data["peers"]["localhost"]["up"] is None, res.summary
+    assert "no peer could test it from its side" in res.summary
+
+
+def res_settings(fleet) -> Settings:
+    return Settings(this=ThisComponent(name=NAME), ros=RosSettings(version=2),
+                    relay=fleet.relay_settings())

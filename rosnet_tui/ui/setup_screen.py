@@ -161,6 +161,8 @@ class SetupScreen(Screen[bool]):
                 yield OrderedInput(value, placeholder=placeholder, id=f.id, compact=True,
                                    type="integer" if f.kind == "number" else "text",
                                    validators=[FieldValidator(f, detected)])
+        if f.hint:
+            yield Label(f.hint, id=f"{f.id}-hint", classes="field-hint")
         if f.detected:
             yield Label(self._local_ip_hint(), id=f"{f.id}-error", classes="field-hint")
         elif f.kind != "choice":
@@ -286,7 +288,11 @@ class SetupScreen(Screen[bool]):
             if f.box:
                 shown = form.shown(f, choices)
                 self.query_one(f"#{f.box}").display = shown
-                self.query_one(f"#{f.id}-error").display = shown
+                for line in self.query(f"#{f.id}-error, #{f.id}-hint"):
+                    if shown:     # the style sheet's say: an error line shows only with one
+                        line.styles.clear_rule("display")
+                    else:
+                        line.display = False
 
     @on(Input.Changed)
     def _input_changed(self, event: Input.Changed) -> None:

@@ -14,8 +14,11 @@ from typing import Any
 
 from rosnet_tui.core.config.settings_model import (
     CheckSettings,
+    FirewallSettings,
     Peer,
     ProbeSettings,
+    RelaySettings,
+    RosbridgeSettings,
     RosSettings,
     Settings,
     SyncSettings,
@@ -57,10 +60,14 @@ def settings_to_json(s: Settings) -> dict[str, Any]:
 
 
 def settings_from_json(d: Mapping[str, Any]) -> Settings:
+    """The settings of *d*; tables a case recorded before they existed ([rosbridge],
+    [firewall], [relay]) are at their defaults, as they were then."""
     return Settings(this=ThisComponent(**d["this"]), peers=[Peer(**p) for p in d["peers"]],
                     ros=RosSettings(**d["ros"]), probe=ProbeSettings(**d["probe"]),
                     checks=CheckSettings(**d["checks"]), sync=SyncSettings(**d["sync"]),
-                    has_sync=d["has_sync"])
+                    rosbridge=RosbridgeSettings(**d.get("rosbridge", {})),
+                    firewall=FirewallSettings(**d.get("firewall", {})),
+                    relay=RelaySettings(**d.get("relay", {})), has_sync=d["has_sync"])
 
 
 def dumps(obj: Any) -> str:

@@ -22,8 +22,8 @@ ACTIONS = {
 }
 
 
-@rule("relay.router.down", "router", ("relay.router", "ros2.router", "ros2.graph",
-                                      "ros2.pubsub_out", "ros2.pubsub_in"),
+@rule("relay.router.down", "router", ("relay.router", "router.port_open", "ros2.router",
+                                      "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in"),
       "the relay's Zenoh router does not answer (ROS 2 under a relay)",
       "Under a relay every component's router, the master's included, links only to the relay's "
       "router: while it does not answer, no node on one site sees or hears the other.",
@@ -43,8 +43,8 @@ def _relay_down(ev: Evidence) -> list[Hit]:
              "not_zenoh": "it took no session with this component's certificate"
                           + (f" (TLS: {handshake})" if handshake else "")}.get(failure, failure)
     acts = [a.format(port=ev.s.relay.zenoh_port) for a in ACTIONS.get(failure, [])]
-    ids = ["relay.router", *[c for c in ("ros2.router", "ros2.graph", "ros2.pubsub_out",
-                                         "ros2.pubsub_in") if ev.is_fail(c)]]
+    ids = ["relay.router", *[c for c in ("router.port_open", "ros2.router", "ros2.graph",
+                                         "ros2.pubsub_out", "ros2.pubsub_in") if ev.is_fail(c)]]
     return [Hit(f"The relay {ev.s.relay.host} ({d.get('endpoint')}) does not answer: {words}. "
                 "Every ROS 2 link between the sites goes through it.",
                 [*acts, "Then re-run the checks."], check_ids=ids,

@@ -26,6 +26,8 @@ def _down(ev: Evidence) -> list[Hit]:
         return []
     d = ev.data("relay.tunnel")
     relay, port, why = d.get("relay") or "the relay", d.get("port"), d.get("failure")
+    if why == "peer":
+        return _peers_turned_away(ev, d, relay, port)
     first = {
         "down": f"On {ev.me}: run `rosnet-tui relay tunnel` (it says on each try why the tunnel "
                 "drops), or `rosnet-tui relay tunnel --install-service` to keep it as a service.",
@@ -43,6 +45,28 @@ def _down(ev: Evidence) -> list[Hit]:
                 f"can SSH to {ev.me} through the relay.",
                 [first, "Then re-run the Linux step here, and on a peer (its `linux.ssh`)."],
                 evidence=[f"{CHECK}: {d.get('detail') or why}"])]
+
+
+def _peers_turned_away(ev: Evidence, d: Mapping, relay: str, port: object) -> list[Hit]:
+    """The tunnel is up, but a peer gets nothing of this machine through it (from its side)."""
+    bad = {n: st for n, st in (d.get("peers") or {}).items()
+           if isinstance(st, Mapping) and st.get("up") is False}
+    name, st = next(iter(bad.items()), ("a peer", {}))
+    login = f"{ev.s.relay.ssh_user}@{relay}" if ev.s.relay.ssh_user else relay
+    first = {
+        "relay": f"On {name}: run `ssh {login}` once, compare the relay's host key and accept "
+                 f"it; in the relay account's authorized_keys, {name}'s key needs "
+                 f"permitopen=\"127.0.0.1:{port}\" (docs/SECURITY.md).",
+        "other_host": f"On {relay}: see who listens at 127.0.0.1:{port} (`sudo ss -tlnp`); "
+                      f"{name} may have another port for {ev.me} under [relay.tunnels]: the "
+                      "settings must be the same on every component.",
+    }.get(str(st.get("failure")), f"On {name}: `rosnet-tui check` there (its linux.ssh to "
+                                  f"{ev.me}) says what the way through {relay} lacks.")
+    return [Hit(f"{ev.me}'s tunnel on {relay} is up, but {', '.join(bad) or 'a peer'} cannot "
+                f"reach {ev.me}'s sshd through it: pairing, sync and the peers' checks fail "
+                "from there.",
+                [first, "Then re-run the Linux step here."],
+                evidence=[f"relay.tunnel from {n}: {x.get('detail')}" for n, x in bad.items()])]
 
 
 @rule("linux.ssh.relay", "linux", ("linux.ssh",),

@@ -305,14 +305,15 @@ def _cgnat(ev: Evidence) -> list[Hit]:
     return [Hit(f"{ev.me}, the master, is behind carrier-grade NAT: no forward on its modem can "
                 f"be reached from the internet, so the members' routers cannot link to its router "
                 f"on TCP {_port(ev)}.",
-                ["Under ROS 2 the 'master' is only the hub the routers link to, and any component "
-                 "can be it: if another component has a public address (a home or office line), "
-                 "make it the master (role and ros.master in the settings of every component).",
-                 "If every site is behind carrier NAT: rent a small server with a public address "
-                 "(a VPS), install rmw_zenoh (or zenohd) there, listen on tcp/0.0.0.0:7447 with "
-                 "TCP 7447 open in its firewall, and give every component's router "
-                 "`connect/endpoints: [\"tcp/<server name>:7447\"]` (the server becomes the hub: "
-                 "name it as the master in each component's hosts file).",
+                ["Use a relay you own: a small server with a public address (a VPS) with SSH "
+                 f"and TCP {_port(ev)} open. Give every component the same [relay] (set-up: "
+                 "Relay), then: on the master `rosnet-tui ros apply --yes` and `rosnet-tui "
+                 "relay apply --yes`; on the relay `rosnet-tui relay serve`; on each component "
+                 "`rosnet-tui relay tunnel`; on each member `rosnet-tui ros apply --yes` "
+                 "(README: Robots on a mobile line).",
+                 "Or, under ROS 2 the 'master' is only the hub: make another component the "
+                 "master if its own ISP step passes there (no carrier NAT) and its modem can "
+                 "forward (role and ros.master in the settings of every component).",
                  "Or ask the carrier for a public IP on this line (its networking department)."],
                 check_ids=["isp.cgnat", *[c for c in ("ros2.router",) if ev.is_fail(c)]],
                 evidence=[f"isp.cgnat: cgnat=True, hop {d.get('hop')}, wan {d.get('wan_ip')}"])]

@@ -74,3 +74,4 @@ async def check_relay_router(ctx: CheckContext) -> Outcome:
                                     f"{tls_handshake.PROBLEM_WORDS['expiring']}", ev, data)
     return Outcome(Status.PASS, f"the relay's Zenoh router{ver} answers at {endpoint} "
                                 f"({addrs[0]}) and took this component's certificate", ev, data)
+

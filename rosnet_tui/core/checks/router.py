@@ -21,6 +21,7 @@ from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import ssh_peers
 from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, round_public_ip
+from rosnet_tui.core.checks.probes.relay_port import relay_port_open
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.net.blocking import run_blocking
@@ -559,12 +560,12 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
     zport, test_port = s.ros.zenoh_port, s.probe.port
     data: dict[str, Any] = {"ports": [], "test_port": test_port, "public_ip": None,
                             "zenoh_port": zport, "zenoh_port_open": None, "zenoh_listener": "none"}
-    if s.relayed or not s.is_master:
-        who = (f"every router connects out to the relay ({s.relay.host})" if s.relayed
-               else f"{s.this.name or 'this component'} is a ROS 2 member: its router connects "
-               "out to the master's")
-        return Outcome(Status.SKIP, f"skipped: {who}, so its modem needs no forwarding at all",
-                       [], data)
+    if s.relayed:       # the relay's port is the one to test from outside
+        return await relay_port_open(ctx, budget(ctx, "router.port_open") * 0.9)
+    if not s.is_master:
+        return Outcome(Status.SKIP, f"skipped: {s.this.name or 'this component'} is a ROS 2 "
+                       "member: its router connects out to the master's, so its modem needs no "
+                       "forwarding at all", [], data)
     total = budget(ctx, "router.port_open") * 0.9
     loop = asyncio.get_running_loop()
     start = loop.time()

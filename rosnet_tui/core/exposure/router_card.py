@@ -51,6 +51,7 @@ class RouterCard:
     profile: str = "remote"   # a LAN profile (office, portable) forwards nothing
     missing: list[str] = field(default_factory=list)    # what we could not find, and how to
     verify: list[str] = field(default_factory=list)
+    relay: list[str] = field(default_factory=list)     # under a relay: what the relay needs
 
 
 def _detect(settings: Settings) -> LocalNet:
@@ -91,6 +92,22 @@ def _connection_notes(conn: str, ip: str, mac: str, page: str) -> list[str]:
     ]
 
 
+def relay_needs(settings: Settings) -> list[str]:
+    """What the relay needs ([relay] host set), in the card's words: empty without a relay."""
+    r = settings.relay
+    if not settings.relayed:
+        return []
+    return [f"Every component's router dials the relay {r.host}; nothing is forwarded for ROS "
+            "on any modem. The relay needs:",
+            f"- a public address (a small VPS), its name {r.host} resolving to it from every "
+            "component (DNS, or each one's hosts file);",
+            f"- TCP {r.zenoh_port} open to the internet (its provider's firewall): its Zenoh "
+            "router, mutual TLS, fleet certificates only;",
+            f"- SSH open (TCP {r.ssh_port}, keys only): `relay apply` sets it up, and the "
+            "tunnels of [relay.tunnels] end there;",
+            "- `rosnet-tui relay serve` running there (its systemd unit)."]
+
+
 def _exposure(settings: Settings) -> list[str]:
     """What the forwards expose, and to whom, for the settings in force: ROS 2 with or without
     mutual TLS, master or member; ROS 1 with or without the peers-only firewall."""
@@ -100,6 +117,10 @@ def _exposure(settings: Settings) -> list[str]:
     bridge = ([f"- rosbridge (TCP {bp}) takes any client that reaches it, like an unprotected "
                "master: forward it only while web clients need it."]
               if forward_needed(settings) else [])
+    if settings.relayed:
+        return [f"Under the relay: this component's router dials out to {settings.relay.host} "
+                "and listens on no address of the internet, so nothing of ROS is exposed on "
+                "this modem.", *bridge, ssh]
     if settings.ros2:
         port = settings.ros.zenoh_port
         if not settings.is_master:
@@ -196,10 +217,15 @@ def build_router_card(settings: Settings, net: LocalNet | None = None) -> Router
         dmz_host="" if settings.ros2 else to, reservation_ip=to, reservation_mac=net.mac or "(MAC, see below)",
         connection_notes=_connection_notes(t.connection, ip, net.mac, page),
         exposure_warning=_exposure(settings), warnings=warnings, missing=missing,
-        verify=_verify(settings))
+        verify=_verify(settings), relay=relay_needs(settings))
 
 
 def _verify(settings: Settings) -> list[str]:
+    if settings.relayed:
+        r = settings.relay
+        return [f"Under the relay nothing is forwarded here. The Router step tests the relay's "
+                f"TCP {r.zenoh_port} from outside ({r.host}); relay.router (ROS step) opens "
+                "a session there with this component's certificate."]
     if settings.ros2 and not settings.is_master:
         return ["ROS 2 member: nothing to forward here (no DMZ either); its router connects out "
                 "to the master's. The port test is skipped on a member."]
@@ -238,6 +264,10 @@ def _render_text(card: RouterCard, width: int) -> str:
     for w in card.warnings:
         out.append("")
         out += _wrap("WARNING: " + w, width)
+    if card.relay:
+        out += ["", "The relay: what it needs"]
+        for n in card.relay:
+            out += _wrap(n, width, "   ")
     if not card.forwards:
         out += ["", f"1. Port forwarding: none on the {card.profile} LAN"]
         out += _wrap("Nothing to forward: the components reach each other on the LAN.", width,
@@ -293,6 +323,10 @@ def _render_markdown(card: RouterCard, width: int) -> str:
     for w in card.warnings:
         out.append("")
         out += _wrap(f"**Warning:** {w}", width)
+    if card.relay:
+        out += ["", "### The relay: what it needs", ""]
+        for n in card.relay:
+            out += _wrap(n, width)
     if card.forwards:
         out += ["", "### 1. Port forwarding", "",
                 "| Proto | Outside ports | To local IP | Ports | Need |", "|---|---|---|---|---|"]

@@ -177,6 +177,17 @@ def compose_block(text: str | None, body: Sequence[str], *, position: str = "end
     return "".join(lines + block)
 
 
+def remove_block(text: str | None) -> str:
+    """*text* without our block (its marker lines and what is between them); every other line
+    as it was, byte for byte. Unchanged when there is no block."""
+    text = text or ""
+    lines = split_lines(text)
+    span = find_block(lines)
+    if span is None:
+        return text
+    return "".join(lines[:span[0]] + lines[span[1] + 1:])
+
+
 @dataclass(frozen=True)
 class LineChange:
     """A line outside our block that we offer to change (comment out), and why."""

@@ -50,12 +50,13 @@ def jump_hosts_block(s: Settings) -> list[str]:
 
 def preview_ssh_config(s: Settings, path: Path | None = None, *,
                        state_dir: Path | None = None) -> mf.Preview | None:
-    """The preview of our block in *path* (default ``~/.ssh/config``); None when the settings
-    give no component to jump to (nothing is written then)."""
+    """The preview of our block in *path* (default ``~/.ssh/config``). When the settings give
+    no component to jump to ([relay] or the tunnels removed), the preview takes out a block an
+    earlier apply wrote, every other line kept; None when there is none (nothing to write)."""
     body = jump_hosts_block(s)
-    if not body:
-        return None
     path = Path(path) if path is not None else default_ssh_config_path()
+    if not body:
+        return _preview_removal(path, state_dir)
     old = mw.read_bytes(path, state_dir=state_dir)
     if old is None and not path.parent.is_dir():
         raise mt.ManagedFileError(f"{path.parent} does not exist: make it first "
@@ -63,6 +64,19 @@ def preview_ssh_config(s: Settings, path: Path | None = None, *,
     return mf.preview_block(path, body, position="top",
                             label=f"SSH through the relay in {path.name}", new_mode=0o600,
                             current=old, use_current=True)
+
+
+def _preview_removal(path: Path, state_dir: Path | None) -> mf.Preview | None:
+    """Our stale block taken out of *path* (None: the file has none, or is not there)."""
+    if not path.parent.is_dir():
+        return None
+    old = mw.read_bytes(path, state_dir=state_dir)
+    text = mt.decode(old) if old is not None else None
+    if text is None or mt.extract_block(text) is None:
+        return None
+    return mf.Preview(path, old, mt.encode(mt.remove_block(text)),
+                      f"no SSH through the relay any more: its block out of {path.name}", (),
+                      0o600)
 
 
 def ssh_config_previews(s: Settings, path: Path | None = None, *,

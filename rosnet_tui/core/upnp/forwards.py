@@ -42,7 +42,7 @@ class Wanted:
 class Needs:
     forwards: list[Wanted] = field(default_factory=list)
     refusal: str = ""         # why nothing can be mapped for these settings (ROS 1: a range)
-    note: str = ""            # why nothing needs to be mapped (a ROS 2 member)
+    note: str = ""            # why nothing needs to be mapped (a ROS 2 member, a relay)
 
 
 def range_refusal(settings: Settings, first: int, last: int) -> str:
@@ -64,8 +64,11 @@ def needs(settings: Settings, *, lease_s: int = LEASE_S, test_port: bool = True)
             return Needs(refusal=out.refusal)
         out.forwards.append(Wanted(p.protocol, p.first, lease_s, p.why))
     if not out.forwards:
-        out.note = (f"{settings.this.name or 'this component'} is a ROS 2 member: its router "
-                    "connects out to the master's, so its modem needs no forward")
+        who = settings.this.name or "this component"
+        out.note = (f"under the relay every router connects out to {settings.relay.host}, "
+                    f"{who}'s too, so its modem needs no forward" if settings.relayed else
+                    f"{who} is a ROS 2 member: its router connects out to the master's, so "
+                    "its modem needs no forward")
         return out
     tp = settings.probe.port
     if test_port and all(w.port != tp for w in out.forwards):

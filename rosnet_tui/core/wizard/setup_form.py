@@ -49,6 +49,7 @@ class FormField:
     # Blank means "detected at each run" (this machine's address): required only when nothing
     # could be detected, and the detected value is the placeholder.
     detected: bool = False
+    hint: str = ""           # a line under the field: when it is needed
 
     def why(self, text: str, detected: str = "") -> str | None:
         """Why *text* cannot be this field's value (None when it can)."""
@@ -98,6 +99,11 @@ FIELDS: tuple[FormField, ...] = (
               placeholder="name of the peer that runs roscore", check=S.validate_name,
               shows="member", box="master-field",
               shown_value=lambda s: s.ros.master if s.this.role == "member" else ""),
+    # Blank: no relay (its other keys, docs/SETTINGS.md, keep their defaults when it is typed).
+    FormField("relay-host", "relay.host", "Relay", "text",
+              placeholder="none, or its name: relay.example.org", check=validate_optional_name,
+              shows="ros2", box="relay-field",
+              hint="Both sites behind carrier NAT or no forwarding possible: a relay"),
     FormField("rosbridge-enabled", "rosbridge.enabled", "rosbridge", "choice",
               options=(("Off (no web clients)", False),
                        ("On: check browsers' path (rosbridge)", True)),
@@ -191,7 +197,7 @@ def settings_from_form(old: S.Settings, values: Mapping[str, Any], peers: list[S
     """The settings the form says (*values*: by field id, text stripped; choices as their
     values), and the problems keeping them from being saved ((key, why), the field's first)."""
     tables = {"this": replace(old.this), "ros": replace(old.ros), "probe": replace(old.probe),
-              "rosbridge": replace(old.rosbridge)}
+              "rosbridge": replace(old.rosbridge), "relay": replace(old.relay)}
     problems: list[tuple[str, str]] = []
     for f in FIELDS:
         if f.key == "ros.security" or not shown(f, values):
@@ -216,8 +222,11 @@ def settings_from_form(old: S.Settings, values: Mapping[str, Any], peers: list[S
         ros.security = "none"
     elif ros.security == "none" or ros.security_chosen():
         ros.security = S.default_security(ros.version)   # on: what this version does
+    relay = tables["relay"]
+    if ros.version != 2 or not relay.host:   # no relay in the form: none of its keys either
+        relay = S.RelaySettings()
     settings = replace(old, this=this, peers=peers, ros=ros, probe=tables["probe"],
-                       rosbridge=tables["rosbridge"])
+                       rosbridge=tables["rosbridge"], relay=relay)
     problems += settings.problems()
     # Blank is fine when this machine's address can be detected at each run.
     why = FIELD_BY_ID["this-local-ip"].why(this.local_ip, detected)

@@ -248,16 +248,22 @@ def configure_isp_ros2(s: Settings) -> str:
             "home": "**Home connection.** You manage the modem yourself",
             "telecom": "**Telecom (mobile hotspot or tethered phone).** Ask the carrier's "
                        "networking department (not first-line support)"}[c]
-    if s.is_master:
+    if s.relayed:
+        need = (f"Under the relay *{s.relay.host}* every router, *{_name(s)}*'s too, connects "
+                "**out** to it: this connection needs no port forwarding and no public IP of "
+                "its own; any internet access works, carrier-grade NAT included.")
+        cg = (f"Only the relay needs a public address, with TCP {s.relay.zenoh_port} and SSH "
+              "open (the Router step says what it needs).")
+    elif s.is_master:
         need = (f"*{_name(s)}* is the ROS 2 master: its Zenoh router is the hub every member "
                 f"connects to, so this connection must accept **one** incoming TCP port "
                 f"({port}) and needs a public IP. {kind}: is port forwarding allowed, and is the "
                 "public IP really yours (not shared by carrier-grade NAT, 100.64.0.0/10)?")
         cg = ("**Carrier-grade NAT on the master** makes it unreachable. Make another "
               "component with a public address the master (under ROS 2 the master is only the "
-              "hub), or, when every site is behind carrier NAT, run a Zenoh router on a small "
-              "server with a public address (a VPS) and let every component's router connect "
-              "to it.")
+              "hub), or, when every site is behind carrier NAT, use a relay: a small server "
+              "with a public address (a VPS) every component's router connects to (set-up: "
+              "Relay; README \"Robots on a mobile line\").")
     else:
         need = (f"*{_name(s)}* is a member: its router only connects **out** to the master's "
                 f"(*{_master_word(s)}*), so this connection needs no port forwarding and no "

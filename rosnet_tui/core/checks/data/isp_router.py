@@ -83,7 +83,7 @@ class PortRow(TypedDict, total=False):
     port: int               # a TCP port tested from outside
     reachable: bool | None  # open from outside (None: could not be tested)
     listener: bool          # our own listener held it during the test (True for others' services)
-    via: str                # who tested: "peer:<name>" over SSH, or "echoip" (the port checker)
+    via: str                # who tested: "peer:<name>" over SSH, "echoip" (the port checker), or "here" (the relay's port, from this component)
     answer: PortAnswer | None  # how it answered the peer (None: the port checker tells only
     #                            open or closed, or, under ROS 2, the test port was not waited
     #                            for once zenoh_port answered; see PortAnswer)
@@ -96,7 +96,7 @@ class RouterPortOpenData(TypedDict, total=False):
     public_ip: str | None   # the address tested (None: unknown)
     public_ip_ping: bool | None  # the peer's ping of public_ip was answered (None: not asked)
     # ROS 2 (the master's modem forwards TCP zenoh_port only; test_port_open is then left out):
-    zenoh_port: int         # the master's Zenoh router port
+    zenoh_port: int         # the master's Zenoh router port (under a relay: the relay's)
     zenoh_port_open: bool | None  # open from outside (None: could not be tested)
     zenoh_listener: Literal["router", "ours", "none"]  # who answered on it during the test
 

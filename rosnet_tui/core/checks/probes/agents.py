@@ -10,7 +10,7 @@ from pathlib import Path
 
 from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.config.settings_model import Peer
-from rosnet_tui.core.peer import agentproto, chatproto, rosproto, zenohproto
+from rosnet_tui.core.peer import agentproto, chatproto, rosproto, tunnelproto, zenohproto
 from rosnet_tui.core.peer.commands import (
     NO_INSTALL_EXIT,
     NO_INSTALL_REPORT,
@@ -28,13 +28,14 @@ from rosnet_tui.core.ssh.connection import SshResult
 
 # One program per peer and round runs every probe the round's checks ask of that peer (see
 # core/peer/peer_agent.py): ROS 1's on the peer's python3 without site (stdlib only), ROS 2's on the
-# interpreter of the rosnet-tui installed there (eclipse-zenoh).
+# interpreter of the rosnet-tui installed there (eclipse-zenoh; paramiko for relay.tunnel's side).
 # Both serve the Linux chats' peer side (core/peer/chatproto.py, stdlib). A peer without rosnet-tui
 # gets ROS 2's agent on its python3 (the finder's fallback): what needs the install (the Zenoh
 # probes: needs_install) answers with the finder's no_install report, as a lone command did.
 ROSPROTO_SOURCE = Path(rosproto.__file__).read_bytes()   # the ROS 1 probe program
 ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()    # the ROS 2 (Zenoh) probe program
 CHAT_SOURCE = Path(chatproto.__file__).read_bytes()      # the chats' peer side
+TUNNEL_SOURCE = Path(tunnelproto.__file__).read_bytes()  # relay.tunnel's peer side (paramiko)
 PEER_PYTHON = "python3"   # the peer's python the ROS 1 agent and the chats run with
 
 
@@ -49,7 +50,8 @@ ROS_AGENT = AgentKind(
 ZENOH_AGENT = AgentKind(
     "ros2", lambda max_s: installed_python_command(f"{max_s:.0f}", mark=zenohproto.REPORT_MARK,
                                                    fallback=True, boot=agentproto.BOOT),
-    (("zenoh", ZENOH_SOURCE, "run_program"), ("chat", CHAT_SOURCE, "main")),
+    (("zenoh", ZENOH_SOURCE, "run_program"), ("chat", CHAT_SOURCE, "main"),
+     ("tunnel", TUNNEL_SOURCE, "main")),
     (f"{zenohproto.REPORT_MARK}{NO_INSTALL_REPORT}\n", NO_INSTALL_EXIT))
 
 
