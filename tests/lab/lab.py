@@ -43,8 +43,10 @@ SSHD = "/usr/sbin/sshd"
 
 # Inside a computer's namespace: set its hostname (own UTS namespace from `unshare --uts`),
 # put its ~/.ssh where ssh and sshd look (the passwd home, /root) and its HOME in the env.
-_WRAP_SCRIPT = ('hostname "$1" && mount --bind "$2" /root/.ssh && '
-                'export HOME="$3" USER=root LOGNAME=root && shift 3 && exec "$@"')
+# A computer's own /etc/ssh too (its sshd's config and host keys), as on a real machine: what
+# rosnet-tui reads there (relay.tunnel: this machine's sshd keys) is the lab computer's.
+_WRAP_SCRIPT = ('hostname "$1" && mount --bind "$2" /root/.ssh && mount --bind "$4" /etc/ssh && '
+                'export HOME="$3" USER=root LOGNAME=root && shift 4 && exec "$@"')
 
 _HTTP_GET = """
 import json, sys, urllib.error, urllib.request
@@ -281,7 +283,7 @@ class Lab:
         if host in self.COMPUTERS or host in self.SERVERS:
             return ["ip", "netns", "exec", ns, "unshare", "--uts", "--", "/bin/sh", "-c",
                     _WRAP_SCRIPT, "rnl-wrap", self.hostname(host), str(self.home(host) / ".ssh"),
-                    str(self.home(host))]
+                    str(self.home(host)), str(self._hostdir(host) / "etc")]
         return ["ip", "netns", "exec", ns]
 
     def env(self, host: str) -> dict[str, str]:
