@@ -261,3 +261,19 @@ def test_write_refuses_a_file_changed_since_the_preview(tmp_path):
     with pytest.raises(OSError):
         relayproto.read(tmp_path / "fifo")
     assert time.monotonic() - t0 < 5
+
+
+async def test_undo_from_a_running_event_loop_says_why_and_does_not_crash():
+    """The wizard undoes from its event loop: the relay's handler must not call asyncio.run
+    there. A relay that does not answer: a refusal naming it (ManagedFileError), not a crash."""
+    from rosnet_tui.core.files.managed_text import ManagedFileError
+    from rosnet_tui.core.ros import relay_apply
+
+    change = {"kind": relay_apply.KIND, "state": "made", "host": "localhost", "user": "root",
+              "port": free_port(), "files": [{"path": "/nonexistent/x", "before": None,
+                                               "after": "0" * 64}]}
+    with pytest.raises(ManagedFileError, match="to the relay localhost"):
+        relay_apply.undo_records([change], False)
+    assert change["state"] == "made"                # nothing said undone
+    said = relay_apply.undo_records([change], True)   # forced: forgotten, said so
+    assert change["state"] == "forgotten" and "forgotten" in said[0]

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import getpass
 import json
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -260,6 +261,17 @@ async def _undo_one(change: dict, force: bool) -> str:
         for f in files))
 
 
+def _blocking(change: dict, force: bool) -> str:
+    """:func:`_undo_one` to its end, from a caller that may be in an event loop (the wizard's
+    undo): then on a thread of its own."""
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:
+        return asyncio.run(_undo_one(change, force))
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, _undo_one(change, force)).result()
+
+
 def undo_records(changes: list[dict], force: bool) -> list[str]:
     """Put the relay's files back as they were (the undo journal's handler for :data:`KIND`)."""
     said = []
@@ -267,7 +279,7 @@ def undo_records(changes: list[dict], force: bool) -> list[str]:
         if change.get("state") not in ("made", "planned"):
             continue
         try:
-            said.append(asyncio.run(_undo_one(change, force)))
+            said.append(_blocking(change, force))
         except RelayApplyError as exc:
             if not force:
                 raise ManagedFileError(f"{exc}; nothing was changed on the relay (run the undo "
