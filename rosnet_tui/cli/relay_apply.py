@@ -109,9 +109,9 @@ def run_apply(args: argparse.Namespace) -> int:
         print(f"TLS: the relay's certificate is good: kept ({plan.cert_kept}).")
     else:
         print(f"TLS ({plan.cert_why}): the relay makes its own key there "
-              f"({plan.look.get('node_key')}; it never leaves the relay), the fleet CA here "
-              f"signs its certificate for {host} ({plan.look.get('node_crt')}), with the CA's "
-              f"certificate ({plan.look.get('ca_crt')}).")
+              f"({plan.look.node_key}; it never leaves the relay), the fleet CA here "
+              f"signs its certificate for {host} ({plan.look.node_crt}), with the CA's "
+              f"certificate ({plan.look.ca_crt}).")
     for f in plan.files:
         _show(f)
     if args.dry_run:
@@ -136,7 +136,7 @@ def run_apply(args: argparse.Namespace) -> int:
             print(f"Undo (the config and unit, not the key) with: {command_line(args, 'undo')}")
     else:
         print("The relay is already set up: nothing to change.")
-    if plan.look.get("systemd"):
+    if plan.look.systemd:
         print(f"Then on the relay: systemctl daemon-reload && systemctl enable --now "
               f"{ra.UNIT_NAME}")
     else:

@@ -105,6 +105,40 @@ async def _run(opts: SshOptions | None, s: Settings, *args: str,
     return rep
 
 
+@dataclass(frozen=True)
+class RelayLook:
+    """What one look at the relay saw (relayproto's ``look``): where its files are, what runs
+    ``relay serve`` there, the text of its files (None: absent)."""
+
+    config_dir: str
+    relay_config: str
+    ca_crt: str
+    node_key: str
+    node_crt: str
+    python: str
+    package_root: str
+    user: str
+    systemd: bool
+    node_key_exists: bool
+    files: dict[str, str | None]
+    writable: dict[str, bool]
+
+    @classmethod
+    def from_report(cls, rep: dict[str, Any]) -> RelayLook:
+        try:
+            return cls(**{k: rep[k] for k in ("config_dir", "relay_config", "ca_crt", "node_key",
+                                              "node_crt", "python", "user")},
+                       package_root=str(rep.get("package_root") or ""),
+                       systemd=bool(rep.get("systemd")),
+                       node_key_exists=bool(rep.get("node_key_exists")),
+                       files={str(k): (v if isinstance(v, str) else None)
+                              for k, v in (rep.get("files") or {}).items()},
+                       writable={str(k): bool(v) for k, v in (rep.get("writable") or {}).items()})
+        except (KeyError, AttributeError, TypeError):
+            raise RelayApplyError("the relay's answer lacks what it must say (another version "
+                                  "of rosnet-tui there?)") from None
+
+
 @dataclass
 class RemoteFile:
     path: str
@@ -123,7 +157,7 @@ class RelayPlan:
     """What `relay apply` would do, from one look at the relay; nothing done yet."""
 
     host: str
-    look: dict[str, Any]
+    look: RelayLook
     cert_why: str | None          # why the relay needs a new certificate (None: its own is good)
     cert_kept: str = ""           # the good certificate's words, when kept
     files: list[RemoteFile] = field(default_factory=list)
@@ -133,12 +167,11 @@ class RelayPlan:
         return self.cert_why is not None or any(f.changed for f in self.files)
 
 
-def _cert_need(s: Settings, tls: TlsPaths, look: dict[str, Any]) -> tuple[str | None, str]:
+def _cert_need(s: Settings, tls: TlsPaths, look: RelayLook) -> tuple[str | None, str]:
     """Why the relay needs a certificate from the fleet CA now (None: the one there is good),
     and the kept one's words."""
-    files = look.get("files") or {}
-    cert, ca = files.get(look.get("node_crt")), files.get(look.get("ca_crt"))
-    if not look.get("node_key_exists") or not cert:
+    cert, ca = look.files.get(look.node_crt), look.files.get(look.ca_crt)
+    if not look.node_key_exists or not cert:
         return "it has none yet", ""
     try:
         summ = fleet_tls.cert_summary(cert.encode())
@@ -151,7 +184,7 @@ def _cert_need(s: Settings, tls: TlsPaths, look: dict[str, Any]) -> tuple[str | 
         return f"the certificate there names {summ['cn']}, not {s.relay.host}", ""
     if summ["days_left"] <= fleet_tls.WARN_DAYS:
         return f"the certificate there expires in {summ['days_left']:.0f} days", ""
-    return None, f"{look.get('node_crt')}, naming {summ['cn']}, valid until {summ['not_after'][:10]}"
+    return None, f"{look.node_crt}, naming {summ['cn']}, valid until {summ['not_after'][:10]}"
 
 
 async def plan(s: Settings, tls: TlsPaths, opts: SshOptions | None, unit_path: Path,
@@ -159,23 +192,21 @@ async def plan(s: Settings, tls: TlsPaths, opts: SshOptions | None, unit_path: P
     """Look at the relay (one SSH round trip) and say what would change there. *unit_text*:
     the unit's text for the relay's interpreter, package root and user (the CLI's, one home for
     units). Raises RelayApplyError."""
-    look = await _run(opts, s, "look", str(unit_path))
-    if not look.get("writable", {}).get(str(unit_path)):
-        raise RelayApplyError(f"the relay's user {look.get('user')} may not write {unit_path}: "
+    look = RelayLook.from_report(await _run(opts, s, "look", str(unit_path)))
+    if not look.writable.get(str(unit_path)):
+        raise RelayApplyError(f"the relay's user {look.user} may not write {unit_path}: "
                               "set [relay] ssh_user = \"root\", or name a folder it may write "
                               "with --unit-dir")
-    rtls = TlsPaths(Path(look["config_dir"]) / "tls", Path(look["ca_crt"]),
-                    Path(look["config_dir"]) / "tls" / "ca.key", Path(look["node_key"]),
-                    Path(look["node_crt"]))
+    tls_dir = Path(look.config_dir) / "tls"
+    rtls = TlsPaths(tls_dir, Path(look.ca_crt), tls_dir / "ca.key", Path(look.node_key),
+                    Path(look.node_crt))
     config = render_relay_config(s.relay.host, s.relay.zenoh_port, rtls)
-    files = look.get("files") or {}
-    unit = unit_text(look["python"], look.get("package_root", ""), look["user"],
-                     look["relay_config"])
+    unit = unit_text(look.python, look.package_root, look.user, look.relay_config)
     why, kept = _cert_need(s, tls, look)
     return RelayPlan(s.relay.host, look, why, kept, [
-        RemoteFile(look["relay_config"], files.get(look["relay_config"]), config, 0o644,
+        RemoteFile(look.relay_config, look.files.get(look.relay_config), config, 0o644,
                    "the relay's router config"),
-        RemoteFile(str(unit_path), files.get(str(unit_path)), unit, 0o644,
+        RemoteFile(str(unit_path), look.files.get(str(unit_path)), unit, 0o644,
                    "the systemd unit that runs `rosnet-tui relay serve`")])
 
 
@@ -217,7 +248,7 @@ async def apply(s: Settings, tls: TlsPaths, opts: SshOptions | None, p: RelayPla
         if "installed" not in rep:
             raise RelayApplyError(f"the relay did not install its certificate: "
                                   f"{rep.get('error')}")
-        done.append(f"the relay's key made there ({p.look.get('node_key')}) and its "
+        done.append(f"the relay's key made there ({p.look.node_key}) and its "
                     f"certificate signed here for {s.relay.host}, valid until "
                     f"{rep['installed']['not_after'][:10]}")
     todo = [f for f in p.files if f.changed]
@@ -242,8 +273,8 @@ async def _undo_one(change: dict, force: bool) -> str:
     s.relay.host, s.relay.ssh_user = str(change.get("host")), str(change.get("user"))
     s.relay.ssh_port = int(change.get("port") or 22)
     files = [f for f in change.get("files") or [] if isinstance(f, dict)]
-    look = await _run(None, s, "look", *[str(f.get("path")) for f in files])
-    now = look.get("files") or {}
+    now = RelayLook.from_report(await _run(None, s, "look",
+                                           *[str(f.get("path")) for f in files])).files
     changed = [str(f["path"]) for f in files
                if relayproto.digest(now.get(str(f["path"]))) not in (f.get("after"),
                                                                      relayproto.digest(
