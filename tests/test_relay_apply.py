@@ -224,6 +224,22 @@ def test_no_sshd_at_the_relay_names_the_hop_and_exits_1(clean_relay, tmp_path):
                      out.stderr), out.stderr
 
 
+def test_a_relay_without_rosnet_tui_installed_is_told_how_to_install_it(tmp_path):
+    home = tmp_path / "bare_home"
+    home.mkdir()
+    bare = Sshd(tmp_path / "bare", extra_config=f"SetEnv HOME={home} PATH={SSH_SESSION_PATH}\n")
+    bare.start()
+    try:
+        m = Master(tmp_path, bare)
+        out = m.apply("--yes")
+        assert out.returncode == 1 and "Traceback" not in out.stderr
+        assert "the relay relay has no rosnet-tui installed" in out.stderr, out.stderr
+        assert "README" in out.stderr
+        assert not (home / ".config").exists()          # nothing made there
+    finally:
+        bare.stop()
+
+
 @pytest.mark.parametrize("case, words", [
     ("no relay", "no relay in the settings"),
     ("member", "turtlebot is not the master"),
