@@ -69,6 +69,8 @@ print("DONE " + json.dumps({"status": r.status.value, "took": time.monotonic() -
 
 def test_the_sites_cannot_reach_each_other_only_the_relay(world):
     lab = world.lab
+    said = world.said["robot: ros apply --yes --no-checks"].stdout
+    assert "Next, the relay relay: `rosnet-tui relay apply`" in said, said    # what comes next
     assert lab.public_ip("robot") == ADDR.CARRIER_PUBLIC
     assert lab.public_ip("laptop") == ADDR.LAPTOP_CARRIER_PUBLIC
     for host in COMPUTERS:    # nothing of the other site answers at its settings' public IP
