@@ -136,3 +136,17 @@ def test_a_tunnel_killed_on_the_relay_is_back_within_10_s(world):
         assert again and not set(again) & set(held), (held, again)    # a new tunnel session
     finally:
         world.lab.kill(poll)
+
+
+def test_the_relay_stopped_fails_relay_router_in_time_and_advice_names_the_relay(world):
+    world.stop_relay()
+    try:
+        results = world.check("laptop")
+        relay = results["relay.router"]
+        assert relay["status"] == "fail", explain(results)
+        timeout = world.settings("laptop").checks.timeout_s
+        assert relay["duration_s"] <= timeout + 0.5, explain(results)
+        advice = relay.get("advice") or []
+        assert advice and advice[0]["rule"] == "relay.router.down", explain(results)
+    finally:
+        world.start_relay()
