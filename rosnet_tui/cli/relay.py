@@ -7,7 +7,7 @@ import signal
 import threading
 from pathlib import Path
 
-from rosnet_tui.cli import relay_tunnel
+from rosnet_tui.cli import relay_apply, relay_tunnel
 from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, say
 
 
@@ -29,6 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                             "~/.config/rosnet-tui/zenoh-relay.json5)")
     serve.set_defaults(func=run_serve)
     relay_tunnel.register(cmds)
+    relay_apply.register(cmds)
 
 
 def run_serve(args: argparse.Namespace) -> int:

@@ -219,6 +219,9 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
     if not (args.client and not settings.is_master):
         print("Then start the router: ros2 run rmw_zenoh_cpp rmw_zenohd")
     rc = _fleet_tls(settings) if ros2.mtls(settings) else EXIT_OK
+    if rc == EXIT_OK and settings.is_master and settings.relay.host:
+        print(f"Next, the relay {settings.relay.host}: `rosnet-tui relay apply` sets it up from "
+              "here (its certificate, router config and unit, over SSH).")
     if not ros2.mtls(settings):
         print("Security is off ([ros] security = \"none\"): anyone who reaches the master's "
               f"port {settings.ros.zenoh_port} can join the ROS graph.")

@@ -25,6 +25,7 @@ from rosnet_tui.core.exposure import firewall
 from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files import privilege
+from rosnet_tui.core.ros import relay_apply
 from rosnet_tui.core.saved.settings import load_settings
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 
@@ -84,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
     forwards = e.made()
     for kind, m in forwards:
         print(f"  {firewall.describe(m)}" if kind == firewall.KIND else
+              f"  {relay_apply.describe(m)}" if kind == relay_apply.KIND else
               f"  the forward {describe_forward(m)}: removed from the modem")
     diff = plan.diff()
     if diff:
@@ -101,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
     if diff or forwards:
         stop = confirm(args, "Restore these files?" if diff else
                        "Put the firewall back?" if e.kinds()[:1] == [firewall.KIND]
+                       else "Put the relay's files back?" if e.kinds()[:1] == [relay_apply.KIND]
                        else "Remove these forwards?")
         if stop is not None:
             return stop
@@ -121,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
             print(line)
     if not args.no_checks and firewall.KIND in e.kinds():
         rerun_checks(affected.FIREWALL, _settings_quietly(args), paths_of(args))
-    elif not args.no_checks and e.kinds():
+    elif not args.no_checks and e.kinds() and relay_apply.KIND not in e.kinds():
         rerun_checks(affected.FORWARD, _settings_quietly(args), paths_of(args))
     elif not args.no_checks:
         settings = _settings_quietly(args)

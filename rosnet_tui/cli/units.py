@@ -22,14 +22,14 @@ def systemd_quote(arg: str) -> str:
     return '"' + arg.replace("\\", "\\\\").replace('"', '\\"').replace("%", "%%") + '"'
 
 
-def exec_lines(argv: Sequence[str]) -> list[str]:
-    """ExecStart of *argv* (this very install by its absolute path: systemd starts it with a
-    clean environment), and the path to this package when it is not installed in site-packages
-    (a checkout)."""
+def exec_lines(argv: Sequence[str], root: Path | None = None) -> list[str]:
+    """ExecStart of *argv* (an install by its absolute path: systemd starts it with a clean
+    environment), and the path to the package (*root*: the folder holding ``rosnet_tui``;
+    default: this very install's) when it is not installed in site-packages (a checkout)."""
     lines = ["ExecStart=" + " ".join(systemd_quote(a) for a in argv),
              "Environment=PYTHONUNBUFFERED=1"]
-    root = privilege.package_root()
-    if not any(part in ("site-packages", "dist-packages") for part in root.parts):
+    root = privilege.package_root() if root is None else root
+    if root.parts and not any(part in ("site-packages", "dist-packages") for part in root.parts):
         lines.append("Environment=" + systemd_quote(f"PYTHONPATH={root}"))
     return lines
 

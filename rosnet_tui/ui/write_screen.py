@@ -20,6 +20,7 @@ from rosnet_tui.core.exposure import firewall
 from rosnet_tui.core.files import managed_file as mf
 from rosnet_tui.core.files import managed_text as mt
 from rosnet_tui.core.files import privilege
+from rosnet_tui.core.ros import relay_apply
 from rosnet_tui.core.upnp.journal import describe as describe_forward
 from rosnet_tui.core.wizard.write_plans import Severity, WritePlan
 from rosnet_tui.ui.dialog import SCROLL_BINDINGS, ConfirmDialog
@@ -227,6 +228,7 @@ class UndoScreen(ConfirmDialog[bool]):
             return
         diff = self.plan.diff()
         forwards = [(firewall.describe(m) if kind == firewall.KIND else
+                     relay_apply.describe(m) if kind == relay_apply.KIND else
                      f"Remove the forward {describe_forward(m)}")
                     for kind, m in self.plan.entry.made()]
         self.query_one("#write-diff", Static).update(diff_text(diff) if diff else
@@ -271,6 +273,8 @@ class UndoScreen(ConfirmDialog[bool]):
             return
         self.notify("Put the firewall back as it was before the last change."
                     if firewall.KIND in self.plan.entry.kinds() else
+                    "Put the relay's router config and unit back."
+                    if relay_apply.KIND in self.plan.entry.kinds() else
                     "Removed the forwards of the last change from the modem."
                     if self.plan.entry.kinds() else "Restored the files of the last write.",
                     timeout=5)

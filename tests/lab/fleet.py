@@ -103,6 +103,7 @@ class Fleet(Lab):
         self.sites = [site(i) for i in range(sites)]
         self.by_name = {s.name: s for s in self.sites}
         self.COMPUTERS = tuple(s.name for s in self.sites)
+        self.SERVERS = ()                 # no relay in a fleet
         self.HOSTS = (*self.COMPUTERS, *(s.modem for s in self.sites), "internet", "outsider")
         self.ROUTERS = (*(s.modem for s in self.sites), "internet")
         self.forwarding = {s.name: "ros1" for s in self.sites}

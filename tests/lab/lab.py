@@ -28,7 +28,7 @@ from cryptography.hazmat.primitives import serialization as ser
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from . import cleanup, procs, readme_install, topology
-from .topology import ADDR, COMPUTERS, HOSTNAMES, HOSTS, MODEM, PEER, VARIANTS
+from .topology import ADDR, COMPUTERS, HOSTNAMES, HOSTS, MODEM, PEER, SERVERS, VARIANTS
 
 REPO = Path(__file__).resolve().parents[2]
 ROS_SCRIPTS = Path(__file__).resolve().parent / "ros_scripts"
@@ -43,8 +43,10 @@ SSHD = "/usr/sbin/sshd"
 
 # Inside a computer's namespace: set its hostname (own UTS namespace from `unshare --uts`),
 # put its ~/.ssh where ssh and sshd look (the passwd home, /root) and its HOME in the env.
-_WRAP_SCRIPT = ('hostname "$1" && mount --bind "$2" /root/.ssh && '
-                'export HOME="$3" USER=root LOGNAME=root && shift 3 && exec "$@"')
+# A computer's own /etc/ssh too (its sshd's config and host keys), as on a real machine: what
+# rosnet-tui reads there (relay.tunnel: this machine's sshd keys) is the lab computer's.
+_WRAP_SCRIPT = ('hostname "$1" && mount --bind "$2" /root/.ssh && mount --bind "$4" /etc/ssh && '
+                'export HOME="$3" USER=root LOGNAME=root && shift 4 && exec "$@"')
 
 _HTTP_GET = """
 import json, sys, urllib.error, urllib.request
@@ -99,7 +101,7 @@ def _check_kernel(ns: str) -> None:
         raise LabUnavailable(f"unshare --uts does not work: {r.stderr.strip()}")
 
 
-LINK_VARIANTS = ("unplugged", "double_nat", "cgnat")   # the variants that switch or move links
+LINK_VARIANTS = ("unplugged", "double_nat", "cgnat", "cgnat_both")   # the variants that switch or move links
 LINKS_SETTLE_S = 5.0   # the kernel's link watcher needs up to ~1 s; more only on a stalled machine
 
 
@@ -159,6 +161,7 @@ class Lab:
     addr = ADDR
     HOSTS = HOSTS
     COMPUTERS = COMPUTERS  # the hosts with a name, sshd, HOME (a subclass may have others)
+    SERVERS = SERVERS      # a name, sshd and HOME with rosnet-tui, but no ROS nor settings
     VARIANTS = VARIANTS
 
     def __init__(self) -> None:
@@ -194,8 +197,10 @@ class Lab:
         return self.dir / host
 
     def home(self, host: str) -> Path:
-        """HOME of robot or laptop (.bashrc, .ssh with key, authorized_keys, known_hosts)."""
-        self._computer(host)
+        """HOME of robot, laptop or the relay (.ssh with key, authorized_keys, known_hosts;
+        the computers' .bashrc)."""
+        if host not in self.SERVERS:
+            self._computer(host)
         return self._hostdir(host) / "home"
 
     def hosts_path(self, host: str) -> Path:
@@ -218,7 +223,7 @@ class Lab:
         if host == "robot":
             return ADDR.CARRIER_PUBLIC if self._state["cgnat"] else self._state["robot_wan"]
         if host == "laptop":
-            return ADDR.LAPTOP_PUBLIC
+            return ADDR.LAPTOP_CARRIER_PUBLIC if self._state["cgnat_both"] else ADDR.LAPTOP_PUBLIC
         raise ValueError("public_ip is for 'robot' or 'laptop'")
 
     @staticmethod
@@ -263,8 +268,8 @@ class Lab:
         hdir/ip.batch), firewall."""
         script = [topology.sysctl_script(host), f"ip -batch {hdir / 'ip.batch'}",
                   topology.sysctl_script(host)]  # again: rp_filter of the new interfaces
-        if host in ("robot_modem", "laptop_modem", "carrier", "travel_router"):
-            rules = (topology.carrier_ruleset() if host == "carrier"
+        if host in ("robot_modem", "laptop_modem", "carrier", "travel_router", "laptop_carrier"):
+            rules = (topology.carrier_ruleset() if host in ("carrier", "laptop_carrier")
                      else topology.modem_ruleset(None) if host == "travel_router"
                      else topology.modem_ruleset("robot" if host == "robot_modem" else "laptop"))
             (hdir / "rules.v4").write_text(rules)
@@ -275,10 +280,10 @@ class Lab:
     def wrap(self, host: str) -> list[str]:
         """argv prefix running a command on *host*: its netns, hostname, HOME, ~/.ssh, /etc/hosts."""
         ns = self.ns(host)
-        if host in self.COMPUTERS:
+        if host in self.COMPUTERS or host in self.SERVERS:
             return ["ip", "netns", "exec", ns, "unshare", "--uts", "--", "/bin/sh", "-c",
                     _WRAP_SCRIPT, "rnl-wrap", self.hostname(host), str(self.home(host) / ".ssh"),
-                    str(self.home(host))]
+                    str(self.home(host)), str(self._hostdir(host) / "etc")]
         return ["ip", "netns", "exec", ns]
 
     def env(self, host: str) -> dict[str, str]:
@@ -289,7 +294,7 @@ class Lab:
                and k not in ("SSH_CONNECTION", "SSH_CLIENT", "SSH_TTY")}  # nor over our SSH
         env["PYTHONPATH"] = str(REPO)
         env["PYTHONUNBUFFERED"] = "1"
-        if host in self.COMPUTERS:
+        if host in self.COMPUTERS or host in self.SERVERS:
             env["HOME"] = str(self.home(host))
         return env
 
@@ -530,9 +535,14 @@ class Lab:
             _write_in_place(etc / "hosts", self.hosts_text(h), 0o644)
             _write_in_place(etc / "resolv.conf", topology.resolv_text(), 0o644)
         keys = {h: {"host": keypair(f"host key of {self.hostname(h)}"),
-                    "user": keypair(f"root@{self.hostname(h)}")} for h in self.COMPUTERS}
-        for h in self.COMPUTERS:
-            hdir, peers = self._hostdir(h), self.peers_of(h)
+                    "user": keypair(f"root@{self.hostname(h)}")}
+                for h in (*self.COMPUTERS, *self.SERVERS)}
+        for h in (*self.COMPUTERS, *self.SERVERS):
+            # A server (the relay) lets every computer in and is known to each by name.
+            server = h in self.SERVERS
+            hdir = self._hostdir(h)
+            peers = list(self.COMPUTERS) if server else self.peers_of(h)
+            known = [] if server else [*peers, *self.SERVERS]
             ssh = hdir / "home" / ".ssh"
             ssh.mkdir(parents=True, mode=0o700)
             os.chmod(hdir / "home", 0o755)
@@ -549,9 +559,11 @@ class Lab:
             os.chmod(ssh / "authorized_keys", 0o600)
             (ssh / "known_hosts").write_bytes(b"".join(
                 self.hostname(o).encode() + b" " + b" ".join(keys[o]["host"][1].split()[:2])
-                + b"\n" for o in peers))
+                + b"\n" for o in known))
             (hdir / "etc" / "sshd_config").write_text(topology.sshd_config(
                 str(host_key), str(hdir / "home"), topology.SSH_SESSION_PATH, ""))
+            if server:
+                continue
             _write_in_place(hdir / "home" / ".bashrc", self.bashrc_text(h))
             self.config_path(h)
 
@@ -560,7 +572,7 @@ class Lab:
             return open(self.log_path(name), "w")
 
         starts = {}
-        for h in self.COMPUTERS:
+        for h in (*self.COMPUTERS, *self.SERVERS):
             with logfile(f"sshd-{h}") as log:
                 starts[f"sshd-{h}"] = (h, 22, "tcp", self.spawn(
                     h, [SSHD, "-D", "-e", "-f", str(self._hostdir(h) / "etc" / "sshd_config")],
@@ -676,7 +688,8 @@ class Lab:
         self._state = {"variant": "healthy", "forward": {"robot": "healthy", "laptop": "healthy"},
                        "cgnat": False, "robot_wan": ADDR.ROBOT_PUBLIC, "lossy": False,
                        "unplugged": False, "ros_extra": {}, "files_dirty": False,
-                       "stale_dhcp": False, "double_nat": False, "sshd_port": False}
+                       "stale_dhcp": False, "double_nat": False, "sshd_port": False,
+                       "cgnat_both": False}
 
     @property
     def current_variant(self) -> str:
@@ -696,7 +709,9 @@ class Lab:
         More variants: stale_dhcp (the robot got a new local IP, 10.10.10.5, from DHCP; its
         modem still forwards to 10.10.10.1), double_nat (a travel router of the user's own
         between the robot and its modem, which forwards correctly to the travel router; the
-        travel router forwards nothing), sshd_port (the robot's sshd listens on 2222, not 22).
+        travel router forwards nothing), sshd_port (the robot's sshd listens on 2222, not 22),
+        cgnat_both (both modems behind a carrier's NAT: nothing reaches either site from the
+        internet; ROS 2 and SSH meet at the relay).
         """
         if name not in VARIANTS:
             raise ValueError(f"unknown variant {name!r} (known: {', '.join(VARIANTS)})")
@@ -726,6 +741,9 @@ class Lab:
                 self._set_forwarding(s, mode)
         elif name == "cgnat":
             self._set_cgnat(True)
+        elif name == "cgnat_both":
+            self._set_cgnat(True)
+            self._set_laptop_cgnat(True)
         elif name == "ros_ip_laptop":
             self._state["ros_extra"]["laptop"] = {"ROS_IP": ADDR.LAPTOP_LOCAL}
             self._state["files_dirty"] = True
@@ -762,13 +780,16 @@ class Lab:
         check to pass loads it first (tests/lab/firewall.py secured)."""
         if not self.built or self.destroyed:
             return
-        for h in COMPUTERS:
+        for h in (*COMPUTERS, *SERVERS):
             readme_install.install(self.home(h))
         st = self._state
-        links_moved = bool(st["unplugged"] or st["double_nat"] or st["cgnat"])
+        links_moved = bool(st["unplugged"] or st["double_nat"] or st["cgnat"]
+                           or st["cgnat_both"])
         for s in ("robot", "laptop"):
             if st["forward"][s] != "healthy":
                 self._set_forwarding(s, "healthy")
+        if st["cgnat_both"]:
+            self._set_laptop_cgnat(False)
         if st["cgnat"]:
             self._set_cgnat(False)
         if st["robot_wan"] != ADDR.ROBOT_PUBLIC:
@@ -906,6 +927,24 @@ class Lab:
                                      f"addr add {self._state['robot_wan']}/24 dev wan0",
                                      f"route replace default via {ADDR.INTERNET_ROBOT_SIDE}"])
         self._state["cgnat"] = on
+
+    def _set_laptop_cgnat(self, on: bool) -> None:
+        """Move the laptop modem's WAN link behind its carrier's NAT (or back to the internet)."""
+        if on:
+            self._ip("internet", [f"link set l-wan netns {self.ns('laptop_carrier')}"])
+            self._ip("laptop_carrier", [f"addr add {ADDR.LAPTOP_CARRIER_LAN}/16 dev l-wan",
+                                        "link set l-wan up"])
+            self._ip("laptop_modem", ["addr flush dev wan0",
+                                      f"addr add {ADDR.LAPTOP_MODEM_CGNAT_WAN}/16 dev wan0",
+                                      f"route replace default via {ADDR.LAPTOP_CARRIER_LAN}"])
+        else:
+            self._ip("laptop_carrier", [f"link set l-wan netns {self.ns('internet')}"])
+            self._ip("internet", [f"addr add {ADDR.INTERNET_LAPTOP_SIDE}/24 dev l-wan",
+                                  "link set l-wan up"])
+            self._ip("laptop_modem", ["addr flush dev wan0",
+                                      f"addr add {ADDR.LAPTOP_PUBLIC}/24 dev wan0",
+                                      f"route replace default via {ADDR.INTERNET_LAPTOP_SIDE}"])
+        self._state["cgnat_both"] = on
 
     def set_robot_wan(self, ip: str) -> contextlib.AbstractContextManager:
         """Give the robot modem a new public address (a modem restart with a new IP), now.

@@ -5,7 +5,7 @@ which has eclipse-zenoh and paramiko) and returns what it got; each is bounded b
 The outsider knows no names of the fleet: it dials public addresses.
 
 - :func:`zenoh_session`: a Zenoh client session to ``tcp/`` or ``tls/<ip>:<port>`` (TLS: with a
-  certificate of its own CA, not the fleet's), then the ROS 2 graph (liveliness tokens under
+  certificate of its own CA, not the fleet's, or with none), then the ROS 2 graph (liveliness tokens under
   ``@ros2_lv``) and three puts on ``/chatter``'s key;
 - :func:`get_system_state`: XML-RPC ``getSystemState`` on a ROS 1 master;
 - :func:`ssh_auth_none`: the SSH methods offered to *user* (paramiko ``auth_none``, no login).
@@ -26,14 +26,17 @@ _ZENOH = r"""
 import json, os, sys, tempfile, time
 import zenoh
 from rosnet_tui.core.exposure import outsider
-ep, t = sys.argv[1], float(sys.argv[2])
+ep, t, ca = sys.argv[1], float(sys.argv[2]), sys.argv[3]
 conf = zenoh.Config()
 conf.insert_json5("mode", '"client"')
 conf.insert_json5("connect/endpoints", json.dumps([ep]))
 conf.insert_json5("scouting/multicast/enabled", "false")
 conf.insert_json5("connect/timeout_ms", str(int(t * 1000)))
 conf.insert_json5("connect/exit_on_failure", "true")
-if ep.startswith("tls/"):
+if ep.startswith("tls/") and ca:      # no certificate of its own; the server checked with *ca*
+    conf.insert_json5("transport/link/tls", json.dumps({
+        "root_ca_certificate": ca, "verify_name_on_connect": False}))
+elif ep.startswith("tls/"):
     d = tempfile.mkdtemp()
     pems = outsider.foreign_pems()
     for k, v in pems.items():
@@ -101,10 +104,12 @@ def _run(lab: Lab, script: str, *args: str, timeout: float) -> dict[str, Any]:
 
 
 def zenoh_session(lab: Lab, ip: str, port: int, *, tls: bool = False,
-                  timeout: float = 3.0) -> dict[str, Any]:
-    """{"session": bool, "tokens": [...], "published": n, "error": str}."""
-    ep = f"{'tls' if tls else 'tcp'}/{ip}:{port}"
-    return _run(lab, _ZENOH, ep, str(timeout), timeout=timeout + 8)
+                  timeout: float = 3.0, no_cert_ca: str = "") -> dict[str, Any]:
+    """{"session": bool, "tokens": [...], "published": n, "error": str}. With *no_cert_ca* (a
+    CA certificate's path, e.g. the fleet's, which is no secret): TLS with no certificate of
+    the outsider's own, the server checked against that CA."""
+    ep = f"{'tls' if tls or no_cert_ca else 'tcp'}/{ip}:{port}"
+    return _run(lab, _ZENOH, ep, str(timeout), no_cert_ca, timeout=timeout + 8)
 
 
 def get_system_state(lab: Lab, ip: str, port: int = 11311,

@@ -8,12 +8,17 @@ plus the private LANs of the procedure and 100.64.0.0/10 behind the carrier in t
                                  carrier 203.0.113.3 (cgnat only) --'            198.51.100.1
     laptop 192.168.1.10 - laptop_modem 192.168.1.254 | 198.51.100.2 ---  services 192.0.2.10/.53
       (sami)                                                            |
+                       laptop_carrier 198.51.100.3 (cgnat_both only) ---|
                                     outsider 192.0.2.66 (no peer) ------|
                                     relay 192.0.2.77 (a VPS) -----------'
 
 The outsider is an address on the internet that is no peer (issue 22): what a stranger tries
 against the forwarded ports comes from there (tests/lab/outsider.py). The relay is a public
-server of the user's own (issue 30): both sites' routers dial out to it (tests/lab/relay.py).
+server of the user's own (issue 30): both sites' routers dial out to it (tests/lab/relay.py);
+it has a name, its own sshd and HOME with rosnet-tui installed as the README says (a server:
+no ROS, no settings of its own). In the cgnat_both variant the laptop's modem is behind a
+carrier's NAT as well (its WAN 100.65.0.2, the carrier's public address 198.51.100.3): no site
+can forward anything, only the relay takes connections.
 
 In the double_nat variant a travel router of the user's own sits between the robot and its modem:
 robot 10.10.10.1 - travel_router 10.10.10.254 | 192.168.0.2 - robot_modem 192.168.0.1 | public.
@@ -52,6 +57,9 @@ class Addresses:
     RELAY_IP: str = "192.0.2.77"                 # the relay, a public server (issue 30)
     RELAY_GW: str = "192.0.2.76"                 # the internet's end of the relay's link
     RELAY_NAME: str = "relay"
+    LAPTOP_CARRIER_PUBLIC: str = "198.51.100.3"  # the laptop's public IP in cgnat_both
+    LAPTOP_CARRIER_LAN: str = "100.65.0.1"
+    LAPTOP_MODEM_CGNAT_WAN: str = "100.65.0.2"
     PROBE_NAME: str = "probe.lab.test"
     PROBE_URL: str = "http://probe.lab.test"
     PUBLIC_IP_URL: str = "http://probe.lab.test/ip"
@@ -63,11 +71,13 @@ class Addresses:
 ADDR = Addresses()
 
 HOSTS = ("robot", "laptop", "robot_modem", "laptop_modem", "internet", "carrier", "travel_router",
-         "outsider", "relay")
+         "outsider", "relay", "laptop_carrier")
 COMPUTERS = ("robot", "laptop")          # the hosts with a name, sshd, HOME and ROS
+SERVERS = ("relay",)                     # a name, sshd and HOME with rosnet-tui; no ROS, no settings
 HOSTNAMES = {"robot": ADDR.ROBOT_NAME, "laptop": ADDR.LAPTOP_NAME, "robot_modem": "robot-modem",
              "laptop_modem": "laptop-modem", "internet": "internet", "carrier": "carrier",
-             "travel_router": "travel-router", "outsider": "outsider", "relay": ADDR.RELAY_NAME}
+             "travel_router": "travel-router", "outsider": "outsider", "relay": ADDR.RELAY_NAME,
+             "laptop_carrier": "laptop-carrier"}
 PEER = {"robot": "laptop", "laptop": "robot"}
 MODEM = {"robot": "robot_modem", "laptop": "laptop_modem"}
 LOCAL_IP = {"robot": ADDR.ROBOT_LOCAL, "laptop": ADDR.LAPTOP_LOCAL}
@@ -77,7 +87,7 @@ WRONG_FORWARD = {"robot": ADDR.ROBOT_WRONG_FORWARD, "laptop": ADDR.LAPTOP_WRONG_
 UPSTREAM = {"robot_modem": ADDR.INTERNET_ROBOT_SIDE, "laptop_modem": ADDR.INTERNET_LAPTOP_SIDE}
 
 VARIANTS = ("healthy", "no_forwarding", "wrong_forward", "cgnat", "ros_ip_laptop", "stale_hosts",
-            "lossy", "unplugged", "stale_dhcp", "double_nat", "sshd_port")
+            "lossy", "unplugged", "stale_dhcp", "double_nat", "sshd_port", "cgnat_both")
 
 # veth pairs: (host A, interface in A, host B, interface in B)
 LINKS = (
@@ -88,10 +98,12 @@ LINKS = (
     ("carrier", "wan0", "internet", "c-wan"),
     ("outsider", "eth0", "internet", "o-wan"),
     ("relay", "eth0", "internet", "v-wan"),
+    ("laptop_carrier", "wan0", "internet", "lc-wan"),
 )
 OUTSIDER_LINK = ("outsider", "eth0", "internet", "o-wan")
 
-ROUTERS = ("robot_modem", "laptop_modem", "internet", "carrier", "travel_router")
+ROUTERS = ("robot_modem", "laptop_modem", "internet", "carrier", "travel_router",
+           "laptop_carrier")
 
 
 def ip_batch(host: str, robot_wan: str = ADDR.ROBOT_PUBLIC) -> list[str]:
@@ -114,7 +126,9 @@ def ip_batch(host: str, robot_wan: str = ADDR.ROBOT_PUBLIC) -> list[str]:
                   f"addr add {ADDR.INTERNET_ROBOT_SIDE}/24 dev r-wan", "link set r-wan up",
                   f"addr add {ADDR.INTERNET_LAPTOP_SIDE}/24 dev l-wan", "link set l-wan up",
                   f"addr add {ADDR.INTERNET_ROBOT_SIDE}/32 dev c-wan", "link set c-wan up",
-                  f"route add {ADDR.CARRIER_PUBLIC}/32 dev c-wan", *outsider_internet_lines(),
+                  f"route add {ADDR.CARRIER_PUBLIC}/32 dev c-wan",
+                  f"addr add {ADDR.INTERNET_LAPTOP_SIDE}/32 dev lc-wan", "link set lc-wan up",
+                  f"route add {ADDR.LAPTOP_CARRIER_PUBLIC}/32 dev lc-wan", *outsider_internet_lines(),
                   *relay_internet_lines()]
     elif host == "outsider":
         lines += outsider_lines()
@@ -125,6 +139,10 @@ def ip_batch(host: str, robot_wan: str = ADDR.ROBOT_PUBLIC) -> list[str]:
         lines += [f"addr add {ADDR.CARRIER_PUBLIC}/32 dev wan0", "link set wan0 up",
                   f"route add {ADDR.INTERNET_ROBOT_SIDE}/32 dev wan0",
                   f"route add default via {ADDR.INTERNET_ROBOT_SIDE}"]
+    elif host == "laptop_carrier":
+        lines += [f"addr add {ADDR.LAPTOP_CARRIER_PUBLIC}/32 dev wan0", "link set wan0 up",
+                  f"route add {ADDR.INTERNET_LAPTOP_SIDE}/32 dev wan0",
+                  f"route add default via {ADDR.INTERNET_LAPTOP_SIDE}"]
     return lines
 
 
@@ -229,7 +247,8 @@ def modem_ruleset(side: str | None) -> str:
 
 
 def carrier_ruleset() -> str:
-    """The carrier's NAT in front of the robot modem (cgnat): no inbound forwarding at all."""
+    """The carrier's NAT in front of the robot modem (cgnat; the laptop modem too in cgnat_both):
+    no inbound forwarding at all."""
     return "\n".join([
         "*nat",
         ":PREROUTING ACCEPT [0:0]", ":INPUT ACCEPT [0:0]", ":OUTPUT ACCEPT [0:0]",

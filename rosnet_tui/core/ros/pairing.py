@@ -105,7 +105,9 @@ def tls_command(*args: str) -> str:
     return zenoh_peer_command(*args)
 
 
-async def _remote(opts: Any, peer: Any, timeout: float, *args: str) -> dict[str, Any]:
+async def remote_tls(opts: Any, peer: Any, timeout: float, *args: str) -> dict[str, Any]:
+    """Run fleet_tls.py's *args* (``request NAME``, ``install CA CERT``) on *peer* with its
+    installed rosnet-tui; its report, or ``{"error": ...}`` saying what went wrong."""
     res = await ssh_run(opts, peer, tls_command(*args), stdin=FLEET_TLS_SOURCE, timeout=timeout)
     if res.failure:
         return {"error": f"SSH to {peer.name} failed ({res.failure}): {res.detail}"}
@@ -131,7 +133,7 @@ async def repair_members(s: Settings, paths: TlsPaths, peers: list[Any], opts: A
         if not peer.ssh_user:
             return (peer.name, False, "no SSH user in the settings: run `rosnet-tui ros pair` "
                                       "there")
-        rep = await _remote(opts, peer, timeout, "request", peer.name)
+        rep = await remote_tls(opts, peer, timeout, "request", peer.name)
         if "csr" not in rep:
             return (peer.name, False, str(rep.get("error")))
         try:
@@ -139,7 +141,7 @@ async def repair_members(s: Settings, paths: TlsPaths, peers: list[Any], opts: A
                                               members=member_names(s))
         except TlsError as exc:
             return (peer.name, False, str(exc))
-        rep = await _remote(opts, peer, timeout, "install", ca, cert)
+        rep = await remote_tls(opts, peer, timeout, "install", ca, cert)
         if "installed" not in rep:
             return (peer.name, False, str(rep.get("error")))
         return (peer.name, True, f"valid until {rep['installed']['not_after'][:10]}")
