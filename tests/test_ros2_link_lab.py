@@ -103,14 +103,28 @@ def test_large_messages_dropped_on_the_way_are_named_before_the_path(ros2):
     assert "low_pass_filter" in " ".join(first["actions"]), explain(results)
 
 
-def test_at_64_kbit_the_check_ends_in_its_budget_with_what_it_measured(ros2):
-    ros2.shape_robot("64kbit")
+def test_at_64_kbit_the_check_ends_in_its_budget_and_says_why(ros2):
+    """At 64 kbit/s (a deep buffer, as a thin mobile link has) the round's peer agent does not
+    start in time (about 50 kB of programs over SSH), so no check reaches the other side:
+    ros2.link still ends within its budget, saying so, never a bare timeout."""
+    ros2.shape_robot("64kbit", latency="2s")
     results = ros2.check("laptop", timeout=180)
     link = results["ros2.link"]
     _bounded(link, results)
-    d = link["data"]["peers"].get("turtlebot") or {}
+    assert link["status"] in ("skip", "fail", "warn") and link["summary"], explain(results)
+
+
+def test_on_a_thin_link_it_reports_what_it_measured_in_its_budget(ros2):
+    """At 256 kbit/s the pings and both bursts fit the budget, 1 MB does not (about 33 s): the
+    rates are reported, and the large message is said not tried, with why."""
+    ros2.shape_robot("256kbit", latency="1s")
+    results = ros2.check("laptop", timeout=180)
+    link = results["ros2.link"]
     print(explain({"ros2.link": link}))
-    assert d.get("rtt_ms") is not None, explain(results)
-    measured = [x for x in (d.get("out_bps"), d.get("in_bps")) if x is not None]
-    assert measured and all(x < 128_000 for x in measured), explain(results)
-    assert "not tried" in " ".join(link["evidence"]), explain(results)
+    _bounded(link, results)
+    d = link["data"]["peers"]["turtlebot"]
+    assert d["rtt_ms"] is not None, explain(results)
+    assert _within(d["out_bps"], 256e3, 0.35) and _within(d["in_bps"], 256e3, 0.35), \
+        explain(results)
+    assert d["tried_out"] < 1 << 20 and d["tried_in"] < 1 << 20, explain(results)
+    assert "1 MB up not tried: about" in " ".join(link["evidence"]), explain(results)

@@ -146,12 +146,13 @@ class Ros2World:
         self.lab._set_forwarding("robot", robot)
         self.lab._set_forwarding("laptop", laptop)
 
-    def shape_robot(self, rate: str | None) -> None:
+    def shape_robot(self, rate: str | None, latency: str = "400ms") -> None:
         """The robot's modem shaped to *rate* ("2mbit") both ways: tc tbf on what leaves its WAN
-        (the robot's upload) and its LAN (its download); None takes it off (healthy() does)."""
+        (the robot's upload) and its LAN (its download), queueing up to *latency* of it; None
+        takes it off (healthy() does)."""
         for dev in ("wan0", "lan0"):
             self.lab._in_ns("robot_modem", f"tc qdisc replace dev {dev} root tbf rate {rate} "
-                                           "burst 32kbit latency 400ms" if rate else
+                                           f"burst 32kbit latency {latency}" if rate else
                             f"tc qdisc del dev {dev} root 2>/dev/null || true")
         self.shaped = rate
 
