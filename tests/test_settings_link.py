@@ -123,3 +123,32 @@ def test_cli_refuses_a_bad_need_with_exit_2(tmp_path: Path):
     assert out.returncode == 2, out.stdout + out.stderr
     assert "link.topic.hz" in out.stderr and "above 0" in out.stderr
     assert "Traceback" not in out.stderr
+
+
+def test_max_hz_becomes_downsampling_on_the_routers_tls_link_only():
+    """`ros apply` writes the router's config from router_config: a topic with max_hz is cut down
+    to that rate on what leaves the router over TLS (the router-to-router link), and a real Zenoh
+    router takes the rules as written."""
+    import json
+
+    import zenoh
+
+    from rosnet_tui.core.ros import ros2
+    from tests.builders import ros2_member as member
+
+    s = member()
+    s.link.topics = [LinkTopic("/camera/image/compressed", 50000, 10, 2),
+                     LinkTopic("/scan", 3000, 20)]
+    cfg = ros2.router_config(s)
+    assert cfg["downsampling"] == [{
+        "id": "wan_max_hz", "link_protocols": ["tls"], "flows": ["egress"], "messages": ["put"],
+        "rules": [{"key_expr": "0/camera/image/compressed/**", "freq": 2.0}]}]
+    assert '"downsampling"' in ros2.render_router_config(s)
+    check = {"mode": "router", "listen": {"endpoints": ["tcp/127.0.0.1:0"]},
+             "scouting": {"multicast": {"enabled": False}}, "downsampling": cfg["downsampling"]}
+    zenoh.open(zenoh.Config.from_json5(json.dumps(check))).close()
+    # no max_hz, or no mutual TLS (the WAN link cannot be told from the local ones): none
+    assert "downsampling" not in ros2.router_config(member())
+    s = member(security="none")
+    s.link.topics = [LinkTopic("/camera/image/compressed", 50000, 10, 2)]
+    assert "downsampling" not in ros2.router_config(s)

@@ -145,7 +145,7 @@ def router_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
     link: dict[str, Any] = {"tx": {"lease": LEASE_MS, "keep_alive": 4}}
     if mtls(s):
         link["tls"] = tls_settings(s, tls, listen=s.is_master and not s.relayed)
-    return {
+    return {**downsampling(s),
         "mode": "router",
         "connect": {"endpoints": connect_endpoints(s)},
         "listen": {"endpoints": listen_endpoints(s)},
@@ -159,6 +159,19 @@ def router_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
         "transport": {"link": link},
         "adminspace": {"enabled": True, "permissions": {"read": True, "write": False}},
     }
+
+
+def downsampling(s: Settings) -> dict[str, Any]:
+    """The [[link.topic]] tables with max_hz as Zenoh downsampling rules on what leaves this
+    router over its TLS link, the router-to-router link across the internet (local nodes use
+    plain TCP on loopback, so they keep every message); {} when none has max_hz. Without mutual
+    TLS the WAN link cannot be told from the local ones: nothing is written."""
+    rules = [{"key_expr": f"{s.ros.domain_id}/{t.name.strip('/')}/**", "freq": float(t.max_hz)}
+             for t in s.link.topics if t.max_hz is not None]
+    if not rules or not mtls(s):
+        return {}
+    return {"downsampling": [{"id": "wan_max_hz", "link_protocols": ["tls"], "flows": ["egress"],
+                              "messages": ["put"], "rules": rules}]}
 
 
 def session_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
