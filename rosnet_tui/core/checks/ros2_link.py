@@ -6,7 +6,7 @@ messages, attachments): ours here, the peer's run by the round's peer agent ther
 this order and within the check's budget: the round trip (median and spread of a few pings), the
 throughput each way (a burst both ways at once, paced by the receiver's acknowledgements), and
 the largest message delivered whole each way (64 kB, then 1 MB, each tried only when the rates
-measured say it can arrive in the time left; a second try when the first is lost). On a thin link it reports what it measured in the
+measured say it can arrive in the time left; up to three tries when one is lost). On a thin link it reports what it measured in the
 time it had. It starts after the pub/sub checks of the round, so its bursts do not delay them.
 
 The sum of the ``[[link.topic]]`` needs is compared with the throughput each way.
@@ -43,7 +43,7 @@ FACTOR_LINK = 6.0
 PINGS = 5                      # round trips measured
 BURST_CAP = 8 * 1024 * 1024    # bytes a burst sends at most (a fast link ends it early)
 LARGE = (65536, 1 << 20)       # the large messages tried, in bytes
-TRIES = 2                      # tries of each large message (while the time left allows)
+TRIES = 3                      # tries of each large message (while the time left allows)
 PUBSUB = ("ros2.pubsub_out", "ros2.pubsub_in")
 
 
@@ -126,9 +126,11 @@ def _largest(end: LinkEnd, m: dict[str, Any], rtt: float, stop_at: float) -> Non
                                      "no rate measured"))
         if not go:
             return
-        for attempt in range(TRIES):    # a second try: one loss is not the link's verdict
-            if attempt and max(go.values()) > stop_at - time.monotonic() - 0.3:
+        for attempt in range(TRIES):    # more tries: one loss is not the link's verdict
+            if attempt and max(go.values()) + 0.2 > stop_at - time.monotonic() - 0.3:
                 break
+            if attempt:
+                time.sleep(0.2)     # what held the last one up may pass
             if "in" in go:
                 end.put(f"s {size}")
                 m["tried_in"] = size

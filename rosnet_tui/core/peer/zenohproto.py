@@ -252,6 +252,10 @@ def open_client(endpoint: str, timeout: float, mode: str = "client",
         c.insert_json5("transport/shared_memory/enabled", "false")
     except Exception:  # noqa: BLE001, S110 - a zenoh built without shared memory
         pass
+    # A probe's own hop to its router (loopback) is not the link measured: a large message's
+    # fragments wait there up to 1 s for room, not 50 ms (a busy machine is no lost message).
+    c.insert_json5("transport/link/tx/queue/congestion_control/drop/"
+                   "max_wait_before_drop_fragments", "1000000")
     for key, value in (tls or {}).items():   # a tls/ endpoint: this component's certificate
         c.insert_json5(f"transport/link/tls/{key}", json.dumps(value))
     if mode == "peer":
