@@ -179,9 +179,24 @@ ROS2_CASES = {
     "ros2.tls.wrong_name": _case(member, r("ros2.router", "fail", {
         "security": "mtls", "endpoint": "tls/turtlebot:7447",
         "tls": {"problem": None, "cn": "sami", "handshake": "wrong_name"}})),
+    "ros2.link.large_dropped": _case(member, r("ros2.link", "warn", {"peers": {"turtlebot": {
+        "rtt_ms": 40.0, "out_bps": 2_000_000, "in_bps": 2_000_000, "largest_out": 1 << 20,
+        "largest_in": 65536, "tried_out": 1 << 20, "tried_in": 1 << 20}}})),
+    "ros2.link.too_thin": _case(lambda: needing(member(), 50000, 10), r("ros2.link", "warn", {
+        "peers": {"turtlebot": {"rtt_ms": 40.0, "out_bps": 2_100_000, "in_bps": 9_000_000,
+                                "largest_out": 1 << 20, "largest_in": 1 << 20,
+                                "tried_out": 1 << 20, "tried_in": 1 << 20}}})),
     "relay.router.down": _case(lambda: relayed(member()), r("relay.router", "fail", {
         "failure": "timeout", "endpoint": "tls/relay:7447", "address": "198.51.100.9"})),
 }
+
+
+def needing(s, size: int, hz: float):
+    """*s* with one [[link.topic]] of *size* bytes at *hz*."""
+    from rosnet_tui.core.config.settings_model import LinkTopic
+
+    s.link.topics = [LinkTopic("/camera/image/compressed", size, hz)]
+    return s
 
 
 def relayed(s):

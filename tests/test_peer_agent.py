@@ -208,8 +208,9 @@ def test_ros2_agent_on_a_peer_without_rosnet_tui_runs_on_python3_and_says_no_ins
     home = tmp_path / "home"
     home.mkdir()
     kind = probe_agents.ZENOH_AGENT
-    loads = b"".join(json.dumps({"load": n, "src": src.decode(), "entry": e}).encode() + b"\n"
-                     for n, src, e in kind.programs)
+    loads = b"".join(json.dumps({"load": p[0], "src": p[1].decode(), "entry": p[2],
+                                 **({"base": p[3]} if len(p) > 3 else {})}).encode() + b"\n"
+                     for p in kind.programs)
     runs = [{"run": "zenoh", "id": 1, "argv": ["info"]},
             {"run": "zenoh", "id": 2, "argv": ["graph", "--timeout", "1"],
              "ni": list(kind.no_install or ())}]

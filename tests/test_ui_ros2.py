@@ -32,7 +32,7 @@ async def test_switching_to_ros2_in_setup_changes_the_ros_step(tmp_path):
         step = app.screen
         assert list(step.query_one(CheckList).rows) == [
             "ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in",
-            "security.outsider"]
+            "ros2.link", "security.outsider"]
         assert "rmw_zenoh" in step.config_source and "tls/" in step.config_source
         await pilot.press("2")
         await pilot.pause()

@@ -36,7 +36,7 @@ ZROUTER = SCRIPTS / "zrouter.py"
 NODE = SCRIPTS / "node.py"
 # The ROS step's checks under ROS 2 (security.outsider: the outsider is refused, issue 22)
 ROS2_IDS = ["ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in",
-            "security.outsider"]
+            "ros2.link", "security.outsider"]
 
 
 class Ros2World:
@@ -47,6 +47,7 @@ class Ros2World:
         self.nodes: list[subprocess.Popen] = []
         self.bash_extra: dict[str, dict[str, str]] = {h: {} for h in COMPUTERS}
         self.ros_extra: dict[str, Any] = {}     # [ros] values of every computer's settings
+        self.shaped: str | None = None          # the robot's modem's rate both ways (tc tbf)
 
 
     # ------------------------------------------------------------------ settings and files
@@ -145,6 +146,16 @@ class Ros2World:
         self.lab._set_forwarding("robot", robot)
         self.lab._set_forwarding("laptop", laptop)
 
+    def shape_robot(self, rate: str | None, latency: str = "400ms") -> None:
+        """The robot's modem shaped to *rate* ("2mbit") both ways: tc tbf on what leaves its WAN
+        (the robot's upload) and its LAN (its download), queueing up to *latency* of it; None
+        takes it off (healthy() does)."""
+        for dev in ("wan0", "lan0"):
+            self.lab._in_ns("robot_modem", f"tc qdisc replace dev {dev} root tbf rate {rate} "
+                                           f"burst 32kbit latency {latency}" if rate else
+                            f"tc qdisc del dev {dev} root 2>/dev/null || true")
+        self.shaped = rate
+
     def uninstall(self, host: str) -> None:
         """Take rosnet-tui off *host* as ``pipx uninstall rosnet-tui`` would (healthy() puts it
         back)."""
@@ -217,6 +228,8 @@ class Ros2World:
         self.bash_extra = {h: {} for h in COMPUTERS}
         restart = bool(self.ros_extra)
         self.ros_extra = {}
+        if self.shaped:
+            self.shape_robot(None)
         self.forward()
         for h in COMPUTERS:
             self.lab.write_hosts(h, topology.hosts_text(h))
@@ -228,6 +241,8 @@ class Ros2World:
                 self.start_router(h)
 
     def __exit__(self, *exc: Any) -> None:
+        if self.shaped:
+            self.shape_robot(None)
         for p in self.nodes:
             self.lab.kill(p, grace=0.5)
         self.nodes.clear()

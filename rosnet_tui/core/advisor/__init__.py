@@ -7,7 +7,7 @@ Where things live:
 - :mod:`.evidence`: :class:`Evidence` (what a rule reads: results, settings, the checks'
   declared data) and the helpers several steps' rules share;
 - :mod:`.isp`, :mod:`.router`, :mod:`.linux` (:mod:`.names` for names and the hosts file),
-  :mod:`.ros` (:mod:`.ros2` for ROS 2, :mod:`.rosbridge`
+  :mod:`.ros` (:mod:`.ros2` for ROS 2, :mod:`.ros2_link` for its link measured, :mod:`.rosbridge`
   for web clients): the rules, one module per step,
   named like the checks whose data they read (Table 1 and security.exposed are the router's;
   :mod:`.router_upnp` reads router.upnp, the modem's own word; :mod:`.security` reads
@@ -31,6 +31,7 @@ from rosnet_tui.core.advisor import (  # noqa: F401  (declare the rules)
     relay_tunnel,
     ros,
     ros2,
+    ros2_link,
     ros2_tls,
     rosbridge,
     router,

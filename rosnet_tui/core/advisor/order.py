@@ -81,7 +81,9 @@ RULE_ORDER: tuple[str, ...] = (
     "ros.pubsub.out_fails",
     "ros.pubsub.in_fails",
     "ros.pubsub.both_fail",
-    # step 4: ROS 2 over rmw_zenoh
+    # step 4: ROS 2 over rmw_zenoh (the link measured first: it fires only when the path works)
+    "ros2.link.large_dropped",
+    "ros2.link.too_thin",
     "ros2.env.dds",
     "ros2.env.domain",
     "ros2.env.distro",

@@ -48,6 +48,9 @@ class CheckContext:
     # The round's peer agents (a core.peer.peer_agent.PeerAgents, made by the first check that needs
     # one; None: none yet): one program per peer serving every probe; closed with the round.
     peer_agents: Any = None
+    # The ids of the checks this round runs (run_checks sets it): a check that must not overlap
+    # another (ros2.link's bursts after the pub/sub checks) knows whether to wait for it.
+    round_ids: frozenset[str] = frozenset()
 
     @property
     def ssh(self) -> SshOptions:
@@ -170,6 +173,8 @@ async def run_check(spec: CheckSpec, ctx: CheckContext) -> CheckResult:
 
 async def run_checks(specs: Iterable[CheckSpec], ctx: CheckContext) -> AsyncIterator[CheckResult]:
     """Run *specs* concurrently; yield each result as soon as it lands."""
+    specs = list(specs)
+    ctx.round_ids = frozenset(s.id for s in specs)
     tasks = [asyncio.ensure_future(run_check(s, ctx)) for s in specs]
     try:
         for fut in asyncio.as_completed(tasks):

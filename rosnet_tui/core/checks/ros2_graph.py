@@ -21,6 +21,7 @@ from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import each_peer
 from rosnet_tui.core.checks.probes.ros2 import (
     close_zenoh,
+    member_arg,
     node_domain,
     node_endpoint,
     open_zenoh,
@@ -73,11 +74,6 @@ async def _unlinked(ctx: CheckContext, session: Any, how: str) -> str | None:
             ", or its config does not connect there)")
 
 
-def _member_arg(ctx: CheckContext, peer: Peer) -> list[str]:
-    """Tell the peer program it is a member (its router must be linked to the master's)."""
-    return ["--member", "1"] if peer.name != ctx.settings.master_name else []
-
-
 @check("ros2.graph", "ros", "The ROS 2 graph: every component's nodes are seen", FACTOR_GRAPH,
        ros=2)
 async def check_graph(ctx: CheckContext) -> Outcome:
@@ -106,7 +102,7 @@ async def check_graph(ctx: CheckContext) -> Outcome:
     # One task for every peer's side (probes.peers.each_peer: bounded, one SSH connection per peer).
     tasks = [asyncio.ensure_future(each_peer(peers, lambda p: peer_run(
         ctx, p, ZENOH_AGENT, "zenoh", ["graph", "--expect", ours, "--name", theirs[p.name],
-                                       "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, p)],
+                                       "--timeout", f"{remote_t:.1f}", *member_arg(ctx, p)],
         timeout=max(0.5, deadline - time.monotonic()),
         connect_timeout=max(0.5, ctx.timeout_s * 0.6), needs_install=True)))]
     # Every token seen during the check, not only at the last look: a peer drops its probe node
@@ -286,7 +282,7 @@ async def _exchange(ctx: CheckContext, peer: Peer, out: bool, budget_s: float
     remote_t = max(1.0, min(budget_s * 0.6, ctx.timeout_s * 2))
     deadline = min(deadline, time.monotonic() + remote_t + max(1.0, ctx.timeout_s))
     args = (["sub", "--expect", text] if out else ["pub", "--text", text, "--ack", tag])
-    argv = [*args, "--topic", topic, "--timeout", f"{remote_t:.1f}", *_member_arg(ctx, peer)]
+    argv = [*args, "--topic", topic, "--timeout", f"{remote_t:.1f}", *member_arg(ctx, peer)]
     got: tuple[str | None, bool | None, int] = (None, None, 0)
     seen_pub: bool | None = None
     ev: list[str] = []

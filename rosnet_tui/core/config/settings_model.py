@@ -350,6 +350,32 @@ class RelaySettings:
         return bool(self.host)
 
 
+@dataclass
+class LinkTopic:
+    """A topic the link must carry ([[link.topic]]): its messages' size and rate; ``max_hz``
+    (ROS 2): the rate it is cut down to on the WAN link, which the need then counts."""
+
+    name: str = ""                   # the topic's name (/camera/image/compressed)
+    bytes: int = 0                   # bytes of one message
+    hz: float = 0.0                  # messages per second
+    max_hz: float | None = None      # optional: the rate on the WAN link (ROS 2 downsampling)
+
+    @property
+    def bps(self) -> float:
+        """Bits per second this topic needs on the link (at max_hz when it is lower)."""
+        rate = min(self.hz, self.max_hz) if self.max_hz is not None else self.hz
+        return float(self.bytes) * float(rate) * 8.0
+
+
+@dataclass
+class LinkSettings:
+    topics: list[LinkTopic] = field(default_factory=list)   # [[link.topic]]: what the link carries
+
+    def need_bps(self) -> float:
+        """Bits per second every [[link.topic]] needs together."""
+        return sum(t.bps for t in self.topics)
+
+
 class Gap(str, Enum):
     """A problem that is a value not given yet, rather than a wrong one."""
 
@@ -368,6 +394,7 @@ class Settings:
     rosbridge: RosbridgeSettings = field(default_factory=RosbridgeSettings)
     firewall: FirewallSettings = field(default_factory=FirewallSettings)
     relay: RelaySettings = field(default_factory=RelaySettings)
+    link: LinkSettings = field(default_factory=LinkSettings)
     # Whether the file had a [sync] table (so saving does not add one the user never asked for).
     has_sync: bool = field(default=False, compare=False, repr=False)
     # When the settings file holding these values was saved (its modification time, seconds since
@@ -491,6 +518,7 @@ class Settings:
         for entry in self.firewall.allow:
             add("firewall.allow", validate_network(entry))
         out.extend(self._relay_checked(seen))
+        out.extend(_link_checked(self.link))
         y = self.sync
         add("sync.store", None if y.store in SYNC_STORES
             else f"must be one of {', '.join(SYNC_STORES)}")
@@ -554,6 +582,33 @@ class Settings:
     @property
     def complete(self) -> bool:
         return not self.problems()
+
+
+TOPIC_NAME = re.compile(r"^/?[A-Za-z_~{][A-Za-z0-9_~{}]*(?:/[A-Za-z_{][A-Za-z0-9_{}]*)*$")
+MAX_TOPIC_BYTES = 1 << 30           # a message of at most 1 GiB
+MAX_TOPIC_HZ = 100_000.0
+
+
+def _link_checked(link: LinkSettings) -> list[tuple[str, str, Gap | None]]:
+    """What is wrong with the [[link.topic]] tables (the keys: link.topic[N].KEY)."""
+    out: list[tuple[str, str, Gap | None]] = []
+    for i, tp in enumerate(link.topics):
+        k = f"link.topic[{i + 1}]"
+        if not isinstance(tp.name, str) or not TOPIC_NAME.match(tp.name):
+            out.append((f"{k}.name", f"'{shown(tp.name)}' is not a ROS topic name (letters, "
+                                     "digits, _ and / as in /camera/image/compressed)", None))
+        if isinstance(tp.bytes, bool) or not isinstance(tp.bytes, int) or \
+                not 1 <= tp.bytes <= MAX_TOPIC_BYTES:
+            out.append((f"{k}.bytes", f"must be a whole number of bytes, 1 to {MAX_TOPIC_BYTES}",
+                        None))
+        if not number_within(tp.hz, 0, MAX_TOPIC_HZ) or tp.hz == 0:
+            out.append((f"{k}.hz", "must be a rate above 0, in messages per second (at most "
+                                   f"{MAX_TOPIC_HZ:g})", None))
+        if tp.max_hz is not None and (not number_within(tp.max_hz, 0, MAX_TOPIC_HZ)
+                                      or tp.max_hz == 0):
+            out.append((f"{k}.max_hz", "must be a rate above 0, in messages per second (leave "
+                                       "it out for no limit)", None))
+    return out
 
 
 def number_within(value: Any, lo: float, hi: float) -> bool:

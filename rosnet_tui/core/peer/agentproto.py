@@ -5,8 +5,9 @@ Stdlib only and a single file, like the probe programs it serves (``core/peer/ro
 ``core/peer/zenohproto.py``): the master feeds it over SSH on stdin (:data:`BOOT` reads it: a line
 with its length, then the source), then speaks JSON lines on the same channel:
 
-- master -> agent: ``{"load": NAME, "src": SOURCE, "entry": FUNCTION or null}`` (a probe
-  program, compiled and run once here as a module: its imports are then warm), ``{"run": NAME,
+- master -> agent: ``{"load": NAME, "src": SOURCE, "entry": FUNCTION or null, "base": NAME
+  (optional)}`` (a probe program, compiled and run once here as a module: its imports are then
+  warm; with "base", on a copy of that program's names, as zenohlink on zenohproto's), ``{"run": NAME,
   "id": N, "argv": [...], "ni": [TEXT, STATUS] (optional)}`` (start it; with "ni", when the agent
   was started as the fallback for a peer without rosnet-tui installed (``no-install`` after its
   life bound), the run needs the install: TEXT is its output and STATUS its exit status, as the
@@ -62,9 +63,10 @@ class Agent:
             except OSError:
                 pass
 
-    def load(self, name: str, src: str, entry) -> None:
+    def load(self, name: str, src: str, entry, base=None) -> None:
         code = compile(src, name, "exec")
-        ns = {"__name__": "rosnet_agent_" + name}
+        ns = dict(self.programs[base][1]) if base in self.programs else {}
+        ns["__name__"] = "rosnet_agent_" + name
         if entry:
             exec(code, ns)   # the module's imports and definitions, once for every run
         self.programs[name] = (code, ns, entry)
@@ -175,7 +177,7 @@ class Agent:
                 continue
             try:
                 if "load" in msg:
-                    self.load(msg["load"], msg["src"], msg.get("entry"))
+                    self.load(msg["load"], msg["src"], msg.get("entry"), msg.get("base"))
                 elif "run" in msg:
                     self.run(msg.get("id"), msg["run"], msg.get("argv") or [], msg.get("ni"))
                 elif "kill" in msg:

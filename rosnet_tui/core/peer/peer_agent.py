@@ -45,7 +45,7 @@ class AgentKind:
 
     name: str
     command: Callable[[float], str]
-    programs: Sequence[tuple[str, bytes, str | None]]
+    programs: Sequence[tuple[str, bytes, str | None] | tuple[str, bytes, str | None, str]]
     # What a run that needs the peer's rosnet-tui answers when the agent runs without one (the
     # install finder's fallback): (output, exit status), the finder's own report.
     no_install: tuple[str, int] | None = None
@@ -179,8 +179,9 @@ class PeerAgent:
     async def _start(self, opts: SshOptions | None, timeout: float, tcp_timeout: float | None,
                      max_s: float) -> SshResult:
         payload = [f"{len(AGENT_SOURCE)}\n".encode(), AGENT_SOURCE]
-        payload += [(json.dumps({"load": n, "src": src.decode(), "entry": entry}) + "\n").encode()
-                    for n, src, entry in self.kind.programs]
+        payload += [(json.dumps({"load": p[0], "src": p[1].decode(), "entry": p[2],
+                                 **({"base": p[3]} if len(p) > 3 else {})}) + "\n").encode()
+                    for p in self.kind.programs]
         for attempt in (1, 2):
             s = await open_session(opts, self.peer, self.kind.command(max_s), timeout,
                                    tcp_timeout)

@@ -248,6 +248,14 @@ def open_client(endpoint: str, timeout: float, mode: str = "client",
     c.insert_json5("connect/exit_on_failure", "true")
     c.insert_json5("scouting/multicast/enabled", "false")
     c.insert_json5("scouting/gossip/enabled", "false")
+    try:   # as rmw_zenoh's nodes by default: payloads go on the wire, not in shared memory
+        c.insert_json5("transport/shared_memory/enabled", "false")
+    except Exception:  # noqa: BLE001, S110 - a zenoh built without shared memory
+        pass
+    # A probe's own hop to its router (loopback) is not the link measured: a large message's
+    # fragments wait there up to 1 s for room, not 50 ms (a busy machine is no lost message).
+    c.insert_json5("transport/link/tx/queue/congestion_control/drop/"
+                   "max_wait_before_drop_fragments", "1000000")
     for key, value in (tls or {}).items():   # a tls/ endpoint: this component's certificate
         c.insert_json5(f"transport/link/tls/{key}", json.dumps(value))
     if mode == "peer":
@@ -266,6 +274,11 @@ def open_client(endpoint: str, timeout: float, mode: str = "client",
                         "failed: a certificate missing, expired or from another CA, or the "
                         "router's certificate does not name the host dialled)")
         raise OpenFailed(text or type(exc).__name__) from None
+
+
+def control_priority() -> Any:
+    """Zenoh's priority for small control messages, above the data queue (zenohlink's)."""
+    return _zenoh().Priority.INTERACTIVE_HIGH
 
 
 def _admin_body(reply: Any) -> dict[str, Any] | None:
@@ -369,17 +382,19 @@ class ProbeNode:
                              self.name, self.topic, type_hash=self.type_hash)
         self._tokens.append(self.session.liveliness().declare_token(tok))
 
-        def on_sample(sample: Any) -> None:
+        def on_sample(sample: Any) -> None:   # (payload, attachment, when it arrived)
             att = sample.attachment
             self.received.put((bytes(sample.payload.to_bytes()),
-                               bytes(att.to_bytes()) if att is not None else None))
+                               bytes(att.to_bytes()) if att is not None else None,
+                               time.monotonic()))
 
         self._sub = self.session.declare_subscriber(self.key, on_sample)
 
-    def publish(self, text: str) -> None:
+    def publish(self, text: str, **put: Any) -> None:
+        """One message of *text*; *put*: more of session.put's options (priority ...)."""
         self.seq += 1
         self.session.put(self.key, encode_string(text),
-                         attachment=encode_attachment(self.seq, time.time_ns(), self.gid))
+                         attachment=encode_attachment(self.seq, time.time_ns(), self.gid), **put)
 
     def close(self) -> None:
         for t in self._tokens:
@@ -404,7 +419,7 @@ def wait_message(node: ProbeNode, timeout: float, expect: str | None = None
         if left <= 0:
             return None, None, seen
         try:
-            payload, att = node.received.get(timeout=min(left, 0.1))
+            payload, att, _at = node.received.get(timeout=min(left, 0.1))
         except queue.Empty:
             continue
         seen += 1
@@ -495,8 +510,9 @@ def session_mode(how: str) -> str:
     return "client" if how == "client" else "peer"
 
 
-def run_program(argv: list[str]) -> int:
-    """``sub``, ``pub`` or ``graph`` on this machine, as its own ROS 2 nodes would; one report line."""
+def run_program(argv: list[str], more: dict[str, Any] | None = None) -> int:
+    """``sub``, ``pub`` or ``graph`` on this machine, as its own ROS 2 nodes would; one report line.
+    *more*: other commands, ``name: function(session, args, base, deadline)`` (zenohlink's)."""
     cmd = argv[0] if argv else ""
     a = _args(argv[1:])
     timeout = float(a.get("timeout", "3"))
@@ -575,6 +591,8 @@ def run_program(argv: list[str]) -> int:
             ack.undeclare()
             node.close()
             _report(published=sent, acked=acked.is_set(), saw_subscriber=saw_sub, **base)
+        elif more and cmd in more:
+            more[cmd](session, a, base, deadline)
         else:
             _report(error="usage", detail=f"unknown command {cmd!r}", **base)
             return 2

@@ -152,7 +152,7 @@ def router_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
     link: dict[str, Any] = {"tx": {"lease": LEASE_MS, "keep_alive": KEEP_ALIVE}}
     if mtls(s):
         link["tls"] = tls_settings(s, tls, listen=s.is_master and not s.relayed)
-    return {
+    return {**downsampling(s),
         "mode": "router",
         "connect": {"endpoints": connect_endpoints(s), "retry": dict(CONNECT_RETRY)},
         "listen": {"endpoints": listen_endpoints(s)},
@@ -168,6 +168,19 @@ def router_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:
         # Echoed in the admin space: the master's ros2.router names the linked members by it.
         "metadata": {"name": s.this.name, "role": "master" if s.is_master else "member"},
     }
+
+
+def downsampling(s: Settings) -> dict[str, Any]:
+    """The [[link.topic]] tables with max_hz as Zenoh downsampling rules on what leaves this
+    router over its TLS link, the router-to-router link across the internet (local nodes use
+    plain TCP on loopback, so they keep every message); {} when none has max_hz. Without mutual
+    TLS the WAN link cannot be told from the local ones: nothing is written."""
+    rules = [{"key_expr": f"{s.ros.domain_id}/{t.name.strip('/')}/**", "freq": float(t.max_hz)}
+             for t in s.link.topics if t.max_hz is not None]
+    if not rules or not mtls(s):
+        return {}
+    return {"downsampling": [{"id": "wan_max_hz", "link_protocols": ["tls"], "flows": ["egress"],
+                              "messages": ["put"], "rules": rules}]}
 
 
 def session_config(s: Settings, tls: TlsPaths | None = None) -> dict[str, Any]:

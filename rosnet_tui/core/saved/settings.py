@@ -20,6 +20,7 @@ from rosnet_tui.core.config.settings_model import (
     ZENOH_PORT_DEFAULT,
     FirewallSettings,
     Gap,
+    LinkTopic,
     Peer,
     RelaySettings,
     RosbridgeSettings,
@@ -52,10 +53,13 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "rosbridge": {"enabled": bool, "port": int, "host": str},
     "firewall": {"allow": list},
     "relay": {"host": str, "ssh_user": str, "ssh_port": int, "zenoh_port": int, "tunnels": dict},
+    "link": {"topic": list},
+    "link.topic": {"name": str, "bytes": int, "hz": (int, float), "max_hz": (int, float)},
 }
 _TYPE_WORDS = {str: "a string in quotes", int: "a whole number", list: "a list [ ... ]",
                (int, float): "a number", bool: "true or false",
                dict: "a table ([relay.tunnels], one name = port a line)"}
+_SECTIONS = [s for s in _SCHEMA if "." not in s]
 
 
 def _lines(text: str) -> list[str]:
@@ -215,8 +219,8 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
         raise SettingsError(f"a value cannot be read ({shown(exc, 80)})", path=path, line=line,
                             key=_key_at(text, line) if line else None) from None
     for top in raw:
-        if top not in _SCHEMA:
-            raise SettingsError(f"unknown section (known: {', '.join('[' + s + ']' for s in _SCHEMA)})",
+        if top not in _SECTIONS:
+            raise SettingsError(f"unknown section (known: {', '.join('[' + s + ']' for s in _SECTIONS)})",
                                 path=path, line=_locate(text, top, None), key=top)
     s = Settings()
     if "this" in raw:
@@ -269,6 +273,8 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
                                     key=f"relay.tunnels.{name}")
         s.relay = replace(s.relay, **raw["relay"])
         s.relay.tunnels = dict(tunnels)
+    if "link" in raw:
+        s.link.topics = _link_topics(text, path, raw["link"])
 
     for key, why in s.errors(allow=(Gap.BLANK,)):   # incomplete is fine (the wizard fills it in)
         table, _, rest = key.partition(".")
@@ -278,10 +284,33 @@ def parse_settings(text: str, path: Path | None = None) -> Settings:
             table, index = "peer", int(m.group(1)) - 1
         if key.startswith("relay.tunnels."):
             table, rest = "relay.tunnels", key[len("relay.tunnels."):]
+        m = re.match(r"link\.topic\[(\d+)\]\.(\w+)$", key)
+        if m:
+            table, index, rest = "link.topic", int(m.group(1)) - 1, m.group(2)
         line = _locate(text, table, rest if table == "relay.tunnels" else rest.split(".")[-1],
                        index)
         raise SettingsError(why, path=path, line=line, key=f"{table}.{rest}")
     return s
+
+
+def _link_topics(text: str, path: Path | None, link: Any) -> list[LinkTopic]:
+    """The [[link.topic]] tables of [link] (each with name, bytes and hz; max_hz optional)."""
+    topics = link.get("topic", []) if isinstance(link, dict) else []
+    if not isinstance(topics, list) or not all(isinstance(t, dict) for t in topics):
+        raise SettingsError("topics are written as [[link.topic]] tables", path=path,
+                            line=_locate(text, "link.topic", None), key="link.topic")
+    _check_table(text, path, "link", link)
+    out = []
+    for i, tp in enumerate(topics):
+        _check_table(text, path, "link.topic", tp, i)
+        for need in ("name", "bytes", "hz"):
+            if need not in tp:
+                raise SettingsError(f"each [[link.topic]] needs {need} (name, bytes of one "
+                                    "message, hz: messages per second)", path=path,
+                                    line=_locate(text, "link.topic", None, i),
+                                    key=f"link.topic.{need}")
+        out.append(LinkTopic(**tp))
+    return out
 
 
 def read_settings_text(path: Path) -> str | None:
@@ -420,6 +449,7 @@ def render_settings(s: Settings, previous_text: str | None = None) -> str:
         _merge_table(doc, "firewall", values["firewall"])
     if "relay" in doc or s.relay != RelaySettings():
         _merge_relay(doc, values["relay"], s.relay.tunnels)
+    _merge_link(doc, s)
     if s.peers:
         # Keep peers before [ros] when writing fresh, as in the documented example.
         body = doc.as_string()
@@ -515,6 +545,29 @@ def _merge_relay(doc: Any, values: dict[str, Any], tunnels: dict[str, int]) -> N
     for k, v in tunnels.items():
         if old.get(k) != v:
             old[k] = v
+
+
+def _merge_link(doc: Any, s: Settings) -> None:
+    """[[link.topic]]: left as written (comments) when the values are the same, else rewritten."""
+    import tomlkit
+
+    want = [{k: v for k, v in (("name", t.name), ("bytes", t.bytes), ("hz", t.hz),
+                               ("max_hz", t.max_hz)) if v is not None} for t in s.link.topics]
+    old = doc.get("link")
+    have = [dict(t) for t in (old.get("topic") or [])] if isinstance(old, dict) else None
+    if have == want or (have is None and not want):
+        return
+    if "link" in doc:
+        del doc["link"]
+    if want:
+        topics = tomlkit.aot()
+        for w in want:
+            tbl = tomlkit.table()
+            tbl.update(w)
+            topics.append(tbl)
+        link = tomlkit.table(is_super_table=True)
+        link["topic"] = topics
+        doc["link"] = link
 
 
 def atomic_write_text(path: Path, text: str, mode: int | None = None,

@@ -391,7 +391,7 @@ STEP_CHECKS: dict[str, tuple[tuple[str, int | None, str | None], ...]] = {
             ("ros.pubsub_out", 1, None), ("ros.pubsub_in", 1, None),
             ("ros2.env", 2, None), ("ros2.router", 2, None), ("relay.router", 2, "relay"),
             ("ros2.graph", 2, None),
-            ("ros2.pubsub_out", 2, None), ("ros2.pubsub_in", 2, None),
+            ("ros2.pubsub_out", 2, None), ("ros2.pubsub_in", 2, None), ("ros2.link", 2, None),
             ("security.outsider", None, None), ("ros.rosbridge", None, "rosbridge")),
 }
 

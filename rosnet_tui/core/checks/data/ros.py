@@ -168,6 +168,22 @@ class Ros2PubsubData(Ros2PubsubPeer, total=False):
     peers: dict[str, Ros2PubsubPeer]  # every peer's exchange, by peer name
 
 
+class Ros2LinkPeer(TypedDict, total=False):
+    rtt_ms: float | None      # round trip through the routers, median of a few pings (None: none came back)
+    rtt_spread_ms: float | None  # the slowest ping's round trip minus the fastest one's
+    out_bps: int | None       # bits per second delivered from this component to the peer (None: not measured)
+    in_bps: int | None        # ... from the peer to this component
+    largest_out: int          # bytes of the largest message delivered whole to the peer (0: none)
+    largest_in: int           # ... from the peer
+    tried_out: int            # bytes of the largest message tried to the peer (0: none: no time)
+    tried_in: int             # ... from the peer
+
+
+class Ros2LinkData(TypedDict, total=False):
+    peers: dict[str, Ros2LinkPeer]  # every peer's link, by peer name
+    need_bps: float           # what the [[link.topic]] tables need, bits per second (0: none given)
+
+
 # ---- step 4, both ROS versions: web clients (rosnet_tui/core/checks/rosbridge.py)
 RosbridgeHop = Literal["name", "forward", "upgrade", "bridge", "rosapi", "round_trip"]
 
@@ -197,5 +213,6 @@ DATA: dict[str, type] = {
     "ros2.graph": Ros2GraphData,
     "ros2.pubsub_out": Ros2PubsubData,
     "ros2.pubsub_in": Ros2PubsubData,
+    "ros2.link": Ros2LinkData,
     "ros.rosbridge": RosRosbridgeData,
 }

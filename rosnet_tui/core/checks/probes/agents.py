@@ -10,7 +10,7 @@ from pathlib import Path
 
 from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.config.settings_model import Peer
-from rosnet_tui.core.peer import agentproto, chatproto, rosproto, tunnelproto, zenohproto
+from rosnet_tui.core.peer import agentproto, chatproto, rosproto, tunnelproto, zenohlink, zenohproto
 from rosnet_tui.core.peer.commands import (
     NO_INSTALL_EXIT,
     NO_INSTALL_REPORT,
@@ -36,6 +36,10 @@ ROSPROTO_SOURCE = Path(rosproto.__file__).read_bytes()   # the ROS 1 probe progr
 ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()    # the ROS 2 (Zenoh) probe program
 CHAT_SOURCE = Path(chatproto.__file__).read_bytes()      # the chats' peer side
 TUNNEL_SOURCE = Path(tunnelproto.__file__).read_bytes()  # relay.tunnel's peer side (paramiko)
+# ros2.link's peer side: zenohlink's body, loaded on zenohproto's names (its imports there)
+_LINK_TEXT = Path(zenohlink.__file__).read_bytes()
+LINK_SOURCE = b"from __future__ import annotations\n" + _LINK_TEXT[_LINK_TEXT.index(zenohlink.BODY_MARK.encode(),
+                                          _LINK_TEXT.index(zenohlink.BODY_MARK.encode()) + 1):]
 PEER_PYTHON = "python3"   # the peer's python the ROS 1 agent and the chats run with
 
 
@@ -50,8 +54,8 @@ ROS_AGENT = AgentKind(
 ZENOH_AGENT = AgentKind(
     "ros2", lambda max_s: installed_python_command(f"{max_s:.0f}", mark=zenohproto.REPORT_MARK,
                                                    fallback=True, boot=agentproto.BOOT),
-    (("zenoh", ZENOH_SOURCE, "run_program"), ("chat", CHAT_SOURCE, "main"),
-     ("tunnel", TUNNEL_SOURCE, "main")),
+    (("zenoh", ZENOH_SOURCE, "run_program"), ("zlink", LINK_SOURCE, "run_link", "zenoh"),
+     ("chat", CHAT_SOURCE, "main"), ("tunnel", TUNNEL_SOURCE, "main")),
     (f"{zenohproto.REPORT_MARK}{NO_INSTALL_REPORT}\n", NO_INSTALL_EXIT))
 
 

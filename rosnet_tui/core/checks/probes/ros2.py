@@ -79,6 +79,11 @@ def ros2_peers(ctx: CheckContext) -> list[Peer]:
     return sorted(ssh_peers(s), key=lambda p: p.name != s.master_name)
 
 
+def member_arg(ctx: CheckContext, peer: Peer) -> list[str]:
+    """Tell the peer program it is a member (its router must be linked to the master's)."""
+    return ["--member", "1"] if peer.name != ctx.settings.master_name else []
+
+
 def zenoh_peer_problem(res: SshResult, peer: Peer, rep: dict | None) -> str | None:
     """Why the peer's zenoh program gave no usable report (None: it did)."""
     if res.failure and res.failure != "timeout" and rep is None:

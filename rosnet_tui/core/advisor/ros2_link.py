@@ -1,0 +1,134 @@
+"""Step 4 for ROS 2: the rules that read ros2.link, the link to each peer measured (round trip,
+throughput each way, the largest message delivered whole) and weighed against what
+``[[link.topic]]`` says the robot must carry.
+
+"Small messages pass, large ones are dropped" is a cause of its own: every path check passes, yet
+a camera or a point cloud never shows across the link.
+"""
+
+from __future__ import annotations
+
+from rosnet_tui.core.advisor.engine import Hit, rule
+from rosnet_tui.core.advisor.evidence import Evidence
+
+WAYS = (("out", "up", "from {me} to {peer}"), ("in", "down", "from {peer} to {me}"))
+
+
+def _size(n: int) -> str:
+    return f"{n / (1 << 20):g} MB" if n >= 1 << 20 else f"{n / 1024:g} kB"
+
+
+def _mbit(bps: float) -> str:
+    return f"{bps / 1e6:.1f} Mbit/s"
+
+
+def _peers(ev: Evidence) -> dict:
+    return (ev.data("ros2.link").get("peers") or {}) if ev.s.ros2 else {}
+
+
+def _dropped(ev: Evidence) -> list[tuple[str, str, str, int, int]]:
+    """(peer, 'up'|'down', direction in words, size tried, largest whole) where a large message
+    tried was lost while small ones came back."""
+    out = []
+    for name, d in _peers(ev).items():
+        if d.get("rtt_ms") is None:
+            continue
+        for way, word, where in WAYS:
+            tried, got = d.get(f"tried_{way}") or 0, d.get(f"largest_{way}") or 0
+            if tried and got < tried:
+                out.append((name, word, where.format(me=ev.me, peer=name), tried, got))
+    return out
+
+
+@rule("ros2.link.large_dropped", "ros", ("ros2.link",),
+      "small messages pass the link, large ones are dropped",
+      "Pings and small messages cross the routers both ways, but a message of 64 kB or 1 MB "
+      "does not arrive whole: Zenoh's congestion control drops a large message's fragments when "
+      "the link's queue is full (rmw_zenoh's default QoS), shared memory on the publisher's "
+      "host keeps large payloads off the wire, a size filter drops them, or the link is too "
+      "thin for them. Topics such as images and point clouds are then listed but never arrive.",
+      "Publish the large topics RELIABLE with KEEP_ALL history, or let the sending router wait "
+      "longer before dropping fragments; turn shared memory off for nodes whose topics cross the "
+      "internet; remove a low_pass_filter; make the messages smaller.",
+      "ros", "warn")
+def _large(ev: Evidence) -> list[Hit]:
+    lost = _dropped(ev)
+    if not lost:
+        return []
+    peer, word, where, tried, got = lost[0]
+    d = _peers(ev)[peer]
+    rate = d.get(f"{'out' if word == 'up' else 'in'}_bps")
+    big = [t for t in ev.s.link.topics if t.bytes > min(x[4] for x in lost)]
+    facts = [f"ros2.link: {p}: {w}, {_size(t)} tried, largest whole {_size(g) if g else 'none'}"
+             f" (round trip {_peers(ev)[p].get('rtt_ms')} ms)" for p, w, _x, t, g in lost]
+    time_words = (f" At the {_mbit(rate)} measured, {_size(tried)} takes "
+                  f"{tried * 8 / rate:.1f} s on the wire." if rate else "")
+    needs = (f" {', '.join(t.name for t in big)} ({', '.join(_size(t.bytes) for t in big)} a "
+             "message) will not arrive." if big else "")
+    return [Hit(f"Small messages cross the link {where} (the round trip is "
+                f"{d.get('rtt_ms')} ms), but a {_size(tried)} message sent that way never "
+                f"arrived whole (the largest that did: {_size(got) if got else 'none of the large ones'})."
+                f"{time_words}{needs} This is not the path: it is what happens to large "
+                "messages on it.",
+                ["Congestion control: rmw_zenoh drops a message whose fragments find the link's "
+                 "queue full, unless the publisher's QoS is RELIABLE with KEEP_ALL history. Give "
+                 "the large topics that QoS, or give the sending side's router more time before "
+                 "it drops fragments, in its config (ZENOH_ROUTER_CONFIG_URI): `transport: { "
+                 "link: { tx: { queue: { congestion_control: { drop: { "
+                 "max_wait_before_drop_fragments: 500000 } } } } } }` (microseconds; the "
+                 "default is 50000), then restart that router.",
+                 "Shared memory: on the publisher's host, start the nodes with "
+                 "`export ZENOH_CONFIG_OVERRIDE='transport/shared_memory/enabled=false'` (or "
+                 "that key in the ZENOH_SESSION_CONFIG_URI file) when their topics must cross "
+                 "the internet.",
+                 "A size filter: look for `low_pass_filter` in both routers' configs; a "
+                 "`size_limit` below the message size drops it. Raise it or remove it.",
+                 "Or make the messages smaller: compressed images (image_transport's "
+                 "`compressed` topics), a lower resolution, a voxel-filtered cloud. Then re-run "
+                 "the ROS step."],
+                severity="fail" if big else None, evidence=facts)]
+
+
+def _key_expr(ev: Evidence, topic: str) -> str:
+    return f"{ev.s.ros.domain_id}/{topic.strip('/')}/**"
+
+
+@rule("ros2.link.too_thin", "ros", ("ros2.link",),
+      "the topics in [[link.topic]] need more than the link carries",
+      "The sum of what the robot must carry (bytes x hz of every [[link.topic]]) is above the "
+      "throughput measured through the routers: queues fill, messages are dropped or arrive "
+      "late, and a teleoperation topic waits behind the images.",
+      "Send less: compressed images (image_transport), a lower rate at the source, or Zenoh's "
+      "downsampling of the named topics on the sending router's WAN link (max_hz).",
+      "ros", "warn")
+def _thin(ev: Evidence) -> list[Hit]:
+    need = ev.s.link.need_bps()
+    if not need:
+        return []
+    short = [(name, word, where.format(me=ev.me, peer=name), d[f"{way}_bps"])
+             for name, d in _peers(ev).items() for way, word, where in WAYS
+             if d.get(f"{way}_bps") is not None and d[f"{way}_bps"] < need]
+    if not short:
+        return []
+    name, word, where, got = short[0]
+    top = max(ev.s.link.topics, key=lambda t: t.bps)
+    proto = '"tls"' if ev.s.ros.security == "mtls" else '"tcp"'
+    freq = max(0.5, round(top.hz * max(0.1, (got * 0.8 - (need - top.bps)) / top.bps), 1)) \
+        if top.bps else 1.0
+    return [Hit(f"The topics in [[link.topic]] need {_mbit(need)}; the link {where} carried "
+                f"{_mbit(got)} (short by {_mbit(need - got)}). "
+                f"The largest need is {top.name}: {top.bytes} bytes x {top.hz:g} Hz = "
+                f"{_mbit(top.bps)}.",
+                [f"Compress: publish {top.name} through image_transport's `compressed` "
+                 "transport (or a compressed point cloud) and subscribe to that across the "
+                 "link; set bytes under its [[link.topic]] to the new size.",
+                 f"Or lower the rate at the source (the driver's frame rate), below about "
+                 f"{freq:g} Hz for {top.name}.",
+                 f"Or let the sending side's router cut it down on the WAN link only: in its "
+                 f"config (ZENOH_ROUTER_CONFIG_URI) `downsampling: [{{ id: \"wan\", "
+                 f"link_protocols: [{proto}], flows: [\"egress\"], messages: [\"put\"], rules: "
+                 f"[{{ key_expr: \"{_key_expr(ev, top.name)}\", freq: {freq:g} }}] }}]`, and "
+                 f"write `max_hz = {freq:g}` under its [[link.topic]] so the check counts it "
+                 "at that rate; restart the router, then re-run the ROS step."],
+                evidence=[f"ros2.link: {n}: {w} {_mbit(g)}" for n, w, _x, g in short]
+                + [f"settings: [[link.topic]] need {_mbit(need)}"])]

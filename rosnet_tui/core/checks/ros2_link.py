@@ -1,0 +1,320 @@
+"""Step 4 for ROS 2 over rmw_zenoh: the link to each peer measured (ros2.link), through the routers
+as the robot's real topics go, with this component's certificate.
+
+Both ends are probe nodes speaking :mod:`rosnet_tui.core.peer.zenohlink` (rmw_zenoh's keys, CDR
+messages, attachments): ours here, the peer's run by the round's peer agent there. Per peer, in
+this order and within the check's budget: the round trip (median and spread of a few pings), the
+throughput each way (a burst both ways at once, paced by the receiver's acknowledgements), and
+the largest message delivered whole each way (64 kB, then 1 MB, each tried only when the rates
+measured say it can arrive in the time left; up to three tries when one is lost). On a thin link it reports what it measured in the
+time it had. It starts after the pub/sub checks of the round, so its bursts do not delay them.
+
+The sum of the ``[[link.topic]]`` needs is compared with the throughput each way.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import secrets
+import statistics
+import time
+from typing import Any
+
+from rosnet_tui.core.checks import CheckContext, check
+from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_session
+from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.peers import each_peer
+from rosnet_tui.core.checks.probes.ros2 import (
+    close_zenoh,
+    member_arg,
+    node_domain,
+    node_endpoint,
+    open_zenoh,
+    ros2_peers,
+    zenoh_peer_problem,
+)
+from rosnet_tui.core.config.settings_model import Peer
+from rosnet_tui.core.net.blocking import run_blocking
+from rosnet_tui.core.peer import zenohproto
+from rosnet_tui.core.peer.zenohlink import CHUNK, LinkEnd, link_text, rate_bps
+from rosnet_tui.core.results import Outcome, Status
+
+FACTOR_LINK = 6.0
+PINGS = 5                      # round trips measured
+BURST_CAP = 8 * 1024 * 1024    # bytes a burst sends at most (a fast link ends it early)
+LARGE = (65536, 1 << 20)       # the large messages tried, in bytes
+TRIES = 3                      # tries of each large message (while the time left allows)
+PUBSUB = ("ros2.pubsub_out", "ros2.pubsub_in")
+
+
+def mbit(bps: float | None) -> str:
+    """Bits per second in words (Mbit/s, or kbit/s below 1 Mbit/s)."""
+    if bps is None:
+        return "not measured"
+    return f"{bps / 1e6:.1f} Mbit/s" if bps >= 1e6 else f"{bps / 1e3:.0f} kbit/s"
+
+
+def kb(n: int) -> str:
+    return f"{n / (1 << 20):g} MB" if n >= 1 << 20 else f"{n / 1024:g} kB"
+
+
+def _measure(end: LinkEnd, t: float) -> dict[str, Any]:
+    """The figures of one peer's link within *t* s (blocking; the peer's side is serving)."""
+    start = time.monotonic()
+    stop_at = start + t
+    m: dict[str, Any] = {"rtts": [], "out": None, "in": None, "largest_out": 0,
+                         "largest_in": 0, "tried_out": 0, "tried_in": 0, "notes": []}
+    warm_until = start + max(0.5, t * 0.3)      # the first ping back: routes exist both ways
+    n = 0
+    while not end.pongs and time.monotonic() < warm_until:
+        n += 1
+        end.put(f"p w{n}")
+        end.pump(min(warm_until, time.monotonic() + 0.25), lambda: bool(end.pongs))
+    if not end.pongs:
+        m["notes"].append(f"no ping came back within {warm_until - start:.1f} s")
+        return m
+    for i in range(PINGS):
+        if time.monotonic() > start + t * 0.4:
+            break
+        sent = time.monotonic()
+        end.put(f"p r{i}")
+        end.pump(min(stop_at, sent + 1.0), lambda i=i: f"r{i}" in end.pongs)
+        if f"r{i}" in end.pongs:
+            m["rtts"].append((end.pongs[f"r{i}"] - sent) * 1000.0)
+    rtt = statistics.median(m["rtts"]) / 1000.0 if m["rtts"] else 0.3
+    # One way at a time, so that neither burst's acknowledgements wait behind the other's data.
+    w = max(0.3, min(2.5, (stop_at - time.monotonic()) * 0.15))
+    stall = max(0.3, 4 * rtt)
+    end.start_burst(w, BURST_CAP, stall)
+    end.pump(min(stop_at - 0.5, time.monotonic() + w * 1.5 + 4 * rtt + 0.3),
+             lambda: not end.sending() and not end.in_flight())
+    ask_until = min(stop_at - 0.3, time.monotonic() + max(1.0, 4 * rtt))
+    while end.stats is None and time.monotonic() < ask_until:
+        end.put("f")
+        end.pump(min(ask_until, time.monotonic() + max(0.2, 2 * rtt)),
+                 lambda: end.stats is not None)
+    end.put(f"b {w:.2f} {BURST_CAP} {stall:.2f}")
+    end.pump(min(stop_at - 0.5, time.monotonic() + w * 1.5 + 4 * rtt + 0.5),
+             lambda: end.their_burst_over)
+    m["out"], m["in"] = rate_bps(end.stats), rate_bps(end.received())
+    if end.stats and end.stats.get("n"):
+        m["largest_out"] = CHUNK
+    if end.got["n"]:
+        m["largest_in"] = CHUNK
+    _largest(end, m, rtt, stop_at)
+    return m
+
+
+def _largest(end: LinkEnd, m: dict[str, Any], rtt: float, stop_at: float) -> None:
+    """Try 64 kB then 1 MB each way, each only when the rate measured brings it in the time left."""
+    ways = {"out": True, "in": True}
+    for size in LARGE:
+        left = stop_at - time.monotonic() - 0.3
+        go: dict[str, float] = {}
+        for way in ways:
+            rate = m[way]
+            if not ways[way]:
+                continue
+            need = size * 8 / rate * 1.5 + 2 * rtt + 0.2 if rate else None
+            if need is not None and need < left:
+                go[way] = need
+            else:
+                ways[way] = False
+                m["notes"].append(f"{kb(size)} {'up' if way == 'out' else 'down'} not tried: "
+                                  + (f"about {size * 8 / rate:.0f} s at the rate measured, "
+                                     f"{max(0.0, left):.1f} s were left" if rate else
+                                     "no rate measured"))
+        if not go:
+            return
+        for attempt in range(TRIES):    # more tries: one loss is not the link's verdict
+            if attempt and max(go.values()) + 0.2 > stop_at - time.monotonic() - 0.3:
+                break
+            if attempt:
+                time.sleep(0.2)     # what held the last one up may pass
+            if "in" in go:
+                end.put(f"s {size}")
+                m["tried_in"] = size
+            if "out" in go:
+                end.put(link_text("L", size), control=False)
+                m["tried_out"] = size
+            end.pump(time.monotonic() + max(go.values()),
+                     lambda go=go, size=size: ("out" not in go or size in end.delivered)
+                     and ("in" not in go or end.largest_in >= size))
+            if "out" in go and size in end.delivered:
+                m["largest_out"] = size
+                del go["out"]
+            if "in" in go and end.largest_in >= size:
+                m["largest_in"] = size
+                del go["in"]
+            if not go:
+                break
+        for way in go:              # not delivered in any try: no larger one either
+            ways[way] = False
+
+
+def _pdata(m: dict[str, Any]) -> dict[str, Any]:
+    rtts = m.get("rtts") or []
+    return {"rtt_ms": round(statistics.median(rtts), 1) if rtts else None,
+            "rtt_spread_ms": round(max(rtts) - min(rtts), 1) if rtts else None,
+            "out_bps": round(m["out"]) if m.get("out") else None,
+            "in_bps": round(m["in"]) if m.get("in") else None,
+            "largest_out": m.get("largest_out", 0), "largest_in": m.get("largest_in", 0),
+            "tried_out": m.get("tried_out", 0), "tried_in": m.get("tried_in", 0)}
+
+
+async def _peer_link(ctx: CheckContext, peer: Peer, deadline: float
+                     ) -> tuple[Status, str, list[str], dict[str, Any]]:
+    """Measure the link to *peer*: (status, words, evidence, its data.peers entry)."""
+    empty = _pdata({})
+    endpoint, how = node_endpoint(ctx)
+    session, why = await open_zenoh(endpoint, max(0.3, min(2.0, (deadline - time.monotonic())
+                                                         * 0.2)), how)
+    if session is None:
+        return (Status.FAIL, f"{peer.name}: no session on this machine's router at {endpoint} "
+                             f"({why})", [], empty)
+    tag = secrets.token_hex(4)
+    topic, dom = f"rosnet_tui/link_{tag}", node_domain(ctx)
+    rx = tx = None
+    ev: list[str] = []
+    m: dict[str, Any] = {}
+    try:
+        rx = await run_blocking(zenohproto.ProbeNode, session, dom, zenohproto.probe_name(),
+                                topic + "/in", timeout=2.0)
+        await run_blocking(rx.subscription, timeout=2.0)
+        tx = await run_blocking(zenohproto.ProbeNode, session, dom, zenohproto.probe_name(),
+                                topic + "/out", timeout=2.0)
+        await run_blocking(tx.publisher, timeout=2.0)
+        remote_t = max(1.0, deadline - time.monotonic() - 0.2)
+        argv = ["link", "--topic", topic, "--timeout", f"{remote_t:.1f}", *member_arg(ctx, peer)]
+        async with peer_session(ctx, peer, ZENOH_AGENT, "zlink", argv,
+                                timeout=max(0.5, min(remote_t * 0.3, ctx.timeout_s * 0.6)),
+                                needs_install=True) as sess:
+            if not sess.ok:
+                return (Status.SKIP, f"{peer.name}: could not run the other side: SSH failed "
+                                     f"({sess.result.failure}): {sess.result.detail}", [], empty)
+            ready = await sess.read_until(zenohproto.READY_MARK,
+                                          timeout=max(0.3, (deadline - time.monotonic()) * 0.4))
+            if ready is not None:
+                end = LinkEnd(rx, tx)
+                t = max(0.3, deadline - time.monotonic() - 0.4)
+                m = await run_blocking(_measure, end, t, timeout=t + 1.0)
+                end.put("e")
+            res = await sess.wait(max(0.3, deadline - time.monotonic()))
+    finally:
+        for node in (rx, tx):
+            if node is not None:
+                await run_blocking(node.close, timeout=1.0)
+        await close_zenoh(session)
+    rep = zenohproto.parse_report(res.stdout)
+    why_not = zenoh_peer_problem(res, peer, rep) if not m else None
+    if why_not:
+        return Status.SKIP, f"{peer.name}: could not run the other side: {why_not}", ev, empty
+    if rep is not None and rep.get("error"):
+        return (Status.FAIL, f"{peer.name}: nothing measured: on {peer.name}, "
+                             f"{rep.get('detail')}", ev, empty)
+    d = _pdata(m)
+    if d["out_bps"] is None and rep is not None:   # their account came on stdout only
+        out = rate_bps(rep.get("link") or {})
+        d["out_bps"] = round(out) if out else None
+    ev.append(f"{peer.name}: round trip {_rtt_words(d)}; up (here -> {peer.name}) "
+              f"{mbit(d['out_bps'])}, down {mbit(d['in_bps'])}; largest delivered whole: up "
+              f"{kb(d['largest_out'])} (tried {kb(d['tried_out'])}), down {kb(d['largest_in'])} "
+              f"(tried {kb(d['tried_in'])})")
+    ev += [f"{peer.name}: {n}" for n in m.get("notes") or []]
+    if d["rtt_ms"] is None:
+        return (Status.FAIL, f"{peer.name}: no small message came back through the routers "
+                             "(see ros2.pubsub_out and ros2.pubsub_in)", ev, d)
+    return Status.PASS, "", ev, d
+
+
+def _rtt_words(d: dict[str, Any]) -> str:
+    if d["rtt_ms"] is None:
+        return "not measured"
+    return f"{d['rtt_ms']:.0f} ms (spread {d['rtt_spread_ms']:.0f} ms)"
+
+
+def _judge(ctx: CheckContext, name: str, d: dict[str, Any]) -> tuple[Status, list[str]]:
+    """The verdict on one measured peer: large messages dropped, and the need against the rates."""
+    warns: list[str] = []
+    fail = False
+    for way, words in (("out", "up"), ("in", "down")):
+        tried, got = d[f"tried_{way}"], d[f"largest_{way}"]
+        if tried and got < tried:
+            warns.append(f"small messages pass {words} but {kb(tried)} ones are dropped (largest "
+                         f"delivered whole: {kb(got) if got else 'none of the large ones'})")
+            big = [tp.name for tp in ctx.settings.link.topics if tp.bytes > got]
+            if big:
+                fail = True
+                warns[-1] += f"; {', '.join(big)} need larger messages"
+    need = ctx.settings.link.need_bps()
+    if need:
+        for way, words in (("out", "up"), ("in", "down")):
+            got = d[f"{way}_bps"]
+            if got is not None and got < need:
+                warns.append(f"needs {need / 1e6:.1f} Mbit/s {words}, measured "
+                             f"{got / 1e6:.1f} (short by {(need - got) / 1e6:.1f} Mbit/s)")
+    if not warns:
+        return Status.PASS, []
+    return (Status.FAIL if fail else Status.WARN), [f"to {name}: {w}" for w in warns]
+
+
+async def _after_pubsub(ctx: CheckContext, until: float) -> None:
+    """Wait (bounded) for the round's pub/sub checks to end: our bursts would delay them."""
+    wanted = [c for c in PUBSUB if c in ctx.round_ids]
+    while time.monotonic() < until and any(c not in ctx.results for c in wanted):
+        await asyncio.sleep(0.05)
+
+
+def _no_path(ctx: CheckContext) -> str | None:
+    """The pub/sub check of this round that found no message passing (None: none did)."""
+    for cid in PUBSUB:
+        r = ctx.results.get(cid)
+        if r is not None and r.status == Status.FAIL:
+            return cid
+    return None
+
+
+@check("ros2.link", "ros", "The link to each peer measured: round trip, throughput, large "
+       "messages", FACTOR_LINK, ros=2)
+async def check_link(ctx: CheckContext) -> Outcome:
+    s = ctx.settings
+    t = budget(ctx, "ros2.link")
+    start = time.monotonic()
+    need = s.link.need_bps()
+    data: dict[str, Any] = {"peers": {}, "need_bps": need}
+    if not s.master_name:
+        return Outcome(Status.SKIP, "skipped: no master is named in the settings (ros.master)",
+                       [], data)
+    peers = ros2_peers(ctx)
+    if not peers:
+        return Outcome(Status.SKIP, "skipped: no peer with an SSH user in the settings, so the "
+                                    "other end of the link cannot be run from here", [], data)
+    await _after_pubsub(ctx, start + t * 0.4)
+    broken = _no_path(ctx)
+    if broken:
+        return Outcome(Status.SKIP, f"skipped: {broken} found no message passing, so there is no "
+                                    "link to measure (see its advice)", [], data)
+    deadline = start + t - 0.4
+    outcomes = await each_peer(peers, lambda p: _peer_link(ctx, p, deadline))
+    ev = [line for o in outcomes for line in o[2]]
+    if need:
+        ev.append(f"[[link.topic]] needs {need / 1e6:.1f} Mbit/s each way: " + ", ".join(
+            f"{tp.name} {tp.bps / 1e6:.2f}" for tp in s.link.topics))
+    rank = {Status.FAIL: 0, Status.WARN: 1, Status.SKIP: 2, Status.PASS: 3}
+    worst, words = Status.PASS, []
+    for p, (status, summary, _ev, d) in zip(peers, outcomes, strict=True):
+        data["peers"][p.name] = d
+        if status == Status.PASS:
+            status, more = _judge(ctx, p.name, d)
+            words += more
+        else:
+            words.append(summary)
+        worst = min(worst, status, key=lambda x: rank[x])
+    if worst == Status.PASS:
+        return Outcome(Status.PASS, "; ".join(
+            f"to {p.name}: round trip {_rtt_words(d)}, up {mbit(d['out_bps'])}, down "
+            f"{mbit(d['in_bps'])}, {kb(min(d['largest_out'], d['largest_in']))} whole both ways"
+            for p in peers for d in [data["peers"][p.name]]), ev, data)
+    if worst == Status.SKIP and all(o[0] == Status.SKIP for o in outcomes):
+        return Outcome(Status.SKIP, "skipped: " + "; ".join(words), ev, data)
+    return Outcome(worst, "; ".join(words), ev, data)

@@ -1,0 +1,102 @@
+"""The link protocol of ros2.link (core/peer/zenohlink.py) between two real Zenoh sessions through
+a real Zenoh router on loopback: echoes, a burst paced by acknowledgements and its account, a
+large message delivered whole, and a burst that never outruns its window."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import pytest
+
+from rosnet_tui.core.peer import zenohproto
+from rosnet_tui.core.peer.zenohlink import CHUNK, LinkEnd, link_text, rate_bps, whole_size
+from tests.builders import free_port
+
+zenoh = pytest.importorskip("zenoh")
+
+
+@pytest.fixture
+def ends():
+    port = free_port()
+    cfg = zenoh.Config.from_json5(json.dumps({
+        "mode": "router", "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"]},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {"shared_memory": {"enabled": False}}}))
+    router = zenoh.open(cfg)
+    sessions = [zenohproto.open_client(f"tcp/127.0.0.1:{port}", 3.0) for _ in range(2)]
+    nodes = []
+    pair = []
+    for s, (rx, tx) in zip(sessions, (("in", "out"), ("out", "in")), strict=True):
+        a = zenohproto.ProbeNode(s, 0, zenohproto.probe_name(), f"rosnet_tui/link_t/{rx}")
+        a.subscription()
+        b = zenohproto.ProbeNode(s, 0, zenohproto.probe_name(), f"rosnet_tui/link_t/{tx}")
+        b.publisher()
+        nodes += [a, b]
+        pair.append(LinkEnd(a, b))
+    here, there = pair
+    server = threading.Thread(target=there.pump, args=(time.monotonic() + 20,), daemon=True)
+    server.start()
+    yield here, there
+    here.put("e")
+    server.join(5)
+    for n in nodes:
+        n.close()
+    for s in sessions:
+        s.close()
+    router.close()
+
+
+def _ping(here: LinkEnd) -> None:
+    deadline = time.monotonic() + 5
+    n = 0
+    while not here.pongs and time.monotonic() < deadline:
+        n += 1
+        here.put(f"p w{n}")
+        here.pump(time.monotonic() + 0.2, lambda: bool(here.pongs))
+    assert here.pongs, "no echo within 5 s"
+
+
+def test_messages_are_sized_and_told_whole():
+    text = link_text("L", 65536)
+    assert len(text) == 65536 and whole_size(text) == 65536
+    assert whole_size(text[:-1]) == 0 and whole_size("L x") == 0 and whole_size("") == 0
+    assert rate_bps({"bytes": 9000, "n": 3, "span": 1.0, "first_bytes": 1000}) == 64000
+    assert rate_bps({"bytes": 9000, "n": 1, "span": 0.0}) is None and rate_bps(None) is None
+
+
+def test_a_burst_is_acknowledged_and_accounted_for_and_a_large_message_arrives_whole(ends):
+    here, there = ends
+    _ping(here)
+    here.start_burst(0.5, 2 * 1024 * 1024, 0.3)
+    here.pump(time.monotonic() + 3, lambda: not here.sending() and not here.in_flight())
+    assert not here.in_flight() and here.burst["seq"] > 1
+    deadline = time.monotonic() + 3
+    while here.stats is None and time.monotonic() < deadline:
+        here.put("f")
+        here.pump(time.monotonic() + 0.2, lambda: here.stats is not None)
+    assert here.stats["n"] == here.burst["seq"], (here.stats, here.burst)
+    assert here.stats["bytes"] >= here.burst["seq"] * CHUNK and rate_bps(here.stats) > 1e6
+    # theirs, asked for: the other way, and the end of it said ("z")
+    here.put(f"b 0.3 {512 * 1024} 0.3")
+    here.pump(time.monotonic() + 3, lambda: here.their_burst_over)
+    assert here.their_burst_over and here.got["n"] > 1 and rate_bps(here.received()) > 1e6
+    # one megabyte each way, whole
+    here.put(f"s {1 << 20}")
+    here.put(link_text("L", 1 << 20), control=False)
+    here.pump(time.monotonic() + 5, lambda: (1 << 20) in here.delivered
+              and here.largest_in == 1 << 20)
+    assert (1 << 20) in here.delivered and here.largest_in == 1 << 20
+
+
+def test_a_burst_never_has_more_than_its_window_on_the_way(ends):
+    """Nobody acknowledges (the other end gone): the sender stops at its first window and
+    gives it up after its stall time, instead of flooding."""
+    here, there = ends
+    _ping(here)
+    there.stop = True               # the other end stops answering
+    time.sleep(0.2)
+    here.start_burst(1.0, 8 * 1024 * 1024, 0.3)
+    here.pump(time.monotonic() + 1.2)
+    assert here.burst["seq"] * CHUNK <= 8 * CHUNK, here.burst    # a window or a few, not 8 MB
