@@ -30,12 +30,18 @@ CAP_S = 40.0          # the longest any one wait may take
 LONG_CUT_S = 30.0     # every other cut is held this long (the others end once it was noticed)
 
 
-def _zid(lab: Any, host: str) -> str:
-    text = lab.log_path(f"zrouter-{host}").read_text(errors="replace")
-    m = re.search(r"^ZROUTER (\S+)", text, re.M)
-    if m is None:
-        raise BenchError(f"the router on {host} printed no id")
-    return m.group(1).lstrip("0")
+def _zid(lab: Any, host: str, cap: float = 10.0) -> str:
+    """The router's id, from the line it prints once its session is open (it may listen a moment
+    before it prints: waited for, bounded)."""
+    deadline = time.monotonic() + cap
+    while True:
+        text = lab.log_path(f"zrouter-{host}").read_text(errors="replace")
+        m = re.search(r"^ZROUTER (\S+)", text, re.M)
+        if m is not None:
+            return m.group(1).lstrip("0")
+        if time.monotonic() > deadline:
+            raise BenchError(f"the router on {host} printed no id")
+        time.sleep(0.05)
 
 
 def _events(lab: Any, proc: Any) -> list[tuple[str, float, str]]:

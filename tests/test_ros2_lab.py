@@ -159,7 +159,8 @@ def test_master_behind_cgnat_needs_a_public_router(ros2):
         cg = robot["isp.cgnat"]
         assert cg["data"]["cgnat"] is True, explain(robot)
         assert "ros2.cgnat" in rules(cg) and "isp.cgnat" not in rules(cg), explain(robot)
-        assert any("VPS" in a["actions"][1] for a in cg["advice"] if a["rule"] == "ros2.cgnat")
+        first = next(a for a in cg["advice"] if a["rule"] == "ros2.cgnat")["actions"][0]
+        assert "VPS" in first and "`rosnet-tui relay apply --yes`" in first, explain(robot)
     finally:
         lab._set_cgnat(False)
 
