@@ -174,9 +174,9 @@ def test_the_hard_maximum_ends_the_agent_while_stdin_stays_open(local):
     a.send({"run": "p", "id": 1, "argv": ["30"]})
     a.line()
     kids = _children(a.pid)
-    t0 = time.monotonic()
-    assert a.proc.wait(3) == 0
-    assert time.monotonic() - t0 < 2.0
+    # its 1 s maximum ends it, not its run's 30 s nor stdin's end (never): the wait's bound only
+    # tells 1 s from 30 s, far from both on a loaded machine
+    assert a.proc.wait(15) == 0
     assert gone_within(kids[0], 2.0)
 
 
