@@ -6,8 +6,9 @@ that only tests/test_advisor_golden.py failed."""
 from __future__ import annotations
 
 from rosnet_tui.core import advisor
+from rosnet_tui.core.results import CheckResult, Status
 from tests.advisor_support import ISP_CASES, run
-from tests.builders import t1
+from tests.builders import healthy_laptop, t1
 
 
 def test_a_findings_order_is_its_rank_among_competing_causes_and_0_without_competitors():
@@ -22,3 +23,19 @@ def test_a_findings_order_is_its_rank_among_competing_causes_and_0_without_compe
         found = run(*case())
         assert found and rule in {f.rule for f in found}, rule
         assert {f.order for f in found} == {0}, (rule, [(f.rule, f.order) for f in found])
+
+
+def test_a_failure_no_rule_explains_gets_the_catch_all_with_the_checks_first_three_lines():
+    """engine._catch_all: its finding competes with none (order 0) and carries the first three
+    lines of the check's evidence, no more (the order 0 -> 1 and [:3] -> [:4] bugs passed every
+    test but the golden one, or every test)."""
+    r = healthy_laptop()
+    r["isp.internet"] = CheckResult("isp.internet", "isp", Status.FAIL, "odd failure",
+                                    ["e1", "e2", "e3", "e4", "e5"], 0.1, 3.0, {})
+    r["linux.hosts"] = CheckResult("linux.hosts", "linux", Status.WARN, "odd warning",
+                                   ["w1"], 0.1, 3.0, {})
+    fs = {f.check_ids[0]: f for f in run(r) if f.rule == "check.unexplained"}
+    f, w = fs["isp.internet"], fs["linux.hosts"]
+    assert (f.severity, f.order, f.evidence, f.goto_step) == ("fail", 0, ["e1", "e2", "e3"], "isp")
+    assert (w.severity, w.order, w.evidence, w.goto_step) == ("warn", 0, ["w1"], "linux")
+    assert f.meaning == "isp.internet: odd failure"
