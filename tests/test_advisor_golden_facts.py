@@ -39,3 +39,19 @@ def test_a_failure_no_rule_explains_gets_the_catch_all_with_the_checks_first_thr
     assert (f.severity, f.order, f.evidence, f.goto_step) == ("fail", 0, ["e1", "e2", "e3"], "isp")
     assert (w.severity, w.order, w.evidence, w.goto_step) == ("warn", 0, ["w1"], "linux")
     assert f.meaning == "isp.internet: odd failure"
+
+
+def test_within_a_severity_findings_follow_the_procedures_steps_the_catch_all_too():
+    """engine._sort_key: a failure no rule explains is listed in its check's step (ISP before
+    the Router's Table 1, Linux after it), not after every rule's findings (the step part of
+    the key dropped failed only the golden test)."""
+    r = t1(True, False)
+    r["isp.internet"] = CheckResult("isp.internet", "isp", Status.FAIL, "odd failure", ["e1"],
+                                    0.1, 3.0, {})
+    r["linux.hosts"] = CheckResult("linux.hosts", "linux", Status.FAIL, "odd", ["e1"], 0.1,
+                                   3.0, {})
+    fails = [(f.rule, f.check_ids[0]) for f in run(r) if f.severity == "fail"]
+    assert fails[0] == ("check.unexplained", "isp.internet")
+    assert [rule for rule, _ in fails[1:4]] == [f"{advisor.T1}.forwarding", f"{advisor.T1}.isp",
+                                               f"{advisor.T1}.port_in_use"]
+    assert fails[4:] == [("check.unexplained", "linux.hosts")]
