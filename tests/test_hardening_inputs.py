@@ -126,9 +126,11 @@ def test_every_json_decode_in_the_product_is_bounded():
 
 
 # --------------------------------------------------------------------------- FIFOs
-def _returns_within(fn, fifo: Path, seconds: float = 1.0):
-    """Run *fn* in a thread; it must return (or raise) within *seconds*. A call stuck in open()
-    on the FIFO is freed afterwards by opening its other end, so the test never hangs."""
+def returns_within(fn, fifo: Path, seconds: float = 20.0):
+    """Run *fn* in a thread; it must return (or raise). Returning at all is the proof: open() of
+    a FIFO nobody writes to never returns by itself, so no wall-clock figure is asserted;
+    *seconds* only bounds the wait for a call that is stuck (freed afterwards by opening the
+    FIFO's other end, so the test never hangs)."""
     box: dict = {}
 
     def run():
@@ -138,10 +140,8 @@ def _returns_within(fn, fifo: Path, seconds: float = 1.0):
             box["error"] = exc
 
     t = threading.Thread(target=run, daemon=True)
-    start = time.monotonic()
     t.start()
     t.join(seconds)
-    took = time.monotonic() - start
     if t.is_alive():
         try:                                                  # free a reader: EOF
             fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
@@ -151,7 +151,6 @@ def _returns_within(fn, fifo: Path, seconds: float = 1.0):
         os.close(fd)
         t.join(5)
         pytest.fail(f"still blocked after {seconds} s on the FIFO {fifo}")
-    assert took < seconds
     return box
 
 
@@ -161,7 +160,7 @@ def test_a_tsig_key_file_that_is_a_fifo_is_refused_at_once(tmp_path):
 
     fifo = tmp_path / "robots.key"
     os.mkfifo(fifo)
-    box = _returns_within(lambda: load_tsig_key(fifo), fifo)
+    box = returns_within(lambda: load_tsig_key(fifo), fifo)
     assert isinstance(box.get("error"), StoreConfigError), box
     assert "not a regular file" in str(box["error"]) and str(fifo) in str(box["error"])
     tally(AREA, 1, 1, "TSIG key FIFO")
@@ -196,21 +195,21 @@ def test_state_files_and_named_files_that_are_fifos_do_not_hang(tmp_path, which,
     if which == "public_ip":
         fifo = tmp_path / state.PUBLIC_IP_FILE
         os.mkfifo(fifo)
-        box = _returns_within(lambda: state.read_json(fifo), fifo)
+        box = returns_within(lambda: state.read_json(fifo), fifo)
         assert box == {"value": None}
     elif which == "ui":
         from rosnet_tui.core.saved.ui_state import UI_FILE, UiState
 
         fifo = tmp_path / UI_FILE
         os.mkfifo(fifo)
-        box = _returns_within(lambda: UiState(tmp_path).data, fifo)
+        box = returns_within(lambda: UiState(tmp_path).data, fifo)
         assert box == {"value": {}}
     elif which == "journal":
         sd = tmp_path / "state"
         (sd / "journal").mkdir(parents=True)
         fifo = sd / "journal" / "000001.json"
         os.mkfifo(fifo)
-        box = _returns_within(lambda: uj.journal_entries(sd), fifo)
+        box = returns_within(lambda: uj.journal_entries(sd), fifo)
         assert box == {"value": []}
     elif which == "backup":
         target = tmp_path / "rc"
@@ -221,14 +220,14 @@ def test_state_files_and_named_files_that_are_fifos_do_not_hang(tmp_path, which,
         backup.unlink()
         os.mkfifo(backup)
         fifo = backup
-        box = _returns_within(lambda: mf.plan_undo(sd), fifo)
+        box = returns_within(lambda: mf.plan_undo(sd), fifo)
         assert isinstance(box.get("error"), mt.ManagedFileError), box
     else:
         from rosnet_tui.core.checks.ros2 import _read_router_config
 
         fifo = tmp_path / "router.json5"
         os.mkfifo(fifo)
-        box = _returns_within(lambda: _read_router_config(f"file://{fifo}"), fifo)
+        box = returns_within(lambda: _read_router_config(f"file://{fifo}"), fifo)
         data, why = box["value"]
         assert data is None and "not a regular file" in why
     tally(AREA, 1, 1, f"FIFO {which}")
@@ -243,17 +242,17 @@ def test_more_files_that_are_fifos_do_not_hang(tmp_path, which):
     if which == "ros1_bashrc":
         from rosnet_tui.core.peer.rosproto import read_shell_exports
 
-        box = _returns_within(lambda: read_shell_exports(str(fifo), ("ROS_MASTER_URI",)), fifo)
+        box = returns_within(lambda: read_shell_exports(str(fifo), ("ROS_MASTER_URI",)), fifo)
         assert box == {"value": {}}
     elif which == "ros2_bashrc":
         from rosnet_tui.core.peer.zenohproto import read_exports
 
-        box = _returns_within(lambda: read_exports(str(fifo)), fifo)
+        box = returns_within(lambda: read_exports(str(fifo)), fifo)
         assert box == {"value": {}}
     elif which == "ros2_distro":
         from rosnet_tui.core.peer.zenohproto import ros_env
 
-        box = _returns_within(lambda: ros_env({}, str(fifo)), fifo)
+        box = returns_within(lambda: ros_env({}, str(fifo)), fifo)
         assert box == {"value": {}}
     else:
         from rosnet_tui.core.ssh.known_hosts import trust_host_key
@@ -261,7 +260,7 @@ def test_more_files_that_are_fifos_do_not_hang(tmp_path, which):
 
         key = "ssh-ed25519 AAAAC3NzaC1lZDI1NTE5AAAAIEdz0LdBvGAIK3wAmPBkH3TkjCFRCe7Ddm6yZ8pHsH4j"
         opts = SshOptions(ssh_dir=str(tmp_path), known_hosts_files=[str(fifo)])
-        box = _returns_within(lambda: trust_host_key(opts, "turtlebot", 22, key), fifo)
+        box = returns_within(lambda: trust_host_key(opts, "turtlebot", 22, key), fifo)
         assert isinstance(box.get("error"), ValueError) and "not a regular file" in \
             str(box["error"]), box
     tally(AREA, 1, 1, f"FIFO {which}")

@@ -174,9 +174,9 @@ def test_the_hard_maximum_ends_the_agent_while_stdin_stays_open(local):
     a.send({"run": "p", "id": 1, "argv": ["30"]})
     a.line()
     kids = _children(a.pid)
-    t0 = time.monotonic()
-    assert a.proc.wait(3) == 0
-    assert time.monotonic() - t0 < 2.0
+    # its 1 s maximum ends it, not its run's 30 s nor stdin's end (never): the wait's bound only
+    # tells 1 s from 30 s, far from both on a loaded machine
+    assert a.proc.wait(15) == 0
     assert gone_within(kids[0], 2.0)
 
 
@@ -271,16 +271,25 @@ KIND = AgentKind("test", lambda m: f"python3 -S -c {commands.shq(agentproto.BOOT
                  (("p", PPID, None),))
 
 
-async def test_a_rounds_runs_on_a_peer_share_one_agent_and_end_with_the_round(ssh_client):
+MEET_KIND = AgentKind("meet", KIND.command, (("meet", MEET, None),))
+
+
+async def test_a_rounds_runs_on_a_peer_share_one_agent_and_end_with_the_round(ssh_client,
+                                                                             tmp_path):
+    """The four runs are in flight at once over the one session (they meet: exit 7), not sent
+    one after another (the first would wait out its bound and end 1, or time out)."""
     opts = ssh_client.opts(timeout_s=3.0, pool=SshPool())
     agents, peer = PeerAgents(), ssh_client.peer()
+    here = tmp_path / "meet"
+    here.mkdir()
     try:
-        got = await asyncio.gather(*(agent_run(agents, opts, peer, KIND, "p", ["0.2", str(i)],
-                                               timeout=5) for i in range(4)))
+        got = await asyncio.gather(*(agent_run(agents, opts, peer, MEET_KIND, "meet",
+                                               [str(here), str(i), "4"], timeout=20)
+                                     for i in range(4)))
         assert all(r.ok and r.exit_status == 7 for r in got), got
         parents = {r.stdout.split()[0] for r in got}
         assert len(parents) == 1 and len(agents.agents) == 1     # one agent served all four
-        assert sorted(r.stdout.split()[2] for r in got) == ["0", "1", "2", "3"]
+        assert sorted(r.stdout.split()[1] for r in got) == ["0", "1", "2", "3"]
         agent_pid = int(parents.pop())
         assert alive(agent_pid)
     finally:

@@ -172,7 +172,9 @@ async def test_only_ever_connects_back_to_the_caller(server):
 
 
 async def test_concurrent_connect_backs_are_bounded():
-    srv = ProbeServer("127.0.0.1", 0, ProbeLimits(connect_timeout_s=1.0, max_connect_backs=1))
+    # the first connect-back hangs for its 4 s timeout: the second request, 0.2 s later, meets
+    # it in flight even on a loaded machine (with 1 s, a late start could miss it)
+    srv = ProbeServer("127.0.0.1", 0, ProbeLimits(connect_timeout_s=4.0, max_connect_backs=1))
     await srv.start()
     # A listener whose accept queue is full: connects to it hang until the timeout.
     stuck = Listener(backlog=0)
@@ -225,8 +227,15 @@ async def test_logs_one_line_per_request(server, caplog):
     caplog.set_level("INFO", logger="rosnet_tui.probe_server")
     await http(server.port, "/ip")
     await http(server.port, f"/port/{free_port()}")
-    await asyncio.sleep(0.05)
-    lines = [r.getMessage() for r in caplog.records if r.name == "rosnet_tui.probe_server"]
+
+    def lines() -> list[str]:
+        return [r.getMessage() for r in caplog.records if r.name == "rosnet_tui.probe_server"]
+
+    for _ in range(500):                 # bounded (5 s): the line may follow the reply
+        if len(lines()) >= 2:
+            break
+        await asyncio.sleep(0.01)
+    lines = lines()
     assert len(lines) == 2
     assert lines[0].startswith("127.0.0.1 GET /ip 200")
     assert "reachable=false" in lines[1]

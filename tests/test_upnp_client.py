@@ -166,8 +166,8 @@ def test_a_huge_answer_is_refused_early(serve):
     s = serve(lambda req: http(b"<root>" + b"x" * (3 * 1024 * 1024) + b"</root>"))
     t = time.monotonic()
     with pytest.raises(HostileAnswer, match="announces a body|larger than"):
-        igd.describe(s.url(), HOST, soon())
-    assert time.monotonic() - t < 1.5
+        igd.describe(s.url(), HOST, soon(30))
+    assert time.monotonic() - t < 10      # refused early: far from the 30 s deadline
 
 
 def test_an_endless_answer_without_length_is_cut_off(serve):
@@ -195,7 +195,7 @@ def test_a_slow_drip_is_stopped_at_the_deadline(serve):
     t = time.monotonic()
     with pytest.raises(NoAnswer, match="in time"):
         igd.describe(s.url(), HOST, soon(0.8))
-    assert time.monotonic() - t < 1.3
+    assert time.monotonic() - t < 5       # at its 0.8 s deadline, not the drip's 10 s
 
 
 def test_not_xml_and_not_http_are_refused(serve):
@@ -347,7 +347,7 @@ def test_natpmp_only_garbage_ends_in_no_answer_at_the_deadline(udp):
     t = time.monotonic()
     with pytest.raises(NoAnswer):
         pmp.natpmp_external(HOST, soon(0.6))
-    assert time.monotonic() - t < 1.0
+    assert time.monotonic() - t < 5       # at its 0.6 s deadline, not NAT-PMP's retries (64 s)
     assert len(u.got) >= 2   # retransmitted (250 ms, then 500 ms)
 
 
@@ -365,8 +365,8 @@ def test_a_closed_port_answers_at_once(monkeypatch):
     s.close()
     t = time.monotonic()
     with pytest.raises(NoAnswer, match="closed"):
-        pmp.natpmp_external(HOST, soon(2))
-    assert time.monotonic() - t < 0.5
+        pmp.natpmp_external(HOST, soon(30))
+    assert time.monotonic() - t < 10      # at once: far from the 30 s deadline
 
 
 def test_pcp_answers_with_another_nonce_are_not_ours(udp):
@@ -519,7 +519,7 @@ def test_pcp_to_a_natpmp_only_modem_ends_at_once(udp):
     udp(lambda req: [struct.pack("!BBHI", 0, 128 + req[1], 1, 7)])   # "unsupported version"
     t = time.monotonic()
     with pytest.raises(NoAnswer, match="NAT-PMP only"):
-        pmp.pcp_map(HOST, HOST, "TCP", 7447, 7447, 600, bytes(12), soon())
+        pmp.pcp_map(HOST, HOST, "TCP", 7447, 7447, 600, bytes(12), soon(30))
     with pytest.raises(NoAnswer, match="NAT-PMP only"):
-        pmp.pcp_announce(HOST, HOST, soon())
-    assert time.monotonic() - t < 0.5
+        pmp.pcp_announce(HOST, HOST, soon(30))
+    assert time.monotonic() - t < 10      # at once: far from the 30 s deadlines

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import getpass
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -26,6 +27,9 @@ from tests.builders import free_port
 from tests.lab import procs
 
 SSHD = shutil.which("sshd") or "/usr/sbin/sshd"
+# sshd (LogLevel VERBOSE) ends a connection's lines with one of these
+CONNECTION_ENDED = re.compile(
+    r"^(Connection (reset|closed) by|Disconnected from|Received disconnect from) ", re.M)
 def keygen(path: Path, kind: str = "ed25519") -> str:
     """Make a key pair at *path*; return the public key line."""
     subprocess.run(["ssh-keygen", "-q", "-t", kind, "-N", "", "-C", "rosnet-test", "-f", str(path)],
@@ -81,6 +85,17 @@ class Sshd:
             except OSError:
                 time.sleep(0.05)
         raise RuntimeError("sshd did not start within 10 s")
+
+    def log_until_ended(self, before: str, timeout: float = 30.0) -> str:
+        """What sshd logged after *before*, read once it logged the connection's end: what did
+        not happen ("no login was tried") is read after that event, not after a guessed pause."""
+        deadline = time.monotonic() + timeout
+        while True:
+            new = self.log.read_text()[len(before):]
+            if CONNECTION_ENDED.search(new):
+                return new
+            assert time.monotonic() < deadline, f"sshd logged no connection's end: {new!r}"
+            time.sleep(0.02)
 
     def stop(self) -> None:
         if self.proc is not None:
