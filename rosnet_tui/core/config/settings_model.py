@@ -100,7 +100,7 @@ def validate_name(value: str) -> str | None:
         return "a name is required"
     if any(c.isspace() for c in value):
         return "a name cannot contain spaces"
-    if len(value) > 253 or not NAME_RE.match(value):
+    if len(value) > 253 or not NAME_RE.fullmatch(value):
         return "use letters, digits and '-' only (like turtlebot or sami-laptop)"
     if value.replace(".", "").isdigit():
         return "a name cannot be only digits"
@@ -117,7 +117,7 @@ SYNC_KEY_RE = re.compile(r"^ed25519:[A-Za-z0-9+/]{42}[AEIMQUYcgkosw048]=$")
 def validate_sync_key(value: str) -> str | None:
     """Why *value* is not a sync record key (``ed25519:`` and 32 bytes in base64), or None
     (also when empty: not pinned yet)."""
-    if not value or SYNC_KEY_RE.match(value):
+    if not value or SYNC_KEY_RE.fullmatch(value):
         return None
     return ("not a sync key: copy the line `rosnet-tui sync key` prints on that component "
             "(ed25519:...)")
@@ -179,7 +179,7 @@ def validate_network(value: object) -> str | None:
 
 
 def validate_ssh_user(value: str) -> str | None:
-    if value and not SSH_USER_RE.match(value):
+    if value and not SSH_USER_RE.fullmatch(value):
         return f"'{echoed(value)}' is not a valid user name"
     return None
 
@@ -439,7 +439,9 @@ class Settings:
         for i, p in enumerate(self.peers):
             k = f"peer[{i + 1}]"
             add(f"{k}.name", validate_name(p.name), None if p.name else Gap.BLANK)
-            if p.name.lower() == t.name.lower():
+            if not p.name:                # not a name yet (the gap above says so): no twin
+                pass
+            elif p.name.lower() == t.name.lower():
                 add(f"{k}.name", f"the name '{shown(p.name)}' is this component's own name "
                                  "(used twice; names ignore case)")
             elif p.name.lower() in seen:
