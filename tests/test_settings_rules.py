@@ -591,3 +591,45 @@ def test_a_relay_takes_only_mutual_tls():
     s.ros.security = "firewall"
     p = problems(s)
     assert list(p) == ["ros.security"] and "security must be \"mtls\"" in p["ros.security"][0]
+
+
+# --------------------------------------------------------------------------- line breaks in values
+LINE_BREAKS = ["\n", "\r", "\u2028", "\u2029", "\x85", "\x0b", "\x0c", "\x1c", "\x1d", "\x1e"]
+
+
+@pytest.mark.parametrize("sep", LINE_BREAKS)
+def test_a_line_break_in_a_typed_value_is_refused_in_one_line(sep):
+    """A settings file cannot hold VT, FF or FS..RS at all (the loader refuses them as not valid
+    TOML, tests/test_hardening_settings.py), but the set-up screen's fields and code hand the
+    model any string: every field refuses them, and the refusal quotes the value on one line."""
+    s = base()
+    s.this.name = f"turtle{sep}bot"
+    s.this.local_ip = f"10.10.10.1{sep}"
+    s.peers[0].public_ip = f"{sep}198.51.100.2"
+    s.peers[0].ssh_user = f"ops{sep}"
+    s.peers[0].sync_key = KEY + sep
+    s.probe.port_check_url = f"https://ifconfig.co{sep}"
+    s.probe.public_ip_urls = [f"https://ifconfig.co/ip{sep}x"]
+    s.firewall.allow = [f"203.0.113.7{sep}/24"]     # around an entry, white space is trimmed
+    s.relay.host = f"relay{sep}"
+    s.ros.version = 2
+    p = problems(s)
+    for key in ("this.name", "this.local_ip", "peer[1].public_ip", "peer[1].ssh_user",
+                "peer[1].sync_key", "probe.port_check_url", "probe.public_ip_urls",
+                "firewall.allow", "relay.host"):
+        assert key in p, key
+        for why in p[key]:
+            assert not any(c in why for c in LINE_BREAKS), (key, why)
+            assert why.splitlines() == [why], (key, why)
+
+
+@pytest.mark.parametrize("value", ["https://ifconfig.co/ip x", "https://ifconfig.co\x07",
+                                   "https://a/\u200b", "https://a b/ip"])
+def test_a_url_is_refused_with_a_space_or_an_invisible_character_anywhere(value):
+    assert "not an http:// or https:// URL" in M.validate_url(value)
+
+
+def test_a_url_may_have_a_path_a_port_and_a_query():
+    for value in ("https://ifconfig.co/ip", "http://192.0.2.1:8080/port/12345?x=1&y=%20",
+                  "https://ifconfig.co/"):
+        assert M.validate_url(value) is None, value

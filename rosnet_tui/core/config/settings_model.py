@@ -184,8 +184,13 @@ def validate_ssh_user(value: str) -> str | None:
     return None
 
 
+URL_RE = re.compile(r"https?://[^\s/]+(/\S*)?")
+
+
 def validate_url(value: str) -> str | None:
-    if not re.match(r"^https?://[^\s/]+", value or ""):
+    """Why *value* is not an http:// or https:// URL (a host, then any path; no spaces or control
+    characters anywhere), or None."""
+    if not isinstance(value, str) or not URL_RE.fullmatch(value) or not value.isprintable():
         return f"'{echoed(value)}' is not an http:// or https:// URL"
     return None
 
