@@ -205,7 +205,10 @@ def test_an_allow_entry_is_an_address_or_a_network(value):
     ("0.0.0.0/8", "where a login comes from"), ("::", "where a login comes from"),
 ])
 def test_an_allow_entry_is_refused_with_the_reason(value, words):
-    assert words in (M.validate_network(value) or ""), value
+    why = M.validate_network(value) or ""
+    assert words in why, value
+    if isinstance(value, str) and value.strip():
+        assert why.startswith(f"'{value}'"), why          # the entry at fault is quoted
 
 
 # --------------------------------------------------------------------------- users, urls
@@ -216,6 +219,10 @@ def test_an_allow_entry_is_refused_with_the_reason(value, words):
 ])
 def test_an_ssh_user_name(value, ok):
     assert (M.validate_ssh_user(value) is None) == ok
+
+
+def test_a_refused_ssh_user_is_quoted():
+    assert M.validate_ssh_user("r t") == "'r t' is not a valid user name"
 
 
 @pytest.mark.parametrize("value, ok", [

@@ -271,16 +271,15 @@ class _SecurityChoice:
     """``RosSettings.security``: the value set, or (when none was) the default of the ROS version,
     so readers always see the effective choice and files that do not say follow their version."""
 
-    def __set_name__(self, owner: type, name: str) -> None:
-        self.attr = "_" + name + "_set"
+    STORED = "_security_set"       # the value set ("": none); __init__ always sets it
 
     def __get__(self, obj: Any, owner: type | None = None) -> str:
         if obj is None:
             return ""        # the dataclass default: not chosen
-        return getattr(obj, self.attr, "") or _DefaultSecurity(default_security(obj.version))
+        return getattr(obj, self.STORED) or _DefaultSecurity(default_security(obj.version))
 
     def __set__(self, obj: Any, value: str) -> None:
-        setattr(obj, self.attr, "" if isinstance(value, _DefaultSecurity) else str(value))
+        setattr(obj, self.STORED, "" if isinstance(value, _DefaultSecurity) else str(value))
 
 
 @dataclass
@@ -295,7 +294,7 @@ class RosSettings:
 
     def security_chosen(self) -> bool:
         """Whether security was set explicitly (not just the version's default)."""
-        return bool(getattr(self, "_security_set", ""))
+        return not isinstance(self.security, _DefaultSecurity)
 
 
 @dataclass
