@@ -640,3 +640,17 @@ def test_a_url_may_have_a_path_a_port_and_a_query():
     for value in ("https://ifconfig.co/ip", "http://192.0.2.1:8080/port/12345?x=1&y=%20",
                   "https://ifconfig.co/"):
         assert M.validate_url(value) is None, value
+
+
+def test_a_wrong_name_is_an_error_the_loader_refuses_not_a_gap():
+    for where in ("this", "peer", "master", "zone"):
+        s = base()
+        if where == "this":
+            s.this.name = s.ros.master = "bad name"
+        elif where == "peer":
+            s.peers[0].name = "bad name"
+        elif where == "master":
+            s.this.role, s.ros.master = "member", "bad name"
+        else:
+            s.sync.zone = "bad zone."
+        assert s.errors(allow=(Gap.BLANK, Gap.NO_ADDRESS)), where

@@ -354,6 +354,9 @@ class RelaySettings:
         return bool(self.host)
 
 
+IP_FIELDS = ("local_ip", "public_ip", "office_ip", "portable_ip")    # of this component and a peer
+
+
 class Gap(str, Enum):
     """A problem that is a value not given yet, rather than a wrong one."""
 
@@ -434,10 +437,8 @@ class Settings:
             else f"must be one of {', '.join(CONNECTIONS)}")
         add("this.profile", None if t.profile in PROFILES
             else f"must be one of {', '.join(PROFILES)}")
-        add("this.local_ip", validate_ip(t.local_ip, required=False))
-        add("this.public_ip", validate_ip(t.public_ip, required=False))
-        add("this.office_ip", validate_ip(t.office_ip, required=False))
-        add("this.portable_ip", validate_ip(t.portable_ip, required=False))
+        for f in IP_FIELDS:
+            add(f"this.{f}", validate_ip(getattr(t, f), required=False))
         names = {t.name}
         seen = {t.name.lower()}           # host names do not differ by case
         for i, p in enumerate(self.peers):
@@ -452,10 +453,8 @@ class Settings:
                 add(f"{k}.name", f"the name '{shown(p.name)}' is used twice (names ignore case)")
             names.add(p.name)
             seen.add(p.name.lower())
-            add(f"{k}.local_ip", validate_ip(p.local_ip, required=False))
-            add(f"{k}.public_ip", validate_ip(p.public_ip, required=False))
-            add(f"{k}.office_ip", validate_ip(p.office_ip, required=False))
-            add(f"{k}.portable_ip", validate_ip(p.portable_ip, required=False))
+            for f in IP_FIELDS:
+                add(f"{k}.{f}", validate_ip(getattr(p, f), required=False))
             add(f"{k}.sync_key", validate_sync_key(p.sync_key))
             if not p.local_ip and not p.public_ip:
                 add(f"{k}.public_ip", "give the peer a local IP, a public IP, or both",
