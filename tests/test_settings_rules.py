@@ -440,7 +440,7 @@ def test_a_peer_named_as_this_component_or_as_another_peer_is_refused():
 
 
 @pytest.mark.parametrize("role, master, words", [
-    ("master", "nobody", "neither this component nor a peer"),
+    ("master", "nobody", "'nobody' is neither this component nor a peer"),
     ("master", "sami", "this component is the master"),
     ("member", "turtlebot", "this component is a member"),
     ("master", "bad name", "spaces"),
@@ -476,7 +476,8 @@ def test_a_member_naming_a_peer_as_master_is_fine():
     ("checks", "timeout_s", True, "checks.timeout_s", "between 0.1 and 120"),
     ("rosbridge", "enabled", "yes", "rosbridge.enabled", "true or false"),
     ("rosbridge", "port", 0, "rosbridge.port", "between 1 and 65535"),
-    ("rosbridge", "host", "nobody", "rosbridge.host", "neither this component nor a peer"),
+    ("rosbridge", "host", "nobody", "rosbridge.host", "'nobody' is neither this component nor a "
+     "peer"),
     ("rosbridge", "host", "bad name", "rosbridge.host", "spaces"),
     ("firewall", "allow", ["203.0.113.7", "0.0.0.0/0"], "firewall.allow", "whole internet"),
     ("sync", "store", "s3", "sync.store", "folder, dns"),
@@ -619,11 +620,16 @@ def test_a_line_break_in_a_typed_value_is_refused_in_one_line(sep):
     s.probe.public_ip_urls = [f"https://ifconfig.co/ip{sep}x"]
     s.firewall.allow = [f"203.0.113.7{sep}/24"]     # around an entry, white space is trimmed
     s.relay.host = f"relay{sep}"
+    s.relay.tunnels = {f"sa{sep}mi": 2202, "turtlebot": 2202}
+    s.ros.domain_id = f"1{sep}2"
     s.ros.version = 2
+    s.ros.master = f"robot{sep}x"
+    s.rosbridge.host = f"sa{sep}mi"
     p = problems(s)
     for key in ("this.name", "this.local_ip", "peer[1].public_ip", "peer[1].ssh_user",
                 "peer[1].sync_key", "probe.port_check_url", "probe.public_ip_urls",
-                "firewall.allow", "relay.host"):
+                "firewall.allow", "relay.host", "ros.master", "rosbridge.host",
+                f"relay.tunnels.sa{sep}mi", "relay.tunnels.turtlebot", "ros.domain_id"):
         assert key in p, key
         for why in p[key]:
             assert not any(c in why for c in LINE_BREAKS), (key, why)

@@ -240,7 +240,7 @@ def validate_domain_id(value: int | str) -> str | None:
     try:
         n = int(str(value).strip())
     except ValueError:
-        return f"'{value}' is not a whole number"
+        return f"'{echoed(value)}' is not a whole number"
     return None if 0 <= n <= DOMAIN_ID_MAX else f"must be between 0 and {DOMAIN_ID_MAX}"
 
 
@@ -464,7 +464,8 @@ class Settings:
         if self.ros.master:
             add("ros.master", validate_name(self.ros.master))
             if self.ros.master not in names:
-                add("ros.master", f"'{self.ros.master}' is neither this component nor a peer")
+                add("ros.master",
+                    f"'{shown(self.ros.master)}' is neither this component nor a peer")
             elif t.role == "master" and self.ros.master != t.name:
                 add("ros.master", "this component is the master, so ros.master must be its own name")
             elif t.role == "member" and self.ros.master == t.name:
@@ -550,7 +551,7 @@ class Settings:
             add(key, why)
             why = validate_port(port, lo=PORT_MIN, hi=65535)
             if not why and port in ports:
-                why = f"port {port} is {ports[port]}'s too: one port per component"
+                why = f"port {port} is {shown(ports[port])}'s too: one port per component"
             add(key, why)
             if isinstance(port, int):
                 ports.setdefault(port, name)
