@@ -512,6 +512,7 @@ def test_a_zone_of_only_dots_is_a_gap_but_a_wrong_zone_is_not():
     ("rosbridge", "host", "turtlebot"), ("firewall", "allow", ["203.0.113.0/24"]),
     ("sync", "store", "dns"), ("sync", "interval_s", 1), ("sync", "interval_s", 86400),
     ("sync", "dns_server", "192.0.2.53"), ("sync", "zone", "robots.example."),
+    ("sync", "zone", "X."), ("sync", "zone", "X"),
 ])
 def test_each_sections_edge_values_are_accepted(section, field_, value):
     s = base()
@@ -565,7 +566,7 @@ def test_a_relay_under_ros_1_is_refused_alone():
 @pytest.mark.parametrize("change, key, words", [
     (dict(host=""), "relay.host", "relay's name is required"),
     (dict(host="bad name"), "relay.host", "spaces"),
-    (dict(host="SAMI"), "relay.host", "a component's name"),
+    (dict(host="SAMI"), "relay.host", "'SAMI' is a component's name"),
     (dict(ssh_user="r t"), "relay.ssh_user", "user name"),
     (dict(ssh_port=0), "relay.ssh_port", "between 1 and 65535"),
     (dict(zenoh_port=1023), "relay.zenoh_port", "between 1024 and 65000"),
