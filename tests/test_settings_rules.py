@@ -50,7 +50,7 @@ def test_the_base_is_complete():
 def test_shown_escapes_line_breaks_and_invisible_characters(c):
     out = M.shown("a" + c + "b")
     assert c not in out and out.startswith("a\\") and out.endswith("b")
-    assert out == "a" + c.encode("unicode_escape", "backslashreplace").decode() + "b"
+    assert out == "a" + c.encode("unicode_escape").decode() + "b"
 
 
 def test_shown_keeps_ordinary_text_and_cuts_at_the_limit_saying_the_length():
@@ -85,6 +85,15 @@ def test_a_settings_error_says_where_then_why_on_one_line():
     assert str(SettingsError("why", key="k")) == "key 'k': why"
     assert SettingsError("why").key is None
     assert str(SettingsError("why", path=M.Path("/p"))) == "/p: why"
+
+
+def test_a_settings_error_carries_its_line_as_its_argument():
+    e = SettingsError("why", line=2)
+    assert e.args == ("line 2: why",)
+
+
+def test_a_port_too_big_to_print_is_out_of_range():
+    assert M.validate_port(10**5000) == "the port must be between 1024 and 65000"
 
 
 def test_a_settings_error_cuts_its_message_and_key():

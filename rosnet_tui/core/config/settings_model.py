@@ -48,7 +48,7 @@ def shown(value: object, limit: int = SHOWN_VALUE_CHARS) -> str:
     out = []
     for c in text:
         if unicodedata.category(c) in ("Cc", "Cf", "Zl", "Zp", "Cs"):
-            out.append(c.encode("unicode_escape", "backslashreplace").decode("ascii"))
+            out.append(c.encode("unicode_escape").decode("ascii"))
         else:
             out.append(c)
     one = "".join(out)
@@ -549,7 +549,7 @@ class Settings:
             if not why and name.lower() not in components:
                 why = f"'{shown(name)}' is neither this component nor a peer"
             add(key, why)
-            why = validate_port(port, lo=PORT_MIN, hi=65535)
+            why = validate_port(port, hi=65535)         # from PORT_MIN: not a privileged port
             if not why and port in ports:
                 why = f"port {port} is {shown(ports[port])}'s too: one port per component"
             add(key, why)
