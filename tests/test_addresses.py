@@ -117,3 +117,34 @@ def test_loopback_names_and_addresses():
     assert not A.is_loopback_ip("localhost") and A.is_loopback_ip("127.0.0.1")
     for host in ("robot", "10.0.0.1", "0.0.0.0", ""):
         assert not A.is_loopback(host)
+
+
+def test_an_ipv6_zone_is_dropped_from_the_address():
+    """The zone (%eth0) names this machine's interface, not part of the address: it is dropped,
+    everything after the first '%' with it, so the address compares and prints bare."""
+    for text in ("fe80::1%eth0", "fe80::1%", "fe80::1%a%b"):
+        a = A.parse_ip(text)
+        assert a == ipaddress.ip_address("fe80::1") and str(a) == "fe80::1", text
+    assert A.address_kind("fe80::1%a%b") == "link-local"
+
+
+@pytest.mark.parametrize("text", ["1.2.3.4%eth0", "10.0.0.1%", "fe80::1%eth\u00e9", None, 5,
+                                  b"1.2.3.4"])
+def test_an_ipv4_zone_a_non_ascii_zone_or_a_non_text_value_is_not_an_address(text):
+    assert A.parse_ip(text) is None
+    assert not A.is_ip(text) and not A.is_ipv4(text)
+    assert A.address_kind(text) == "invalid"
+
+
+def test_is_ip_is_any_address_and_is_ipv4_only_ipv4():
+    for text in ("203.0.113.2", "10.0.0.1", "2001:db8::1", "::1", "fe80::1%eth0"):
+        assert A.is_ip(text), text
+    assert A.is_ipv4("203.0.113.2") and not A.is_ipv4("2001:db8::1")
+    for text in ("robot", "localhost", "", "203.0.113", "203.0.113.2.1"):
+        assert not A.is_ip(text), text
+
+
+@pytest.mark.parametrize("host", ["localhost", "ip6-localhost", "ip6-loopback"])
+def test_the_loopback_names_of_the_hosts_file_are_loopback_but_not_loopback_ips(host):
+    assert A.is_loopback(host)
+    assert not A.is_loopback_ip(host)

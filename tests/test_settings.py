@@ -94,6 +94,10 @@ def test_missing_file_is_none(tmp_path: Path):
     ('[this]\nname = "x"\nrole = "boss"\n', 3, "this.role", "master, member"),
     ('[weird]\na = 1\n', 1, "weird", "unknown section"),
     ('[this]\nname = "x\n', 2, None, "not valid TOML"),
+    ('[this]\nname = "x"\n[[peer]]\nname = "sami"\npublic_ip = "203.0.113.2"\n'
+     'ssh_user = "ops\\n"\n', 6, "peer.ssh_user", "not a valid user name"),
+    ('[this]\nname = "x"\n[[peer]]\nname = "sami"\npublic_ip = "203.0.113.2"\n'
+     'sync_key = "ed25519:' + "A" * 43 + '=\\n"\n', 6, "peer.sync_key", "not a sync key"),
 ])
 def test_malformed_files_name_line_and_key(tmp_path: Path, text, line, key, words):
     path = tmp_path / "config.toml"

@@ -48,7 +48,7 @@ def shown(value: object, limit: int = SHOWN_VALUE_CHARS) -> str:
     out = []
     for c in text:
         if unicodedata.category(c) in ("Cc", "Cf", "Zl", "Zp", "Cs"):
-            out.append(c.encode("unicode_escape", "backslashreplace").decode("ascii"))
+            out.append(c.encode("unicode_escape").decode("ascii"))
         else:
             out.append(c)
     one = "".join(out)
@@ -100,7 +100,7 @@ def validate_name(value: str) -> str | None:
         return "a name is required"
     if any(c.isspace() for c in value):
         return "a name cannot contain spaces"
-    if len(value) > 253 or not NAME_RE.match(value):
+    if len(value) > 253 or not NAME_RE.fullmatch(value):
         return "use letters, digits and '-' only (like turtlebot or sami-laptop)"
     if value.replace(".", "").isdigit():
         return "a name cannot be only digits"
@@ -117,7 +117,7 @@ SYNC_KEY_RE = re.compile(r"^ed25519:[A-Za-z0-9+/]{42}[AEIMQUYcgkosw048]=$")
 def validate_sync_key(value: str) -> str | None:
     """Why *value* is not a sync record key (``ed25519:`` and 32 bytes in base64), or None
     (also when empty: not pinned yet)."""
-    if not value or SYNC_KEY_RE.match(value):
+    if not value or SYNC_KEY_RE.fullmatch(value):
         return None
     return ("not a sync key: copy the line `rosnet-tui sync key` prints on that component "
             "(ed25519:...)")
@@ -179,13 +179,18 @@ def validate_network(value: object) -> str | None:
 
 
 def validate_ssh_user(value: str) -> str | None:
-    if value and not SSH_USER_RE.match(value):
+    if value and not SSH_USER_RE.fullmatch(value):
         return f"'{echoed(value)}' is not a valid user name"
     return None
 
 
+URL_RE = re.compile(r"https?://[^\s/]+(/\S*)?")
+
+
 def validate_url(value: str) -> str | None:
-    if not re.match(r"^https?://[^\s/]+", value or ""):
+    """Why *value* is not an http:// or https:// URL (a host, then any path; no spaces or control
+    characters anywhere), or None."""
+    if not isinstance(value, str) or not URL_RE.fullmatch(value) or not value.isprintable():
         return f"'{echoed(value)}' is not an http:// or https:// URL"
     return None
 
@@ -235,7 +240,7 @@ def validate_domain_id(value: int | str) -> str | None:
     try:
         n = int(str(value).strip())
     except ValueError:
-        return f"'{value}' is not a whole number"
+        return f"'{echoed(value)}' is not a whole number"
     return None if 0 <= n <= DOMAIN_ID_MAX else f"must be between 0 and {DOMAIN_ID_MAX}"
 
 
@@ -266,16 +271,15 @@ class _SecurityChoice:
     """``RosSettings.security``: the value set, or (when none was) the default of the ROS version,
     so readers always see the effective choice and files that do not say follow their version."""
 
-    def __set_name__(self, owner: type, name: str) -> None:
-        self.attr = "_" + name + "_set"
+    STORED = "_security_set"       # the value set ("": none); __init__ always sets it
 
     def __get__(self, obj: Any, owner: type | None = None) -> str:
         if obj is None:
             return ""        # the dataclass default: not chosen
-        return getattr(obj, self.attr, "") or _DefaultSecurity(default_security(obj.version))
+        return getattr(obj, self.STORED) or _DefaultSecurity(default_security(obj.version))
 
     def __set__(self, obj: Any, value: str) -> None:
-        setattr(obj, self.attr, "" if isinstance(value, _DefaultSecurity) else str(value))
+        setattr(obj, self.STORED, "" if isinstance(value, _DefaultSecurity) else str(value))
 
 
 @dataclass
@@ -290,7 +294,7 @@ class RosSettings:
 
     def security_chosen(self) -> bool:
         """Whether security was set explicitly (not just the version's default)."""
-        return bool(getattr(self, "_security_set", ""))
+        return not isinstance(self.security, _DefaultSecurity)
 
 
 @dataclass
@@ -376,6 +380,9 @@ class LinkSettings:
         return sum(t.bps for t in self.topics)
 
 
+IP_FIELDS = ("local_ip", "public_ip", "office_ip", "portable_ip")    # of this component and a peer
+
+
 class Gap(str, Enum):
     """A problem that is a value not given yet, rather than a wrong one."""
 
@@ -457,26 +464,24 @@ class Settings:
             else f"must be one of {', '.join(CONNECTIONS)}")
         add("this.profile", None if t.profile in PROFILES
             else f"must be one of {', '.join(PROFILES)}")
-        add("this.local_ip", validate_ip(t.local_ip, required=False))
-        add("this.public_ip", validate_ip(t.public_ip, required=False))
-        add("this.office_ip", validate_ip(t.office_ip, required=False))
-        add("this.portable_ip", validate_ip(t.portable_ip, required=False))
+        for f in IP_FIELDS:
+            add(f"this.{f}", validate_ip(getattr(t, f), required=False))
         names = {t.name}
         seen = {t.name.lower()}           # host names do not differ by case
         for i, p in enumerate(self.peers):
             k = f"peer[{i + 1}]"
             add(f"{k}.name", validate_name(p.name), None if p.name else Gap.BLANK)
-            if p.name.lower() == t.name.lower():
+            if not p.name:                # not a name yet (the gap above says so): no twin
+                pass
+            elif p.name.lower() == t.name.lower():
                 add(f"{k}.name", f"the name '{shown(p.name)}' is this component's own name "
                                  "(used twice; names ignore case)")
             elif p.name.lower() in seen:
                 add(f"{k}.name", f"the name '{shown(p.name)}' is used twice (names ignore case)")
             names.add(p.name)
             seen.add(p.name.lower())
-            add(f"{k}.local_ip", validate_ip(p.local_ip, required=False))
-            add(f"{k}.public_ip", validate_ip(p.public_ip, required=False))
-            add(f"{k}.office_ip", validate_ip(p.office_ip, required=False))
-            add(f"{k}.portable_ip", validate_ip(p.portable_ip, required=False))
+            for f in IP_FIELDS:
+                add(f"{k}.{f}", validate_ip(getattr(p, f), required=False))
             add(f"{k}.sync_key", validate_sync_key(p.sync_key))
             if not p.local_ip and not p.public_ip:
                 add(f"{k}.public_ip", "give the peer a local IP, a public IP, or both",
@@ -486,7 +491,8 @@ class Settings:
         if self.ros.master:
             add("ros.master", validate_name(self.ros.master))
             if self.ros.master not in names:
-                add("ros.master", f"'{self.ros.master}' is neither this component nor a peer")
+                add("ros.master",
+                    f"'{shown(self.ros.master)}' is neither this component nor a peer")
             elif t.role == "master" and self.ros.master != t.name:
                 add("ros.master", "this component is the master, so ros.master must be its own name")
             elif t.role == "member" and self.ros.master == t.name:
@@ -571,9 +577,9 @@ class Settings:
             if not why and name.lower() not in components:
                 why = f"'{shown(name)}' is neither this component nor a peer"
             add(key, why)
-            why = validate_port(port, lo=PORT_MIN, hi=65535)
+            why = validate_port(port, hi=65535)         # from PORT_MIN: not a privileged port
             if not why and port in ports:
-                why = f"port {port} is {ports[port]}'s too: one port per component"
+                why = f"port {port} is {shown(ports[port])}'s too: one port per component"
             add(key, why)
             if isinstance(port, int):
                 ports.setdefault(port, name)
