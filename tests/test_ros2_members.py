@@ -12,8 +12,6 @@ import socket
 import time
 from dataclasses import replace
 
-import pytest
-
 from rosnet_tui.core.checks.ros2 import linked_members, member_label, version_skew
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.peer import zenohproto
@@ -88,7 +86,6 @@ def test_the_masters_router_lists_its_linked_members_with_name_version_and_addre
     """Three real routers from the written configs (the members dial the master's on loopback):
     the master's admin space lists both members' routers, named by the metadata their configs
     carry, with Zenoh's version and the address each came from."""
-    pytest.importorskip("zenoh")
     port = _free_port()
     mcfg = ros2.router_config(ros2_master(security="none"))
     assert mcfg["metadata"] == {"name": "turtlebot", "role": "master"}

@@ -9,12 +9,11 @@ import threading
 import time
 
 import pytest
+import zenoh
 
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.peer.zenohlink import CHUNK, LinkEnd, link_text, rate_bps, whole_size
 from tests.builders import free_port
-
-zenoh = pytest.importorskip("zenoh")
 
 
 @pytest.fixture
