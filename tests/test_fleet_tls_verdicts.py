@@ -88,8 +88,10 @@ def test_the_program_refuses_with_a_reason_and_a_status(tmp_path, monkeypatch, c
     junk = fleet_tls.PEM_CERT + "\njunk\n"
     rc, rep, _ = run_main(capsys, "install", junk, junk)
     assert rc == 1 and "not a PEM certificate" in rep["error"]
-    rc, rep, _ = run_main(capsys, "install", str(tmp_path / "none"), junk)   # OSError too
-    assert rc == 1 and "No such file" in rep["error"]
+    (tmp_path / "ca.pem").write_text(junk)
+    for ca_arg in (str(tmp_path / "ca.pem"), "", "."):    # text is never read as a file name
+        rc, rep, _ = run_main(capsys, "install", ca_arg, junk)
+        assert rc == 1 and "not a PEM certificate" in rep["error"], ca_arg
     (tmp_path / "file").write_text("")
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "file"))   # cannot hold a folder
     rc, rep, _ = run_main(capsys, "request", "sami")
@@ -228,7 +230,7 @@ def test_the_ca_and_a_leaf_say_what_they_are(ca, tmp_path):
     assert fleet_tls.ca_key_id(tmp_path / "none") == ""
     (tmp_path / "junk").write_text("junk")
     assert fleet_tls.ca_key_id(tmp_path / "junk") == ""
-    assert fleet_tls.load_cert(str(ca.ca_crt)).subject == c.subject        # a path as text
+    assert fleet_tls.load_cert(ca.ca_crt.read_text()).subject == c.subject
     assert fleet_tls.load_cert(ca.ca_crt.read_bytes()).subject == c.subject
 
 
