@@ -190,6 +190,11 @@ def test_the_removed_list(tmp_path):
     assert fleet_tls.removed_members(p) == ["eve"]
     (p.dir / fleet_tls.REMOVED_FILE).write_text("  Eve \n\n\t\nx\n")
     assert fleet_tls.removed_members(p) == ["eve", "x"]
+    (p.dir / fleet_tls.REMOVED_FILE).write_text("".join(f"m{i}\n" for i in range(10001)))
+    got = fleet_tls.removed_members(p)
+    assert len(got) == 10000 and got[-1] == "m9999"         # read up to a bound
+    (p.dir / fleet_tls.REMOVED_FILE).write_bytes(b"\xffbob\n")
+    assert fleet_tls.removed_members(p) == ["\ufffdbob"]
 
 
 def test_split_pems_takes_whole_blocks_in_order(ca):
@@ -206,21 +211,44 @@ def test_the_ca_and_a_leaf_say_what_they_are(ca, tmp_path):
     bc = c.extensions.get_extension_for_class(x509.BasicConstraints)
     assert bc.critical and bc.value.ca and bc.value.path_length == 0
     ku = c.extensions.get_extension_for_class(x509.KeyUsage)
-    assert ku.critical and ku.value.key_cert_sign and ku.value.crl_sign
-    assert not ku.value.key_encipherment
+    assert ku.critical and ku.value == x509.KeyUsage(
+        digital_signature=True, key_cert_sign=True, crl_sign=True, content_commitment=False,
+        key_encipherment=False, data_encipherment=False, key_agreement=False,
+        encipher_only=False, decipher_only=False)
+    ski = c.extensions.get_extension_for_class(x509.SubjectKeyIdentifier)
+    assert not ski.critical
+    assert ski.value == x509.SubjectKeyIdentifier.from_public_key(c.public_key())
     days = (c.not_valid_after_utc - c.not_valid_before_utc).days
     assert days == fleet_tls.CA_DAYS
     assert c.subject == c.issuer and "turtlebot" in c.subject.rfc4514_string()
     leaf = fleet_tls.load_cert(ca.node_crt)
     bc = leaf.extensions.get_extension_for_class(x509.BasicConstraints)
     assert bc.critical and not bc.value.ca
-    ku = leaf.extensions.get_extension_for_class(x509.KeyUsage).value
-    assert ku.digital_signature and not ku.key_encipherment and not ku.key_cert_sign
+    ku = leaf.extensions.get_extension_for_class(x509.KeyUsage)
+    assert ku.critical and ku.value == x509.KeyUsage(
+        digital_signature=True, key_cert_sign=False, crl_sign=False, content_commitment=False,
+        key_encipherment=False, data_encipherment=False, key_agreement=False,
+        encipher_only=False, decipher_only=False)
+    for ext in (x509.SubjectAlternativeName, x509.ExtendedKeyUsage,
+                x509.AuthorityKeyIdentifier):
+        assert not leaf.extensions.get_extension_for_class(ext).critical, ext
+    aki = leaf.extensions.get_extension_for_class(x509.AuthorityKeyIdentifier).value
+    assert aki.key_identifier == ski.value.digest
+    san = leaf.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert san.get_values_for_type(x509.DNSName) == ["turtlebot"]
+    assert [str(a) for a in san.get_values_for_type(x509.IPAddress)] == ["203.0.113.2"]
+    assert list(leaf.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value) == [
+        x509.oid.ExtendedKeyUsageOID.SERVER_AUTH, x509.oid.ExtendedKeyUsageOID.CLIENT_AUTH]
     assert (leaf.not_valid_after_utc - leaf.not_valid_before_utc).days == fleet_tls.CERT_DAYS
     now = dt.datetime.now(dt.timezone.utc)
-    assert now - dt.timedelta(minutes=6) < leaf.not_valid_before_utc < now
+    for cert in (c, leaf):          # back-dated a few minutes (clocks differ a little)
+        assert now - dt.timedelta(minutes=15) < cert.not_valid_before_utc \
+            < now - dt.timedelta(minutes=4)
     assert leaf.issuer == c.subject
     leaf.verify_directly_issued_by(c)
+    s = fleet_tls.cert_summary(ca.node_crt, now=leaf.not_valid_after_utc
+                               - dt.timedelta(seconds=0.95 * 86400 + 0.5))
+    assert s["days_left"] == 1.0            # 0.950006 days, to one decimal
     s = fleet_tls.cert_summary(ca.node_crt, now=leaf.not_valid_after_utc - dt.timedelta(days=2))
     assert s["days_left"] == 2.0 and s["not_after"] == leaf.not_valid_after_utc.isoformat()
     assert s["fingerprint"] == leaf.fingerprint(hashes.SHA256()).hex()
@@ -304,8 +332,7 @@ def test_the_program_finds_the_config_folder_as_the_product_does(tmp_path, monke
 def test_why_a_member_needs_pairing(ca, tmp_path):
     sp, me = fleet_tls.tls_paths(tmp_path / "s"), ros2_member()
     assert pairing.needs_pairing(me, sp) == "no fleet certificate here yet"
-    fleet_tls.issue_test_cert(ca, sp, "sami", days=31)
-    sp.ca_crt.write_bytes(ca.ca_crt.read_bytes())
+    fleet_tls.issue_test_cert(ca, sp, "sami", days=31)              # with the CA's certificate
     assert pairing.needs_pairing(me, sp) is None
     fleet_tls.issue_test_cert(ca, sp, "sami", days=30)
     assert pairing.needs_pairing(me, sp) == "the certificate expires in 30 days"
@@ -360,3 +387,23 @@ def test_renewal_turns_only_where_it_should(tmp_path, monkeypatch):
     assert r.next_at == 0.0
     r.tick(ros2_member(security="none"), background=False)
     assert r.next_at > six_h - 60 and lines == []
+
+
+def test_a_write_that_fails_leaves_no_temporary_file(ca, tmp_path):
+    sp = fleet_tls.tls_paths(tmp_path / "s")
+    ca_pem, cert = fleet_tls.sign_request(ca, fleet_tls.make_request(sp, "sami"),
+                                          master="turtlebot", members=["sami"], days=10)
+    leaf = fleet_tls.load_cert(cert)
+    assert (leaf.not_valid_after_utc - leaf.not_valid_before_utc).days == 10
+    sp.node_crt.mkdir()                                   # cannot be replaced by a file
+    with pytest.raises(OSError):
+        fleet_tls.install(sp, ca_pem, cert)
+    assert sorted(x.name for x in sp.dir.iterdir()) == ["ca.crt", "node.crt", "node.key"]
+
+
+def test_the_master_renews_its_certificate_when_asked(ca):
+    before = ca.node_crt.read_bytes()
+    assert pairing.prepare_master(master(), ca) == []
+    made = pairing.prepare_master(master(), ca, renew=True)
+    assert len(made) == 1 and "this router's certificate" in made[0]
+    assert ca.node_crt.read_bytes() != before
