@@ -117,6 +117,11 @@ def test_a_long_time_text_is_cut_in_the_message():
     with pytest.raises(RecordError) as e:
         sr.parse_time("x" * 64)                             # at the bound: read, then refused
     assert "'..." not in str(e.value) and "not an ISO 8601 time" in str(e.value)
+    assert "x" * 40 + "'" in str(e.value) and "x" * 41 not in str(e.value)
+    with pytest.raises(RecordError) as e:                  # the text as given, cut
+        sr.parse_time(" " * 30 + "2025-03-01T12:00:00")
+    assert str(e.value) == f"timestamp {' ' * 30 + '2025-03-01'!r} has no time zone (write " \
+        "it in UTC, ...Z)"
 
 
 # --------------------------------------------------------------------------- what a record holds
@@ -143,6 +148,12 @@ def test_a_record_checked_field_by_field():
     refused(rec(name=""), "name")
     refused(rec(name="a b"), "name")
     refused(rec(role="boss"), "role 'boss' is not one of master, member")
+    with pytest.raises(RecordError) as e:
+        sr.check_record(rec(name="n" * 50 + "!"), now=T)
+    assert f"name {'n' * 40!r}: " in str(e.value) and "n" * 41 not in str(e.value)
+    with pytest.raises(RecordError) as e:
+        sr.check_record(rec(role="r" * 30), now=T)
+    assert f"role {'r' * 20!r} is not" in str(e.value) and "r" * 21 not in str(e.value)
     refused(rec(local_ip="", public_ip=""), "no address at all")
     refused(rec(local_ip="127.0.0.1"), "local_ip: .*loopback")
     refused(rec(public_ip="10.0.0.1"), "public_ip: .*never a public one")
@@ -188,8 +199,8 @@ def test_a_record_parsed_from_each_form():
     assert sr.parse_record(json.dumps(good()), now=T) == want
     assert sr.parse_record(json.dumps(good()).encode(), now=T) == want
     assert sr.parse_record(bytearray(json.dumps(good()).encode()), now=T) == want
-    padded = {**good(), "name": "  sami ", "role": " member", "local_ip": "192.168.1.10 ",
-              "public_ip": " 198.51.100.2", "extra": [1, 2]}
+    padded = {**good(), "name": "  sami ", "role": " member\t", "local_ip": " 192.168.1.10 ",
+              "public_ip": "\n198.51.100.2 ", "extra": [1, 2]}
     assert sr.parse_record(padded, now=T) == want
     assert sr.parse_record(good(), expect_name="SAMI", now=T) == want
     with pytest.raises(RecordError, match="it names 'sami', not 'bob'"):
@@ -280,6 +291,8 @@ def test_the_copy_chosen_and_the_conflicts_noted():
     same_len = Candidate(rec(seq=5, public_ip="198.51.100.9"), "a.json")
     assert sr.choose_best([Candidate(rec(seq=5), "b.json"), same_len])[0] is same_len
     assert sr.choose_best([a, Candidate(rec(seq=5, timestamp=T - 1), "a")])[0] is a
+    short = Candidate(rec(seq=5, public_ip="198.51.100.9"), "z.json")   # shorter name first
+    assert sr.choose_best([Candidate(rec(seq=5), "aa.json"), short])[0] is short
 
 
 # --------------------------------------------------------------------------- the applied list
