@@ -53,7 +53,7 @@ def test_content_rank_and_the_next_record():
     for change in ({"name": "bob"}, {"local_ip": "192.168.1.11"},
                    {"public_ip": "198.51.100.3"}, {"role": "master"}):
         assert not r.same_content(rec(**change)), change
-    n = rec(sig="x", version=1).next(local_ip="192.168.1.20", public_ip="", role="master",
+    n = rec(sig="x", version=2).next(local_ip="192.168.1.20", public_ip="", role="master",
                                       now=T + 60)
     assert (n.seq, n.timestamp, n.sig, n.version) == (6, T + 60, "", sr.RECORD_VERSION)
     assert (n.local_ip, n.public_ip, n.role, n.name) == ("192.168.1.20", "", "master", "sami")
