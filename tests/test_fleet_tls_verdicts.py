@@ -8,6 +8,9 @@ from __future__ import annotations
 import datetime as dt
 import json
 import stat
+import sys
+import threading
+import time
 
 import pytest
 from cryptography import x509
@@ -77,6 +80,15 @@ def test_the_program_makes_a_request_and_installs_the_answer(tmp_path, monkeypat
         assert stat.S_IMODE(p.stat().st_mode) == 0o644
     assert not mine.ca_key.exists()
     assert sorted(x.name for x in mine.dir.iterdir()) == ["ca.crt", "node.crt", "node.key"]
+
+
+def test_the_program_says_when_cryptography_cannot_load(tmp_path, monkeypatch, capsys):
+    """A member whose rosnet-tui has a broken cryptography (its import fails): one answer line,
+    status 1, not a traceback."""
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "member"))
+    monkeypatch.setitem(sys.modules, "cryptography", None)
+    rc, rep, _ = run_main(capsys, "request", "sami")
+    assert rc == 1 and rep["error"].startswith("rosnet-tui there cannot load cryptography (")
 
 
 def test_the_program_refuses_with_a_reason_and_a_status(tmp_path, monkeypatch, capsys):
@@ -285,8 +297,10 @@ def test_when_the_masters_certificate_counts_as_current(ca):
     assert len(plan) == 1 and "certificate" in plan[0] and "its key" not in plan[0]
     ca.node_crt.unlink()
     assert not fleet_tls.master_cert_current(ca, name)
+    old_ca = fleet_tls.ca_key_id(ca.ca_crt)
     fleet_tls.rotate_ca(ca, "turtlebot")
-    assert not ca.node_crt.exists()
+    assert not ca.node_crt.exists() and fleet_tls.ca_key_id(ca.ca_crt) != old_ca
+    assert "fleet CA (turtlebot)" in fleet_tls.load_cert(ca.ca_crt).subject.rfc4514_string()
     other = fleet_tls.tls_paths(ca.dir.parent / "o")
     fleet_tls.issue_test_cert(fleet_tls.make_test_ca(ca.dir.parent / "f"), other, name)
     ca.node_crt.write_bytes(other.node_crt.read_bytes())
@@ -298,7 +312,18 @@ def test_the_master_plans_what_it_would_make(tmp_path):
     plan = pairing.master_plan(ros2_master(), p)
     assert len(plan) == 2 and "fleet CA" in plan[0] and "its key" in plan[1]
     assert not p.dir.exists()                                  # a preview makes nothing
+    pairing.prepare_master(ros2_master(), p)                   # no public IP known yet
+    assert pairing.master_plan(ros2_master(), p) == []
+    plan = pairing.master_plan(master(), p)                    # now it is: a new certificate
+    assert len(plan) == 1 and "this router's certificate" in plan[0]
+    p.ca_key.unlink()                                          # a CA without its key: anew
+    assert "fleet CA" in pairing.master_plan(ros2_master(), p)[0]
+    p.ca_crt.unlink()
+    p.node_crt.unlink()
+    p.node_key.unlink()
     assert fleet_tls.ensure_ca(p, "x") is True and fleet_tls.ensure_ca(p, "x") is False
+    p.ca_crt.unlink()
+    assert fleet_tls.ensure_ca(p, "x") is True                  # a key without its CA: anew
     p.ca_key.unlink()
     assert fleet_tls.ensure_ca(p, "x") is True                  # a CA without its key: anew
     assert stat.S_IMODE(p.ca_key.stat().st_mode) == 0o600
@@ -407,3 +432,47 @@ def test_the_master_renews_its_certificate_when_asked(ca):
     made = pairing.prepare_master(master(), ca, renew=True)
     assert len(made) == 1 and "this router's certificate" in made[0]
     assert ca.node_crt.read_bytes() != before
+
+
+class Lines:
+    """A logger that keeps the lines and says when one came."""
+
+    def __init__(self):
+        self.lines, self.came = [], threading.Event()
+
+    def info(self, fmt, *a):
+        self.lines.append(fmt % a)
+        self.came.set()
+
+
+def test_the_renewer_logs_what_it_made_and_waits_its_turn(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    p = fleet_tls.tls_paths(tmp_path / "rosnet-tui")
+    fleet_tls.ensure_ca(p, "turtlebot")
+    log = Lines()
+    r = pairing.CertRenewer(log)
+    t0 = time.monotonic()
+    r.tick(master(security="mtls"), background=False)
+    assert len(log.lines) == 1 and log.lines[0].startswith("TLS: made this router's certificate")
+    assert t0 + 6 * 3600 <= r.next_at <= time.monotonic() + 6 * 3600
+    p.node_crt.unlink()
+    r.tick(master(security="mtls"), background=False)          # not its turn yet
+    assert len(log.lines) == 1 and not p.node_crt.exists()
+    r.next_at = 0.0
+    log.came.clear()
+    r.tick(master(security="mtls"), background=True)           # on a thread of its own
+    assert log.came.wait(30) and len(log.lines) == 2 and p.node_crt.exists()
+
+
+def test_the_renewer_logs_a_failure_and_tries_again_in_10_minutes(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    p = fleet_tls.tls_paths(tmp_path / "rosnet-tui")
+    fleet_tls.ensure_ca(p, "turtlebot")
+    p.ca_crt.write_text("damaged")
+    log = Lines()
+    r = pairing.CertRenewer(log)
+    t0 = time.monotonic()
+    r.tick(master(security="mtls"), background=False)
+    assert log.lines == ["TLS: renewing the certificate failed: not a PEM certificate "
+                         + log.lines[0].split("not a PEM certificate ", 1)[1]]
+    assert t0 + 600 <= r.next_at <= time.monotonic() + 600

@@ -138,3 +138,26 @@ def test_the_master_repairs_each_member_with_its_own_key(ssh_client, tmp_path):
     [(_, ok, why)] = asyncio.run(pairing.repair_members(s, master, [peer], ssh_client.opts(),
                                                         10.0))
     assert not ok and why.startswith("SSH to localhost failed"), why
+
+
+# --------------------------------------------------------------------------- renewal
+def test_a_member_renews_a_certificate_that_expires_soon(ssh_client, tmp_path):
+    master = fleet_tls.tls_paths(tmp_path / "m")
+    pairing.prepare_master(ros2_master(), master)
+    mine = fleet_tls.tls_paths(tmp_path / "s")
+    fleet_tls.issue_test_cert(master, mine, "sami", days=10)
+    s = member_settings(ssh_client)
+    s.ros.security = "mtls"
+    answer_with(ssh_client, tmp_path, {"--serve": report({"error": "not now"})})
+    said, nxt = pairing.renew_due(s, mine, ssh_client.opts())
+    assert said == ["TLS: renewing (the certificate expires in 10 days): localhost did not "
+                    "sign: not now"] and nxt == 600.0
+    ca, cert = fleet_tls.sign_request(master, fleet_tls.make_request(mine, "sami"),
+                                      master="turtlebot", members=["sami"])
+    answer_with(ssh_client, tmp_path, {"--serve": report({"ca": ca, "cert": cert})})
+    said, nxt = pairing.renew_due(s, mine, ssh_client.opts())
+    assert len(said) == 1 and said[0].startswith(
+        "TLS: renewing (the certificate expires in 10 days): paired with localhost's") \
+        and nxt == 6 * 3600.0, said
+    assert mine.node_crt.read_text() == cert
+    assert pairing.renew_due(s, mine, ssh_client.opts()) == ([], 6 * 3600.0)   # good now
