@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 
 import pytest
@@ -326,3 +327,16 @@ def test_a_damaged_applied_list_loses_only_what_is_damaged(tmp_path):
     assert len(got) == applied.MAX_PEERS and "p0" in got and f"p{applied.MAX_PEERS}" not in got
     path.write_text('{"version": 1, "peers": ' + "[" * 100000 + "]" * 100000 + "}")
     assert applied.load_applied(tmp_path) == {}
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root (hands files to another user)")
+def test_root_hands_the_applied_list_to_the_owner_of_the_state_dir(tmp_path):
+    """The system service (root) writes a user's state dir: the files it makes are the user's."""
+    state = tmp_path / "state"
+    state.mkdir()
+    os.chown(state, 4321, 4321)
+    applied.save_applied(state, {"sami": rec()})
+    for p in (state / "sync", applied.applied_path(state)):
+        st = p.stat()
+        assert (st.st_uid, st.st_gid) == (4321, 4321), p
+    assert applied.load_applied(state) == {"sami": rec()}
