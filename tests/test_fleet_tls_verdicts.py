@@ -438,10 +438,12 @@ class Lines:
     """A logger that keeps the lines and says when one came."""
 
     def __init__(self):
-        self.lines, self.came = [], threading.Event()
+        self.lines, self.came, self.threads = [], threading.Event(), []
 
     def info(self, fmt, *a):
         self.lines.append(fmt % a)
+        t = threading.current_thread()
+        self.threads.append((t.name, t.daemon))
         self.came.set()
 
 
@@ -462,6 +464,9 @@ def test_the_renewer_logs_what_it_made_and_waits_its_turn(tmp_path, monkeypatch)
     log.came.clear()
     r.tick(master(security="mtls"), background=True)           # on a thread of its own
     assert log.came.wait(30) and len(log.lines) == 2 and p.node_crt.exists()
+    # a daemon thread (it never holds the service's exit), named for ps and the logs
+    assert log.threads == [(threading.current_thread().name, False),
+                           ("certificate renewal", True)]
 
 
 def test_the_renewer_logs_a_failure_and_tries_again_in_10_minutes(tmp_path, monkeypatch):
