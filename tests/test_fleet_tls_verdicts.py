@@ -198,6 +198,8 @@ def test_the_removed_list(tmp_path):
     fleet_tls.set_removed(p, "BOB")
     fleet_tls.set_removed(p, "eve")
     assert fleet_tls.removed_members(p) == ["bob", "eve"]
+    assert (p.dir / fleet_tls.REMOVED_FILE).read_text() == "bob\neve\n"
+    assert stat.S_IMODE((p.dir / fleet_tls.REMOVED_FILE).stat().st_mode) == 0o644
     fleet_tls.set_removed(p, "bOb", removed=False)
     assert fleet_tls.removed_members(p) == ["eve"]
     (p.dir / fleet_tls.REMOVED_FILE).write_text("  Eve \n\n\t\nx\n")
@@ -481,3 +483,26 @@ def test_the_renewer_logs_a_failure_and_tries_again_in_10_minutes(tmp_path, monk
     assert log.lines == ["TLS: renewing the certificate failed: not a PEM certificate "
                          + log.lines[0].split("not a PEM certificate ", 1)[1]]
     assert t0 + 600 <= r.next_at <= time.monotonic() + 600
+
+
+def test_the_renewer_never_runs_twice_at_once(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    fleet_tls.ensure_ca(fleet_tls.tls_paths(tmp_path / "rosnet-tui"), "turtlebot")
+    go = threading.Event()
+
+    class Held(Lines):
+        def info(self, fmt, *a):
+            super().info(fmt, *a)
+            go.wait(30)                    # the renewal is still at work until released
+
+    log = Held()
+    r = pairing.CertRenewer(log)
+    r.tick(master(security="mtls"), background=True)
+    assert log.came.wait(30)
+    r.tick(master(security="mtls"), background=True)   # at work: nothing more, no error
+    r.tick(master(security="mtls"), background=False)
+    go.set()
+    deadline = time.monotonic() + 30
+    while r.next_at == float("inf") and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert len(log.lines) == 1 and r.next_at < float("inf")
