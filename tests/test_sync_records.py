@@ -229,7 +229,7 @@ def test_a_record_parsed_from_each_form():
     ({"version": "1"}, "version must be a whole number"),
     ({"name": 5}, "name must be a string"), ({"role": None}, "role must be a string"),
     ({"local_ip": 1}, "local_ip must be a string"), ({"public_ip": []}, "public_ip must be"),
-    ({"seq": True}, "seq must be a whole number"), ({"seq": 5.0}, "seq must be a whole number"),
+    ({"seq": True}, "seq must be a whole number$"), ({"seq": 5.0}, "seq must be a whole number$"),
     ({"seq_epoch": True}, "seq_epoch must be a whole number"),
     ({"seq_epoch": "1"}, "seq_epoch must be a whole number"),
     ({"sig": 5}, "sig must be"), ({"sig": "s" * 201}, "sig must be"),
@@ -324,6 +324,8 @@ def test_a_damaged_applied_list_loses_only_what_is_damaged(tmp_path):
         "SAMI": good_entry, "bob": good_entry, "eve": {"name": "eve"}, "x": 5,
         "carl": {**good_entry, "name": "carl", "seq": -1}}}))
     assert applied.load_applied(tmp_path) == {"sami": rec()}
+    path.write_text(json.dumps({"version": 1, "peers": {"bob": good_entry}}))
+    assert applied.load_applied(tmp_path) == {}          # sami's record kept as bob's: dropped
     many = {f"p{i}": {**good_entry, "name": f"p{i}"} for i in range(applied.MAX_PEERS + 5)}
     path.write_text(json.dumps({"version": 1, "peers": many}))
     got = applied.load_applied(tmp_path)
