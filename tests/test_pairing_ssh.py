@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import json
 import shlex
+import time
 
 import pytest
 
@@ -18,18 +19,27 @@ from tests.builders import ros2_master, ros2_member
 REQ, INST = "rosnet-tui-peer 'request'", "rosnet-tui-peer 'install'"   # as fleet_tls.py is run
 
 
-def answer_with(ssh_client, tmp_path, by_command: dict[str, str], status: int = 0) -> None:
-    """The sshd runs a script for any command: it drains stdin, prints the answer whose key is
-    in the command asked for ('' for any), and exits *status*."""
+def answer_with(ssh_client, tmp_path, by_command: dict[str, str], status: int = 0,
+                before: str = "") -> None:
+    """The sshd runs a script for any command: it keeps what it was sent (stdin in
+    ``got.stdin``, the command in ``got.cmd``, the last one's), runs *before*, prints the answer
+    whose key is in the command asked for, and exits *status*."""
     parts = []
     for i, (key, text) in enumerate(by_command.items()):
         f = tmp_path / f"answer{i}"
         f.write_text(text)
         parts.append(f"*{shlex.quote(key)}*) cat {shlex.quote(str(f))};;")
     script = tmp_path / "answer.sh"
-    script.write_text('cat >/dev/null\ncase "$SSH_ORIGINAL_COMMAND" in\n' + "\n".join(parts)
+    got = shlex.quote(str(tmp_path / "got"))
+    script.write_text(f'cat >{got}.stdin\nprintf %s "$SSH_ORIGINAL_COMMAND" >{got}.cmd\n{before}\n'
+                      'case "$SSH_ORIGINAL_COMMAND" in\n' + "\n".join(parts)
                       + f"\nesac\nexit {status}\n")
     ssh_client.sshd.authorized.write_text(f'command="sh {script}" {ssh_client.pub}\n')
+
+
+def sent(tmp_path) -> tuple[str, str]:
+    """What the other side was sent last: (stdin, command)."""
+    return (tmp_path / "got.stdin").read_text(), (tmp_path / "got.cmd").read_text()
 
 
 def member_settings(ssh_client):
@@ -57,6 +67,10 @@ def test_a_member_installs_what_the_master_signed(ssh_client, tmp_path):
         {"ca": ca, "cert": cert, "sync_key": "ssh-ed25519 AAAAkey"})})
     res = pair(member_settings(ssh_client), mine, ssh_client)
     assert res.ok and res.summary["cn"] == "sami", res.detail
+    stdin, cmd = sent(tmp_path)                  # its own request, for its own name
+    assert fleet_tls.key_fingerprint(fleet_tls.load_request_key(stdin)) == \
+        fleet_tls.key_fingerprint(fleet_tls.load_request_key(req))
+    assert cmd == pairing.serve_command("sami")
     assert res.detail.startswith(f"paired with localhost's fleet CA: {mine.node_crt} names sami")
     assert res.master_sync_key == "ssh-ed25519 AAAAkey" and res.seconds > 0
     assert pairing.needs_pairing(ros2_member(), mine) is None
@@ -67,17 +81,18 @@ def test_a_member_installs_what_the_master_signed(ssh_client, tmp_path):
 
 @pytest.mark.parametrize("answer, status, why", [
     (report({"error": "no, thanks"}), 1, "localhost did not sign: no, thanks"),
-    ("just words\n", 3, "localhost gave no answer (exit status 3)"),
+    ("just words\n", 3, "localhost gave no answer (exit status 3: c | d | e)"),
     ('ROSNET_ZENOH {"error": "no_install"}\n', 0, "localhost has no rosnet-tui installed"),
     (report({"ca": "x", "cert": "y"}), 0, "the answer from localhost was not installed"),
     (report({"cert": "y"}), 0, "was not installed"),
 ])
 def test_a_member_says_why_it_is_not_paired(ssh_client, tmp_path, answer, status, why):
     mine = fleet_tls.tls_paths(tmp_path / "s")
-    answer_with(ssh_client, tmp_path, {"--serve": answer}, status)
+    answer_with(ssh_client, tmp_path, {"--serve": answer}, status,
+                before="printf 'a\\nb\\nc\\nd\\ne\\n' >&2")
     res = pair(member_settings(ssh_client), mine, ssh_client)
-    assert not res.ok and why in res.detail, res.detail
-    assert not mine.node_crt.exists()
+    assert res.ok is False and why in res.detail, res.detail
+    assert not mine.node_crt.exists() and 0 < res.seconds < 30
 
 
 def test_a_member_pairs_only_with_a_master_it_can_reach(ssh_client, tmp_path):
@@ -87,7 +102,15 @@ def test_a_member_pairs_only_with_a_master_it_can_reach(ssh_client, tmp_path):
     res = pair(s, mine, ssh_client)
     assert not res.ok and "no SSH user for the master localhost" in res.detail
     assert not mine.dir.exists()                       # nothing made
-    assert "it signs, it does not pair" in pair(ros2_master(), mine, ssh_client).detail
+    res = pair(ros2_master(), mine, ssh_client)
+    assert res.ok is False and "it signs, it does not pair" in res.detail
+    res = pair(s, mine, ssh_client)
+    assert res.ok is False
+    answer_with(ssh_client, tmp_path, {"--serve": report({"error": "late"})}, before="sleep 20")
+    t0 = time.monotonic()
+    res = asyncio.run(pairing.pair_over_ssh(member_settings(ssh_client), mine, ssh_client.opts(),
+                                            timeout=1.0))
+    assert res.ok is False and time.monotonic() - t0 < 10 and "late" not in res.detail
     ssh_client.sshd.authorized.write_text("")          # the master does not let us in
     res = pair(member_settings(ssh_client), mine, ssh_client)
     assert not res.ok and "SSH to localhost failed" in res.detail, res.detail
@@ -108,6 +131,28 @@ def test_the_master_repairs_each_member_with_its_own_key(ssh_client, tmp_path):
                                        INST: report({"installed": summ})})
     got = asyncio.run(pairing.repair_members(s, master, [peer], ssh_client.opts(), 10.0))
     assert got == [("localhost", True, f"valid until {summ['not_after'][:10]}")]
+    stdin, cmd = sent(tmp_path)                  # the master's own program, and what to install
+    assert stdin.encode() == pairing.FLEET_TLS_SOURCE
+    assert cmd.startswith(pairing.tls_command("install", "x")[:-len(" 'install' 'x'")])
+    installed = cmd.split("rosnet-tui-peer ", 1)[1]
+    assert installed.count(fleet_tls.PEM_CERT) == 2 and "'install' " in installed
+    pems = fleet_tls.split_pems(installed.replace("'", "\n"))
+    assert len(pems) == 2 and fleet_tls.load_cert(pems[1]).public_key() == \
+        fleet_tls.load_request_key(req)
+    answer_with(ssh_client, tmp_path, {REQ: report({"error": "x"})})     # the request only
+    asyncio.run(pairing.repair_members(s, master, [peer], ssh_client.opts(), 10.0))
+    assert sent(tmp_path)[1].endswith("rosnet-tui-peer 'request' 'localhost'")
+    answer_with(ssh_client, tmp_path, {REQ: report({"csr": req})}, before="sleep 20")
+    t0 = time.monotonic()
+    [(_, ok, why)] = asyncio.run(pairing.repair_members(s, master, [peer], ssh_client.opts(),
+                                                        1.0))
+    assert not ok and time.monotonic() - t0 < 10, why
+    answer_with(ssh_client, tmp_path, {REQ: report({"csr": req})},
+                before="case \"$SSH_ORIGINAL_COMMAND\" in *install*) sleep 20;; esac")
+    t0 = time.monotonic()
+    [(_, ok, why)] = asyncio.run(pairing.repair_members(s, master, [peer], ssh_client.opts(),
+                                                        1.0))
+    assert not ok and time.monotonic() - t0 < 10, why
     # refusals, each named with its member
     answer_with(ssh_client, tmp_path, {REQ: report({"csr": req}),
                                        INST: report({"error": "disk full"})})
@@ -116,10 +161,11 @@ def test_the_master_repairs_each_member_with_its_own_key(ssh_client, tmp_path):
     answer_with(ssh_client, tmp_path, {REQ: report({"error": "no key"})})
     assert asyncio.run(pairing.repair_members(s, master, [peer], ssh_client.opts(), 10.0)) \
         == [("localhost", False, "no key")]
-    answer_with(ssh_client, tmp_path, {REQ: "nothing\n"}, 4)
+    answer_with(ssh_client, tmp_path, {REQ: "nothing\n"}, 4,
+                before="printf 'a\\nb\\nc\\nd\\ne\\n' >&2")
     [(_, ok, why)] = asyncio.run(pairing.repair_members(s, master, [peer], ssh_client.opts(),
                                                         10.0))
-    assert not ok and why.startswith("localhost gave no answer (exit status 4"), why
+    assert not ok and why == "localhost gave no answer (exit status 4: c | d | e)", why
     answer_with(ssh_client, tmp_path, {REQ: 'ROSNET_ZENOH {"error": "no_install"}\n'})
     [(_, ok, why)] = asyncio.run(pairing.repair_members(s, master, [peer], ssh_client.opts(),
                                                         10.0))
