@@ -71,6 +71,17 @@ def test_content_rank_and_the_next_record():
 
 
 # --------------------------------------------------------------------------- time
+def test_times_are_written_in_utc_whatever_the_local_zone(monkeypatch):
+    monkeypatch.setenv("TZ", "Asia/Kolkata")
+    time.tzset()
+    try:
+        assert sr.format_time(T) == "2025-03-01T12:00:00.000Z"
+        assert sr.parse_time("2025-03-01T12:00:00Z") == T
+    finally:
+        monkeypatch.undo()
+        time.tzset()
+
+
 def test_times_are_written_and_shown_in_milliseconds():
     assert sr.millis(1.0006) == 1001 and sr.millis(1.0004) == 1000 and sr.millis(2.5) == 2500
     assert sr.format_time(T + 0.123) == "2025-03-01T12:00:00.123Z"
