@@ -104,10 +104,12 @@ def _load_key(path: Path) -> Any:
 
 
 def load_cert(path_or_pem: Path | str | bytes) -> Any:
+    """A certificate from a file (a Path) or from PEM (text or bytes). Text is never taken for a
+    path: an answer that is no certificate is refused, not read as a file name."""
     from cryptography import x509
 
     data = (path_or_pem if isinstance(path_or_pem, bytes) else
-            path_or_pem.encode() if isinstance(path_or_pem, str) and PEM_CERT in path_or_pem
+            path_or_pem.encode("utf-8", "replace") if isinstance(path_or_pem, str)
             else Path(path_or_pem).read_bytes())
     try:
         return x509.load_pem_x509_certificate(data)
