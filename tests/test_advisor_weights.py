@@ -305,11 +305,10 @@ def test_dated_rows_newest_first_and_only_well_formed_ones():
 
 
 def test_dated_words_name_their_source():
-    ev = Evidence(silent_peer(), HOME)
-    assert dated_words(ev, "turtlebot", dated("sync", 60)) == (
+    assert dated_words("turtlebot", dated("sync", 60)) == (
         "203.0.113.2 was confirmed 60 s ago (turtlebot's own sync record)")
-    assert dated_words(ev, "turtlebot", dated("settings", 60)).endswith("(settings saved)")
-    assert dated_words(ev, "turtlebot", dated("dns", 60)).endswith("(dns)")
+    assert dated_words("turtlebot", dated("settings", 60)).endswith("(settings saved)")
+    assert dated_words("turtlebot", dated("dns", 60)).endswith("(dns)")
 
 
 def test_an_hour_old_address_is_no_longer_fresh_and_a_day_old_one_is_old():
