@@ -22,16 +22,18 @@ def scores(causes) -> dict[str, float]:
 
 
 # --------------------------------------------------------------------------- Table 1
-def closed(answer=None, *, free: bool | None = False, reach: bool = False, nat: dict | None = None,
+def closed(answer=None, *, free: bool | None = True, reach: bool = False, nat: dict | None = None,
            moved: bool = False, token: bool = False):
-    """Table 1's closed test port: how it *answer*ed; port_free's verdict (None: not run);
+    """Table 1's closed test port: how it *answer*ed; port_free's verdict (the port is *free*,
+    or held by sshd; None: not run);
     another port that got through (*reach*; *token*: answered by our listener); isp.cgnat's
     data (*nat*; None: not run); a local IP the modem was not set up for (*moved*)."""
     r = t1(True, False)
     if free is None:
         del r["router.port_free"]
     else:
-        put(r, "router.port_free", "pass", in_use=False)
+        put(r, "router.port_free", "pass" if free else "warn", in_use=not free,
+            **({} if free else {"process": "sshd", "pid": 99}))
     ports = [{"port": 12345, "reachable": False, "listener": True, "via": "peer:sami",
               "answer": answer}]
     if reach:
@@ -68,6 +70,10 @@ CGNAT = dict(cgnat=True, hop="100.64.0.1", method="traceroute")
     # port_free did not run) against a private hop far up (the provider +60)
     (closed("other", free=None, reach=True, token=True, nat=FAR), ("isp", "port_in_use"),
      ["isp", "port_in_use", "forwarding"], ["isp", "port_in_use", "forwarding"]),
+    # a held port (+100, -10 for the connection that was not accepted) against unreachable and
+    # another port reaching our listener (the modem +50 +40)
+    (closed("unreachable", free=False, reach=True, token=True), ("forwarding", "port_in_use"),
+     ["forwarding", "port_in_use", "isp"], ["forwarding", "port_in_use", "isp"]),
 ])
 def test_table1_equal_evidence_for_two_causes_leaves_the_order_to_the_connection_type(
         round_, tied, home, telecom):
@@ -184,3 +190,14 @@ def test_a_refused_master_with_nothing_said_of_this_machines_address_gives_the_f
     got = {c.key: c for c in causes}
     assert got["firewall"].score == 0 and got["firewall"].seen_for
     assert [c.key for c in causes] == ["forwarding", "roscore", "peer", "address", "firewall"]
+
+
+def test_another_program_answering_after_a_local_ip_change_outweighs_a_held_port():
+    """A held port on this machine (+100) against another program answering at the public
+    address (the modem +50) after the local IP changed (the modem +60): the forwarding that
+    points at the old address first. Cutting either of the modem's weights to half (or zero)
+    puts the held port first."""
+    causes = table1_causes(Evidence(closed("other", free=False, moved=True), HOME))
+    got = scores(causes)
+    assert got["forwarding"] > got["port_in_use"] > got["isp"]
+    assert [c.key for c in causes] == ["forwarding", "port_in_use", "isp"]
