@@ -125,3 +125,40 @@ def test_undo_keeps_a_session_on_its_own_sshd_port(monkeypatch):
     # a journal entry whose copy is no text (a damaged journal) is described, not read
     assert fw.describe({"kind": fw.KIND, "before": ["table"]}) == \
         "the firewall table inet rosnet_tui: put back as it was before"
+
+
+def test_the_preview_says_who_gets_in_by_name_and_for_how_long():
+    """who_gets_in in this process (the CLI tests run it in a child): the peers by name, what
+    is empty said so, and the session's three cases."""
+    s = robot()
+    adm = fw.Admission(peers=["198.51.100.2", "198.51.100.99"], lan=["10.10.10.0/24"])
+    out = fw.who_gets_in(s, adm)
+    assert out[0] == "On TCP 22, 1024-65000 only these get in (the rest is refused there):"
+    assert out[1] == "  the peers (remote profile; SSH and ROS): 198.51.100.2 (sami), 198.51.100.99"
+    assert out[2] == "  this machine's LAN (SSH and ROS): 10.10.10.0/24"
+    assert out[3] == "  [firewall] allow (SSH): none"
+    assert out[4].startswith("  no SSH session runs this")
+    assert out[-1] == "  loopback, and replies to this machine's own connections"
+    office = fw.who_gets_in(s, fw.Admission(peers=["172.16.0.9"]), "office")
+    assert office[1] == "  the peers (office profile; SSH and ROS): 172.16.0.9 (sami)"
+    assert office[2] == "  this machine's LAN (SSH and ROS): none found"
+    assert fw.who_gets_in(s, fw.Admission(peers=[]))[1].endswith(": none")
+    kept = origin.Session("203.0.113.50", 2222, "SSH_CONNECTION")
+    assert fw.who_gets_in(s, adm, session=kept)[4] == (
+        "  this SSH session, 203.0.113.50 (to sshd port 2222; SSH_CONNECTION): SSH only, "
+        + fw.SESSION_STAYS)
+    assert fw.who_gets_in(s, adm, session=kept, session_in="a peer")[4] == \
+        "  this SSH session, 203.0.113.50: gets in already (a peer)"
+
+
+def test_the_privileged_rerun_gets_the_very_session_previewed(tmp_path):
+    assert fw.session_args(None) == ["--session-ip", "none"]
+    assert fw.session_args(origin.Session("203.0.113.50", 2222)) == \
+        ["--session-ip", "203.0.113.50", "--session-port", "2222"]
+    argv = fw.apply_command(config=tmp_path / "c.toml", profile="office", digest="ab12",
+                            state_dir=tmp_path / "st", session=origin.Session("192.0.2.9", 22))
+    tail = argv[argv.index("--config"):]
+    assert tail == ["--config", str(tmp_path / "c.toml"), "firewall", "apply", "--profile",
+                    "office", "--expect-digest", "ab12", "--session-ip", "192.0.2.9",
+                    "--session-port", "22", "--yes", "--state-dir", str(tmp_path / "st"),
+                    "--no-checks"]
