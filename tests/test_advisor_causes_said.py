@@ -65,6 +65,12 @@ def test_a_refusal_blamed_on_the_peers_firewall_names_that_peer():
     assert first.key == "firewall"
     assert "turtlebot's peers-only firewall lets in the addresses it was given" in \
         first.sentence()
+    peer = healthy_laptop()
+    ssh_shut_out(peer, "refused", icmp=True, address="203.0.113.2")
+    put(peer, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp="timeout")
+    peer["isp.public_ip"].data.update(public_ip="198.51.100.77")
+    first = peer_causes(Evidence(peer, HOME), "turtlebot")[0]
+    assert first.key == "firewall" and "turtlebot's peers-only firewall" in first.sentence()
     master = refused_master("timeout")
     master["isp.public_ip"].data.update(public_ip="198.51.100.77")
     first = master_causes(Evidence(master, HOME), "turtlebot")[0]
