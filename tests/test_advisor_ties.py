@@ -124,6 +124,12 @@ def row(by: str, age_s: float, ip: str = "203.0.113.2") -> dict:
     (peer_round("timeout", icmp=False, master="refused", dated=[row("settings", 5 * 3600)],
                 moved=True),
      ("forwarding", "address"), ["forwarding", "address", "sshd", "offline", "firewall"]),
+    # SSH silent, ping answered, the master's port refused (the address -20), the address
+    # confirmed minutes ago (-30) and the name resolving elsewhere (+50): the address at 0,
+    # level with sshd
+    (peer_round("timeout", icmp=True, master="refused", dated=[row("settings", 600)],
+                moved=True),
+     ("sshd", "address"), ["forwarding", "sshd", "address", "offline", "firewall"]),
     # SSH and the master's port refused (sshd +30; the address -20) and the name resolves
     # elsewhere (the address +50)
     (peer_round("refused", icmp=True, master="refused", moved=True), ("sshd", "address"),
