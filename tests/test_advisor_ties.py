@@ -207,3 +207,28 @@ def test_another_program_answering_after_a_local_ip_change_outweighs_a_held_port
     got = scores(causes)
     assert got["forwarding"] > got["port_in_use"] > got["isp"]
     assert [c.key for c in causes] == ["forwarding", "port_in_use", "isp"]
+
+
+@pytest.mark.parametrize(("round_", "order"), [
+    # silent SSH and master, ping answered, the address last confirmed 30 h ago (+10)
+    (peer_round("timeout", icmp=True, master="timeout", dated=[row("settings", 30 * 3600)]),
+     ["forwarding", "offline", "address", "sshd", "firewall"]),
+    # SSH refused while the master answers: the peer is up (off-line -30), its table knows us
+    (peer_round("refused", icmp=True, master="connected"),
+     ["sshd", "forwarding", "address", "offline", "firewall"]),
+    # SSH and the master's port refused alike: the modem first (+25 +35 against sshd's +30)
+    (peer_round("refused", icmp=True, master="refused"),
+     ["forwarding", "sshd", "firewall", "address", "offline"]),
+    # SSH unreachable while the master answers: the modem's target, then the peer off (+30)
+    (peer_round("unreachable", icmp=True, master="connected"),
+     ["forwarding", "offline", "sshd", "address", "firewall"]),
+    # SSH silent, ping answered, the master's port refused; the address 30 h old or undated
+    (peer_round("timeout", icmp=True, master="refused", dated=[row("settings", 30 * 3600)]),
+     ["forwarding", "sshd", "offline", "address", "firewall"]),
+    (peer_round("timeout", icmp=True, master="refused"),
+     ["forwarding", "sshd", "offline", "address", "firewall"]),
+])
+def test_a_peers_causes_in_full_order_with_their_competing_evidence(round_, order):
+    """Every cause's place, not only the first: a weight zeroed or cut to half moves one of
+    them here (found by zeroing and halving each weight over every round)."""
+    assert [c.key for c in peer_causes(Evidence(round_, HOME), "turtlebot")] == order
