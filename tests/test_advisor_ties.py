@@ -232,3 +232,64 @@ def test_a_peers_causes_in_full_order_with_their_competing_evidence(round_, orde
     """Every cause's place, not only the first: a weight zeroed or cut to half moves one of
     them here (found by zeroing and halving each weight over every round)."""
     assert [c.key for c in peer_causes(Evidence(round_, HOME), "turtlebot")] == order
+
+
+def chat_round(inbound: bool, *, port_open: bool | None, moved: bool = False):
+    r = healthy_laptop()
+    put(r, "linux.chat_in" if inbound else "linux.chat_out", "fail",
+        peers={"turtlebot": {"ok": False, "tcp": "refused"}})
+    put(r, "router.port_open", "pass" if port_open else "fail", test_port_open=port_open)
+    if moved:
+        r["linux.resolve"].data["names"]["turtlebot"].update(resolved="203.0.113.99",
+                                                              expected="203.0.113.2")
+    return r
+
+
+@pytest.mark.parametrize(("inbound", "round_", "order"), [
+    # turtlebot reached our test port from outside (the modem -40, the name +30), then was
+    # refused by name: the name, then a firewall here (+15), the modem last
+    (True, chat_round(True, port_open=True), ["hosts", "firewall", "forwarding"]),
+    # our connection refused (the modem +15, a firewall there +15 -10: this machine's address
+    # is the one its table holds) and the name resolves elsewhere (+50)
+    (False, chat_round(False, port_open=True, moved=True), ["hosts", "forwarding", "firewall"]),
+])
+def test_a_chats_causes_in_full_order_with_their_competing_evidence(inbound, round_, order):
+    assert [c.key for c in chat_causes(Evidence(round_, HOME), "turtlebot", inbound)] == order
+
+
+def master_round(tcp: str, ssh: str | None, *, public_ip: str | None = None):
+    """sami's round: turtlebot's master port answered *tcp*; SSH ok (None) or its port 22
+    answering *ssh*; this machine's public IP as isp.public_ip saw it."""
+    r = healthy_laptop()
+    put(r, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp=tcp)
+    if ssh is not None:
+        ssh_shut_out(r, ssh, icmp=False)
+    if public_ip:
+        r["isp.public_ip"].data.update(public_ip=public_ip)
+    return r
+
+
+@pytest.mark.parametrize(("round_", "order"), [
+    # SSH gets in, the master's port refused: nothing listens (+50); this machine's address
+    # moved, but SSH got in, so the peer's table knows it (the firewall -100 +70)
+    (master_round("refused", None, public_ip="198.51.100.77"),
+     ["roscore", "forwarding", "peer", "address", "firewall"]),
+    # SSH's port refused too: the modem (+40) before roscore
+    (master_round("refused", "refused"), ["forwarding", "roscore", "peer", "address", "firewall"]),
+    # SSH silent: roscore (+20) before the modem (+10)
+    (master_round("refused", "timeout"), ["roscore", "forwarding", "peer", "address", "firewall"]),
+    # SSH gets in, the master's port silent: the forwarded range (+40)
+    (master_round("timeout", None), ["forwarding", "roscore", "peer", "address", "firewall"]),
+    # nothing gets through at all: the peer itself (+40) before the modem (+10)
+    (master_round("timeout", "refused"), ["peer", "forwarding", "roscore", "address", "firewall"]),
+])
+def test_the_masters_causes_in_full_order_with_their_competing_evidence(round_, order):
+    assert [c.key for c in master_causes(Evidence(round_, HOME), "turtlebot")] == order
+
+
+def test_on_the_master_a_name_on_the_old_address_outweighs_a_refused_port():
+    r = healthy_laptop()
+    put(r, "ros.master", "fail", reachable=False, topics=[], nodes=[], tcp="refused")
+    put(r, "router.local_ip", "warn", local_ip="192.168.1.77")
+    causes = master_causes(Evidence(r, laptop_settings(role="master")), "sami")
+    assert [c.key for c in causes] == ["address", "roscore", "forwarding", "peer", "firewall"]
