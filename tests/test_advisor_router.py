@@ -113,6 +113,10 @@ def test_table1_double_nat_behind_our_own_router_puts_the_inner_router_first():
     assert "WAN address (192.168.0.2)" in f.actions[1]
     second = [x for x in fs if x.rule.startswith(advisor.T1)][1]
     assert second.rule == f"{advisor.T1}.isp" and "provider" in second.meaning
+    # the evidence, not the tie-break: on a carrier's line (tie: the carrier first) the inner
+    # router still comes first
+    assert first_failure(run(r, laptop_settings(connection="telecom"))).rule == \
+        f"{advisor.T1}.forwarding"
 
 
 def test_table1_private_nat_far_up_the_provider_puts_isp_first():

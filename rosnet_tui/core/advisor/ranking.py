@@ -304,7 +304,7 @@ def address_dates(ev: Evidence, name: str, ip: str) -> tuple[Mapping | None, Map
     return same, other
 
 
-def dated_words(ev: Evidence, name: str, row: Mapping) -> str:
+def dated_words(name: str, row: Mapping) -> str:
     """"203.0.113.2 was confirmed 3 min ago (settings saved)"."""
     by = _DATED_BY.get(str(row.get("by")), str(row.get("by"))).format(name=name)
     return f"{row['ip']} was confirmed {age(row['age_s'])} ago ({by})"
@@ -321,7 +321,7 @@ def _date_address(ev: Evidence, name: str, ip: str, addr: Cause, fwd: Cause) -> 
         addr.up(0, f"nothing here says when {ip} was last confirmed (no sync record of {name}, "
                    "no time for the settings)")
         return
-    said, age_s = dated_words(ev, name, same), float(same["age_s"])
+    said, age_s = dated_words(name, same), float(same["age_s"])
     if age_s < FRESH_S:
         addr.down(30, said)
         fwd.up(30, f"{said}, so the address is most likely right: {name}'s modem is there and "

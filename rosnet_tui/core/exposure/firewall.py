@@ -179,7 +179,7 @@ class Admission:
 def _within(addr: str, entries: list[str]) -> str:
     a = ipaddress.ip_address(addr)
     for e in entries:
-        net = ipaddress.ip_network(e, strict=False)
+        net = ipaddress.ip_interface(e).network       # 10.0.0.1/8 is the network 10.0.0.0/8
         if a.version == net.version and a in net:
             return e
     return ""
@@ -207,17 +207,14 @@ def admitted(adm: Admission, address: str, port: int = SSH_PORT) -> str:
 
 
 def split_families(addresses: list[str]) -> tuple[list[str], list[str]]:
-    v4 = [a for a in addresses if ipaddress.ip_network(a.split(" ")[0], strict=False).version == 4]
+    """(IPv4, IPv6) of addresses, networks and set elements ("address . port")."""
+    v4 = [a for a in addresses if ipaddress.ip_interface(a.partition(" ")[0]).version == 4]
     return v4, [a for a in addresses if a not in v4]
-
-
-def _elements(addrs: list[str]) -> str:
-    return f"elements = {{ {', '.join(addrs)} }}" if addrs else ""
 
 
 def _set(name: str, kind: str, elements: list[str], interval: bool = False) -> list[str]:
     return [f"\tset {name} {{", f"\t\ttype {kind}", *(["\t\tflags interval"] if interval else []),
-            *([f"\t\t{_elements(elements)}"] if elements else []), "\t}"]
+            *([f"\t\telements = {{ {', '.join(elements)} }}"] if elements else []), "\t}"]
 
 
 def render_ruleset(settings: Settings, adm: Admission) -> str:
