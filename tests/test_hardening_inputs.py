@@ -109,7 +109,8 @@ def test_every_json_decode_in_the_product_is_bounded():
     """Siblings: outside core.jsonsafe, json.loads appears only in the stdlib-only peer programs
     (they cannot import it), and there RecursionError is caught with the decode errors."""
     peer_programs = ("rosnet_tui/core/peer/rosproto.py", "rosnet_tui/core/peer/zenohproto.py",
-                     "rosnet_tui/core/peer/agentproto.py")
+                     "rosnet_tui/core/peer/agentproto.py", "rosnet_tui/core/peer/relayproto.py",
+                     "rosnet_tui/core/peer/zenohlink.py")
     allowed = {"rosnet_tui/core/jsonsafe.py", *peer_programs}
     found = []
     for p in sorted((REPO / "rosnet_tui").rglob("*.py")):

@@ -99,3 +99,16 @@ def test_a_burst_never_has_more_than_its_window_on_the_way(ends):
     here.start_burst(1.0, 8 * 1024 * 1024, 0.3)
     here.pump(time.monotonic() + 1.2)
     assert here.burst["seq"] * CHUNK <= 8 * CHUNK, here.burst    # a window or a few, not 8 MB
+
+
+@pytest.mark.parametrize("stats", ["[" * 100_000 + "]" * 100_000, "[1, 2]", '{"n": "3"}',
+                                   '{"n": true}', '{"n": {"deep": 1}}'])
+def test_the_other_ends_stats_are_a_flat_object_of_numbers_or_nothing(stats):
+    """The other end's "r" answer comes from another machine: too deep, not an object, or not
+    numbers is no stats (never a RecursionError out of the peer program, nor a crash in the
+    rate)."""
+    here = LinkEnd(rx=None, tx=None)    # "r" is only read: nothing is sent
+    here.handle(zenohproto.encode_string("r " + stats), time.monotonic())
+    assert here.stats is None and rate_bps(here.stats) is None
+    here.handle(zenohproto.encode_string('r {"n": 3, "span": 0.5, "bytes": 1000}'), 0.0)
+    assert here.stats == {"n": 3, "span": 0.5, "bytes": 1000} and rate_bps(here.stats) == 16000.0

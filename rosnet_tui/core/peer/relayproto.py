@@ -136,8 +136,8 @@ def main(argv: list[str]) -> int:
         else:
             print("usage: look [PATH...] | write JSON", file=sys.stderr)
             return 2
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        out = {"error": str(exc)}
+    except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
+        out = {"error": str(exc) or type(exc).__name__}
     print(REPORT_MARK + json.dumps(out), flush=True)
     return 1 if "error" in out else 0
 

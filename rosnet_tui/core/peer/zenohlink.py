@@ -154,13 +154,16 @@ class LinkEnd:
                 self.start_burst(float(f[0]), int(f[1]), float(f[2]))
             elif kind == "f":
                 self.put("r " + json.dumps(self.received()))
-            elif kind == "r":
-                self.stats = json.loads(rest)
+            elif kind == "r":      # the other end's stats: a flat object of numbers, or none
+                got = json.loads(rest)
+                self.stats = got if isinstance(got, dict) and all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool)
+                    for v in got.values()) else None
             elif kind == "z":
                 self.their_burst_over = True
             elif kind == "e":
                 self.stop = True
-        except (IndexError, ValueError):   # not ours, or cut: ignored
+        except (IndexError, ValueError, RecursionError):   # not ours, cut, too deep: ignored
             pass
 
     def received(self) -> dict[str, Any]:
