@@ -506,3 +506,24 @@ def test_the_renewer_never_runs_twice_at_once(tmp_path, monkeypatch):
     while r.next_at == float("inf") and time.monotonic() < deadline:
         time.sleep(0.01)
     assert len(log.lines) == 1 and r.next_at < float("inf")
+
+
+def test_keys_are_the_owners_alone_and_certificates_readable_and_nothing_is_made_twice(tmp_path):
+    """Files fleet_tls writes have exact modes (a private key 0600, a certificate 0644: no other
+    bit, execute included), and it says what it made: a second call makes nothing."""
+    def mode(p):
+        return stat.S_IMODE(p.stat().st_mode)
+
+    ca = fleet_tls.make_test_ca(tmp_path / "ca")
+    assert (mode(ca.ca_key), mode(ca.ca_crt)) == (0o600, 0o644)
+    into = fleet_tls.tls_paths(tmp_path / "node")
+    fleet_tls.issue_test_cert(ca, into, "sami")
+    assert (mode(into.node_key), mode(into.node_crt), mode(into.ca_crt)) == (0o600, 0o644, 0o644)
+    m = fleet_tls.tls_paths(tmp_path / "master")
+    assert fleet_tls.ensure_node_key(m) is True and fleet_tls.ensure_node_key(m) is False
+    fleet_tls.make_test_ca(tmp_path / "master")             # the master's CA in its own folder
+    assert fleet_tls.ensure_master_cert(m, "turtlebot", "203.0.113.5") is True
+    assert mode(m.node_crt) == 0o644 and mode(m.node_key) == 0o600
+    assert fleet_tls.ensure_master_cert(m, "turtlebot", "203.0.113.5") is False   # still current
+    assert fleet_tls.ensure_master_cert(m, "turtlebot") is False     # its name is still on it
+    assert fleet_tls.ensure_master_cert(m, "robot") is True          # another name: made anew
