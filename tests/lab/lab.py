@@ -666,6 +666,16 @@ class Lab:
                 return False
         return self.call_in(self.master, ask, timeout=timeout + 5)
 
+    def roscore_said(self) -> str:
+        """What a failed ROS 1 check needs to be read: is the lab's roscore running, does the
+        master answer, and the end of its log."""
+        p = self._roscore
+        state = ("not started" if p is None else
+                 f"running (pid {p.pid})" if p.poll() is None else f"exited ({p.returncode})")
+        log = self.log_path("roscore")
+        tail = log.read_text(errors="replace")[-1500:] if log.exists() else ""
+        return f"roscore: {state}; master answers: {self.master_answers()}\n{tail}"
+
     def stop_roscore(self) -> None:
         if self._roscore is not None:
             self.kill(self._roscore, grace=2.0)
