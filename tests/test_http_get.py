@@ -137,13 +137,18 @@ def test_help_does_not_import_requests(argv):
     assert not loads_requests(argv)
 
 
-def test_a_get_imports_requests(server):
-    """The same helper sees the import once a GET is made (so the test above can fail)."""
+def test_a_get_imports_requests_without_a_character_detector(server):
+    """The same helper sees the import once a GET is made (so the test above can fail); the
+    character detector requests would load (a third of its import, on the path of every round
+    of checks) is not, and nothing is said about it."""
     s = server(response("200 OK", b"203.0.113.9"))
     code = ("import asyncio, sys\nfrom rosnet_tui.core.net.http import http_get\n"
-            f"print(asyncio.run(http_get({s.url()!r}, 2.0)).ok, 'requests' in sys.modules)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
-    assert out.stdout.split() == ["True", "True"], out.stderr
+            f"print(asyncio.run(http_get({s.url()!r}, 2.0)).ok, 'requests' in sys.modules,\n"
+            "      any(m in sys.modules for m in ('chardet', 'charset_normalizer')))\n")
+    out = subprocess.run([sys.executable, "-W", "default", "-c", code], capture_output=True,
+                         text=True, timeout=60)
+    assert out.stdout.split() == ["True", "True", "False"], out.stderr
+    assert out.stderr == ""
 
 
 def test_the_wizards_first_frame_does_not_import_requests(tmp_path: Path):
@@ -169,3 +174,18 @@ def test_the_wizards_first_frame_does_not_import_requests(tmp_path: Path):
     loaded = mods.read_text().split()
     assert "rosnet_tui.ui.app" in loaded  # the wizard did run
     assert "requests" not in loaded
+
+
+def test_the_round_s_first_gets_at_once_all_get_their_answer(server):
+    """A round starts several GETs at once (isp.*, security.*) in a new process: each waits for
+    the one import of requests another thread has begun, none uses it half made."""
+    s = server(response("200 OK", b"203.0.113.9"))
+    code = ("import asyncio\nfrom rosnet_tui.core.net.http import http_get\n"
+            "async def main():\n"
+            f"    got = await asyncio.gather(*(http_get({s.url()!r}, 5.0) for _ in range(6)))\n"
+            "    print([a.error for a in got if not a.ok])\n"
+            "asyncio.run(main())\n")
+    for _ in range(3):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             timeout=60)
+        assert out.stdout.strip() == "[]", out.stdout + out.stderr

@@ -124,7 +124,7 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/core/ros/fleet_tls.py", "cryptography.x509.oid"): "start-up cost: cryptography kept off the start-up path",
     ("rosnet_tui/core/net/http.py", "ssl"): "start-up cost: stdlib module loaded when used",
     ("rosnet_tui/core/net/http.py", "email.message"): "start-up cost: stdlib module loaded when used",
-    ("rosnet_tui/core/net/http.py", "requests"): "start-up cost: requests kept off the start-up path",
+    ("rosnet_tui/core/net/http.py", "requests"): "start-up cost: requests kept off the start-up path (without a character detector: core/net/lazy_import.py)",
     ("rosnet_tui/core/net/netinfo.py", "psutil"): "start-up cost: psutil kept off the start-up path",
     ("rosnet_tui/core/exposure/outsider.py", "cryptography"): "start-up cost: cryptography kept off the start-up path",
     ("rosnet_tui/core/exposure/outsider.py", "cryptography.hazmat.primitives"): "start-up cost: cryptography kept off the start-up path",
@@ -141,10 +141,9 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/core/peer/rosproto.py", "base64"): "start-up cost: a program fed to peers over SSH loads only what its run needs",
     ("rosnet_tui/core/peer/rosproto.py", "xml.parsers"): "start-up cost: a program fed to peers over SSH loads only what its run needs",
     ("rosnet_tui/core/saved/settings.py", "tomlkit"): "start-up cost: tomlkit kept off the start-up path",
-    ("rosnet_tui/core/ssh/connection.py", "paramiko"): "start-up cost: paramiko kept off the start-up path",
+    ("rosnet_tui/core/ssh/connection.py", "paramiko"): "start-up cost: paramiko kept off the start-up path (without invoke: core/net/lazy_import.py)",
     ("rosnet_tui/core/ssh/origin.py", "psutil"): "start-up cost: psutil kept off the start-up path",
     ("rosnet_tui/core/ssh/session.py", "paramiko"): "start-up cost: paramiko kept off the start-up path",
-    ("rosnet_tui/core/ssh/tunnel_probe.py", "paramiko"): "start-up cost: paramiko kept off the start-up path",
     ("rosnet_tui/core/files/undo_journal.py", "shutil"): "start-up cost: stdlib module loaded when used",
     ("rosnet_tui/core/peer/zenohproto.py", "zenoh"): "start-up cost: zenoh kept off the start-up path",
     ("rosnet_tui/core/peer/tunnelproto.py", "paramiko"): "start-up cost: paramiko kept off the peer agent's start (it loads this every ROS 2 round)",
@@ -213,6 +212,10 @@ def _function_level_imports() -> set[tuple[str, str]]:
                     found.add((rel, "." * child.level + (child.module or "")))
                 elif in_function and isinstance(child, ast.Import):
                     found.update((rel, a.name) for a in child.names)
+                elif (in_function and isinstance(child, ast.Call)   # core/net/lazy_import.py
+                      and getattr(child.func, "id", None) == "import_without" and child.args
+                      and isinstance(child.args[0], ast.Constant)):
+                    found.add((rel, str(child.args[0].value)))
                 walk(child, inner)
 
         walk(ast.parse(path.read_text(encoding="utf-8")), False)

@@ -16,11 +16,13 @@ import socket
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING, TypeVar
 
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.connect import tcp_failure_kind
+from rosnet_tui.core.net.lazy_import import import_without
 from rosnet_tui.core.ssh.known_hosts import host_key_name, known_host_keys, verify_commands
 from rosnet_tui.core.ssh.options import RelayRoute, SshOptions, known_hosts_files, ssh_dir
 
@@ -37,6 +39,14 @@ login or forwarding); the peer's own "network" through the relay: its tunnel is 
 KEY_FILES = ("id_ed25519", "id_ecdsa", "id_rsa")
 
 T = TypeVar("T")
+
+
+def load_paramiko() -> ModuleType:
+    """paramiko, imported on first use without invoke, which paramiko.config imports only to run
+    the commands of ssh_config's ``Match exec``: :func:`load_keys` never gets there (paramiko's
+    ``get_hostnames`` fails on a config with any Match block). Every import of paramiko in the
+    product comes through here first."""
+    return import_without("paramiko", "invoke")
 
 
 @dataclass
@@ -110,9 +120,9 @@ def failed(failure: str, detail: str, *, fingerprint: str | None = None,
                            tcp))
 
 
-def _load_keys(opts: SshOptions | None) -> tuple[list[paramiko.PKey], list[str]]:
+def load_keys(opts: SshOptions | None) -> tuple[list[paramiko.PKey], list[str]]:
     """Private keys to offer: the agent's, then ~/.ssh/id_* and IdentityFile from ~/.ssh/config."""
-    import paramiko
+    paramiko = load_paramiko()
 
     keys: list[paramiko.PKey] = []
     notes: list[str] = []
@@ -190,7 +200,7 @@ def _login(opts: SshOptions | None, sock: object, name: str, port: int, user: st
     """SSH over *sock* (a socket, or a channel through the relay): the server's key checked
     against known_hosts under *name*:*port* (whatever *sock* leads to, as OpenSSH's
     HostKeyAlias), then a key login as *user*. *where* names the server in messages."""
-    import paramiko
+    paramiko = load_paramiko()
 
     def left() -> float:
         return max(deadline - time.monotonic(), 0.05)
@@ -259,7 +269,7 @@ def _login(opts: SshOptions | None, sock: object, name: str, port: int, user: st
                      f"{host_key_name(name, port)} and verify the new one: "
                      + verify_commands(name, port, ktype, user) + said,
                      fingerprint=fp, host_key=key_text, address=addr)
-    keys, notes = _load_keys(opts)
+    keys, notes = load_keys(opts)
     if not keys:
         t.close()
         return failed("auth", f"no SSH key to log in to {name} with: create one (ssh-keygen -t "
@@ -319,7 +329,7 @@ def _jump(opts: SshOptions | None, route: RelayRoute, tunnel: int, peer: Peer, d
     """*peer* through the relay: log in to the relay (its host key checked as any other), open
     a ``direct-tcpip`` channel to the relay's 127.0.0.1:*tunnel*, where *peer*'s reverse tunnel
     ends, and speak SSH to *peer* over it (its key checked under its own name)."""
-    import paramiko
+    paramiko = load_paramiko()
 
     name, port, user = peer.name, int(peer.ssh_port or 22), peer.ssh_user
     via = f"the relay {route.host}"

@@ -22,6 +22,7 @@ from rosnet_tui.core.ssh.connection import (
     Holder,
     JumpSock,
     connect_blocking,
+    load_paramiko,
 )
 from rosnet_tui.core.ssh.known_hosts import key_fingerprint
 from rosnet_tui.core.ssh.options import RelayRoute, SshOptions
@@ -52,7 +53,7 @@ def own_host_keys(folder: Path = SSHD_DIR) -> set[bytes]:
 
 def _probe(opts: SshOptions | None, route: RelayRoute, port: int, own: set[bytes],
            deadline: float, holder: Holder) -> TunnelState:
-    import paramiko
+    paramiko = load_paramiko()
 
     relay = Peer(name=route.host, ssh_user=route.user, ssh_port=route.port)
     conn = connect_blocking(opts, relay, deadline, holder)

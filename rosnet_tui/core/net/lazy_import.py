@@ -1,0 +1,41 @@
+"""Importing a library without the optional parts of it this program never uses.
+
+paramiko imports invoke (for ssh_config's ``Match exec``) and requests a character detector
+(chardet or charset_normalizer, to guess a body's encoding): each as long to import as a good
+part of the library itself, on the path of every round of checks, where the process is bound by
+its CPU. :func:`import_without` imports a library with such modules held off: its own
+``import`` of them fails as if they were not installed, which both libraries allow.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import threading
+import warnings
+from types import ModuleType
+
+_LOCK = threading.Lock()
+
+
+def import_without(name: str, *held: str, quiet: str | None = None) -> ModuleType:
+    """Module *name*, imported (the first time) with the modules *held* off: ``import`` of one of
+    them inside it raises ImportError. Held modules already imported are left alone; afterwards
+    any of them can be imported again as usual. *quiet*: a warning the import may give about
+    a held module (a regular expression of its text), not shown. A module another thread is
+    still importing is waited for, as ``import`` waits."""
+    with _LOCK:
+        if name in sys.modules:
+            return importlib.import_module(name)
+        mine = [h for h in held if h not in sys.modules]
+        for h in mine:
+            sys.modules[h] = None  # type: ignore[assignment]  # the import system's "not here"
+        try:
+            with warnings.catch_warnings():
+                if quiet is not None:
+                    warnings.filterwarnings("ignore", message=quiet)
+                return importlib.import_module(name)
+        finally:
+            for h in mine:
+                if h in sys.modules and sys.modules[h] is None:
+                    del sys.modules[h]

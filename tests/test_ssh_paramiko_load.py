@@ -1,0 +1,33 @@
+"""paramiko is loaded without invoke (paramiko.config's runner of ssh_config's ``Match exec``,
+as long to import as the rest of paramiko, on the path of every round of checks)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _keygen(path: Path) -> None:
+    subprocess.run(["ssh-keygen", "-q", "-t", "ed25519", "-N", "", "-C", path.name, "-f",
+                    str(path)], check=True, capture_output=True, timeout=30)
+
+
+def _load_keys_in_a_new_process(ssh_dir: Path) -> list[str]:
+    code = ("import sys\n"
+            "from rosnet_tui.core.ssh.connection import load_keys\n"
+            "from rosnet_tui.core.ssh.options import SshOptions\n"
+            f"keys, notes = load_keys(SshOptions(ssh_dir={str(ssh_dir)!r}, ssh_agent=False))\n"
+            "print(len(keys), 'invoke' in sys.modules, sorted(notes))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    return out.stdout.strip().split(maxsplit=2)
+
+
+def test_keys_are_read_without_importing_invoke(tmp_path):
+    _keygen(tmp_path / "id_ed25519")
+    (tmp_path / "config").write_text("Host robot\n    User root\n")
+    assert _load_keys_in_a_new_process(tmp_path) == ["1", "False", "[]"]
