@@ -73,3 +73,20 @@ def test_nothing_listening_is_told_as_refused(sshd_of):
 
     rep, _ = audit(free_port(), getpass.getuser(), "root")
     assert rep["tcp"] == "refused" and not rep["users"], rep
+
+
+def test_the_audit_s_messages_go_out_without_waiting_for_acks(sshd_of):
+    """NEWKEYS and the service request go out back to back: with Nagle's algorithm on, the
+    second waited for sshd's delayed ACK (40 ms on Linux, the audit's handshake doubled)."""
+    import socket
+
+    from rosnet_tui.core.peer import sshnone
+
+    d = sshd_of("nodelay")
+    sock = socket.create_connection(("127.0.0.1", d.port), timeout=5)
+    try:
+        methods, banner = sshnone.none_methods(sock, getpass.getuser())
+        assert methods == ["publickey"] and banner.startswith("SSH-2.0-OpenSSH")
+        assert sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
+    finally:
+        sock.close()

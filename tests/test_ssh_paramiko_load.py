@@ -31,3 +31,21 @@ def test_keys_are_read_without_importing_invoke(tmp_path):
     _keygen(tmp_path / "id_ed25519")
     (tmp_path / "config").write_text("Host robot\n    User root\n")
     assert _load_keys_in_a_new_process(tmp_path) == ["1", "False", "[]"]
+
+
+def test_the_connection_to_a_peer_sends_without_waiting_for_acks(ssh_client):
+    """A round's checks send their runs to the peer's agent on one connection, one right after
+    another: with Nagle's algorithm on, each waited for the ACK of the one before (sshd delays
+    its ACKs up to 40 ms)."""
+    import socket
+    import time
+
+    from rosnet_tui.core.ssh.connection import Holder, connect_blocking
+
+    conn = connect_blocking(ssh_client.opts(), ssh_client.peer(), time.monotonic() + 10, Holder())
+    assert conn.transport is not None, conn.result.detail
+    try:
+        sock = conn.transport.sock
+        assert sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
+    finally:
+        conn.transport.close()

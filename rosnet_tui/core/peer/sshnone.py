@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import socket
 import struct
 
 
@@ -167,6 +168,10 @@ def none_methods(sock, user, version=b"SSH-2.0-rosnet_tui_audit"):
         X25519PublicKey,
     )
 
+    try:  # NEWKEYS and the next message go out back to back: with Nagle's algorithm the second
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # waited for the server's
+    except OSError:                                     # delayed ACK (40 ms on Linux)
+        pass
     c = Conn(sock)
     sock.sendall(version + b"\r\n")
     v_s = c.line()

@@ -188,7 +188,9 @@ def _tcp(name: str, port: int, deadline: float, holder: Holder,
                errno.ENETUNREACH: "the network is unreachable"}.get(exc.errno or 0, str(exc))
         return None, addr, failed("network", f"cannot reach {name} ({addr}) on TCP {port}: {why}",
                                   address=addr, tcp=tcp_failure_kind(exc))
-    holder.sock = sock
+    with contextlib.suppress(OSError):  # our messages (a check's run on the peer's agent, the
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # next check's) go out at
+    holder.sock = sock                  # once, not after the ACK of the one before (Nagle)
     if holder.cancelled:
         sock.close()
         return None, addr, failed("timeout", "cancelled", address=addr)
