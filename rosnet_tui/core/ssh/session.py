@@ -42,6 +42,21 @@ the last output (a process the command left behind may also hold the output open
 
 
 # --------------------------------------------------------------------------- sessions
+class _Wake:
+    """Set by paramiko's thread when output (or the channel's end) arrives: wakes the session's
+    reader in its event loop at once, instead of at its next poll."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, event: asyncio.Event) -> None:
+        self.loop, self.event = loop, event
+
+    def set(self) -> None:
+        with contextlib.suppress(RuntimeError):   # the loop is closed: nobody waits any more
+            self.loop.call_soon_threadsafe(self.event.set)
+
+    def clear(self) -> None:
+        pass
+
+
 class SshSession:
     """A remote command that keeps running while we work; see :func:`ssh_session`.
 
@@ -60,6 +75,7 @@ class SshSession:
         self._out = bytearray()
         self._err = bytearray()
         self._exited_at: float | None = None   # when the exit status arrived
+        self._arrived: asyncio.Event | None = None  # output or the end came (see _nap)
 
     @property
     def ok(self) -> bool:
@@ -79,6 +95,22 @@ class SshSession:
         chan.setblocking(False)
         chan.exec_command(command)
         self._chan = chan
+
+    async def _nap(self) -> None:
+        """Wait until output or the channel's end arrives, at most one poll interval (the exit
+        status alone wakes nobody: it is seen at the next poll)."""
+        chan = self._chan
+        if self._arrived is None and chan is not None:
+            self._arrived = asyncio.Event()
+            wake = _Wake(asyncio.get_running_loop(), self._arrived)
+            chan.in_buffer.set_event(wake)
+            chan.in_stderr_buffer.set_event(wake)
+        if self._arrived is None:
+            await asyncio.sleep(_POLL_S)
+            return
+        with contextlib.suppress(asyncio.TimeoutError):
+            await asyncio.wait_for(self._arrived.wait(), _POLL_S)
+        self._arrived.clear()
 
     def _pump(self) -> bool:
         """Move whatever arrived into the buffers; True when the channel is finished."""
@@ -144,7 +176,7 @@ class SshSession:
                 return self.stdout
             if done or time.monotonic() > deadline:
                 return None
-            await asyncio.sleep(_POLL_S)
+            await self._nap()
 
     async def wait(self, timeout: float | None = None) -> SshResult:
         """Wait for the command to end; its result (failure "timeout" if it did not end)."""
@@ -157,7 +189,7 @@ class SshSession:
                                  f"the command on {self.peer.name} did not finish in time",
                                  self.result.fingerprint, self.result.host_key, self.result.address,
                                  self.result.tcp)
-            await asyncio.sleep(_POLL_S)
+            await self._nap()
         # paramiko keeps -1 until an exit-status arrives (real ones are unsigned): a command a
         # signal ended, or a channel the broken connection closed, has none.
         status = self._chan.exit_status if self._chan.exit_status >= 0 else None
