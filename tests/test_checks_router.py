@@ -22,7 +22,7 @@ from rosnet_tui.core.checks import (
     run_check,
     run_checks,
 )
-from rosnet_tui.core.checks.router import port_probe_command
+from rosnet_tui.core.checks.router import PROBE_SCRIPT, port_probe_argv
 from rosnet_tui.core.config.paths import Paths
 from rosnet_tui.core.config.settings_model import (
     ProbeSettings,
@@ -32,6 +32,7 @@ from rosnet_tui.core.config.settings_model import (
 )
 from rosnet_tui.core.net.listener import GREETING, ListenerPool
 from rosnet_tui.core.net.netinfo import detect_local_net
+from rosnet_tui.core.peer.commands import python_command
 from rosnet_tui.core.results import Status
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
@@ -314,7 +315,7 @@ def dropping_port():
 
 
 def run_probe(ports: dict, t: float = 3.0) -> tuple[dict, float]:
-    cmd = port_probe_command("127.0.0.1", t, ports)
+    cmd = python_command(PROBE_SCRIPT, *port_probe_argv("127.0.0.1", t, ports))
     t0 = time.monotonic()
     r = subprocess.run(["sh", "-c", cmd], capture_output=True, text=True, timeout=t + 5)
     took = time.monotonic() - t0

@@ -298,6 +298,30 @@ async def test_a_rounds_runs_on_a_peer_share_one_agent_and_end_with_the_round(ss
     assert await asyncio.to_thread(gone_within, agent_pid, 3.0)
 
 
+async def test_a_program_its_kind_does_not_load_is_loaded_by_its_first_run(ssh_client):
+    """security.outsider's TLS probe (made per process: its foreign certificate inside) runs on
+    the member's agent of the round, not on an interpreter of its own: loaded once, with the
+    first run; a changed source is loaded again."""
+    opts = ssh_client.opts(timeout_s=3.0, pool=SshPool())
+    agents, peer = PeerAgents(), ssh_client.peer()
+    src = b"import os, sys\nprint('hello', os.getppid(), *sys.argv[1:])\n"
+    try:
+        got = await asyncio.gather(*(agent_run(agents, opts, peer, KIND, "extra", [w],
+                                               timeout=20, source=src) for w in "ab"))
+        assert [r.stdout.split()[::2] for r in got] == [["hello", "a"], ["hello", "b"]], got
+        assert len({r.stdout.split()[1] for r in got}) == 1 and len(agents.agents) == 1
+        (agent,) = agents.agents.values()
+        assert agent.loaded == {"extra": src}
+        plain = await agent_run(agents, opts, peer, KIND, "p", ["0"], timeout=20)
+        assert plain.exit_status == 7          # the kind's own programs are still there
+        new = await agent_run(agents, opts, peer, KIND, "extra", [], timeout=20,
+                              source=b"print('changed')\n")
+        assert new.ok and new.stdout == "changed\n", new
+    finally:
+        agents.close()
+        opts.pool.close()
+
+
 async def test_each_run_keeps_its_own_timeout(ssh_client):
     opts = ssh_client.opts(timeout_s=3.0, pool=SshPool())
     agents, peer = PeerAgents(), ssh_client.peer()

@@ -274,8 +274,10 @@ async def check_router(ctx: CheckContext) -> Outcome:
                             "address": None, "failure": None, "ipv6": ipv6, "remote_peers": [],
                             "security": str(s.ros.security)}
     tls_paths = fleet_tls.tls_paths(default_config_dir())
-    if ros2.mtls(s):
-        data["tls"] = tls_handshake.local_state(s, tls_paths)
+    if ros2.mtls(s):   # in a thread: reading the certificates (cryptography's first import in
+        # the round) would hold up every check the round has yet to start
+        data["tls"] = await run_blocking(tls_handshake.local_state, s, tls_paths,
+                                         timeout=max(t, 1.0))
     if not name:
         return Outcome(Status.SKIP, "skipped: no master is named in the settings (ros.master)",
                        [], data)

@@ -18,6 +18,7 @@ from typing import Any, Literal
 import psutil
 
 from rosnet_tui.core.checks import CheckContext, check
+from rosnet_tui.core.checks.probes.agents import chat_agent, peer_run
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import ssh_peers
 from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, round_public_ip
@@ -35,10 +36,8 @@ from rosnet_tui.core.net.netinfo import (
     interface_ipv4,
     link_state,
 )
-from rosnet_tui.core.peer.commands import python_command
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.saved.state import record_local_ip
-from rosnet_tui.core.ssh.session import ssh_run
 
 
 # --------------------------------------------------------------------------- router.local_ip
@@ -216,7 +215,7 @@ async def check_listener(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- router.port_open
-_PROBE_SCRIPT = r"""
+PROBE_SCRIPT = r"""
 import json, socket, sys, threading
 ip = sys.argv[1]; t = float(sys.argv[2]); ports = []; how = {}
 optional = set()
@@ -292,12 +291,11 @@ print("RESULT " + json.dumps(res))
 PortTalk = Literal["line", "xmlrpc", "accept", "line?", "xmlrpc?", "accept?"]
 
 
-def port_probe_command(ip: str, t_connect: float, ports: dict[int, PortTalk]) -> str:
-    """The shell command a peer runs to test *ports* (how to talk to each) at *ip*, and ping
-    it: it prints ``PING true|false|null`` and ``RESULT {port: [state, first line read]}``
+def port_probe_argv(ip: str, t_connect: float, ports: dict[int, PortTalk]) -> list[str]:
+    """The arguments of PROBE_SCRIPT, run by a peer to test *ports* (how to talk to each) at *ip*,
+    and ping it: it prints ``PING true|false|null`` and ``RESULT {port: [state, first line read]}``
     (state: open, timeout, error, or pending for an optional port not waited for longer)."""
-    spec = ",".join(f"{p}={how}" for p, how in ports.items())
-    return python_command(_PROBE_SCRIPT, ip, f"{t_connect:.2f}", spec)
+    return [ip, f"{t_connect:.2f}", ",".join(f"{p}={h}" for p, h in ports.items())]
 
 
 def _talk(port: int, lst: PortListener | None, ros_port: int) -> PortTalk:
@@ -329,9 +327,10 @@ async def _probe_from_peer(ctx: CheckContext, peer: Peer, public_ip: str,
     """
     t_connect, total = min(max(left() * 0.35, 0.5), 3.0), left() * 0.9
     patience = max(ctx.timeout_s * 0.6, 0.3)
-    cmd = port_probe_command(public_ip, t_connect, ports)
-    res = await ssh_run(ctx.ssh, peer, cmd, timeout=total, connect_timeout=min(patience, total),
-                        tcp_timeout=patience)
+    res = await peer_run(ctx, peer, chat_agent(ctx), "port_probe",     # the round's agent there
+                         port_probe_argv(public_ip, t_connect, ports), timeout=total,
+                         tcp_timeout=patience, connect_timeout=min(patience, total),
+                         source=PROBE_SCRIPT.encode())
     if not res.ok:
         return None, None, f"SSH to {peer.name} failed ({res.failure}): {res.detail}"
     ping = next((_PING_WORDS[ln[5:].strip()] for ln in res.stdout.splitlines()

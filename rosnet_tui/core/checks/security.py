@@ -28,13 +28,19 @@ from typing import Any
 
 import rosnet_tui
 from rosnet_tui.core.checks import CheckContext, check
-from rosnet_tui.core.checks.probes.agents import peer_program_problem, stderr_tail
+from rosnet_tui.core.checks.probes.agents import (
+    ZENOH_AGENT,
+    peer_program_problem,
+    peer_run,
+    stderr_tail,
+)
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import each_peer, ssh_peers
 from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip
 from rosnet_tui.core.config.settings_model import Peer, Settings
 from rosnet_tui.core.exposure import outsider
 from rosnet_tui.core.jsonsafe import loads_bounded
+from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.connect import close_writer
 from rosnet_tui.core.net.http import http_get
 from rosnet_tui.core.peer.commands import installed_python_command, python_command
@@ -263,7 +269,8 @@ async def _outsider_ros2(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
     t = budget(ctx, "security.outsider")
     data["target"] = f"{master}:{port}"
     args = [master, str(port), f"{min(2.0, t * 0.2):.1f}"]
-    program = outsider.tls_probe_program()
+    # in a thread: the foreign certificate is made here (cryptography's keys and signatures)
+    program = await run_blocking(outsider.tls_probe_program, timeout=max(t * 0.5, 1.0))
     if s.is_master and not s.relayed:   # under a relay, the relay is outside every component
         members = [p for p in ssh_peers(s) if p.name != master]
         if not members:
@@ -271,9 +278,10 @@ async def _outsider_ros2(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
                                         "the master cannot be tested from outside it", [], data)
         peer = members[0]
         data["from"] = peer.name
-        res = await ssh_run(ctx.ssh, peer, installed_python_command(
-            *args, mark=outsider.TLS_MARK, fallback=True), stdin=program, timeout=t * 0.9,
-            connect_timeout=t * 0.4, tcp_timeout=ctx.timeout_s)
+        # on the member's agent of the round (its rosnet-tui's interpreter, or python3 without
+        # one: the probe needs only the standard library), not an interpreter of its own
+        res = await peer_run(ctx, peer, ZENOH_AGENT, "outsider_tls", args, timeout=t * 0.9,
+                             connect_timeout=t * 0.4, tcp_timeout=ctx.timeout_s, source=program)
         rep = outsider.parse_marked(res.stdout, outsider.TLS_MARK)
         problem = None if rep is not None else (peer_program_problem(res, peer) or
                                                 f"no report ({stderr_tail(res) or res.detail})")

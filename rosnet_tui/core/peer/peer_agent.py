@@ -169,6 +169,7 @@ class PeerAgent:
         self.reader: asyncio.Task | None = None
         self.send_lock = asyncio.Lock()
         self.closed = False
+        self.loaded: dict[str, bytes] = {}     # programs loaded after the start (call's source)
 
     def start(self, opts: SshOptions | None, timeout: float, tcp_timeout: float | None,
               max_s: float) -> asyncio.Task:
@@ -247,14 +248,18 @@ class PeerAgent:
                 call.end()
             self.calls.clear()
 
-    async def send(self, msg: dict[str, Any]) -> bool:
+    async def send(self, *msgs: dict[str, Any]) -> bool:
+        """Send *msgs* in this order, none of another sender's in between."""
         if self.session is None or self.closed:
             return False
         async with self.send_lock:
-            return await self.session.write(json.dumps(msg) + "\n")
+            return await self.session.write("".join(json.dumps(m) + "\n" for m in msgs))
 
     async def call(self, program: str, argv: Sequence[str], timeout: float,
-                   needs_install: bool = False) -> AgentCall:
+                   needs_install: bool = False, source: bytes | None = None) -> AgentCall:
+        """Start a run of *program*; with *source*, a program the agent's kind does not load
+        at its start (run as ``__main__``): loaded first, once per agent (and again if its
+        source changed)."""
         assert self.session is not None
         rid = next(self.ids)
         call = AgentCall(self.peer, self.session.result, timeout, self, rid)
@@ -268,7 +273,11 @@ class PeerAgent:
         msg: dict[str, Any] = {"run": program, "id": rid, "argv": list(argv)}
         if needs_install and self.kind.no_install is not None:
             msg["ni"] = list(self.kind.no_install)
-        if not await self.send(msg):
+        msgs = [msg]
+        if source is not None and self.loaded.get(program) != source:
+            self.loaded[program] = source
+            msgs.insert(0, {"load": program, "src": source.decode(), "entry": None})
+        if not await self.send(*msgs):
             self.calls.pop(rid, None)
             call.end()
         return call
@@ -320,13 +329,14 @@ def _failed(peer: Peer, result: SshResult, timeout: float) -> AgentCall:
 async def agent_call(agents: PeerAgents, opts: SshOptions | None, peer: Peer, kind: AgentKind,
                      program: str, argv: Sequence[str], *, timeout: float,
                      tcp_timeout: float | None = None, max_s: float = 120.0,
-                     needs_install: bool = False, start_timeout: float | None = None
-                     ) -> AgentCall:
+                     needs_install: bool = False, start_timeout: float | None = None,
+                     source: bytes | None = None) -> AgentCall:
     """Start *program* with *argv* on *peer*'s agent of *kind*; never raises. *timeout* bounds
     reaching the peer (and is the default for reads and waits), *tcp_timeout* its TCP part, as
     for an SSH session; *max_s* bounds the agent's life if this call starts it; *needs_install*:
     the run needs the peer's rosnet-tui (see AgentKind.no_install); *start_timeout* bounds the
-    wait for the agent to be ready (default: twice the longer of *timeout* and the round's)."""
+    wait for the agent to be ready (default: twice the longer of *timeout* and the round's);
+    *source*: a program *kind* does not load at the start (see :meth:`PeerAgent.call`)."""
     pool = getattr(opts, "pool", None)
     if pool is not None:       # the peer's connection first: its failures, within our bounds
         conn, _shared = await pool.connect(opts, peer, timeout, tcp_timeout)
@@ -351,19 +361,19 @@ async def agent_call(agents: PeerAgents, opts: SshOptions | None, peer: Peer, ki
         raise
     if started.failure is not None:
         return _failed(peer, started, timeout)
-    return await agent.call(program, argv, timeout, needs_install)
+    return await agent.call(program, argv, timeout, needs_install, source)
 
 
 @contextlib.asynccontextmanager
 async def agent_session(agents: PeerAgents, opts: SshOptions | None, peer: Peer,
                         kind: AgentKind, program: str, argv: Sequence[str], *, timeout: float,
                         tcp_timeout: float | None = None, max_s: float = 120.0,
-                        needs_install: bool = False, start_timeout: float | None = None
-                        ) -> AsyncIterator[AgentCall]:
+                        needs_install: bool = False, start_timeout: float | None = None,
+                        source: bytes | None = None) -> AsyncIterator[AgentCall]:
     """:func:`agent_call` for an ``async with`` block; the run is stopped on leaving it."""
     call = await agent_call(agents, opts, peer, kind, program, argv, timeout=timeout,
                             tcp_timeout=tcp_timeout, max_s=max_s, needs_install=needs_install,
-                            start_timeout=start_timeout)
+                            start_timeout=start_timeout, source=source)
     try:
         yield call
     finally:
@@ -373,15 +383,17 @@ async def agent_session(agents: PeerAgents, opts: SshOptions | None, peer: Peer,
 async def agent_run(agents: PeerAgents, opts: SshOptions | None, peer: Peer, kind: AgentKind,
                     program: str, argv: Sequence[str], *, timeout: float,
                     connect_timeout: float | None = None, tcp_timeout: float | None = None,
-                    max_s: float = 120.0, needs_install: bool = False) -> SshResult:
+                    max_s: float = 120.0, needs_install: bool = False,
+                    source: bytes | None = None) -> SshResult:
     """Run *program* on *peer*'s agent within *timeout* overall, as ``ssh_run`` runs a command
-    (*connect_timeout*: reaching the peer; *tcp_timeout*: its TCP part)."""
+    (*connect_timeout*: reaching the peer; *tcp_timeout*: its TCP part; *source*: see
+    :meth:`PeerAgent.call`)."""
     loop = asyncio.get_running_loop()
     deadline = loop.time() + timeout
     ct = min(float(connect_timeout), timeout) if connect_timeout is not None else timeout
     async with agent_session(agents, opts, peer, kind, program, argv, timeout=ct,
                              tcp_timeout=tcp_timeout, max_s=max_s, needs_install=needs_install,
-                             start_timeout=deadline - loop.time()) as call:
+                             start_timeout=deadline - loop.time(), source=source) as call:
         if not call.ok:
             return call.result
         return await call.wait(max(deadline - loop.time(), 0.05))

@@ -83,12 +83,14 @@ def agent_life(ctx: CheckContext) -> float:
 
 async def peer_run(ctx: CheckContext, peer: Peer, kind: AgentKind, program: str,
                    argv: Sequence[str], *, timeout: float, connect_timeout: float | None = None,
-                   tcp_timeout: float | None = None, needs_install: bool = False) -> SshResult:
-    """Run *program* (one of *kind*'s) with *argv* on *peer*'s agent of the round, as
-    ``ssh_run`` would run it alone: the same bounds, the same result."""
+                   tcp_timeout: float | None = None, needs_install: bool = False,
+                   source: bytes | None = None) -> SshResult:
+    """Run *program* (one of *kind*'s, or with *source* one loaded on the agent when first
+    run) with *argv* on *peer*'s agent of the round, as ``ssh_run`` would run it alone: the
+    same bounds, the same result."""
     return await agent_run(_agents(ctx), ctx.ssh, peer, kind, program, argv, timeout=timeout,
                            connect_timeout=connect_timeout, tcp_timeout=tcp_timeout,
-                           max_s=agent_life(ctx), needs_install=needs_install)
+                           max_s=agent_life(ctx), needs_install=needs_install, source=source)
 
 
 def peer_session(ctx: CheckContext, peer: Peer, kind: AgentKind, program: str,
