@@ -30,6 +30,7 @@ import rosnet_tui
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import (
     ZENOH_AGENT,
+    chat_agent,
     peer_program_problem,
     peer_run,
     stderr_tail,
@@ -43,7 +44,7 @@ from rosnet_tui.core.jsonsafe import loads_bounded
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.connect import close_writer
 from rosnet_tui.core.net.http import http_get
-from rosnet_tui.core.peer.commands import installed_python_command, python_command
+from rosnet_tui.core.peer.commands import installed_python_command
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.session import ssh_run
 
@@ -410,7 +411,6 @@ async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
         ports.append(spare.port)
         data["ports"] = ports
         rem = left()
-        cmd = python_command(_CONNECT, target, f"{rem * 0.25:.2f}", *map(str, ports))
         peer = peers[0]
         asked = loop.time()
         answered: dict[int, float] = {}
@@ -420,8 +420,10 @@ async def _outsider_ros1(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
             answered[p] = round(loop.time() - asked, 3)
             return ans
         res, *outs = await asyncio.gather(
-            ssh_run(ctx.ssh, peer, cmd, timeout=rem * 0.85,
-                    connect_timeout=min(t * 0.4, rem * 0.45), tcp_timeout=ctx.timeout_s),
+            peer_run(ctx, peer, chat_agent(ctx), "outsider_connect",   # on the round's agent
+                     [target, f"{rem * 0.25:.2f}", *map(str, ports)], timeout=rem * 0.85,
+                     connect_timeout=min(t * 0.4, rem * 0.45), tcp_timeout=ctx.timeout_s,
+                     source=_CONNECT.encode()),
             *(ask_checker(p) for p in ports))
     data["from"] = peer.name
     # How long each of the checker's verdicts took: a refusal (the peers-only firewall resets a
