@@ -49,3 +49,15 @@ def test_the_connection_to_a_peer_sends_without_waiting_for_acks(ssh_client):
         assert sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
     finally:
         conn.transport.close()
+
+
+def test_a_match_block_in_ssh_config_does_not_hide_its_identity_files(tmp_path):
+    """paramiko's SSHConfig.get_hostnames raises on any Match block: every IdentityFile of such a
+    config was silently left out, and a technician whose key is named only there could not log
+    in to the peers."""
+    _keygen(tmp_path / "fleet_key")
+    (tmp_path / "config").write_text(
+        "Match host *.lab exec \"true\"\n    User ops\n\n"
+        f"Host robot\n    IdentityFile = \"{tmp_path / 'fleet_key'}\"\n"
+        "Host *\n    identityfile %d/no_such_key\n")
+    assert _load_keys_in_a_new_process(tmp_path) == ["1", "False", "[]"]

@@ -12,6 +12,7 @@ import contextlib
 import errno
 import logging
 import os
+import pwd
 import socket
 import time
 from dataclasses import dataclass
@@ -133,17 +134,9 @@ def load_keys(opts: SshOptions | None) -> tuple[list[paramiko.PKey], list[str]]:
             notes.append(f"ssh-agent unusable: {exc}")
     d = ssh_dir(opts)
     paths = [d / n for n in KEY_FILES]
-    cfg = d / "config"
-    if cfg.is_file():
-        try:
-            conf = paramiko.SSHConfig.from_path(str(cfg))
-            for host in conf.get_hostnames():
-                for ident in conf.lookup(host).get("identityfile", []) if host != "*" else []:
-                    p = Path(os.path.expanduser(ident))
-                    if p not in paths:
-                        paths.append(p)
-        except Exception:  # noqa: BLE001 - a broken config is not our business here
-            pass
+    for p in config_identity_files(d / "config"):
+        if p not in paths:
+            paths.append(p)
     for p in paths:
         if not p.is_file():
             continue
@@ -154,6 +147,38 @@ def load_keys(opts: SshOptions | None) -> tuple[list[paramiko.PKey], list[str]]:
         except Exception as exc:  # noqa: BLE001
             notes.append(f"{p} could not be read: {exc}")
     return keys, notes
+
+
+def config_identity_files(cfg: Path) -> list[Path]:
+    """The IdentityFile paths of an ssh_config, in its order, whatever block they sit in. Read
+    line by line: paramiko's SSHConfig.get_hostnames raises on any ``Match`` block, which hid
+    every key such a config names. ``~``, ``%d`` (home), ``%u`` (user) and ``%%`` are expanded;
+    a path with another token depends on the host it is used for and is left out."""
+    try:
+        text = cfg.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return []
+    tokens = {"%%": "\x00", "%d": os.path.expanduser("~"), "%u": local_user_name()}
+    out = []
+    for line in text.splitlines():
+        words = line.strip().replace("=", " ", 1).split(None, 1)
+        if len(words) != 2 or words[0].lower() != "identityfile":
+            continue
+        value = words[1].strip().strip('"')
+        for token, meaning in tokens.items():
+            value = value.replace(token, meaning)
+        if "%" in value or not value or value.lower() == "none":
+            continue
+        out.append(Path(os.path.expanduser(value.replace("\x00", "%"))))
+    return out
+
+
+def local_user_name() -> str:
+    """This process's user name, as ssh_config's ``%u`` means it."""
+    try:
+        return pwd.getpwuid(os.getuid()).pw_name
+    except KeyError:
+        return os.environ.get("USER", "")
 
 
 _ALGOS_FOR_TYPE = {"ssh-rsa": ("rsa-sha2-512", "rsa-sha2-256", "ssh-rsa")}
