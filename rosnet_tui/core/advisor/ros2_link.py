@@ -10,16 +10,9 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence
+from rosnet_tui.core.words import kb, mbit
 
 WAYS = (("out", "up", "from {me} to {peer}"), ("in", "down", "from {peer} to {me}"))
-
-
-def _size(n: int) -> str:
-    return f"{n / (1 << 20):g} MB" if n >= 1 << 20 else f"{n / 1024:g} kB"
-
-
-def _mbit(bps: float) -> str:
-    return f"{bps / 1e6:.1f} Mbit/s"
 
 
 def _peers(ev: Evidence) -> dict:
@@ -59,15 +52,15 @@ def _large(ev: Evidence) -> list[Hit]:
     d = _peers(ev)[peer]
     rate = d.get(f"{'out' if word == 'up' else 'in'}_bps")
     big = [t for t in ev.s.link.topics if t.bytes > min(x[4] for x in lost)]
-    facts = [f"ros2.link: {p}: {w}, {_size(t)} tried, largest whole {_size(g) if g else 'none'}"
+    facts = [f"ros2.link: {p}: {w}, {kb(t)} tried, largest whole {kb(g) if g else 'none'}"
              f" (round trip {_peers(ev)[p].get('rtt_ms')} ms)" for p, w, _x, t, g in lost]
-    time_words = (f" At the {_mbit(rate)} measured, {_size(tried)} takes "
+    time_words = (f" At the {mbit(rate)} measured, {kb(tried)} takes "
                   f"{tried * 8 / rate:.1f} s on the wire." if rate else "")
-    needs = (f" {', '.join(t.name for t in big)} ({', '.join(_size(t.bytes) for t in big)} a "
+    needs = (f" {', '.join(t.name for t in big)} ({', '.join(kb(t.bytes) for t in big)} a "
              "message) will not arrive." if big else "")
     return [Hit(f"Small messages cross the link {where} (the round trip is "
-                f"{d.get('rtt_ms')} ms), but a {_size(tried)} message sent that way never "
-                f"arrived whole (the largest that did: {_size(got) if got else 'none of the large ones'})."
+                f"{d.get('rtt_ms')} ms), but a {kb(tried)} message sent that way never "
+                f"arrived whole (the largest that did: {kb(got) if got else 'none of the large ones'})."
                 f"{time_words}{needs} This is not the path: it is what happens to large "
                 "messages on it.",
                 ["Congestion control: rmw_zenoh drops a message whose fragments find the link's "
@@ -115,10 +108,10 @@ def _thin(ev: Evidence) -> list[Hit]:
     proto = '"tls"' if ev.s.ros.security == "mtls" else '"tcp"'
     freq = max(0.5, round(top.hz * max(0.1, (got * 0.8 - (need - top.bps)) / top.bps), 1)) \
         if top.bps else 1.0
-    return [Hit(f"The topics in [[link.topic]] need {_mbit(need)}; the link {where} carried "
-                f"{_mbit(got)} (short by {_mbit(need - got)}). "
+    return [Hit(f"The topics in [[link.topic]] need {mbit(need)}; the link {where} carried "
+                f"{mbit(got)} (short by {mbit(need - got)}). "
                 f"The largest need is {top.name}: {top.bytes} bytes x {top.hz:g} Hz = "
-                f"{_mbit(top.bps)}.",
+                f"{mbit(top.bps)}.",
                 [f"Compress: publish {top.name} through image_transport's `compressed` "
                  "transport (or a compressed point cloud) and subscribe to that across the "
                  "link; set bytes under its [[link.topic]] to the new size.",
@@ -130,5 +123,5 @@ def _thin(ev: Evidence) -> list[Hit]:
                  f"[{{ key_expr: \"{_key_expr(ev, top.name)}\", freq: {freq:g} }}] }}]`, and "
                  f"write `max_hz = {freq:g}` under its [[link.topic]] so the check counts it "
                  "at that rate; restart the router, then re-run the ROS step."],
-                evidence=[f"ros2.link: {n}: {w} {_mbit(g)}" for n, w, _x, g in short]
-                + [f"settings: [[link.topic]] need {_mbit(need)}"])]
+                evidence=[f"ros2.link: {n}: {w} {mbit(g)}" for n, w, _x, g in short]
+                + [f"settings: [[link.topic]] need {mbit(need)}"])]
