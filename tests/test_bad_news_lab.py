@@ -35,7 +35,7 @@ def durations(lab, host: str, state) -> dict[str, tuple[float, str, str]]:
 def test_every_verdict_within_the_timeout(ros1_lab, tmp_path, variant, options, host):
     with ros1_lab.variant(variant, **options):
         got = durations(ros1_lab, host, tmp_path)
-    assert len(got) == 21            # security.ssh_auth and security.outsider too
+    assert len(got) == 22            # security.ssh_auth and security.outsider too; ros.link
     late = {cid: d for cid, d in got.items() if d[0] > TIMEOUT_S + SLACK_S}
     assert not late, late
     # the peer's side could not run: those checks say so (no pass from a dead peer)

@@ -63,7 +63,7 @@ def _all_declarations() -> set[type]:
 # --------------------------------------------------------------------------- ids
 def test_every_registered_check_has_a_declaration_and_every_declaration_a_check():
     ids = [c.id for c in checks_for()]
-    assert len(ids) == 31  # issue 22: security.ssh_auth, security.outsider, linux.firewall; 30: relay.router, relay.tunnel; 31: ros2.link
+    assert len(ids) == 32  # issue 22: security.ssh_auth, security.outsider, linux.firewall; 30: relay.router, relay.tunnel; 31: ros2.link, ros.link
     assert sorted(ids) == sorted(data.DATA)
 
 
@@ -149,7 +149,7 @@ async def test_every_check_reports_only_declared_keys_when_there_is_nothing_to_c
     """Empty settings: each check's skip or early-failure branch, nothing leaves the machine."""
     s = Settings(probe=ProbeSettings(port=free_port(), public_ip_urls=[], port_check_url=""))
     got = await _run_all(_ctx(tmp_path, s))
-    assert len(got) == 31
+    assert len(got) == 32
     for cid, r in got.items():
         assert not r.summary.startswith("the check failed unexpectedly"), (cid, r.summary)
         assert data.undeclared(cid, r.data) == [], (cid, r.data)
@@ -167,7 +167,7 @@ async def test_every_check_reports_only_declared_keys_against_dead_loopback_serv
                  ros=RosSettings(master="localhost", port=dead))
     (tmp_path / "hosts").write_text("127.0.0.1 localhost\n")
     got = await _run_all(_ctx(tmp_path, s))
-    assert len(got) == 31
+    assert len(got) == 32
     for cid, r in got.items():
         assert not r.summary.startswith("the check failed unexpectedly"), (cid, r.summary)
         assert data.undeclared(cid, r.data) == [], (cid, r.data)

@@ -68,7 +68,7 @@ async def run(ctx: CheckContext, check_id: str):
 
 
 def test_ros_checks_are_registered():
-    assert [c.id for c in checks_for(["ros"], Settings())] == [*ROS_IDS, "security.outsider"]
+    assert [c.id for c in checks_for(["ros"], Settings())] == [*ROS_IDS, "ros.link", "security.outsider"]
 
 
 # --------------------------------------------------------------------------- ros.env

@@ -13,7 +13,7 @@ from tests.lab.firewall import secured
 pytestmark = pytest.mark.lab
 
 ROS_IDS = ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in",
-           "security.outsider"]
+           "ros.link", "security.outsider"]
 
 
 def ros_check(lab, host: str) -> dict[str, dict]:

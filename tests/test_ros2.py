@@ -62,7 +62,7 @@ def test_the_ros_step_lists_the_checks_of_the_version():
         master="turtlebot")))]
     two = [c.id for c in select(["ros"], settings=member())]
     assert one == ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in",
-                   "security.outsider"]
+                   "ros.link", "security.outsider"]
     assert two == ["ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in",
                    "ros2.link", "security.outsider"]
     assert step_for("ros", member()).check_ids == tuple(two)

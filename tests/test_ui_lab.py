@@ -28,7 +28,7 @@ def test_healthy_lab_every_check_passes_in_the_wizard(ros1_lab, healthy_lab, tmp
     with secured(lab, ["laptop"]):              # ROS 1 as the product sets it up
         seen = run_wizard(lab, "laptop", tmp_path)
     states = {cid: row["state"] for step in seen["steps"].values() for cid, row in step.items()}
-    assert len(states) == 21                    # security.ssh_auth and security.outsider too
+    assert len(states) == 22                    # security.ssh_auth, security.outsider, ros.link
     assert states["security.ssh_auth"] == states["security.outsider"] == "pass", states
     assert {cid for cid, st in states.items() if st != "pass"} <= {"isp.cgnat"}, seen["steps"]
     assert states["isp.cgnat"] in ("pass", "skip")

@@ -187,6 +187,7 @@ SHORT_TITLES = {
     "ros2.pubsub_out": "Publish here, peer hears",
     "ros2.pubsub_in": "Peer publishes, we hear",
     "ros2.link": "The link measured",
+    "ros.link": "The link measured",
     "ros.rosbridge": "Browser path (rosbridge)",
     "security.ssh_auth": "SSH offers no password",
     "relay.router": "The relay's Zenoh router",

@@ -699,7 +699,7 @@ class Lab:
                        "cgnat": False, "robot_wan": ADDR.ROBOT_PUBLIC, "lossy": False,
                        "unplugged": False, "ros_extra": {}, "files_dirty": False,
                        "stale_dhcp": False, "double_nat": False, "sshd_port": False,
-                       "cgnat_both": False}
+                       "cgnat_both": False, "shaped": None}
 
     @property
     def current_variant(self) -> str:
@@ -806,6 +806,8 @@ class Lab:
             self.set_robot_wan(ADDR.ROBOT_PUBLIC)
         if st["lossy"]:
             self._set_lossy(False)
+        if st["shaped"]:
+            self.shape_robot(None)
         if st["unplugged"]:
             who = st["unplugged"]
             self._ip(who, ["link set eth0 up",
@@ -862,6 +864,16 @@ class Lab:
         reset()) ends it. Not a variant: the links stay up, so ending it is instant."""
         self._unplug_rule(MODEM[side], on, both=True)
         self._state["unplugged"] = self._state["unplugged"] or (side if on else False)
+
+    def shape_robot(self, rate: str | None, latency: str = "400ms") -> None:
+        """The robot's modem shaped to *rate* ("2mbit") both ways: tc tbf on what leaves its WAN
+        (the robot's upload) and its LAN (its download), queueing up to *latency* of it; None
+        (or reset()) takes it off. This kernel has tbf but not netem: no delay."""
+        for dev in ("wan0", "lan0"):
+            self._in_ns("robot_modem", f"tc qdisc replace dev {dev} root tbf rate {rate} "
+                                       f"burst 32kbit latency {latency}" if rate else
+                        f"tc qdisc del dev {dev} root 2>/dev/null || true")
+        self._state["shaped"] = rate
 
     def _unplug_rule(self, modem: str, on: bool, both: bool = False) -> None:
         """The modem drops what it would forward to its LAN (a computer that is gone, silently);

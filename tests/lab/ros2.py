@@ -150,10 +150,7 @@ class Ros2World:
         """The robot's modem shaped to *rate* ("2mbit") both ways: tc tbf on what leaves its WAN
         (the robot's upload) and its LAN (its download), queueing up to *latency* of it; None
         takes it off (healthy() does)."""
-        for dev in ("wan0", "lan0"):
-            self.lab._in_ns("robot_modem", f"tc qdisc replace dev {dev} root tbf rate {rate} "
-                                           f"burst 32kbit latency {latency}" if rate else
-                            f"tc qdisc del dev {dev} root 2>/dev/null || true")
+        self.lab.shape_robot(rate, latency)
         self.shaped = rate
 
     def uninstall(self, host: str) -> None:

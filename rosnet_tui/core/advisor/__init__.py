@@ -7,8 +7,8 @@ Where things live:
 - :mod:`.evidence`: :class:`Evidence` (what a rule reads: results, settings, the checks'
   declared data) and the helpers several steps' rules share;
 - :mod:`.isp`, :mod:`.router`, :mod:`.linux` (:mod:`.names` for names and the hosts file),
-  :mod:`.ros` (:mod:`.ros2` for ROS 2, :mod:`.ros2_link` for its link measured, :mod:`.rosbridge`
-  for web clients): the rules, one module per step,
+  :mod:`.ros` (:mod:`.ros2` for ROS 2, :mod:`.ros2_link` for the link measured, ros2.link's
+  and ros.link's, :mod:`.rosbridge` for web clients): the rules, one module per step,
   named like the checks whose data they read (Table 1 and security.exposed are the router's;
   :mod:`.router_upnp` reads router.upnp, the modem's own word; :mod:`.security` reads
   security.ssh_auth and security.outsider, what a stranger gets; :mod:`.relay_tunnel` reads

@@ -1,6 +1,7 @@
-"""Step 4 for ROS 2: the rules that read ros2.link, the link to each peer measured (round trip,
-throughput each way, the largest message delivered whole) and weighed against what
-``[[link.topic]]`` says the robot must carry.
+"""Step 4: the rules that read ros2.link (ROS 2) and ros.link (ROS 1), the link to each peer
+measured (round trip, throughput each way, the largest message delivered whole) and weighed
+against what ``[[link.topic]]`` says the robot must carry. One rule per cause for both ROS
+versions; what to do differs (Zenoh's settings under ROS 2, TCPROS's path under ROS 1).
 
 "Small messages pass, large ones are dropped" is a cause of its own: every path check passes, yet
 a camera or a point cloud never shows across the link.
@@ -10,20 +11,18 @@ from __future__ import annotations
 
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence
+from rosnet_tui.core.words import kb, mbit
 
 WAYS = (("out", "up", "from {me} to {peer}"), ("in", "down", "from {peer} to {me}"))
 
 
-def _size(n: int) -> str:
-    return f"{n / (1 << 20):g} MB" if n >= 1 << 20 else f"{n / 1024:g} kB"
-
-
-def _mbit(bps: float) -> str:
-    return f"{bps / 1e6:.1f} Mbit/s"
+def _cid(ev: Evidence) -> str:
+    """The link check of the settings' ROS version."""
+    return "ros2.link" if ev.s.ros2 else "ros.link"
 
 
 def _peers(ev: Evidence) -> dict:
-    return (ev.data("ros2.link").get("peers") or {}) if ev.s.ros2 else {}
+    return ev.data(_cid(ev)).get("peers") or {}
 
 
 def _dropped(ev: Evidence) -> list[tuple[str, str, str, int, int]]:
@@ -40,16 +39,19 @@ def _dropped(ev: Evidence) -> list[tuple[str, str, str, int, int]]:
     return out
 
 
-@rule("ros2.link.large_dropped", "ros", ("ros2.link",),
+@rule("ros2.link.large_dropped", "ros", ("ros2.link", "ros.link"),
       "small messages pass the link, large ones are dropped",
-      "Pings and small messages cross the routers both ways, but a message of 64 kB or 1 MB "
-      "does not arrive whole: Zenoh's congestion control drops a large message's fragments when "
+      "Pings and small messages cross the link both ways, but a message of 64 kB or 1 MB "
+      "does not arrive whole. ROS 2: Zenoh's congestion control drops a large message's fragments when "
       "the link's queue is full (rmw_zenoh's default QoS), shared memory on the publisher's "
       "host keeps large payloads off the wire, a size filter drops them, or the link is too "
-      "thin for them. Topics such as images and point clouds are then listed but never arrive.",
+      "thin for them. ROS 1 (TCP): full-size packets lost on the path (an MTU black hole on a "
+      "mobile, PPPoE or VPN link) or a link too thin for them. Topics such as images and point clouds are then listed but "
+      "never arrive.",
       "Publish the large topics RELIABLE with KEEP_ALL history, or let the sending router wait "
       "longer before dropping fragments; turn shared memory off for nodes whose topics cross the "
-      "internet; remove a low_pass_filter; make the messages smaller.",
+      "internet; remove a low_pass_filter (ROS 2). Lower the MTU on a path that loses "
+      "full-size packets (ROS 1). Make the messages smaller.",
       "ros", "warn")
 def _large(ev: Evidence) -> list[Hit]:
     lost = _dropped(ev)
@@ -59,17 +61,19 @@ def _large(ev: Evidence) -> list[Hit]:
     d = _peers(ev)[peer]
     rate = d.get(f"{'out' if word == 'up' else 'in'}_bps")
     big = [t for t in ev.s.link.topics if t.bytes > min(x[4] for x in lost)]
-    facts = [f"ros2.link: {p}: {w}, {_size(t)} tried, largest whole {_size(g) if g else 'none'}"
+    facts = [f"{_cid(ev)}: {p}: {w}, {kb(t)} tried, largest whole {kb(g) if g else 'none'}"
              f" (round trip {_peers(ev)[p].get('rtt_ms')} ms)" for p, w, _x, t, g in lost]
-    time_words = (f" At the {_mbit(rate)} measured, {_size(tried)} takes "
+    time_words = (f" At the {mbit(rate)} measured, {kb(tried)} takes "
                   f"{tried * 8 / rate:.1f} s on the wire." if rate else "")
-    needs = (f" {', '.join(t.name for t in big)} ({', '.join(_size(t.bytes) for t in big)} a "
+    needs = (f" {', '.join(t.name for t in big)} ({', '.join(kb(t.bytes) for t in big)} a "
              "message) will not arrive." if big else "")
-    return [Hit(f"Small messages cross the link {where} (the round trip is "
-                f"{d.get('rtt_ms')} ms), but a {_size(tried)} message sent that way never "
-                f"arrived whole (the largest that did: {_size(got) if got else 'none of the large ones'})."
-                f"{time_words}{needs} This is not the path: it is what happens to large "
-                "messages on it.",
+    what = (f"Small messages cross the link {where} (the round trip is {d.get('rtt_ms')} ms), "
+            f"but a {kb(tried)} message sent that way never arrived whole (the largest that did: "
+            f"{kb(got) if got else 'none of the large ones'}).{time_words}{needs} This is not "
+            "the path: it is what happens to large messages on it.")
+    if not ev.s.ros2:
+        return [Hit(what, _ROS1_LARGE, severity="fail" if big else None, evidence=facts)]
+    return [Hit(what,
                 ["Congestion control: rmw_zenoh drops a message whose fragments find the link's "
                  "queue full, unless the publisher's QoS is RELIABLE with KEEP_ALL history. Give "
                  "the large topics that QoS, or give the sending side's router more time before "
@@ -89,20 +93,32 @@ def _large(ev: Evidence) -> list[Hit]:
                 severity="fail" if big else None, evidence=facts)]
 
 
+_ROS1_LARGE = [
+    "A path that loses full-size packets (an MTU black hole: PPPoE, a mobile carrier, a VPN): "
+    "from each side, `ping -M do -s 1472 <the other's name>` must answer; if only smaller "
+    "sizes do, lower this component's MTU to what passes plus 28 (`sudo ip link set dev <its "
+    "interface> mtu 1400`, then in its network settings to keep it), or turn on MSS clamping "
+    "in the modem.",
+    "A link too thin for them in time: see the throughput measured each way; send less.",
+    "Or make the messages smaller: compressed images (image_transport's `compressed` topics), "
+    "a lower resolution, a voxel-filtered cloud. Then re-run the ROS step."]
+
+
 def _key_expr(ev: Evidence, topic: str) -> str:
     return f"{ev.s.ros.domain_id}/{topic.strip('/')}/**"
 
 
-@rule("ros2.link.too_thin", "ros", ("ros2.link",),
+@rule("ros2.link.too_thin", "ros", ("ros2.link", "ros.link"),
       "the topics in [[link.topic]] need more than the link carries",
       "The sum of what the robot must carry (bytes x hz of every [[link.topic]]) is above the "
-      "throughput measured through the routers: queues fill, messages are dropped or arrive "
+      "throughput measured: queues fill, messages are dropped or arrive "
       "late, and a teleoperation topic waits behind the images.",
-      "Send less: compressed images (image_transport), a lower rate at the source, or Zenoh's "
-      "downsampling of the named topics on the sending router's WAN link (max_hz).",
+      "Send less: compressed images (image_transport), a lower rate at the source, or (ROS 2) "
+      "Zenoh's downsampling of the named topics on the sending router's WAN link (max_hz), or "
+      "(ROS 1) topic_tools throttle on the sending side.",
       "ros", "warn")
 def _thin(ev: Evidence) -> list[Hit]:
-    need = ev.s.link.need_bps()
+    need = ev.s.link.need_bps(downsampled=ev.s.ros2)
     if not need:
         return []
     short = [(name, word, where.format(me=ev.me, peer=name), d[f"{way}_bps"])
@@ -111,24 +127,33 @@ def _thin(ev: Evidence) -> list[Hit]:
     if not short:
         return []
     name, word, where, got = short[0]
-    top = max(ev.s.link.topics, key=lambda t: t.bps)
-    proto = '"tls"' if ev.s.ros.security == "mtls" else '"tcp"'
-    freq = max(0.5, round(top.hz * max(0.1, (got * 0.8 - (need - top.bps)) / top.bps), 1)) \
-        if top.bps else 1.0
-    return [Hit(f"The topics in [[link.topic]] need {_mbit(need)}; the link {where} carried "
-                f"{_mbit(got)} (short by {_mbit(need - got)}). "
+    rate = (lambda tp: tp.bps) if ev.s.ros2 else (lambda tp: tp.full_bps)
+    top = max(ev.s.link.topics, key=rate)
+    top_bps = rate(top)
+    freq = max(0.5, round(top.hz * max(0.1, (got * 0.8 - (need - top_bps)) / top_bps), 1)) \
+        if top_bps else 1.0
+    if ev.s.ros2:
+        proto = '"tls"' if ev.s.ros.security == "mtls" else '"tcp"'
+        cut = (f"Or let the sending side's router cut it down on the WAN link only: in its "
+               f"config (ZENOH_ROUTER_CONFIG_URI) `downsampling: [{{ id: \"wan\", "
+               f"link_protocols: [{proto}], flows: [\"egress\"], messages: [\"put\"], rules: "
+               f"[{{ key_expr: \"{_key_expr(ev, top.name)}\", freq: {freq:g} }}] }}]`, and "
+               f"write `max_hz = {freq:g}` under its [[link.topic]] so the check counts it "
+               "at that rate; restart the router, then re-run the ROS step.")
+    else:
+        cut = (f"Or throttle it on the sending side only for the link: `rosrun topic_tools "
+               f"throttle messages {top.name} {freq:g} {top.name}_wan` there, and subscribe to "
+               f"{top.name}_wan across the link; write hz = {freq:g} under its [[link.topic]] "
+               "(max_hz is ROS 2's: under ROS 1 the check counts hz), then re-run the ROS step.")
+    return [Hit(f"The topics in [[link.topic]] need {mbit(need)}; the link {where} carried "
+                f"{mbit(got)} (short by {mbit(need - got)}). "
                 f"The largest need is {top.name}: {top.bytes} bytes x {top.hz:g} Hz = "
-                f"{_mbit(top.bps)}.",
+                f"{mbit(top_bps)}.",
                 [f"Compress: publish {top.name} through image_transport's `compressed` "
                  "transport (or a compressed point cloud) and subscribe to that across the "
                  "link; set bytes under its [[link.topic]] to the new size.",
                  f"Or lower the rate at the source (the driver's frame rate), below about "
                  f"{freq:g} Hz for {top.name}.",
-                 f"Or let the sending side's router cut it down on the WAN link only: in its "
-                 f"config (ZENOH_ROUTER_CONFIG_URI) `downsampling: [{{ id: \"wan\", "
-                 f"link_protocols: [{proto}], flows: [\"egress\"], messages: [\"put\"], rules: "
-                 f"[{{ key_expr: \"{_key_expr(ev, top.name)}\", freq: {freq:g} }}] }}]`, and "
-                 f"write `max_hz = {freq:g}` under its [[link.topic]] so the check counts it "
-                 "at that rate; restart the router, then re-run the ROS step."],
-                evidence=[f"ros2.link: {n}: {w} {_mbit(g)}" for n, w, _x, g in short]
-                + [f"settings: [[link.topic]] need {_mbit(need)}"])]
+                 cut],
+                evidence=[f"{_cid(ev)}: {n}: {w} {mbit(g)}" for n, w, _x, g in short]
+                + [f"settings: [[link.topic]] need {mbit(need)}"])]

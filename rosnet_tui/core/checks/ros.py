@@ -22,7 +22,8 @@ from rosnet_tui.core.checks.probes.agents import (
     peer_session,
     stderr_tail,
 )
-from rosnet_tui.core.checks.probes.peers import each_peer, ssh_peers
+from rosnet_tui.core.checks.probes.peers import each_peer
+from rosnet_tui.core.checks.probes.ros1 import master_uri, ros1_peers
 from rosnet_tui.core.config.settings_model import Peer, Settings
 from rosnet_tui.core.files.hosts import own_ip
 from rosnet_tui.core.net.blocking import run_blocking
@@ -36,23 +37,6 @@ FACTOR_PUBSUB = 4.0
 
 
 # --------------------------------------------------------------------------- helpers
-def master_uri(ctx: CheckContext) -> tuple[str | None, str]:
-    """(URI of the master every component should use, where it came from) or (None, why not)."""
-    s = ctx.settings
-    if s.master_name:
-        return f"http://{s.master_name}:{s.ros.port}", "the settings"
-    env = ctx.env.get("ROS_MASTER_URI")
-    if env and s.is_master:
-        return env, "ROS_MASTER_URI"
-    return None, ("no ROS master is configured: set the master's name (ros.master) in the "
-                  "settings")
-
-
-def _ssh_peers(s: Settings) -> list[Peer]:
-    """Peers we can reach over SSH; the master first (it is usually the robot)."""
-    return sorted(ssh_peers(s), key=lambda p: p.name != s.ros.master)
-
-
 def _budget(ctx: CheckContext, factor: float) -> float:
     return max(0.5, float(ctx.timeout_s) * factor)
 
@@ -321,7 +305,7 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
             await run_blocking(me.stop, timeout=2.0)
             return Outcome(Status.FAIL, f"cannot list the nodes: the master does not answer "
                                         f"({me.report.hops[-1].detail})", evidence, data)
-    peers = _ssh_peers(ctx.settings)
+    peers = ros1_peers(ctx.settings)
     local_t = max(0.3, min(budget * 0.5, deadline - time.monotonic()))
     remote_t = max(0.5, budget * 0.45)
     include = ["--include", me.caller_id] if registered else []
@@ -559,7 +543,7 @@ async def _pubsub(ctx: CheckContext, direction: str) -> Outcome:
     uri, why = master_uri(ctx)
     if uri is None:
         return Outcome(Status.SKIP, f"skipped: {why}", [], _pubsub_data("", False))
-    peers = _ssh_peers(ctx.settings)
+    peers = ros1_peers(ctx.settings)
     if not peers:
         return Outcome(Status.SKIP, "skipped: no peer with an SSH user in the settings, so the "
                                     "other side of the exchange cannot be run from here",

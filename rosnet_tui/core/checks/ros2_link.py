@@ -23,6 +23,7 @@ from typing import Any
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_session
 from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.link import figures_line, link_data, link_outcome, need_of
 from rosnet_tui.core.checks.probes.peers import each_peer
 from rosnet_tui.core.checks.probes.ros2 import (
     close_zenoh,
@@ -38,6 +39,7 @@ from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.peer.zenohlink import CHUNK, LinkEnd, link_text, rate_bps
 from rosnet_tui.core.results import Outcome, Status
+from rosnet_tui.core.words import kb
 
 FACTOR_LINK = 6.0
 PINGS = 5                      # round trips measured
@@ -45,17 +47,6 @@ BURST_CAP = 8 * 1024 * 1024    # bytes a burst sends at most (a fast link ends i
 LARGE = (65536, 1 << 20)       # the large messages tried, in bytes
 TRIES = 3                      # tries of each large message (while the time left allows)
 PUBSUB = ("ros2.pubsub_out", "ros2.pubsub_in")
-
-
-def mbit(bps: float | None) -> str:
-    """Bits per second in words (Mbit/s, or kbit/s below 1 Mbit/s)."""
-    if bps is None:
-        return "not measured"
-    return f"{bps / 1e6:.1f} Mbit/s" if bps >= 1e6 else f"{bps / 1e3:.0f} kbit/s"
-
-
-def kb(n: int) -> str:
-    return f"{n / (1 << 20):g} MB" if n >= 1 << 20 else f"{n / 1024:g} kB"
 
 
 def _measure(end: LinkEnd, t: float) -> dict[str, Any]:
@@ -152,20 +143,10 @@ def _largest(end: LinkEnd, m: dict[str, Any], rtt: float, stop_at: float) -> Non
             ways[way] = False
 
 
-def _pdata(m: dict[str, Any]) -> dict[str, Any]:
-    rtts = m.get("rtts") or []
-    return {"rtt_ms": round(statistics.median(rtts), 1) if rtts else None,
-            "rtt_spread_ms": round(max(rtts) - min(rtts), 1) if rtts else None,
-            "out_bps": round(m["out"]) if m.get("out") else None,
-            "in_bps": round(m["in"]) if m.get("in") else None,
-            "largest_out": m.get("largest_out", 0), "largest_in": m.get("largest_in", 0),
-            "tried_out": m.get("tried_out", 0), "tried_in": m.get("tried_in", 0)}
-
-
 async def _peer_link(ctx: CheckContext, peer: Peer, deadline: float
                      ) -> tuple[Status, str, list[str], dict[str, Any]]:
     """Measure the link to *peer*: (status, words, evidence, its data.peers entry)."""
-    empty = _pdata({})
+    empty = link_data({})
     endpoint, how = node_endpoint(ctx)
     session, why = await open_zenoh(endpoint, max(0.3, min(2.0, (deadline - time.monotonic())
                                                          * 0.2)), how)
@@ -212,50 +193,16 @@ async def _peer_link(ctx: CheckContext, peer: Peer, deadline: float
     if rep is not None and rep.get("error"):
         return (Status.FAIL, f"{peer.name}: nothing measured: on {peer.name}, "
                              f"{rep.get('detail')}", ev, empty)
-    d = _pdata(m)
+    d = link_data(m)
     if d["out_bps"] is None and rep is not None:   # their account came on stdout only
         out = rate_bps(rep.get("link") or {})
         d["out_bps"] = round(out) if out else None
-    ev.append(f"{peer.name}: round trip {_rtt_words(d)}; up (here -> {peer.name}) "
-              f"{mbit(d['out_bps'])}, down {mbit(d['in_bps'])}; largest delivered whole: up "
-              f"{kb(d['largest_out'])} (tried {kb(d['tried_out'])}), down {kb(d['largest_in'])} "
-              f"(tried {kb(d['tried_in'])})")
+    ev.append(figures_line(peer.name, d))
     ev += [f"{peer.name}: {n}" for n in m.get("notes") or []]
     if d["rtt_ms"] is None:
         return (Status.FAIL, f"{peer.name}: no small message came back through the routers "
                              "(see ros2.pubsub_out and ros2.pubsub_in)", ev, d)
     return Status.PASS, "", ev, d
-
-
-def _rtt_words(d: dict[str, Any]) -> str:
-    if d["rtt_ms"] is None:
-        return "not measured"
-    return f"{d['rtt_ms']:.0f} ms (spread {d['rtt_spread_ms']:.0f} ms)"
-
-
-def _judge(ctx: CheckContext, name: str, d: dict[str, Any]) -> tuple[Status, list[str]]:
-    """The verdict on one measured peer: large messages dropped, and the need against the rates."""
-    warns: list[str] = []
-    fail = False
-    for way, words in (("out", "up"), ("in", "down")):
-        tried, got = d[f"tried_{way}"], d[f"largest_{way}"]
-        if tried and got < tried:
-            warns.append(f"small messages pass {words} but {kb(tried)} ones are dropped (largest "
-                         f"delivered whole: {kb(got) if got else 'none of the large ones'})")
-            big = [tp.name for tp in ctx.settings.link.topics if tp.bytes > got]
-            if big:
-                fail = True
-                warns[-1] += f"; {', '.join(big)} need larger messages"
-    need = ctx.settings.link.need_bps()
-    if need:
-        for way, words in (("out", "up"), ("in", "down")):
-            got = d[f"{way}_bps"]
-            if got is not None and got < need:
-                warns.append(f"needs {need / 1e6:.1f} Mbit/s {words}, measured "
-                             f"{got / 1e6:.1f} (short by {(need - got) / 1e6:.1f} Mbit/s)")
-    if not warns:
-        return Status.PASS, []
-    return (Status.FAIL if fail else Status.WARN), [f"to {name}: {w}" for w in warns]
 
 
 async def _after_pubsub(ctx: CheckContext, until: float) -> None:
@@ -280,8 +227,7 @@ async def check_link(ctx: CheckContext) -> Outcome:
     s = ctx.settings
     t = budget(ctx, "ros2.link")
     start = time.monotonic()
-    need = s.link.need_bps()
-    data: dict[str, Any] = {"peers": {}, "need_bps": need}
+    data: dict[str, Any] = {"peers": {}, "need_bps": need_of(ctx)}
     if not s.master_name:
         return Outcome(Status.SKIP, "skipped: no master is named in the settings (ros.master)",
                        [], data)
@@ -296,25 +242,4 @@ async def check_link(ctx: CheckContext) -> Outcome:
                                     "link to measure (see its advice)", [], data)
     deadline = start + t - 0.4
     outcomes = await each_peer(peers, lambda p: _peer_link(ctx, p, deadline))
-    ev = [line for o in outcomes for line in o[2]]
-    if need:
-        ev.append(f"[[link.topic]] needs {need / 1e6:.1f} Mbit/s each way: " + ", ".join(
-            f"{tp.name} {tp.bps / 1e6:.2f}" for tp in s.link.topics))
-    rank = {Status.FAIL: 0, Status.WARN: 1, Status.SKIP: 2, Status.PASS: 3}
-    worst, words = Status.PASS, []
-    for p, (status, summary, _ev, d) in zip(peers, outcomes, strict=True):
-        data["peers"][p.name] = d
-        if status == Status.PASS:
-            status, more = _judge(ctx, p.name, d)
-            words += more
-        else:
-            words.append(summary)
-        worst = min(worst, status, key=lambda x: rank[x])
-    if worst == Status.PASS:
-        return Outcome(Status.PASS, "; ".join(
-            f"to {p.name}: round trip {_rtt_words(d)}, up {mbit(d['out_bps'])}, down "
-            f"{mbit(d['in_bps'])}, {kb(min(d['largest_out'], d['largest_in']))} whole both ways"
-            for p in peers for d in [data["peers"][p.name]]), ev, data)
-    if worst == Status.SKIP and all(o[0] == Status.SKIP for o in outcomes):
-        return Outcome(Status.SKIP, "skipped: " + "; ".join(words), ev, data)
-    return Outcome(worst, "; ".join(words), ev, data)
+    return link_outcome(ctx, peers, outcomes, data)

@@ -370,14 +370,20 @@ class LinkTopic:
         rate = min(self.hz, self.max_hz) if self.max_hz is not None else self.hz
         return float(self.bytes) * float(rate) * 8.0
 
+    @property
+    def full_bps(self) -> float:
+        """Bits per second at its full rate (ROS 1: nothing on the link cuts it down)."""
+        return float(self.bytes) * float(self.hz) * 8.0
+
 
 @dataclass
 class LinkSettings:
     topics: list[LinkTopic] = field(default_factory=list)   # [[link.topic]]: what the link carries
 
-    def need_bps(self) -> float:
-        """Bits per second every [[link.topic]] needs together."""
-        return sum(t.bps for t in self.topics)
+    def need_bps(self, downsampled: bool = True) -> float:
+        """Bits per second every [[link.topic]] needs together (with *downsampled* False, each
+        at its full rate: max_hz is ROS 2's)."""
+        return sum(t.bps if downsampled else t.full_bps for t in self.topics)
 
 
 IP_FIELDS = ("local_ip", "public_ip", "office_ip", "portable_ip")    # of this component and a peer

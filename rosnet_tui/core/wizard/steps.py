@@ -388,7 +388,7 @@ STEP_CHECKS: dict[str, tuple[tuple[str, int | None, str | None], ...]] = {
               ("linux.firewall", 1, None), ("security.ssh_auth", None, None),
               ("relay.tunnel", 2, "relay")),
     "ros": (("ros.env", 1, None), ("ros.master", 1, None), ("ros.node_uris", 1, None),
-            ("ros.pubsub_out", 1, None), ("ros.pubsub_in", 1, None),
+            ("ros.pubsub_out", 1, None), ("ros.pubsub_in", 1, None), ("ros.link", 1, None),
             ("ros2.env", 2, None), ("ros2.router", 2, None), ("relay.router", 2, "relay"),
             ("ros2.graph", 2, None),
             ("ros2.pubsub_out", 2, None), ("ros2.pubsub_in", 2, None), ("ros2.link", 2, None),

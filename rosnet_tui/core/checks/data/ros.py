@@ -168,8 +168,10 @@ class Ros2PubsubData(Ros2PubsubPeer, total=False):
     peers: dict[str, Ros2PubsubPeer]  # every peer's exchange, by peer name
 
 
-class Ros2LinkPeer(TypedDict, total=False):
-    rtt_ms: float | None      # round trip through the routers, median of a few pings (None: none came back)
+class LinkPeer(TypedDict, total=False):
+    """One peer's link, in ros.link (ROS 1, over TCPROS) and ros2.link (through the routers)."""
+
+    rtt_ms: float | None      # round trip of a small message, median of a few pings (None: none came back)
     rtt_spread_ms: float | None  # the slowest ping's round trip minus the fastest one's
     out_bps: int | None       # bits per second delivered from this component to the peer (None: not measured)
     in_bps: int | None        # ... from the peer to this component
@@ -179,8 +181,8 @@ class Ros2LinkPeer(TypedDict, total=False):
     tried_in: int             # ... from the peer
 
 
-class Ros2LinkData(TypedDict, total=False):
-    peers: dict[str, Ros2LinkPeer]  # every peer's link, by peer name
+class LinkData(TypedDict, total=False):
+    peers: dict[str, LinkPeer]  # every peer's link, by peer name
     need_bps: float           # what the [[link.topic]] tables need, bits per second (0: none given)
 
 
@@ -208,11 +210,12 @@ DATA: dict[str, type] = {
     "ros.node_uris": RosNodeUrisData,
     "ros.pubsub_out": RosPubsubData,
     "ros.pubsub_in": RosPubsubData,
+    "ros.link": LinkData,
     "ros2.env": Ros2EnvData,
     "ros2.router": Ros2RouterData,
     "ros2.graph": Ros2GraphData,
     "ros2.pubsub_out": Ros2PubsubData,
     "ros2.pubsub_in": Ros2PubsubData,
-    "ros2.link": Ros2LinkData,
+    "ros2.link": LinkData,
     "ros.rosbridge": RosRosbridgeData,
 }

@@ -10,7 +10,15 @@ from pathlib import Path
 
 from rosnet_tui.core.checks import CheckContext
 from rosnet_tui.core.config.settings_model import Peer
-from rosnet_tui.core.peer import agentproto, chatproto, rosproto, tunnelproto, zenohlink, zenohproto
+from rosnet_tui.core.peer import (
+    agentproto,
+    chatproto,
+    roslink,
+    rosproto,
+    tunnelproto,
+    zenohlink,
+    zenohproto,
+)
 from rosnet_tui.core.peer.commands import (
     NO_INSTALL_EXIT,
     NO_INSTALL_REPORT,
@@ -36,10 +44,19 @@ ROSPROTO_SOURCE = Path(rosproto.__file__).read_bytes()   # the ROS 1 probe progr
 ZENOH_SOURCE = Path(zenohproto.__file__).read_bytes()    # the ROS 2 (Zenoh) probe program
 CHAT_SOURCE = Path(chatproto.__file__).read_bytes()      # the chats' peer side
 TUNNEL_SOURCE = Path(tunnelproto.__file__).read_bytes()  # relay.tunnel's peer side (paramiko)
-# ros2.link's peer side: zenohlink's body, loaded on zenohproto's names (its imports there)
-_LINK_TEXT = Path(zenohlink.__file__).read_bytes()
-LINK_SOURCE = b"from __future__ import annotations\n" + _LINK_TEXT[_LINK_TEXT.index(zenohlink.BODY_MARK.encode(),
-                                          _LINK_TEXT.index(zenohlink.BODY_MARK.encode()) + 1):]
+
+
+def program_body(path: str, mark: str) -> bytes:
+    """The source of a peer program loaded on another's names: the text of *path* from the
+    second *mark* (the first defines it), under ``from __future__ import annotations``."""
+    text, m = Path(path).read_bytes(), mark.encode()
+    return b"from __future__ import annotations\n" + text[text.index(m, text.index(m) + 1):]
+
+
+# ros2.link's and ros.link's peer sides: zenohlink's body on zenohproto's names (its imports
+# there), roslink's on rosproto's
+LINK_SOURCE = program_body(zenohlink.__file__, zenohlink.BODY_MARK)
+ROSLINK_SOURCE = program_body(roslink.__file__, roslink.BODY_MARK)
 PEER_PYTHON = "python3"   # the peer's python the ROS 1 agent and the chats run with
 
 
@@ -50,7 +67,8 @@ def peer_python() -> str:
 
 ROS_AGENT = AgentKind(
     "ros1", lambda max_s: f"{peer_python()} -I -S -c {shq(agentproto.BOOT)} {max_s:.0f}",
-    (("ros", ROSPROTO_SOURCE, "main"), ("chat", CHAT_SOURCE, "main")))
+    (("ros", ROSPROTO_SOURCE, "main"), ("rlink", ROSLINK_SOURCE, "run_link", "ros"),
+     ("chat", CHAT_SOURCE, "main")))
 ZENOH_AGENT = AgentKind(
     "ros2", lambda max_s: installed_python_command(f"{max_s:.0f}", mark=zenohproto.REPORT_MARK,
                                                    fallback=True, boot=agentproto.BOOT),

@@ -1,0 +1,136 @@
+"""ros.link on the network lab (issue 31, ROS 1): the link to each peer measured over TCPROS
+through the modems' forwards (round trip, throughput each way, the largest message delivered
+whole), with the robot's modem shaped by `tc tbf` both ways (this kernel has no netem) and a
+need from [[link.topic]] compared. The ROS 2 twin is tests/test_ros2_link_lab.py."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from rosnet_tui.core.config.settings_model import LinkTopic
+from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
+from tests.lab.firewall import secured
+
+pytestmark = pytest.mark.lab
+
+
+def check(lab, host: str, config=None, timeout: float = 90) -> dict[str, dict]:
+    """`rosnet-tui check --json --step ros` on *host*, in its ROS environment."""
+    r = lab.rosnet(host, "check", "--json", "--step", "ros", "--config",
+                   str(config or lab.config_path(host)), env=lab.ros_env(host), timeout=timeout)
+    assert r.stdout.strip(), r.stderr
+    return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
+
+
+def explain(results: dict[str, dict]) -> str:
+    return "\n".join(f"{c['id']}: {c['status']} ({c['duration_s']:.2f} s) - {c['summary']}\n  "
+                     + "\n  ".join(c["evidence"]) for c in results.values())
+
+
+def _within(value: float | None, want: float, share: float) -> bool:
+    return value is not None and abs(value - want) <= want * share
+
+
+def _bounded(link: dict, results: dict) -> None:
+    assert link["duration_s"] <= link["timeout_s"] + 0.5, explain(results)
+    assert not link["summary"].startswith("no verdict within"), explain(results)   # bare
+
+
+def _needing(lab, host: str, size: int, hz: float):
+    """*host*'s settings file with one [[link.topic]] of *size* bytes at *hz*."""
+    s = lab.settings(host)
+    s.link.topics = [LinkTopic("/camera/image/compressed", size, hz)]
+    path = lab.home(host) / ".config" / "rosnet-tui" / "need.toml"
+    atomic_write_text(path, render_settings(s), mode=0o644)
+    return path
+
+
+def test_unshaped_the_link_passes_with_its_figures(ros1_lab):
+    lab = ros1_lab
+    lab.reset()
+    with secured(lab):                     # ROS 1 as the product sets it up: the firewall on
+        both = {h: check(lab, h) for h in ("laptop", "robot")}
+    for host, peer in (("laptop", "turtlebot"), ("robot", "sami")):
+        results = both[host]
+        link = results["ros.link"]
+        assert link["status"] == "pass", explain(results)
+        d = link["data"]["peers"][peer]
+        assert d["rtt_ms"] is not None and d["out_bps"] > 10e6 and d["in_bps"] > 10e6, d
+        assert d["largest_out"] == d["largest_in"] == 1 << 20, d
+        assert "Mbit/s" in link["summary"] and " ms" in link["summary"], link["summary"]
+        _bounded(link, results)
+
+
+def test_shaped_to_2_mbit_each_way_the_rates_a_round_trip_and_the_need(ros1_lab):
+    lab = ros1_lab
+    lab.reset()
+    lab.shape_robot("2mbit")
+    try:
+        # From the robot, a need of 10 x 50 kB (4.0 Mbit/s): the rates and a warning with them.
+        results = check(lab, "robot", config=_needing(lab, "robot", 50_000, 10))
+        link = results["ros.link"]
+        d = link["data"]["peers"]["sami"]
+        assert _within(d["out_bps"], 2e6, 0.25) and _within(d["in_bps"], 2e6, 0.25), \
+            explain(results)
+        assert d["rtt_ms"] is not None and link["data"]["need_bps"] == 4e6, explain(results)
+        _bounded(link, results)
+        assert link["status"] in ("warn", "fail"), explain(results)
+        assert "needs 4.0 Mbit/s up, measured 1." in link["summary"] or \
+            "needs 4.0 Mbit/s up, measured 2." in link["summary"], explain(results)
+        assert "needs 4.0 Mbit/s down, measured" in link["summary"], explain(results)
+        thin = next(a for a in link["advice"] if a["rule"] == "ros2.link.too_thin")
+        assert "4.0 Mbit/s" in thin["meaning"] and "compressed" in " ".join(thin["actions"])
+        assert "downsampling" not in " ".join(thin["actions"]), thin   # Zenoh's: not ROS 1's
+        # From the laptop, no need: the rates each way (up is the laptop's: the robot's download).
+        results = check(lab, "laptop")
+        link = results["ros.link"]
+        d = link["data"]["peers"]["turtlebot"]
+        assert _within(d["out_bps"], 2e6, 0.25) and _within(d["in_bps"], 2e6, 0.25), \
+            explain(results)
+        assert d["rtt_ms"] is not None, explain(results)
+        _bounded(link, results)
+    finally:
+        lab.reset()
+
+
+def test_on_a_thin_link_it_reports_what_it_measured_in_its_budget(ros1_lab):
+    """At 256 kbit/s the pings and both bursts fit the budget, 1 MB does not (about 33 s): the
+    rates are reported, and the large message is said not tried, with why."""
+    lab = ros1_lab
+    lab.reset()
+    lab.shape_robot("256kbit", latency="1s")
+    try:
+        results = check(lab, "laptop", timeout=180)
+        link = results["ros.link"]
+        print(explain({"ros.link": link}))
+        _bounded(link, results)
+        d = link["data"]["peers"]["turtlebot"]
+        assert d["rtt_ms"] is not None, explain(results)
+        assert _within(d["out_bps"], 256e3, 0.35) and _within(d["in_bps"], 256e3, 0.35), \
+            explain(results)
+        assert d["tried_out"] < 1 << 20 and d["tried_in"] < 1 << 20, explain(results)
+        assert "1 MB up not tried: about" in " ".join(link["evidence"]), explain(results)
+    finally:
+        lab.reset()
+
+
+def test_at_64_kbit_the_check_ends_in_its_budget_and_says_what_it_has(ros1_lab):
+    """At 64 kbit/s (a deep buffer, as a thin mobile link has) the round's peer agent takes
+    seconds to start (its programs go over SSH): ros.link still ends within its budget with a
+    verdict that says what it measured or why not, never a bare timeout."""
+    lab = ros1_lab
+    lab.reset()
+    lab.shape_robot("64kbit", latency="2s")
+    try:
+        results = check(lab, "laptop", timeout=180)
+        link = results["ros.link"]
+        print(explain({"ros.link": link}))
+        _bounded(link, results)
+        assert link["summary"], explain(results)
+        d = link["data"]["peers"].get("turtlebot") or {}
+        if link["status"] == "pass":      # measured: the rates are about the shaping's
+            assert d["out_bps"] is None or d["out_bps"] < 128e3, explain(results)
+    finally:
+        lab.reset()
