@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import pty
@@ -245,7 +246,7 @@ def _open_wizard(user: NewUser, program: str, timeout: float = 60) -> tuple[int,
     proc = subprocess.Popen(user.argv(f"exec {program}", TERM="xterm-256color"), cwd=user.home,
                             stdin=slave, stdout=slave, stderr=slave, start_new_session=True)
     os.close(slave)
-    seen, quit_sent = b"", False
+    seen, next_quit = b"", None
     deadline = time.monotonic() + timeout
     try:
         while time.monotonic() < deadline:
@@ -257,10 +258,13 @@ def _open_wizard(user: NewUser, program: str, timeout: float = 60) -> tuple[int,
                     seen += os.read(master, 65536)
                 except OSError:
                     break
-            if not quit_sent and b"set-up" in seen:
-                time.sleep(0.5)
-                os.write(master, b"\x11")       # Ctrl+Q
-                quit_sent = True
+            # Ctrl+Q once the set-up screen is drawn, again each second until the wizard
+            # ends (the event waited on; no guess at when it reads keys): a Ctrl+Q that came
+            # too early is sent again, one that worked leaves nothing to send it to
+            if b"set-up" in seen and (next_quit is None or time.monotonic() >= next_quit):
+                with contextlib.suppress(OSError):     # the wizard may have just ended
+                    os.write(master, b"\x11")
+                next_quit = time.monotonic() + 1.0
         rc = proc.wait(timeout=max(1.0, deadline - time.monotonic()))
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)

@@ -3,6 +3,7 @@ it the way they should, and tear-down leaves nothing behind."""
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import os
@@ -10,6 +11,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -97,6 +99,66 @@ def test_a_talker_is_heard_on_the_other_side(ros1_lab, talker_host):
     finally:
         lab.kill(talker)
         lab.kill(listener)
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def test_start_roscore_returns_when_roscores_start_up_is_over(lab):
+    """The sync lab's "ros.master refused" (CI, twice): roscore resolves the master's name
+    (ROS_MASTER_URI) in calls it makes after the master first answers, and exits on a name
+    that does not resolve; the lab then rewrote the robot's /etc/hosts (emptied it first). So
+    start_roscore returns only when roscore's start-up is over: here roscore's own process is
+    held at the moment the master first answers, and start_roscore must not return until it
+    goes on (before the fix it returned at once). The hold must come before roscore launched
+    rosout (a few tries: the moment is short)."""
+    was_running = lab.master_answers()
+    lab.stop_roscore()
+    log = lab.log_path("roscore")
+    try:
+        for _ in range(5):
+            box: dict = {}
+            starter = threading.Thread(target=lambda b=box: b.update(p=lab.start_roscore()),
+                                       daemon=True)
+            with contextlib.suppress(FileNotFoundError):
+                log.unlink()
+            starter.start()
+            held = None
+            deadline = time.monotonic() + 30
+            while held is None and time.monotonic() < deadline:
+                text = log.read_text(errors="replace") if log.exists() else ""
+                if "ROS_MASTER_URI=http" in text:       # printed once the master answers
+                    held = next((p for p in lab.lab_pids() if "bin/roscore" in _cmdline(p)),
+                                None)
+                    if held is not None:
+                        os.kill(held, signal.SIGSTOP)
+                else:
+                    time.sleep(0.001)
+            assert held is not None, log.read_text(errors="replace")[-2000:]
+            try:
+                too_late = any("rosout" in _cmdline(c) for c in procs.descendants(held))
+                if not too_late:
+                    assert lab.master_answers()
+                    starter.join(1.5)
+                    assert starter.is_alive(), "start_roscore returned while roscore starts"
+            finally:
+                os.kill(held, signal.SIGCONT)
+            starter.join(40)
+            assert not starter.is_alive() and box.get("p") is not None
+            assert "/rosout" in (lab.master_nodes() or [])
+            if not too_late:
+                return
+            lab.stop_roscore()
+        pytest.fail("roscore launched rosout before it could be held, five times")
+    finally:                      # left as found (ros1_lab's tests expect it running)
+        if was_running:
+            lab.start_roscore()
+        else:
+            lab.stop_roscore()
 
 
 def test_port_checker_sees_the_forwarded_listener(healthy_lab):

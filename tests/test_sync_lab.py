@@ -348,8 +348,8 @@ def test_a_record_change_while_the_checks_wait_is_applied_at_once(rig_lab, tmp_p
         assert wait_for(lambda: hosts_entry(lab, "laptop", "turtlebot") == ADDR.ROBOT_PUBLIC,
                         WAIT), rig.log("laptop")
         st = rig.wait_status("laptop", lambda st: st["last_change"].get("checked_at"), WAIT)
-        assert st and checks_of(st) == {c: "pass" for c in AFFECTED_PASS}, (    # the baseline
-            lab.roscore_said(), st and st["last_change"])
+        assert st and checks_of(st) == {c: "pass" for c in AFFECTED_PASS}, \
+            f"{lab.roscore_said()}\n{st and st['last_change']}"    # the baseline; a str: whole
         # Nothing answers at this address: linux.ssh and ros.master wait for their timeouts.
         publish(ADDR.STALE_ROBOT_PUBLIC, 2)
         assert wait_for(lambda: hosts_entry(lab, "laptop", "turtlebot") ==
@@ -364,8 +364,8 @@ def test_a_record_change_while_the_checks_wait_is_applied_at_once(rig_lab, tmp_p
         assert took <= 0.5, (took, rig.log("laptop")[-3000:])
         st = rig.followed(ADDR.ROBOT_PUBLIC, WAIT, since=t_wall)
         assert st is not None, rig.log("laptop")[-3000:]
-        assert checks_of(st) == {c: "pass" for c in AFFECTED_PASS}, (
-            lab.roscore_said(), st["last_change"], rig.log("laptop")[-3000:])
+        assert checks_of(st) == {c: "pass" for c in AFFECTED_PASS}, \
+            f"{lab.roscore_said()}\n{st['last_change']}\n{rig.log('laptop')[-3000:]}"
         # Stopping while checks wait on a silent peer is quick and clean all the same.
         publish(ADDR.STALE_ROBOT_PUBLIC, 4)
         assert wait_for(lambda: hosts_entry(lab, "laptop", "turtlebot") ==

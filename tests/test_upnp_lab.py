@@ -208,8 +208,13 @@ def test_a_modem_without_upnp_skips_fast(lab, world):
     r = res["router.upnp"]
     assert r["status"] == "skip", explain(res)
     assert "no modem answered" in r["summary"]
+    # Fast because each protocol ended on the modem's own "closed" (ICMP port unreachable), not
+    # on a timeout: the notes say so (the event); the time is held only to the check's budget.
+    tried = " | ".join(r["data"]["tried"])
+    assert "does not listen for UPnP searches" in tried, tried
+    assert tried.count("is closed (the modem does not speak it)") == 2, tried  # NAT-PMP, PCP
     limit = 3.0 * 1.5
-    assert r["duration_s"] < 1.2 < limit, r["duration_s"]
+    assert r["duration_s"] < limit, r["duration_s"]
     print(f"router.upnp with no modem to ask: {r['duration_s']:.2f} s (budget {limit:g} s)")
     t = time.monotonic()
     p = rosnet(lab, w, "robot", "router", "map", "--yes")

@@ -27,6 +27,8 @@ from typing import Any
 from cryptography.hazmat.primitives import serialization as ser
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
+from rosnet_tui.core.files.managed_write import write_all
+
 from . import cleanup, procs, readme_install, topology
 from .topology import ADDR, COMPUTERS, HOSTNAMES, HOSTS, MODEM, PEER, SERVERS, VARIANTS
 
@@ -141,9 +143,20 @@ def wait_links_settled(namespaces: list[str], timeout: float = LINKS_SETTLE_S) -
 
 
 def _write_in_place(path: Path, text: str, mode: int | None = None) -> None:
-    """Rewrite *path* keeping its inode: /etc/hosts and resolv.conf are bind-mounted files."""
-    with open(path, "w", encoding="utf-8") as f:
-        f.write(text)
+    """Rewrite *path* keeping its inode: /etc/hosts and resolv.conf are bind-mounted files.
+
+    The new bytes go over the old ones and the file is cut after them (as rosnet-tui's own
+    in-place writer does), never emptied first: a program reading it meanwhile gets the old
+    bytes, the new ones or, for the moment of the copy, a mix; not an empty file for as long
+    as a truncating open() and a buffered write leave one (roscore, still starting, looked
+    its master's name up in an emptied /etc/hosts and exited: see start_roscore)."""
+    data = text.encode("utf-8")
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_CLOEXEC, 0o666)
+    try:
+        write_all(fd, data)
+        os.ftruncate(fd, len(data))
+    finally:
+        os.close(fd)
     if mode is not None:
         os.chmod(path, mode)
 
@@ -627,7 +640,10 @@ class Lab:
 
     # ================================================================== ROS
     def start_roscore(self, timeout: float = 30.0) -> subprocess.Popen:
-        """Start roscore on the master and wait (bounded) until it answers."""
+        """Start roscore on the master and wait (bounded) until its start-up is over: the master
+        answers and lists /rosout, which roscore launches after its own calls to the master.
+        Until then roscore looks the master's name up (ROS_MASTER_URI) and exits on a name
+        that does not resolve; the master answering alone came before those calls."""
         self._require_built()
         if self._roscore is not None and self._roscore.poll() is None:
             return self._roscore
@@ -641,7 +657,7 @@ class Lab:
         while time.monotonic() < deadline:
             if self._roscore.poll() is not None:
                 break
-            if self.master_answers():
+            if "/rosout" in (self.master_nodes() or ()):
                 return self._roscore
             time.sleep(0.1)
         tail = self.log_path("roscore").read_text(errors="replace")[-3000:]
@@ -650,20 +666,27 @@ class Lab:
 
     def master_answers(self, timeout: float = 2.0) -> bool:
         """Whether the ROS master answers getSystemState (asked on the master's computer)."""
+        return self.master_nodes(timeout) is not None
+
+    def master_nodes(self, timeout: float = 2.0) -> list[str] | None:
+        """The nodes the ROS master lists (getSystemState, asked on the master's computer), or
+        None when it does not answer."""
         local = self.local_ip(self.master)
 
-        def ask() -> bool:
+        def ask() -> list[str] | None:
             class T(xmlrpc.client.Transport):
                 def make_connection(self, host):
                     conn = super().make_connection(host)
                     conn.timeout = timeout
                     return conn
             try:
-                code, _, _ = xmlrpc.client.ServerProxy(
+                code, _, state = xmlrpc.client.ServerProxy(
                     f"http://{local}:11311/", transport=T()).getSystemState("/rnl")
-                return code == 1
             except (OSError, xmlrpc.client.Error):
-                return False
+                return None
+            if code != 1:
+                return None
+            return sorted({n for group in state for _, nodes in group for n in nodes})
         return self.call_in(self.master, ask, timeout=timeout + 5)
 
     def roscore_said(self) -> str:

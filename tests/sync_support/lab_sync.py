@@ -163,8 +163,9 @@ class SyncRig:
 def prepare_lab(lab) -> None:
     """Healthy network, roscore on the robot, and hosts files that know nothing of the peer:
     the laptop's is stock, the robot's names only itself (roslaunch gives up when its own
-    name stops resolving), as on a robot set up for a LAN."""
+    name stops resolving), as on a robot set up for a LAN. The hosts files are written before
+    roscore starts: it looks the master's name up while it starts, and exits if that fails."""
     lab.reset()
-    lab.start_roscore()
     lab.write_hosts("laptop", STOCK_HOSTS)
     lab.write_hosts("robot", STOCK_HOSTS + f"{lab.addr.ROBOT_LOCAL}\t{lab.addr.ROBOT_NAME}\n")
+    lab.start_roscore()

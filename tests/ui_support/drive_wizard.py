@@ -39,7 +39,9 @@ async def drive(config: Path, state_dir: Path) -> dict:
                 if all(r.state not in ("running", "not run") for r in rows.values()):
                     break
             out["steps"][step.id] = {cid: {"state": r.state,
-                                           "summary": r.result.summary if r.result else ""}
+                                           "summary": r.result.summary if r.result else "",
+                                           "evidence": r.result.evidence if r.result else [],
+                                           "data": r.result.data if r.result else {}}
                                      for cid, r in rows.items()}
         bar = app.screen.query_one("#step-bar")
         for step in STEPS:
