@@ -43,7 +43,7 @@ from rosnet_tui.core.results import Outcome, Status
 
 FACTOR_LINK = 6.0
 PINGS = 5                      # round trips measured
-BURST_CAP = 8 * 1024 * 1024    # bytes a burst sends at most (a fast link ends it early)
+BURST_CAP = 4 * 1024 * 1024    # bytes a burst sends at most (a steady rate ends it earlier)
 LARGE = (65536, 1 << 20)       # the large messages tried, in bytes
 TRIES = 3                      # tries of each large message (while the time left allows)
 PUBSUB = ("ros2.pubsub_out", "ros2.pubsub_in")
