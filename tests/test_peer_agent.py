@@ -22,7 +22,13 @@ import pytest
 
 from rosnet_tui.core.checks.probes import agents as probe_agents
 from rosnet_tui.core.peer import agentproto, chatproto, commands, rosproto, zenohproto
-from rosnet_tui.core.peer.peer_agent import AGENT_SOURCE, AgentKind, PeerAgents, agent_run
+from rosnet_tui.core.peer.peer_agent import (
+    AGENT_SOURCE,
+    AgentKind,
+    PeerAgents,
+    agent_run,
+    boot_payload,
+)
 from rosnet_tui.core.ssh.pool import SshPool
 from rosnet_tui.core.ssh.session import ssh_run
 from tests.builders import free_port
@@ -56,9 +62,7 @@ class Local:
         self.proc = subprocess.Popen([PY, "-S", "-c", agentproto.BOOT, str(max_s), *extra],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      stderr=subprocess.PIPE)
-        loads = b"".join(json.dumps({"load": n, "src": src.decode(), "entry": e}).encode() + b"\n"
-                         for n, src, e in programs)
-        self.send_raw(f"{len(AGENT_SOURCE)}\n".encode() + AGENT_SOURCE + loads)
+        self.send_raw(boot_payload(tuple(programs)))
         ready = self.line()
         assert ready.get(agentproto.READY) == 1, ready
         self.pid = ready["pid"]
@@ -208,13 +212,10 @@ def test_ros2_agent_on_a_peer_without_rosnet_tui_runs_on_python3_and_says_no_ins
     home = tmp_path / "home"
     home.mkdir()
     kind = probe_agents.ZENOH_AGENT
-    loads = b"".join(json.dumps({"load": p[0], "src": p[1].decode(), "entry": p[2],
-                                 **({"base": p[3]} if len(p) > 3 else {})}).encode() + b"\n"
-                     for p in kind.programs)
     runs = [{"run": "zenoh", "id": 1, "argv": ["info"]},
             {"run": "zenoh", "id": 2, "argv": ["graph", "--timeout", "1"],
              "ni": list(kind.no_install or ())}]
-    stdin = (f"{len(AGENT_SOURCE)}\n".encode() + AGENT_SOURCE + loads
+    stdin = (boot_payload(tuple(kind.programs))
              + b"".join(json.dumps(r).encode() + b"\n" for r in runs))
     proc = subprocess.Popen(["/bin/sh", "-c", kind.command(20)], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -380,3 +381,20 @@ def test_a_line_that_is_no_request_is_said_and_the_agent_goes_on(local):
     assert all(e["id"] is None and e["e"].startswith("agent: ") for e in errors), errors
     a.send({"run": "p", "id": 9, "argv": ["0", "after"]})
     assert a.until_exits(1)[9]["o"] == f"{a.pid} 0 after\n"
+
+
+def test_the_agents_start_is_compressed_for_a_thin_link(local):
+    """Issue 31 at 64 kbit/s: the ROS 2 agent's start (its source and programs, about 58 kB)
+    goes compressed, about 20 kB, so it is ready within a few seconds on such a line; a
+    "loadz" frame the agent cannot take is said, and the agent goes on."""
+    kind = probe_agents.ZENOH_AGENT
+    raw = len(AGENT_SOURCE) + sum(len(p[1]) for p in kind.programs)
+    sent = len(boot_payload(tuple(kind.programs)))
+    assert raw > 50_000 and sent < 24_000, (raw, sent)
+    a = local()                              # its program came in a loadz frame: it runs
+    a.send({"run": "p", "id": 1, "argv": []})
+    assert a.until_exits(1)[1]["x"] == 7      # PPID ends 7
+    a.send({"loadz": 0})
+    assert "a loadz frame of 0 bytes" in a.line()["e"]
+    a.send({"run": "p", "id": 2, "argv": []})
+    assert a.until_exits(1)[2]["x"] == 7

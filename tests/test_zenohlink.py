@@ -12,7 +12,15 @@ import pytest
 import zenoh
 
 from rosnet_tui.core.peer import zenohproto
-from rosnet_tui.core.peer.zenohlink import CHUNK, LinkEnd, link_text, rate_bps, whole_size
+from rosnet_tui.core.peer.zenohlink import (
+    CHUNK,
+    STEADY_N,
+    LinkEnd,
+    link_text,
+    rate_bps,
+    steady,
+    whole_size,
+)
 from tests.builders import free_port
 
 
@@ -65,6 +73,23 @@ def test_messages_are_sized_and_told_whole():
     assert rate_bps({"bytes": 9000, "n": 1, "span": 0.0}) is None and rate_bps(None) is None
 
 
+def test_a_burst_ends_when_its_rate_is_steady_and_the_later_half_gives_the_rate():
+    """ros2.link's speed: a burst on a fast link ends as soon as its acknowledgements show one
+    rate (the last half and its last quarter alike, with enough messages), not at its time."""
+    even = [i * 0.001 for i in range(101)], list(range(0, 101 * 2, 2))   # 2 per ms, steady
+    assert steady(*even)
+    growing = [i * 0.001 for i in range(101)], [2 ** (i // 10) for i in range(101)]  # doubling
+    assert not steady(*growing)
+    few = [0.0, 0.5, 1.0], [0, STEADY_N // 2, STEADY_N]       # steady, but too few to tell
+    assert not steady(*few)
+    assert not steady([1.0], [0])
+    # The later half's rate when the stats hold it (past the window's growth), else the whole.
+    stats = {"bytes": 9000, "n": 30, "span": 1.0, "first_bytes": 1000,
+             "tail_bytes": 6000, "tail_span": 0.5}
+    assert rate_bps(stats) == 96000
+    assert rate_bps({**stats, "tail_span": 0}) == 64000
+
+
 def test_a_burst_is_acknowledged_and_accounted_for_and_a_large_message_arrives_whole(ends):
     here, there = ends
     _ping(here)
@@ -90,6 +115,19 @@ def test_a_burst_is_acknowledged_and_accounted_for_and_a_large_message_arrives_w
     here.pump(time.monotonic() + 5, lambda: (1 << 20) in here.delivered
               and here.largest_in == 1 << 20)
     assert (1 << 20) in here.delivered and here.largest_in == 1 << 20
+
+
+def test_asked_for_a_burst_with_a_least_time_the_other_end_stops_once_its_rate_is_steady(ends):
+    """"b SECONDS CAP STALL LEAST": a 10 s burst with no cap in reach on loopback ends long
+    before its time, once its acknowledgements are steady; the rate is the later half's."""
+    here, there = ends
+    _ping(here)
+    t0 = time.monotonic()
+    here.put(f"b 10 {1 << 30} 0.3 0.02")
+    here.pump(t0 + 12, lambda: here.their_burst_over)
+    assert here.their_burst_over and time.monotonic() - t0 < 8, there.burst
+    got = here.received()
+    assert got["n"] > 1 and got["tail_span"] > 0 and rate_bps(got) > 1e6, got
 
 
 def test_a_burst_never_has_more_than_its_window_on_the_way(ends):

@@ -20,9 +20,11 @@ Leaving the block stops the routers and nodes and puts the ROS 1 lab back (lab.r
 
 from __future__ import annotations
 
+import contextlib
 import json
 import subprocess
 import sys
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -34,6 +36,7 @@ from .topology import ADDR, COMPUTERS
 SCRIPTS = Path(__file__).resolve().parent / "ros2_scripts"
 ZROUTER = SCRIPTS / "zrouter.py"
 NODE = SCRIPTS / "node.py"
+DELAY_RELAY = Path(__file__).resolve().parent / "delay_relay.py"
 # The ROS step's checks under ROS 2 (security.outsider: the outsider is refused, issue 22)
 ROS2_IDS = ["ros2.env", "ros2.router", "ros2.graph", "ros2.pubsub_out", "ros2.pubsub_in",
             "ros2.link", "security.outsider"]
@@ -152,6 +155,35 @@ class Ros2World:
         takes it off (healthy() does)."""
         self.lab.shape_robot(rate, latency)
         self.shaped = rate
+
+    @contextlib.contextmanager
+    def delay_to_master(self, delay_ms: float, port: int = 17447) -> Iterator[None]:
+        """The laptop's router reaches the master's through a userspace hop on the robot's modem
+        (tests/lab/delay_relay.py on its public address, *port*, to the robot's 7447) that holds
+        every chunk *delay_ms* ms each way: the lab's delay, this kernel having no netem. The
+        laptop's router is restarted on that path, and on its own after the block."""
+        from rosnet_tui.core.ros import ros2 as ros2_cfg
+
+        rule = f"INPUT -p tcp -d {ADDR.ROBOT_PUBLIC} --dport {port} -j ACCEPT"
+        self.lab._in_ns("robot_modem", f"iptables -I {rule}")
+        relay = self.lab.spawn("robot_modem", [
+            sys.executable, str(DELAY_RELAY), ADDR.ROBOT_PUBLIC, str(port),
+            ADDR.ROBOT_LOCAL, str(topology.ZENOH_PORT), f"{delay_ms:g}", "300"])
+        try:
+            if not self.lab.wait_output(relay, r"RELAY READY", timeout=10):
+                raise RuntimeError(f"the delay relay did not start: {self.lab.output(relay)}")
+            cfg = ros2_cfg.loads_json5(self.router_config_path("laptop").read_text())
+            eps = cfg["connect"]["endpoints"]
+            cfg["connect"]["endpoints"] = [e.replace(f":{topology.ZENOH_PORT}", f":{port}")
+                                           for e in eps]
+            self.write_router_config("laptop", json.dumps(cfg, indent=2))
+            self.start_router("laptop")
+            yield
+        finally:
+            self.lab.kill(relay, grace=0.5)
+            self.lab._in_ns("robot_modem", f"iptables -D {rule}", check=False)
+            self.write_router_config("laptop")
+            self.start_router("laptop")
 
     def uninstall(self, host: str) -> None:
         """Take rosnet-tui off *host* as ``pipx uninstall rosnet-tui`` would (healthy() puts it

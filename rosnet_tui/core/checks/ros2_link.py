@@ -4,10 +4,12 @@ as the robot's real topics go, with this component's certificate.
 Both ends are probe nodes speaking :mod:`rosnet_tui.core.peer.zenohlink` (rmw_zenoh's keys, CDR
 messages, attachments): ours here, the peer's run by the round's peer agent there. Per peer, in
 this order and within the check's budget: the round trip (median and spread of a few pings), the
-throughput each way (a burst both ways at once, paced by the receiver's acknowledgements), and
-the largest message delivered whole each way (64 kB, then 1 MB, each tried only when the rates
-measured say it can arrive in the time left; up to three tries when one is lost). On a thin link it reports what it measured in the
-time it had. It starts after the pub/sub checks of the round, so its bursts do not delay them.
+throughput each way (a burst one way, then the other, paced by the receiver's acknowledgements and
+ended as soon as its rate is steady), and the largest message delivered whole each way (64 kB,
+then 1 MB, each tried only when the rates measured say it can arrive in the time left; up to three
+tries when one is lost). On a thin link it reports what it measured in the time it had. The set-up
+and the pings overlap the round's pub/sub checks; the bursts and large messages wait for their
+end, so as not to delay them.
 
 The sum of the ``[[link.topic]]`` needs is compared with the throughput each way.
 """
@@ -43,19 +45,19 @@ from rosnet_tui.core.words import kb
 
 FACTOR_LINK = 6.0
 PINGS = 5                      # round trips measured
-BURST_CAP = 8 * 1024 * 1024    # bytes a burst sends at most (a fast link ends it early)
+BURST_CAP = 4 * 1024 * 1024    # bytes a burst sends at most (a steady rate ends it earlier)
 LARGE = (65536, 1 << 20)       # the large messages tried, in bytes
 TRIES = 3                      # tries of each large message (while the time left allows)
 PUBSUB = ("ros2.pubsub_out", "ros2.pubsub_in")
 
 
-def _measure(end: LinkEnd, t: float) -> dict[str, Any]:
-    """The figures of one peer's link within *t* s (blocking; the peer's side is serving)."""
+def _pings(end: LinkEnd, t: float) -> dict[str, Any]:
+    """The round trip within *t* s (blocking; the peer's side is serving): the first ping back
+    (routes exist both ways), then PINGS more. Small messages: this overlaps the pub/sub checks."""
     start = time.monotonic()
-    stop_at = start + t
     m: dict[str, Any] = {"rtts": [], "out": None, "in": None, "largest_out": 0,
                          "largest_in": 0, "tried_out": 0, "tried_in": 0, "notes": []}
-    warm_until = start + max(0.5, t * 0.3)      # the first ping back: routes exist both ways
+    warm_until = start + max(0.5, t * 0.75)
     n = 0
     while not end.pongs and time.monotonic() < warm_until:
         n += 1
@@ -65,18 +67,25 @@ def _measure(end: LinkEnd, t: float) -> dict[str, Any]:
         m["notes"].append(f"no ping came back within {warm_until - start:.1f} s")
         return m
     for i in range(PINGS):
-        if time.monotonic() > start + t * 0.4:
+        if time.monotonic() > start + t:
             break
         sent = time.monotonic()
         end.put(f"p r{i}")
-        end.pump(min(stop_at, sent + 1.0), lambda i=i: f"r{i}" in end.pongs)
+        end.pump(min(start + t, sent + 1.0), lambda i=i: f"r{i}" in end.pongs)
         if f"r{i}" in end.pongs:
             m["rtts"].append((end.pongs[f"r{i}"] - sent) * 1000.0)
+    return m
+
+
+def _bursts(end: LinkEnd, m: dict[str, Any], t: float) -> dict[str, Any]:
+    """The rate each way, then the largest message each way, within *t* s (blocking)."""
+    stop_at = time.monotonic() + t
     rtt = statistics.median(m["rtts"]) / 1000.0 if m["rtts"] else 0.3
     # One way at a time, so that neither burst's acknowledgements wait behind the other's data.
+    # Each ends as soon as its rate is steady (after its least time), or at its time or cap.
     w = max(0.3, min(2.5, (stop_at - time.monotonic()) * 0.15))
-    stall = max(0.3, 4 * rtt)
-    end.start_burst(w, BURST_CAP, stall)
+    stall, least = max(0.3, 4 * rtt), max(0.02, 10 * rtt)
+    end.start_burst(w, BURST_CAP, stall, least)
     end.pump(min(stop_at - 0.5, time.monotonic() + w * 1.5 + 4 * rtt + 0.3),
              lambda: not end.sending() and not end.in_flight())
     ask_until = min(stop_at - 0.3, time.monotonic() + max(1.0, 4 * rtt))
@@ -84,7 +93,7 @@ def _measure(end: LinkEnd, t: float) -> dict[str, Any]:
         end.put("f")
         end.pump(min(ask_until, time.monotonic() + max(0.2, 2 * rtt)),
                  lambda: end.stats is not None)
-    end.put(f"b {w:.2f} {BURST_CAP} {stall:.2f}")
+    end.put(f"b {w:.2f} {BURST_CAP} {stall:.3f} {least:.3f}")
     end.pump(min(stop_at - 0.5, time.monotonic() + w * 1.5 + 4 * rtt + 0.5),
              lambda: end.their_burst_over)
     m["out"], m["in"] = rate_bps(end.stats), rate_bps(end.received())
@@ -120,8 +129,8 @@ def _largest(end: LinkEnd, m: dict[str, Any], rtt: float, stop_at: float) -> Non
         for attempt in range(TRIES):    # more tries: one loss is not the link's verdict
             if attempt and max(go.values()) + 0.2 > stop_at - time.monotonic() - 0.3:
                 break
-            if attempt:
-                time.sleep(0.2)     # what held the last one up may pass
+            if attempt:     # what held the last one up may pass meanwhile (answering)
+                end.pump(time.monotonic() + min(0.2, max(0.05, 4 * rtt)))
             if "in" in go:
                 end.put(f"s {size}")
                 m["tried_in"] = size
@@ -143,9 +152,11 @@ def _largest(end: LinkEnd, m: dict[str, Any], rtt: float, stop_at: float) -> Non
             ways[way] = False
 
 
-async def _peer_link(ctx: CheckContext, peer: Peer, deadline: float
+async def _peer_link(ctx: CheckContext, peer: Peer, deadline: float, gate: asyncio.Future
                      ) -> tuple[Status, str, list[str], dict[str, Any]]:
-    """Measure the link to *peer*: (status, words, evidence, its data.peers entry)."""
+    """Measure the link to *peer*: (status, words, evidence, its data.peers entry). The set-up
+    and the pings go at once; the bursts and large messages wait for *gate* (the pub/sub checks'
+    end), and go only when those found messages passing."""
     empty = link_data({})
     endpoint, how = node_endpoint(ctx)
     session, why = await open_zenoh(endpoint, max(0.3, min(2.0, (deadline - time.monotonic())
@@ -177,14 +188,17 @@ async def _peer_link(ctx: CheckContext, peer: Peer, deadline: float
                                           timeout=max(0.3, (deadline - time.monotonic()) * 0.4))
             if ready is not None:
                 end = LinkEnd(rx, tx)
-                t = max(0.3, deadline - time.monotonic() - 0.4)
-                m = await run_blocking(_measure, end, t, timeout=t + 1.0)
+                t = max(0.3, deadline - time.monotonic() - 0.4) * 0.4
+                m = await run_blocking(_pings, end, t, timeout=t + 1.5)
+                await asyncio.shield(gate)
+                if m["rtts"] and not _no_path(ctx):
+                    t = max(0.3, deadline - time.monotonic() - 0.4)
+                    m = await run_blocking(_bursts, end, m, t, timeout=t + 1.0)
                 end.put("e")
             res = await sess.wait(max(0.3, deadline - time.monotonic()))
     finally:
-        for node in (rx, tx):
-            if node is not None:
-                await run_blocking(node.close, timeout=1.0)
+        await asyncio.gather(*(run_blocking(node.close, timeout=1.0)
+                               for node in (rx, tx) if node is not None))
         await close_zenoh(session)
     rep = zenohproto.parse_report(res.stdout)
     why_not = zenoh_peer_problem(res, peer, rep) if not m else None
@@ -209,7 +223,7 @@ async def _after_pubsub(ctx: CheckContext, until: float) -> None:
     """Wait (bounded) for the round's pub/sub checks to end: our bursts would delay them."""
     wanted = [c for c in PUBSUB if c in ctx.round_ids]
     while time.monotonic() < until and any(c not in ctx.results for c in wanted):
-        await asyncio.sleep(0.05)
+        await asyncio.sleep(0.01)     # (a look costs nothing: 10 ms late at most)
 
 
 def _no_path(ctx: CheckContext) -> str | None:
@@ -235,11 +249,15 @@ async def check_link(ctx: CheckContext) -> Outcome:
     if not peers:
         return Outcome(Status.SKIP, "skipped: no peer with an SSH user in the settings, so the "
                                     "other end of the link cannot be run from here", [], data)
-    await _after_pubsub(ctx, start + t * 0.4)
+    deadline = start + t - 0.4
+    gate = asyncio.ensure_future(_after_pubsub(ctx, start + t * 0.4))
+    try:
+        outcomes = await each_peer(peers, lambda p: _peer_link(ctx, p, deadline, gate))
+        await gate
+    finally:
+        gate.cancel()
     broken = _no_path(ctx)
     if broken:
         return Outcome(Status.SKIP, f"skipped: {broken} found no message passing, so there is no "
                                     "link to measure (see its advice)", [], data)
-    deadline = start + t - 0.4
-    outcomes = await each_peer(peers, lambda p: _peer_link(ctx, p, deadline))
     return link_outcome(ctx, peers, outcomes, data)

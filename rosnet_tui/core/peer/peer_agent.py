@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import itertools
 import json
+import zlib
 from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +36,21 @@ from rosnet_tui.core.ssh.options import SshOptions
 from rosnet_tui.core.ssh.session import SshSession, open_session
 
 AGENT_SOURCE = Path(agentproto.__file__).read_bytes()   # fed on stdin after BOOT reads its size
+
+
+@functools.lru_cache(maxsize=8)
+def boot_payload(programs: tuple[tuple[Any, ...], ...]) -> bytes:
+    """What the master writes on an agent's stdin at its start: the agent's source compressed
+    (after its length, as :data:`agentproto.BOOT` reads it), then the loads of *programs* (name,
+    source, entry[, base]) as one zlib frame after its ``{"loadz": LENGTH}`` line. About 20 kB
+    for ROS 2's agent instead of 58: on a 64 kbit/s line, under 3 s."""
+    agent = zlib.compress(AGENT_SOURCE, 9)
+    loads = b"".join((json.dumps({"load": p[0], "src": p[1].decode(), "entry": p[2],
+                                  **({"base": p[3]} if len(p) > 3 else {})}) + "\n").encode()
+                     for p in programs)
+    frame = zlib.compress(loads, 9)
+    return (f"{len(agent)}\n".encode() + agent
+            + (json.dumps({"loadz": len(frame)}) + "\n").encode() + frame)
 _POLL_S = 0.5     # how long one read of the agent's output waits before looking again
 
 
@@ -179,17 +196,14 @@ class PeerAgent:
 
     async def _start(self, opts: SshOptions | None, timeout: float, tcp_timeout: float | None,
                      max_s: float) -> SshResult:
-        payload = [f"{len(AGENT_SOURCE)}\n".encode(), AGENT_SOURCE]
-        payload += [(json.dumps({"load": p[0], "src": p[1].decode(), "entry": p[2],
-                                 **({"base": p[3]} if len(p) > 3 else {})}) + "\n").encode()
-                    for p in self.kind.programs]
+        payload = boot_payload(tuple(tuple(p) for p in self.kind.programs))
         for attempt in (1, 2):
             s = await open_session(opts, self.peer, self.kind.command(max_s), timeout,
                                    tcp_timeout)
             self.session = s
             if not s.ok:
                 return s.result
-            await s.write(b"".join(payload))
+            await s.write(payload)
             ready = await s.read_until(self._marker(), timeout=max(timeout, 2.0) * 2)
             if ready is not None and f'"{agentproto.READY}"' in ready:
                 self._take_lines()

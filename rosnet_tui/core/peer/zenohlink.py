@@ -6,13 +6,18 @@ those messages, so every byte measured is a real rmw_zenoh message through the r
 
 - ``p ID`` / ``q ID``: a ping and its echo (the round trip);
 - ``d SIZE SEQ ...``: a message of a burst; ``k SEQ``: the receiver has it (acknowledgements,
-  every 10 ms at most); ``b SECONDS CAP STALL``: "send me a burst"; ``z``: my burst is over (all
-  of it acknowledged or given up); ``f`` / ``r JSON``: "what did you receive" and the answer;
+  every 2 ms at most); ``b SECONDS CAP STALL [MIN]``: "send me a burst"; ``z``: my burst is over
+  (all of it acknowledged or given up); ``f`` / ``r JSON``: "what did you receive" and the answer;
 - ``L SIZE ...``: a large message (whole when its text is SIZE characters long); ``a SIZE``: it
   arrived whole; ``s SIZE``: "send me one"; ``e``: the end.
 
 A burst is paced by the acknowledgements: at most a window of data is on its way, and the window
-grows only as the other end acknowledges, to under a second of what arrived so far. A thin
+grows only as the other end acknowledges, to under a second of what arrived so far. It ends at
+its time or cap, or as soon as its rate is known: after its least time, when its last half and its
+last quarter were acknowledged at rates within 15 % of each other, with enough messages to tell
+(on a fast link a few tens of milliseconds; a thin one uses its time). What is on its way is given
+up after its stall time without an acknowledgement (shorter on a fast link). The receiver's rate is that
+of the later half of what arrived, past the window's growth, when that half holds enough. A thin
 link thus holds less than a second of our data when the burst ends, and data messages go with
 congestion control *drop*, as rmw_zenoh's default QoS does, so a full queue drops them instead of
 blocking anyone. Control messages go at a higher priority than data.
@@ -36,14 +41,18 @@ from rosnet_tui.core.peer.zenohproto import (
 
 BODY_MARK = "# ---- the program's body: what a peer's agent loads on zenohproto's names"
 # ---- the program's body: what a peer's agent loads on zenohproto's names
+import bisect  # noqa: E402
 import json  # noqa: E402
 import queue  # noqa: E402
 import time  # noqa: E402
 from typing import Any  # noqa: E402
 
 CHUNK = 4096              # bytes of text in one burst message
-ACK_EVERY_S = 0.01        # a receiver acknowledges at most this often
+ACK_EVERY_S = 0.002       # a receiver acknowledges at most this often
 QUEUED_S = 0.8            # a burst keeps at most about this much of what arrives on its way
+STEADY = 0.15             # a burst ends when its last half's and last quarter's rates differ less
+STEADY_N = 16             # ... the quarter with at least this many messages acknowledged
+TAIL_N = 16               # messages the later half of a burst needs for its rate to be used
 
 
 def link_text(kind: str, size: int, head: str = "") -> str:
@@ -69,6 +78,7 @@ class LinkEnd:
     def __init__(self, rx: ProbeNode, tx: ProbeNode) -> None:
         self.rx, self.tx = rx, tx
         self.got: dict[str, Any] = {"bytes": 0, "n": 0, "first": None, "last": None, "seq": 0}
+        self.arrivals: list[tuple[float, int]] = []   # (when, bytes so far) of each burst message
         self.pongs: dict[str, float] = {}
         self.stats: dict[str, Any] | None = None     # the other end's "r"
         self.largest_in = 0                          # the largest "L" received whole
@@ -84,11 +94,13 @@ class LinkEnd:
         data."""
         self.tx.publish(text, **({"priority": control_priority()} if control else {}))
 
-    def start_burst(self, seconds: float, cap: int, stall_s: float) -> None:
+    def start_burst(self, seconds: float, cap: int, stall_s: float, least_s: float = 0.0) -> None:
+        """Send a burst for *seconds* at most, *cap* bytes at most, ended earlier once its rate is
+        steady after *least_s* s (0: never earlier)."""
         now = time.monotonic()
         self.burst = {"until": now + seconds, "cap": cap, "seq": 0, "acked": 0,
                       "window": CHUNK, "start": now, "progress": now,
-                      "stall": max(0.2, stall_s)}
+                      "stall": max(0.2, stall_s), "least": least_s, "acks": ([now], [0])}
 
     def sending(self) -> bool:
         """A burst is still being sent (its time and cap not used up)."""
@@ -105,7 +117,7 @@ class LinkEnd:
         if b is None:
             return False
         now = time.monotonic()
-        if b["acked"] < b["seq"] and now - b["progress"] > b["stall"]:
+        if b["acked"] < b["seq"] and now - b["progress"] > self._stall(b, now):
             b["acked"], b["progress"] = b["seq"], now      # lost on the way: given up
             b["window"] = max(CHUNK, b["window"] // 2)
         if not self.sending() or (b["seq"] - b["acked"]) * CHUNK >= b["window"]:
@@ -113,6 +125,16 @@ class LinkEnd:
         b["seq"] += 1
         self.tx.publish(link_text("d", CHUNK, str(b["seq"])))
         return True
+
+    @staticmethod
+    def _stall(b: dict[str, Any], now: float) -> float:
+        """Seconds without an acknowledgement after which what is on its way is given up: the
+        burst's stall time, shorter on a fast link (20 messages' time at the rate acknowledged so
+        far, 50 ms at least), so a lost last message does not hold a fast burst's end."""
+        if not b["acked"]:
+            return b["stall"]
+        per_msg = (now - b["start"]) / b["acked"]
+        return max(0.05, min(b["stall"], 20 * per_msg))
 
     def _acked(self, seq: int) -> None:
         b = self.burst
@@ -123,6 +145,11 @@ class LinkEnd:
         rate = seq * CHUNK / max(1e-3, now - b["start"])       # what arrived so far, per second
         b["window"] = int(max(CHUNK, min(grown, rate * QUEUED_S)))
         b["acked"], b["progress"] = seq, now
+        times, seqs = b["acks"]
+        times.append(now)
+        seqs.append(seq)
+        if b["least"] and now - b["start"] >= b["least"] and steady(times, seqs):
+            b["until"] = now        # the rate is known: the burst ends here
 
     def handle(self, payload: bytes, at: float) -> None:
         text = decode_string(payload) or ""
@@ -136,6 +163,7 @@ class LinkEnd:
                 g["first"] = g["first"] or at
                 g["last"] = at
                 g["seq"] = max(g["seq"], int(f[1]))
+                self.arrivals.append((at, g["bytes"]))
                 self.ack_due = True
             elif kind == "k":
                 self._acked(int(f[0]))
@@ -151,7 +179,9 @@ class LinkEnd:
             elif kind == "s":
                 self.put(link_text("L", int(f[0])), control=False)
             elif kind == "b":
-                self.start_burst(float(f[0]), int(f[1]), float(f[2]))
+                b = rest.split()
+                self.start_burst(float(b[0]), int(b[1]), float(b[2]),
+                                 float(b[3]) if len(b) > 3 else 0.0)
             elif kind == "f":
                 self.put("r " + json.dumps(self.received()))
             elif kind == "r":      # the other end's stats: a flat object of numbers, or none
@@ -171,8 +201,15 @@ class LinkEnd:
         to the last, the largest whole message."""
         g = self.got
         span = (g["last"] - g["first"]) if g["n"] > 1 else 0.0
-        return {"bytes": g["bytes"], "n": g["n"], "span": span,
-                "first_bytes": g["bytes"] // max(1, g["n"]), "largest": self.largest_in}
+        out = {"bytes": g["bytes"], "n": g["n"], "span": span,
+               "first_bytes": g["bytes"] // max(1, g["n"]), "largest": self.largest_in}
+        if span > 0:        # the later half: what arrived once the window had grown
+            times = [a[0] for a in self.arrivals]
+            i = bisect.bisect_left(times, g["first"] + span / 2)
+            if len(times) - i > TAIL_N and i > 0:
+                out["tail_bytes"] = g["bytes"] - self.arrivals[i - 1][1]
+                out["tail_span"] = g["last"] - self.arrivals[i - 1][0]
+        return out
 
     def pump(self, until: float, done: Any = None) -> None:
         """Answer and send until *until* (monotonic), the other end says ``e``, or *done()*."""
@@ -194,10 +231,30 @@ class LinkEnd:
             self.handle(payload, at)
 
 
+def steady(times: list[float], seqs: list[int]) -> bool:
+    """Whether acknowledgements (*times*, *seqs*: ascending) show a steady rate: over the last
+    half of the time since the first and over its last quarter, each with STEADY_N messages or
+    more, at rates within STEADY of each other."""
+    start, now = times[0], times[-1]
+    q = (now - start) / 4
+    if q <= 0:
+        return False
+
+    def seq_at(t: float) -> int:
+        return seqs[max(0, bisect.bisect_right(times, t) - 1)]
+
+    half = (seqs[-1] - seq_at(now - 2 * q)) / 2      # per quarter, over the last half
+    last = seqs[-1] - seq_at(now - q)
+    return last >= STEADY_N and abs(half - last) <= STEADY * max(half, last)
+
+
 def rate_bps(stats: dict[str, Any] | None) -> float | None:
-    """Bits per second a receiver's stats show (None: fewer than two messages arrived)."""
+    """Bits per second a receiver's stats show (None: fewer than two messages arrived): those of
+    the later half of the burst when the stats hold it, else from the first message to the last."""
     if not stats or stats.get("n", 0) < 2 or stats.get("span", 0) <= 0:
         return None
+    if stats.get("tail_span", 0) > 0 and stats.get("tail_bytes", 0) > 0:
+        return stats["tail_bytes"] * 8.0 / stats["tail_span"]
     return (stats["bytes"] - stats.get("first_bytes", 0)) * 8.0 / stats["span"]
 
 
