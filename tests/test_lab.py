@@ -290,9 +290,7 @@ def _leftovers(prefix: str) -> list[str]:
 
 
 def test_teardown_leaves_no_namespace_file_or_process(lab_session):
-    t0 = time.monotonic()
     other = Lab().build()
-    build_s = time.monotonic() - t0
     prefix = other.prefix
     try:
         other.start_roscore()
@@ -305,7 +303,6 @@ def test_teardown_leaves_no_namespace_file_or_process(lab_session):
         assert _leftovers(prefix)
     finally:
         other.destroy()
-    assert build_s < 5.0  # typically 0.3 s; generous for a loaded CI machine
     assert _leftovers(prefix) == []
     assert procs.pids_in_netns(inodes) == []
     assert [p for p in pids if procs.alive(p)] == []
