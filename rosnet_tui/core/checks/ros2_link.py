@@ -25,7 +25,13 @@ from typing import Any
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_session
 from rosnet_tui.core.checks.probes.budget import budget
-from rosnet_tui.core.checks.probes.link import figures_line, link_data, link_outcome, need_of
+from rosnet_tui.core.checks.probes.link import (
+    figures_line,
+    large_wait,
+    link_data,
+    link_outcome,
+    need_of,
+)
 from rosnet_tui.core.checks.probes.peers import each_peer
 from rosnet_tui.core.checks.probes.ros2 import (
     close_zenoh,
@@ -41,7 +47,6 @@ from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import zenohproto
 from rosnet_tui.core.peer.zenohlink import CHUNK, LinkEnd, link_text, rate_bps
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.words import kb
 
 FACTOR_LINK = 6.0
 PINGS = 5                      # round trips measured
@@ -112,18 +117,13 @@ def _largest(end: LinkEnd, m: dict[str, Any], rtt: float, stop_at: float) -> Non
         left = stop_at - time.monotonic() - 0.3
         go: dict[str, float] = {}
         for way in ways:
-            rate = m[way]
             if not ways[way]:
                 continue
-            need = size * 8 / rate * 1.5 + 2 * rtt + 0.2 if rate else None
-            if need is not None and need < left:
+            need = large_wait(m, way, size, rtt, left)
+            if need is not None:
                 go[way] = need
             else:
                 ways[way] = False
-                m["notes"].append(f"{kb(size)} {'up' if way == 'out' else 'down'} not tried: "
-                                  + (f"about {size * 8 / rate:.0f} s at the rate measured, "
-                                     f"{max(0.0, left):.1f} s were left" if rate else
-                                     "no rate measured"))
         if not go:
             return
         for attempt in range(TRIES):    # more tries: one loss is not the link's verdict

@@ -33,6 +33,7 @@ from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.link import (
     PeerLink,
     figures_line,
+    large_wait,
     link_data,
     link_outcome,
     need_of,
@@ -44,7 +45,6 @@ from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import rosproto
 from rosnet_tui.core.peer.roslink import LinkEnd, LinkNode, link_frame, rate_bps
 from rosnet_tui.core.results import Outcome, Status
-from rosnet_tui.core.words import kb
 
 FACTOR_LINK = 6.0
 PINGS = 5                      # round trips measured
@@ -121,17 +121,11 @@ def _largest(end: LinkEnd, m: dict[str, Any], rtt: float, stop_at: float) -> Non
         left = stop_at - time.monotonic() - 0.3
         go: dict[str, float] = {}
         for way in ("out", "in"):
-            rate = m[way]
             if size > 65536 and m[f"largest_{way}"] < 65536:
                 continue        # the smaller one did not arrive: the larger will not either
-            need = size * 8 / rate * 1.5 + 2 * rtt + 0.2 if rate else None
-            if need is not None and need < left:
+            need = large_wait(m, way, size, rtt, left)
+            if need is not None:
                 go[way] = need
-            else:
-                m["notes"].append(f"{kb(size)} {'up' if way == 'out' else 'down'} not tried: "
-                                  + (f"about {size * 8 / rate:.0f} s at the rate measured, "
-                                     f"{max(0.0, left):.1f} s were left" if rate else
-                                     "no rate measured"))
         if not go:
             return
         if "in" in go:

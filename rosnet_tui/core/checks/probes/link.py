@@ -41,6 +41,20 @@ def figures_line(name: str, d: dict[str, Any]) -> str:
             f"(tried {kb(d['tried_in'])})")
 
 
+def large_wait(m: dict[str, Any], way: str, size: int, rtt: float, left: float) -> float | None:
+    """How long a *size*-byte message takes *way* ("out", "in") at the rate measured in *m*, with
+    room for the round trip, when that fits in the *left* seconds; else None, with a note in *m*
+    saying why it is not tried."""
+    rate = m[way]
+    need = size * 8 / rate * 1.5 + 2 * rtt + 0.2 if rate else None
+    if need is not None and need < left:
+        return need
+    m["notes"].append(f"{kb(size)} {'up' if way == 'out' else 'down'} not tried: "
+                      + (f"about {size * 8 / rate:.0f} s at the rate measured, "
+                         f"{max(0.0, left):.1f} s were left" if rate else "no rate measured"))
+    return None
+
+
 def need_of(ctx: CheckContext) -> float:
     """Bits per second the ``[[link.topic]]`` tables need each way: at ``max_hz`` under ROS 2
     (the router cuts the topic down to it), at ``hz`` under ROS 1 (nothing cuts it down)."""
