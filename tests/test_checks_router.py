@@ -376,3 +376,23 @@ async def test_a_port_the_verdict_does_not_need_is_not_waited_for():
         assert took < 5.0, f"the probe took {took:.2f} s"
         got, took = await asyncio.to_thread(run_probe, {dropped: "accept"}, 1.0)
     assert got[dropped][0] == "timeout" and took >= 1.0     # a needed port gets its whole time
+
+
+# --------------------------------------------------------------------------- ros2.router
+async def test_a_master_whose_router_is_down_is_told_so_while_our_stand_in_holds_its_port(
+        tmp_path):
+    """router.port_open holds a stand-in listener on the Zenoh port while the router is down (to
+    test the forward): ros2.router, in the same round, took that listener for the router and the
+    advice for a stopped router never came (seen on the lab's fresh master)."""
+    from tests.builders import ros2_master
+
+    zport = free_port()
+    s = ros2_master(zenoh_port=zport, security="none")
+    s.ros.master = "localhost"                  # no name lookup leaves this machine
+    ctx = CheckContext(settings=s, timeout_s=2.0, paths=Paths(state_dir=tmp_path / "state"),
+                       upnp=False, ssh_options=SshOptions(ssh_agent=False))
+    async with ctx.listeners.hold(zport):
+        r = await run("ros2.router", ctx)
+    assert r.data["listen_problem"] == "not_running", (r.summary, r.evidence)
+    assert r.data["listening"] == [], r.evidence
+    assert r.status is Status.FAIL, r.summary

@@ -287,8 +287,12 @@ async def check_router(ctx: CheckContext) -> Outcome:
     if not hub_here and how == "router":
         local_task = asyncio.ensure_future(open_zenoh(node_ep, max(0.2, t * 0.3)))
     if hub_here:
-        data["listening"] = lst = await run_blocking(_listening, port, timeout=1.0)
-        ev.append(f"TCP {port} listened on here: {', '.join(lst) or 'nothing'}")
+        if ctx.listeners.rosnet_listens(port):   # router.port_open's stand-in: no router
+            data["listening"] = lst = []
+            ev.append(f"TCP {port} is held by rosnet-tui's own test listener (no router there)")
+        else:
+            data["listening"] = lst = await run_blocking(_listening, port, timeout=1.0)
+            ev.append(f"TCP {port} listened on here: {', '.join(lst) or 'nothing'}")
         # Known before the name is looked up: a name missing from /etc/hosts must not hide it.
         problem = None
         if not lst:
