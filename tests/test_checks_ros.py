@@ -8,7 +8,6 @@ from rosproto's source piped into ``python3 -`` exactly as on a real peer.
 from __future__ import annotations
 
 import getpass
-import os
 import socket
 import time
 from pathlib import Path
@@ -23,21 +22,15 @@ from rosnet_tui.core.results import Status
 from rosnet_tui.core.ssh.options import SshOptions
 from tests.builders import free_port
 from tests.plugins.roscore import RosCore
-from tests.plugins.ssh import Client, Sshd
+from tests.plugins.ssh import Client, ros_sshd
 
 ROS_IDS = ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubsub_in"]
 
 
 @pytest.fixture(scope="module")
 def sshd(tmp_path_factory: pytest.TempPathFactory):
-    """The ssh plugin's loopback sshd (its ``ssh_client`` gets in), sessions with
-    ROS_IP=127.0.0.1 so the peer-side probe advertises loopback only."""
-    if os.geteuid() != 0:
-        pytest.skip("the loopback sshd needs root (privilege separation)")
-    d = Sshd(tmp_path_factory.mktemp("sshd"), extra_config="SetEnv ROS_IP=127.0.0.1\n")
-    d.start()
-    yield d
-    d.stop()
+    """The ssh plugin's loopback sshd with ROS_IP=127.0.0.1 in its sessions."""
+    yield from ros_sshd(tmp_path_factory)
 
 
 def make_ctx(tmp_path: Path, settings: Settings, *, env: dict[str, str] | None = None,

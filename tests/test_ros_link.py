@@ -13,6 +13,8 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
+
 from rosnet_tui.core.checks import REGISTRY, CheckContext, checks_for, run_check
 from rosnet_tui.core.checks.probes.agents import ROSLINK_SOURCE, ROSPROTO_SOURCE
 from rosnet_tui.core.config.settings_model import LinkTopic, RosSettings
@@ -20,9 +22,16 @@ from rosnet_tui.core.peer import rosproto
 from rosnet_tui.core.peer.roslink import LinkEnd, LinkNode, link_frame, rate_bps
 from rosnet_tui.core.results import Status
 from tests.plugins.roscore import RosCore
-from tests.test_checks_ros import loopback_env, loopback_settings, make_ctx, sshd  # noqa: F401
+from tests.plugins.ssh import ros_sshd
+from tests.test_checks_ros import loopback_env, loopback_settings, make_ctx
 
 ENV = {"ROS_IP": "127.0.0.1"}
+
+
+@pytest.fixture(scope="module")
+def sshd(tmp_path_factory: pytest.TempPathFactory):
+    """The ssh plugin's loopback sshd with ROS_IP=127.0.0.1 in its sessions."""
+    yield from ros_sshd(tmp_path_factory)
 
 
 def _pair(core: RosCore) -> tuple[LinkNode, LinkNode, str]:

@@ -14,6 +14,7 @@ import shutil
 import socket
 import subprocess
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -132,6 +133,18 @@ class Client:
     def trust(self) -> None:
         (self.dir / "known_hosts").write_text(
             f"{host_key_name('localhost', self.sshd.port)} {self.sshd.host_pub.rsplit(' ', 1)[0]}\n")
+
+
+def ros_sshd(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Sshd]:
+    """The body of a module's own ``sshd`` fixture for ROS 1 probes on loopback: sessions with
+    ROS_IP=127.0.0.1, so a peer-side probe advertises loopback only (``ssh_client`` then logs in
+    there)."""
+    if os.geteuid() != 0:
+        pytest.skip("the loopback sshd needs root (privilege separation)")
+    d = Sshd(tmp_path_factory.mktemp("sshd"), extra_config="SetEnv ROS_IP=127.0.0.1\n")
+    d.start()
+    yield d
+    d.stop()
 
 
 @pytest.fixture(scope="module")

@@ -22,7 +22,9 @@ def _cid(ev: Evidence) -> str:
 
 
 def _peers(ev: Evidence) -> dict:
-    return ev.data(_cid(ev)).get("peers") or {}
+    if ev.s.ros2:
+        return ev.data("ros2.link").get("peers") or {}
+    return ev.data("ros.link").get("peers") or {}
 
 
 def _dropped(ev: Evidence) -> list[tuple[str, str, str, int, int]]:
