@@ -59,3 +59,24 @@ def test_public_ip_differs_from_settings():
     f = only(run(differs()[0]), "isp.public_ip.differs")
     assert "198.51.100.9" in f.meaning and "198.51.100.2" in f.meaning
     assert 'public_ip = "198.51.100.9"' in text(f)
+
+
+def test_under_a_relay_a_moved_address_is_only_news_for_ssh():
+    """Under a relay the ROS path never uses this component's address: with its own tunnel the
+    moved address asks nothing; without one the finding says only SSH to it needs the new one."""
+    from rosnet_tui.core.config.settings_model import RelaySettings
+
+    for case in (changed, differs):
+        r, s = case()
+        s.ros.version, s.ros.security = 2, "mtls"
+        s.relay = RelaySettings(host="relay", tunnels={"sami": 2202})
+        assert not [i for i in ids(run(r, s)) if i.startswith("isp.public_ip")], case
+        s.relay.tunnels = {"turtlebot": 2201}
+        f = only(run(r, s), f"isp.public_ip.{case.__name__}")
+        assert "the ROS path goes through the relay relay" in f.meaning, f.meaning
+        assert "SSH" in f.meaning
+    r, s = public_unknown()
+    s.ros.version, s.ros.security = 2, "mtls"
+    s.relay = RelaySettings(host="relay", tunnels={"sami": 2202})
+    t = text(only(run(r, s), "isp.public_ip.unknown"))
+    assert "its public address does not matter" in t and "no peer can be given" not in t

@@ -84,6 +84,34 @@ async def test_public_ip_agrees_records_history_and_notices_a_change(web, tmp_pa
     assert [h["ip"] for h in history] == ["203.0.113.9", "203.0.113.77"]
 
 
+async def test_under_a_relay_a_moved_address_does_not_send_peers_to_their_hosts_files(
+        web, tmp_path):
+    """Under a relay (ROS 2) the peers reach this component through the relay: the summary
+    said to update the peers' hosts files when the address moved. With its own tunnel nothing
+    uses the address (a pass that says so); without one only the peers' SSH does (a warning
+    that says that much). The data fields stay as they are."""
+    from rosnet_tui.core.config.settings_model import RelaySettings, RosSettings
+
+    web.routes["/a"] = (200, "203.0.113.9")
+    ctx = make_ctx(tmp_path, [web.url("/a")], public_ip="203.0.113.9")
+    ctx.settings.ros = RosSettings(version=2, master="turtlebot", security="mtls")
+    ctx.settings.relay = RelaySettings(host="relay", tunnels={"turtlebot": 2201})
+    assert (await run("isp.public_ip", ctx)).status is Status.PASS
+    web.routes["/a"] = (200, "203.0.113.77")                    # the carrier moved it
+    r = await run("isp.public_ip", ctx)
+    assert r.status is Status.PASS, r.summary
+    assert "hosts" not in r.summary and "through the relay relay" in r.summary, r.summary
+    assert "was 203.0.113.9" in r.summary and "does not matter" in r.summary
+    assert r.data["changed"] and r.data["matches_settings"] is False
+    assert r.data["previous_ip"] == "203.0.113.9" and r.data["public_ip"] == "203.0.113.77"
+    ctx.settings.relay.tunnels = {}                  # no tunnel: the peers SSH to this address
+    web.routes["/a"] = (200, "203.0.113.78")
+    r = await run("isp.public_ip", ctx)
+    assert r.status is Status.WARN and r.data["changed"], r.summary
+    assert "the ROS path goes through the relay relay and does not use it" in r.summary
+    assert "SSH" in r.summary
+
+
 async def test_public_ip_sources_that_disagree_fail(web, tmp_path):
     web.routes["/a"] = (200, "203.0.113.9")
     web.routes["/b"] = (200, "198.51.100.4")

@@ -471,3 +471,44 @@ def test_ros_apply_takes_out_the_relay_block_once_the_relay_is_gone(box):
     undone = run(box, "undo", "--yes")
     assert undone.returncode == 0, undone.stdout + undone.stderr
     assert b"Host sami" in cfg.read_bytes() and cfg.read_bytes().endswith(mine)
+
+
+def test_ros1_apply_takes_out_a_stale_relay_block_too(box, monkeypatch):
+    """A machine moved from ROS 2 with a relay to ROS 1 (which refuses [relay]): ROS 1's `ros
+    apply` wrote its ~/.bashrc block and left the ~/.ssh/config block, so `ssh sami` kept
+    jumping through a relay the network no longer uses. Now it is taken out as ROS 2's apply
+    does: previewed, the user's lines kept byte for byte, one undo with the .bashrc block."""
+    from rosnet_tui.core.config.settings_model import RelaySettings
+    from rosnet_tui.core.saved.settings import render_settings
+
+    mine = b"Host *\r\n    ServerAliveInterval 30\nIdentityFile ~/.ssh/other\n"
+    cfg = box.home / ".ssh" / "config"
+    cfg.parent.mkdir(mode=0o700)
+    cfg.write_bytes(mine)
+    s = ros2_master(security="mtls")
+    s.relay = RelaySettings(host="relay", ssh_user="jump", tunnels={"sami": 2202})
+    box.cfg.write_text(render_settings(s))
+    assert run(box, "ros", "apply", "--yes", "--no-checks").returncode == 0
+    relayed = cfg.read_bytes()
+    assert relayed.startswith(b"# BEGIN rosnet-tui") and relayed.endswith(mine)
+    box.cfg.write_text(ROBOT_CONFIG)                      # ROS 1 now, no [relay]
+    # The wizard's ROS step writes the same: the block goes with its .bashrc write.
+    from rosnet_tui.core.config.paths import Paths
+    from rosnet_tui.core.wizard.write_plans import write_plan
+
+    monkeypatch.setenv("HOME", str(box.home))
+    plan = write_plan("ros", load_settings(box.cfg), Paths(state_dir=box.state,
+                                                           bashrc_path=box.bashrc))
+    assert [(p.path, p.new) for p in plan.companions(False)] == [(cfg, mine)]
+    dry = run(box, "ros", "apply", "--dry-run")
+    assert dry.returncode == 0, dry.stdout + dry.stderr
+    assert "-Host sami" in dry.stdout and "-    ProxyJump jump@relay" in dry.stdout, dry.stdout
+    assert cfg.read_bytes() == relayed                       # a dry run writes nothing
+    done = run(box, "ros", "apply", "--yes", "--no-checks")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert cfg.read_bytes() == mine and b"ROS_MASTER_URI" in box.bashrc.read_bytes()
+    again = run(box, "ros", "apply", "--dry-run")
+    assert "Host sami" not in again.stdout
+    undone = run(box, "undo", "--yes")
+    assert undone.returncode == 0, undone.stdout + undone.stderr
+    assert cfg.read_bytes() == relayed and b"ROS_MASTER_URI" not in box.bashrc.read_bytes()

@@ -19,7 +19,7 @@ import pytest
 
 from rosnet_tui.core.config import paths as config_paths
 from rosnet_tui.core.peer import relayproto
-from rosnet_tui.core.ros import fleet_tls, pairing, relay
+from rosnet_tui.core.ros import fleet_tls, pairing, relay, relay_apply
 from rosnet_tui.core.saved.settings import load_settings
 from tests.builders import free_port
 from tests.lab import readme_install
@@ -190,6 +190,98 @@ def test_relay_apply_sets_the_relay_up_and_undo_puts_its_files_back(clean_relay,
     assert "on the relay relay" in undo.stdout
     assert not files["config"].exists() and not unit.exists()
     assert files["key"].read_bytes() == key     # the key and certificate stay, as ros apply's
+
+
+# systemd does not run here: the relay's sshd gets /run/systemd/system (what relayproto looks
+# for) in a mount namespace of its own, and a stand-in `systemctl` first on its PATH that speaks
+# systemctl's interface as far as `relay apply` uses it (its arguments; exit 0, or the status
+# and message of a failed unit) and records each call.
+STANDIN = """#!/bin/sh
+printf '%s\\n' "$*" >> "$(dirname "$0")/calls"
+if [ -e "$(dirname "$0")/fail" ]; then echo "Failed to enable unit: Access denied" >&2; exit 1; fi
+exit 0
+"""
+SYSTEMD_NS = ("unshare", "-m", "sh", "-c", "mount -t tmpfs -o mode=755 none /run/systemd && "
+              'mkdir /run/systemd/system && exec "$@"', "sh")
+
+
+@pytest.fixture(scope="module")
+def systemd_relay(tmp_path_factory):
+    root = tmp_path_factory.mktemp("systemd_relay")
+    home, bin_dir = root / "home", root / "bin"
+    home.mkdir()
+    bin_dir.mkdir()
+    (bin_dir / "systemctl").write_text(STANDIN)
+    (bin_dir / "systemctl").chmod(0o755)
+    readme_install.install(home)
+    d = Sshd(root / "sshd", wrap=SYSTEMD_NS,
+             extra_config=f"SetEnv HOME={home} PATH={bin_dir}:{SSH_SESSION_PATH}\n")
+    d.home, d.bin = home, bin_dir
+    d.start()
+    yield d
+    d.stop()
+
+
+def test_a_yes_enables_and_starts_the_unit_on_the_relay(systemd_relay, tmp_path):
+    """`relay apply` printed the systemctl line for the user to run on the relay after a yes
+    to setting it up; now that yes runs it there over SSH (root here), and --dry-run, or a
+    rerun without --yes, still only says it."""
+    m = Master(tmp_path, systemd_relay)
+    calls = systemd_relay.bin / "calls"
+    unit = m.unit_dir / "rosnet-tui-relay.service"      # outside systemd's folder: by its path
+    started = [["daemon-reload"], ["enable", str(unit)], ["start", "rosnet-tui-relay.service"]]
+
+    def seen() -> list[list[str]]:
+        return [x.split() for x in calls.read_text().splitlines()] if calls.exists() else []
+
+    dry = m.apply("--dry-run")
+    assert dry.returncode == 0, dry.stdout + dry.stderr
+    line = f"systemctl daemon-reload && systemctl enable {unit} && systemctl start "
+    assert f"the apply runs: {line}" in dry.stdout, dry.stdout
+    assert seen() == []
+    out = m.apply("--yes")
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert seen() == started, out.stdout
+    assert "its router runs as rosnet-tui-relay.service" in out.stdout
+    calls.unlink()
+    idle = m.apply()            # nothing to change and no yes: the line is said, not run
+    assert idle.returncode == 0 and seen() == [], idle.stdout + idle.stderr
+    assert f"on the relay: {line}" in idle.stdout
+    again = m.apply("--yes")    # nothing changed: started (a running unit stays as it is)
+    assert again.returncode == 0 and seen() == started, again.stdout + again.stderr
+    calls.unlink()
+    relay_files(systemd_relay.home)["config"].write_text("// changed by hand\n")
+    fixed = m.apply("--yes")    # the running router must read its config again
+    assert fixed.returncode == 0, fixed.stdout + fixed.stderr
+    assert seen() == [*started[:2], ["restart", "rosnet-tui-relay.service"]]
+    calls.unlink()
+    (systemd_relay.bin / "fail").touch()
+    try:
+        bad = m.apply("--yes")
+    finally:
+        (systemd_relay.bin / "fail").unlink()
+    assert bad.returncode == 1 and "Traceback" not in bad.stderr
+    assert "systemctl failed (exit status 1: Failed to enable unit: Access denied)" in bad.stderr
+    assert f"run on the relay: {line}" in bad.stderr, bad.stderr
+
+
+def test_the_systemctl_line_names_the_unit_as_systemd_knows_it():
+    """In systemd's own folder the unit is enabled and started by name (restarted when the
+    apply changed what it reads); a login that is not root is told to use sudo."""
+    look = relay_apply.RelayLook("c", "r", "ca", "k", "crt", "py", "", "root", True, True, {}, {})
+    plan = relay_apply.RelayPlan("relay", look, None)
+    start_line = relay_apply.start_line
+    unit = relay_apply.UNIT_DIR / relay_apply.UNIT_NAME
+    assert start_line(plan, unit) == ("systemctl daemon-reload && systemctl enable --now "
+                                      "rosnet-tui-relay.service")
+    plan.cert_why = "it has none yet"               # a first set-up: nothing runs yet
+    assert start_line(plan, unit).endswith("systemctl enable --now rosnet-tui-relay.service")
+    plan.files = [relay_apply.RemoteFile(str(unit), "[Unit]\n", "[Unit]\n")]   # a renewal
+    assert start_line(plan, unit) == ("systemctl daemon-reload && systemctl enable "
+                                      "rosnet-tui-relay.service && systemctl restart "
+                                      "rosnet-tui-relay.service")
+    plan.look = relay_apply.RelayLook("c", "r", "ca", "k", "crt", "py", "", "ops", True, True, {}, {})
+    assert start_line(plan, unit).startswith("sudo systemctl daemon-reload && sudo systemctl")
 
 
 def test_a_config_changed_on_the_relay_is_previewed_as_a_diff_and_undo_puts_it_back(

@@ -39,8 +39,9 @@ from rosnet_tui.core.ssh.client_config import preview_ssh_config
 from rosnet_tui.core.ssh.options import SshOptions, relay_route
 from rosnet_tui.core.ssh.pool import SshPool
 from rosnet_tui.core.ssh.session import ssh_run
+from rosnet_tui.core.ssh.sshd_keys import own_host_keys
 from rosnet_tui.core.ssh.tunnel import TunnelKeeper, tunnel_argv
-from rosnet_tui.core.ssh.tunnel_probe import own_host_keys, probe_tunnel
+from rosnet_tui.core.ssh.tunnel_probe import probe_tunnel
 from tests.builders import free_port
 from tests.plugins.ssh import SSHD, Sshd, keygen
 
@@ -271,7 +272,7 @@ async def test_the_tunnel_probe_sees_this_machine_s_key_through_the_relay(fleet,
     folder.mkdir()
     (folder / "ssh_host_ed25519_key.pub").write_text(fleet.robot.host_pub + "\n")
     (folder / "ssh_host_rsa_key.pub").write_text("garbage\n")
-    assert own_host_keys(folder) == own
+    assert set(own_host_keys(folder).keys) == own
 
 
 async def test_the_tunnel_probe_gives_bad_news_within_its_timeout(fleet):
@@ -317,6 +318,24 @@ async def test_relay_tunnel_passes_when_the_port_leads_here(fleet, tmp_path):
     elsewhere.settings.this.name = "sami"                 # no tunnel for this component
     skipped = await run_check(REGISTRY["relay.tunnel"], elsewhere)
     assert skipped.status == Status.SKIP
+
+
+async def test_relay_tunnel_knows_an_sshd_that_keeps_its_keys_elsewhere(fleet, tmp_path):
+    """The robot's sshd keeps its host key outside /etc/ssh (a HostKey line in its sshd_config,
+    as every sshd of tests/plugins/ssh.py): relay.tunnel read only ssh_host_*_key.pub in the
+    folder and warned that it could not tell whose sshd answers, though the tunnel was fine. It
+    now takes the keys sshd takes, and its evidence names the files it compared."""
+    load_builtin_checks()
+    ctx = tunnel_ctx(fleet, tmp_path, fleet.robot.host_pub)
+    ctx.paths = replace(ctx.paths, sshd_dir=fleet.robot.root)      # its sshd_config is there
+    res = await run_check(REGISTRY["relay.tunnel"], ctx)
+    assert res.status == Status.PASS, (res.summary, res.evidence)
+    said = " ".join(res.evidence)
+    assert f"{fleet.robot.host_key}.pub ({fleet.robot.fingerprint})" in said, said
+    assert ("`sshd -T" if os.geteuid() == 0 else "HostKey lines") in said, said
+    # Without sshd -T (not root): the same key from the HostKey line itself.
+    read = own_host_keys(fleet.robot.root, ask_sshd=False)
+    assert set(read.keys) == {key_blob(fleet.robot.host_pub)} and "HostKey lines" in read.source
 
 
 async def test_relay_tunnel_bad_news_within_the_timeout(fleet, tmp_path):

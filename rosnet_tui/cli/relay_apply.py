@@ -36,7 +36,9 @@ def register(cmds: argparse._SubParsersAction) -> None:
                     "known_hosts): the relay makes its own TLS key (it never leaves the relay), "
                     "the fleet CA here signs its certificate for the relay's name, and the "
                     "relay's router config and a systemd unit running `rosnet-tui relay serve` "
-                    "are written there. Shows everything first. `rosnet-tui undo` puts the "
+                    "are written there, and where systemd runs the unit is enabled and "
+                    "(re)started (systemctl, as root or through sudo; otherwise the command "
+                    "is shown). Shows everything first. `rosnet-tui undo` puts the "
                     "config and unit back (not the key and certificate).")
     add_config_option(p)
     p.add_argument("--yes", "-y", action="store_true", help="do it without asking")
@@ -96,8 +98,9 @@ def run_apply(args: argparse.Namespace) -> int:
         say(f"rosnet-tui relay apply: --unit-dir must be an absolute path on the relay, not "
             f"{unit_dir}")
         return EXIT_USAGE
+    unit = unit_dir / ra.UNIT_NAME
     try:
-        plan = asyncio.run(ra.plan(settings, tls, None, unit_dir / ra.UNIT_NAME, unit_text))
+        plan = asyncio.run(ra.plan(settings, tls, None, unit, unit_text))
     except ra.RelayApplyError as exc:
         say(f"rosnet-tui: {exc}")
         return EXIT_FAIL
@@ -116,6 +119,8 @@ def run_apply(args: argparse.Namespace) -> int:
         _show(f)
     if args.dry_run:
         print("Dry run: nothing was done on the relay.")
+        if plan.look.systemd:
+            print(f"Then, on the relay, the apply runs: {ra.start_line(plan, unit)}")
         return EXIT_OK
     if plan.changed:
         stop = confirm(args, f"Set the relay {host} up like this?",
@@ -136,10 +141,20 @@ def run_apply(args: argparse.Namespace) -> int:
             print(f"Undo (the config and unit, not the key) with: {command_line(args, 'undo')}")
     else:
         print("The relay is already set up: nothing to change.")
-    if plan.look.systemd:
-        print(f"Then on the relay: systemctl daemon-reload && systemctl enable --now "
-              f"{ra.UNIT_NAME}")
-    else:
+    if not plan.look.systemd:
         print("No systemd runs on the relay: start its router there with "
               "`rosnet-tui relay serve`.")
-    return EXIT_OK
+        return EXIT_OK
+    if not (plan.changed or args.yes):    # nobody said yes to this apply: only say it
+        print(f"To run the relay's router, on the relay: {ra.start_line(plan, unit)}")
+        return EXIT_OK
+    ok, words = asyncio.run(ra.start_unit(settings, None, plan, unit))
+    if ok:
+        print(f"Done: {words}; its router runs as {ra.UNIT_NAME}.")
+        return EXIT_OK
+    line = ra.start_line(plan, unit)
+    if ok is None:
+        print(f"Not started: {words}. Run on the relay: {line}")
+        return EXIT_OK
+    say(f"rosnet-tui: {words}. Its files are written; run on the relay: {line}")
+    return EXIT_FAIL

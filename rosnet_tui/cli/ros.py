@@ -129,6 +129,8 @@ def run_apply(args: argparse.Namespace) -> int:
     try:
         preview = preview_bashrc(settings, path, comment_ros_ip=comment,
                                  state_dir=state_dir_of(args))
+        # ROS 1 refuses [relay]: this only takes out a block a ROS 2 apply left (as ROS 2's)
+        jumps, notes = ssh_config_previews(settings, state_dir=state_dir_of(args))
         lines = shell_lines(settings, os.environ)
     except WriterSettingsError as exc:
         return report_settings_problems(exc)
@@ -141,12 +143,19 @@ def run_apply(args: argparse.Namespace) -> int:
     role = "the ROS master" if settings.is_master else f"a member (master: {settings.master_name})"
     print(f"ROS settings for {settings.this.name}, {role}, in {path}:")
     show_preview(preview)
+    for p in jumps:
+        show_preview(p)
+    for n in notes:
+        print(f"note: {n}")
     rc = EXIT_OK
-    if preview.changed:
-        stop = confirm(args, f"Write these changes to {path}?", dry_run="nothing was written")
+    changed = [p for p in (preview, *jumps) if p.changed]
+    if changed:
+        stop = confirm(args, f"Write these changes to {', '.join(str(p.path) for p in changed)}?",
+                       dry_run="nothing was written")
         if stop is not None:
             return stop
-        rc = write_preview(args, preview, None)
+        rc = (write_preview(args, preview, None) if changed == [preview]
+              else _write_all(args, [preview, *jumps], "ROS environment"))
     if rc == EXIT_OK:
         print("New shells get it from the file. For this shell, run:")
         for line in lines:
@@ -154,6 +163,19 @@ def run_apply(args: argparse.Namespace) -> int:
         if not args.no_checks:
             rerun_checks(affected.ROS_ENV, settings, paths_of(args, bashrc_path=path))
     return rc
+
+
+def _write_all(args: argparse.Namespace, previews: list[mf.Preview], label: str) -> int:
+    """Write every changed preview as one undo entry; say what was written."""
+    try:
+        result = mf.apply_previews(previews, state_dir=state_dir_of(args), label=label)
+    except mt.ManagedFileError as exc:
+        say(f"rosnet-tui: {exc}")
+        return EXIT_FAIL
+    print(f"Wrote {', '.join(str(p.path) for p in previews if p.changed)}. Backups: "
+          f"{', '.join(str(b) for b in result.backups) or 'none (new files)'}. "
+          f"Undo with: {command_line(args, 'undo')}")
+    return EXIT_OK
 
 
 def run_export(args: argparse.Namespace) -> int:
@@ -204,15 +226,8 @@ def _apply_ros2(args: argparse.Namespace, settings) -> int:
         stop = confirm(args, "Write these changes?")
         if stop is not None:
             return stop
-        try:
-            result = mf.apply_previews(previews, state_dir=state_dir_of(args),
-                                       label="ROS 2 environment and Zenoh config")
-        except mt.ManagedFileError as exc:
-            say(f"rosnet-tui: {exc}")
+        if _write_all(args, previews, "ROS 2 environment and Zenoh config") != EXIT_OK:
             return EXIT_FAIL
-        print(f"Wrote {', '.join(str(p.path) for p in changed)}. Backups: "
-              f"{', '.join(str(b) for b in result.backups) or 'none (new files)'}. "
-              f"Undo with: {command_line(args, 'undo')}")
     print("New shells get it from the file. For this shell, run:")
     for line in lines:
         print(f"  {line}")

@@ -47,8 +47,9 @@ def fingerprint(pub: Path) -> str:
 class Sshd:
     """A real sshd on 127.0.0.1:PORT with its own host key and authorized_keys (nothing else)."""
 
-    def __init__(self, root: Path, extra_config: str = "") -> None:
+    def __init__(self, root: Path, extra_config: str = "", wrap: tuple[str, ...] = ()) -> None:
         self.root = root
+        self.wrap = wrap        # a command sshd runs under (``exec "$@"`` at its end), if any
         root.mkdir(parents=True, exist_ok=True)
         self.port = free_port()
         self.host_key = root / "host_ed25519"
@@ -72,7 +73,7 @@ class Sshd:
     def start(self) -> None:
         if os.geteuid() == 0:
             os.makedirs("/run/sshd", mode=0o755, exist_ok=True)
-        self.proc = subprocess.Popen([SSHD, "-D", "-e", "-f", str(self.config), "-E", str(self.log)],
+        self.proc = subprocess.Popen([*self.wrap, SSHD, "-D", "-e", "-f", str(self.config), "-E", str(self.log)],
                                      stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                      stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 10

@@ -78,6 +78,19 @@ def _no_http(ev: Evidence) -> list[Hit]:
                 evidence=["isp.internet: DNS ok, HTTP failed"])]
 
 
+def _relay_says(ev: Evidence) -> str | None:
+    """Under a relay (ROS 2), what this component's public address is still for (None: no
+    relay); the peers' SSH, when it has no tunnel."""
+    if not (ev.s.ros2 and ev.s.relayed):
+        return None
+    if ev.s.tunnelled:
+        return (f"the peers reach {ev.me} through the relay {ev.s.relay.host} (ROS 2, and SSH "
+                "through its tunnel): its public address does not matter")
+    return (f"the ROS path goes through the relay {ev.s.relay.host} and does not use this "
+            f"address; only the peers' SSH to {ev.me} does (no tunnel for it under "
+            "[relay.tunnels])")
+
+
 @rule("isp.public_ip.unknown", "isp", ("isp.public_ip",),
       "no source tells the public IP",
       "None of the what-is-my-IP sources answered, so the public address is unknown.",
@@ -91,11 +104,13 @@ def _public_unknown(ev: Evidence) -> list[Hit]:
     srcs = d.get("sources") or {}
     errs = [f"{u}: {v}" for u, v in srcs.items()]
     urls = join_and(srcs) or "the configured sources"
+    relay = _relay_says(ev)
     return [Hit(f"None of the what-is-my-IP sources ({urls}) told {ev.me} its public address.",
                 ["Check that the internet works (ISP step, isp.internet).",
                  "Check public_ip_urls under [probe] in the settings: each URL must answer the "
                  "caller's address as plain text (e.g. https://ifconfig.co/ip).",
-                 "Without a public IP no peer can be given this component's address."],
+                 "Without a public IP no peer can be given this component's address."
+                 if relay is None else f"Under the relay, {relay}."],
                 evidence=errs or ["isp.public_ip: no address"])]
 
 
@@ -139,7 +154,8 @@ def _public_disagree(ev: Evidence) -> list[Hit]:
       "isp", "warn")
 def _public_changed(ev: Evidence) -> list[Hit]:
     d = ev.data("isp.public_ip")
-    if not d.get("changed"):
+    relay = _relay_says(ev)
+    if not d.get("changed") or ev.s.tunnelled:
         return []
     now, prev = d.get("public_ip") or "?", d.get("previous_ip") or "?"
     peers = [p.name for p in ev.s.peers]
@@ -158,6 +174,10 @@ def _public_changed(ev: Evidence) -> list[Hit]:
     ev_lines = [f"isp.public_ip: was {prev}, now {now}"]
     if n:
         ev_lines.append(f"{n} different addresses seen so far")
+    if relay is not None:
+        return [Hit(f"{ev.me}'s public IP changed from {prev} to {now} since the last run: "
+                    f"{relay}; a peer that still uses {prev} for {ev.me} cannot SSH to "
+                    "it.", acts, evidence=ev_lines)]
     return [Hit(f"{ev.me}'s public IP changed from {prev} to {now} since the last run: this "
                 "connection has no fixed address, and every peer that still uses "
                 f"{prev} for {ev.me} can no longer reach it.", acts, evidence=ev_lines)]
@@ -171,7 +191,8 @@ def _public_changed(ev: Evidence) -> list[Hit]:
       "isp", "warn", superseded_by=("isp.public_ip.changed",))
 def _public_differs(ev: Evidence) -> list[Hit]:
     d = ev.data("isp.public_ip")
-    if d.get("matches_settings") is not False or not d.get("public_ip"):
+    relay = _relay_says(ev)
+    if d.get("matches_settings") is not False or not d.get("public_ip") or ev.s.tunnelled:
         return []
     now, old = d["public_ip"], d.get("settings_ip") or ev.s.this.public_ip or "?"
     acts = [f"Set public_ip = \"{now}\" under [this] in the settings of {ev.me}."]
@@ -179,8 +200,9 @@ def _public_differs(ev: Evidence) -> list[Hit]:
         acts.append(f"On {p}: the hosts line for {ev.me} must read `{now} {ev.me}`, not "
                     f"`{old} {ev.me}`.")
     acts.append("Address sync does both for you whenever the address moves: `rosnet-tui sync`.")
-    return [Hit(f"{ev.me}'s public IP is {now}, but the settings say {old}: peers configured "
-                f"from the settings look for {ev.me} at an address that is no longer its own.",
+    why = (f"peers configured from the settings look for {ev.me} at an address that is no "
+           "longer its own" if relay is None else relay)
+    return [Hit(f"{ev.me}'s public IP is {now}, but the settings say {old}: {why}.",
                 acts, evidence=[f"isp.public_ip: seen {now}, settings {old}"])]
 
 

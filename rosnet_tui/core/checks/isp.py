@@ -30,6 +30,7 @@ from rosnet_tui.core.addresses import (
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip
+from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.exposure.public_ip import find_public_ip
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.http import http_get
@@ -102,6 +103,19 @@ async def check_internet(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- isp.public_ip
+def relay_words(s: Settings) -> str | None:
+    """Under a relay (ROS 2), what this component's public address is still used for, in
+    words (None: no relay, the address is the peers' way here)."""
+    if not (s.ros2 and s.relayed):
+        return None
+    via = f"the relay {s.relay.host}"
+    if s.tunnelled:
+        return (f"the address does not matter here: the peers reach this component through "
+                f"{via} (ROS 2, and SSH through its tunnel), never at this address")
+    return (f"the ROS path goes through {via} and does not use it; only the peers' SSH to this "
+            "component does (it has no tunnel under [relay.tunnels]), from their hosts files")
+
+
 @check("isp.public_ip", "isp", "Public IP: what the internet sees, and whether it changes", 1.0)
 async def check_public_ip(ctx: CheckContext) -> Outcome:
     s = ctx.settings
@@ -139,13 +153,23 @@ async def check_public_ip(ctx: CheckContext) -> Outcome:
     if errors:
         status = Status.WARN
         notes.append(f"{found.asked - len(ips)} of {found.asked} services did not answer")
-    if rec.changed:
-        status = Status.WARN
-        notes.append(f"it changed since the last run (was {rec.previous_ip}): this connection's "
-                     "address is not fixed; peers' hosts entries go stale")
-    if matches is False:
-        status = Status.WARN
-        notes.append(f"the settings say {settings_ip}: update them and the peers' hosts files")
+    relay = relay_words(s)
+    if relay is not None and (rec.changed or matches is False):
+        moved = ([f"it changed since the last run (was {rec.previous_ip})"] if rec.changed
+                 else []) + ([f"the settings say {settings_ip}"] if matches is False else [])
+        status = status if s.tunnelled else Status.WARN
+        notes.append(f"{'; '.join(moved)}: {relay}")
+    else:
+        if rec.changed:
+            status = Status.WARN
+            notes.append(f"it changed since the last run (was {rec.previous_ip}): this "
+                         "connection's address is not fixed; peers' hosts entries go stale")
+        if matches is False:
+            status = Status.WARN
+            notes.append(f"the settings say {settings_ip}: update them and the peers' hosts "
+                         "files")
+    if status is Status.PASS and notes:      # moved, and under a relay nothing uses it
+        return Outcome(Status.PASS, f"public IP {public_ip}; " + "; ".join(notes), evidence, data)
     if status is Status.PASS:
         kept = rec.history[-1]["first_seen"]
         how = f"unchanged since {kept}" if len(rec.history) > 1 or rec.previous_ip else "recorded"

@@ -27,12 +27,14 @@ from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import each_peer, ssh_peers
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.exposure.outsider import parse_marked
+from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.peer import tunnelproto
 from rosnet_tui.core.peer.commands import NO_INSTALL_EXIT
 from rosnet_tui.core.results import Outcome, Status
 from rosnet_tui.core.ssh.known_hosts import key_fingerprint
 from rosnet_tui.core.ssh.options import RelayRoute, relay_route
-from rosnet_tui.core.ssh.tunnel_probe import own_host_keys, probe_tunnel
+from rosnet_tui.core.ssh.sshd_keys import SSHD_T_TIMEOUT_S, OwnKeys, own_host_keys
+from rosnet_tui.core.ssh.tunnel_probe import probe_tunnel
 
 WHY = {
     "down": "nothing answers there: `rosnet-tui relay tunnel` is not running here, or its "
@@ -90,12 +92,17 @@ async def check_relay_tunnel(ctx: CheckContext) -> Outcome:
         return Outcome(Status.SKIP, f"no tunnel for {s.this.name or 'this component'} under "
                                     "[relay.tunnels]: its peers reach it directly")
     data: dict[str, Any] = {"relay": route.host, "port": port}
-    own = own_host_keys(ctx.paths.sshd_dir)
+    try:   # sshd -T (as root) or the config files: bounded, off the event loop
+        mine = await run_blocking(own_host_keys, ctx.paths.sshd_dir,
+                                  timeout=SSHD_T_TIMEOUT_S + 1.0)
+    except asyncio.TimeoutError:
+        mine = OwnKeys(source="`sshd -T` gave no answer in time")
+    own = set(mine.keys)
     if not own:
         data.update(up=None, failure="own_keys")
-        return Outcome(Status.WARN, f"this machine's sshd host keys are not readable in "
-                                    f"{ctx.paths.sshd_dir}: whose sshd answers on the relay "
-                                    "cannot be told", data=data)
+        return Outcome(Status.WARN, "this machine's sshd host keys cannot be read "
+                                    f"({mine.words()}): whose sshd answers on the relay "
+                                    "cannot be told", [mine.words()], data)
     t = budget(ctx, "relay.tunnel")
     peers = ssh_peers(s)
     here, there = await asyncio.gather(
@@ -104,7 +111,8 @@ async def check_relay_tunnel(ctx: CheckContext) -> Outcome:
     got = {p.name: st for p, st in zip(peers, there, strict=True)}
     data.update(up=here.up, failure=here.failure, fingerprint=here.fingerprint,
                 detail=here.detail, peers=got)
-    evidence = [f"ssh {route.user}@{route.host}, then 127.0.0.1:{port} there: {here.detail}"]
+    evidence = [f"ssh {route.user}@{route.host}, then 127.0.0.1:{port} there: {here.detail}",
+                f"compared with {mine.words()}"]
     evidence += [f"from {n}: {st['detail']}" for n, st in got.items()]
     where = f"127.0.0.1:{port} on {route.host}"
     if not here.up:

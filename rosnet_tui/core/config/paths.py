@@ -48,5 +48,6 @@ class Paths:
     state_dir: Path = field(default_factory=default_state_dir)
     hosts_path: Path = DEFAULT_HOSTS_PATH
     bashrc_path: Path = field(default_factory=default_bashrc_path)
-    # this machine's sshd host keys (ssh_host_*_key.pub): relay.tunnel knows its own sshd by them
+    # this machine's sshd config folder (sshd_config; its HostKey lines, or the default keys
+    # there): relay.tunnel knows its own sshd by those keys
     sshd_dir: Path = Path("/etc/ssh")

@@ -433,6 +433,13 @@ class Settings:
         return bool(self.relay.host)
 
     @property
+    def tunnelled(self) -> bool:
+        """True when the peers reach this component's sshd through its tunnel on the relay too
+        (ROS 2 with a relay, this component under [relay.tunnels]): no peer then uses its public
+        address for anything."""
+        return self.ros2 and self.relayed and self.this.name in self.relay.tunnels
+
+    @property
     def master_name(self) -> str:
         return self.ros.master or (self.this.name if self.is_master else "")
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import getpass
 import json
+import shlex
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -265,6 +266,55 @@ async def apply(s: Settings, tls: TlsPaths, opts: SshOptions | None, p: RelayPla
     _save(sd, entry)
     done.extend(f"wrote {f.what} {f.path} on the relay" for f in todo)
     return done
+
+
+# --------------------------------------------------------------------------- the unit
+NOT_ALLOWED_EXIT = 77      # the start command's own status: this login may not use sudo
+
+
+def start_steps(p: RelayPlan, unit_path: Path) -> list[str]:
+    """The systemctl commands that run the relay's unit after this apply: daemon-reload, then
+    enable and start it; restart it when the unit was there before and the plan changes what
+    a running router reads (its config, unit or certificate). A unit outside systemd's folder
+    is enabled by its path (systemctl links it) and then named."""
+    moved = unit_path.parent != UNIT_DIR
+    before = next((f.old for f in p.files if f.path == str(unit_path)), None)
+    restart = p.changed and before is not None
+    if not moved and not restart:
+        return ["systemctl daemon-reload", f"systemctl enable --now {UNIT_NAME}"]
+    enable = shlex.quote(str(unit_path)) if moved else UNIT_NAME
+    return ["systemctl daemon-reload", f"systemctl enable {enable}",
+            f"systemctl {'restart' if restart else 'start'} {UNIT_NAME}"]
+
+
+def start_line(p: RelayPlan, unit_path: Path) -> str:
+    """What a person runs on the relay (sudo for a login that is not root)."""
+    sudo = "" if p.look.user == "root" else "sudo "
+    return " && ".join(sudo + step for step in start_steps(p, unit_path))
+
+
+async def start_unit(s: Settings, opts: SshOptions | None, p: RelayPlan,
+                     unit_path: Path) -> tuple[bool | None, str]:
+    """Run :func:`start_steps` on the relay over SSH, as root or through ``sudo -n``. True: done;
+    None: this login may not (not root, and sudo asks for a password or refuses); False: a step
+    failed. The words say which."""
+    steps = start_steps(p, unit_path)
+    if p.look.user == "root":
+        cmd = " && ".join(steps)
+    else:
+        cmd = (f"sudo -n true 2>/dev/null || exit {NOT_ALLOWED_EXIT}; "
+               + " && ".join(f"sudo -n {step}" for step in steps))
+    res = await ssh_run(opts, relay_peer(s), cmd, timeout=STEP_TIMEOUT_S)
+    if res.failure:
+        return False, f"{hop_words(s)} failed ({res.failure}): {res.detail}"
+    if res.exit_status == NOT_ALLOWED_EXIT and p.look.user != "root":
+        return None, (f"the relay's user {p.look.user} is not root and sudo asks it for a "
+                      "password")
+    if res.exit_status != 0:
+        tail = " | ".join((res.stderr or res.stdout or "").strip().splitlines()[-3:])
+        return False, (f"on the relay {s.relay.host}, systemctl failed (exit status "
+                       f"{res.exit_status}{': ' + tail if tail else ''})")
+    return True, f"ran `{' && '.join(steps)}` on the relay {s.relay.host}"
 
 
 # --------------------------------------------------------------------------- undo

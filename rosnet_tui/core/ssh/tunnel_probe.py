@@ -1,21 +1,18 @@
 """Is this component's reverse tunnel up? Asked through the relay, as a peer would reach it: log
 in to the relay (its host key verified), open a ``direct-tcpip`` channel to the relay's
 ``127.0.0.1:<port>`` and read the host key of the sshd that answers there; it must be one of
-this machine's own sshd host keys (another key: a stale session, or another component's tunnel
-on that port). No login at the far end: the key is all the question needs.
+this machine's own sshd host keys (:mod:`.sshd_keys`; another key: a stale session, or another
+component's tunnel on that port). No login at the far end: the key is all the question needs.
 """
 
 from __future__ import annotations
 
 import asyncio
-import base64
 import contextlib
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 from rosnet_tui.core.config.settings_model import Peer
-from rosnet_tui.core.files.regular_file import read_regular
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.ssh.connection import (
     CHANNEL_CONNECT_FAILED,
@@ -27,7 +24,6 @@ from rosnet_tui.core.ssh.connection import (
 from rosnet_tui.core.ssh.known_hosts import key_fingerprint
 from rosnet_tui.core.ssh.options import RelayRoute, SshOptions
 
-SSHD_DIR = Path("/etc/ssh")
 TUNNEL_FAILURES = ("relay", "down", "other_host", "not_sshd", "timeout")
 
 
@@ -37,18 +33,6 @@ class TunnelState:
     failure: str | None      # None or one of TUNNEL_FAILURES
     detail: str
     fingerprint: str | None = None   # the key that answered at the port, when one did
-
-
-def own_host_keys(folder: Path = SSHD_DIR) -> set[bytes]:
-    """The public host keys of this machine's sshd (``ssh_host_*_key.pub`` in *folder*)."""
-    out: set[bytes] = set()
-    for pub in sorted(folder.glob("ssh_host_*_key.pub")):
-        try:
-            fields = read_regular(pub, 1 << 16).decode("ascii", "replace").split()
-            out.add(base64.b64decode(fields[1], validate=True))
-        except (OSError, IndexError, ValueError):
-            continue
-    return out
 
 
 def _probe(opts: SshOptions | None, route: RelayRoute, port: int, own: set[bytes],

@@ -199,6 +199,8 @@ def ros_plan(settings: Settings, paths: Paths) -> WritePlan:
         option_label="comment out ROS_IP / ROS_HOSTNAME lines (they break remote networks: a "
                      "node then publishes but cannot subscribe, or the reverse)",
         option_count=ros_ip_lines,
+        # ROS 1 refuses [relay]: only a block a ROS 2 apply left in ~/.ssh/config, taken out
+        companions=lambda _fix: ssh_config_previews(settings, state_dir=paths.state_dir)[0],
         after=affected.ROS_ENV,
         footnote=f"For the shell you are in now: {bashrc.export_line(settings)}")
 
