@@ -15,6 +15,7 @@ from tests.lab.ros2 import explain
 
 pytestmark = pytest.mark.lab
 REPS = int(os.environ.get("REPS", "1"))
+PEER = {"laptop": "turtlebot", "robot": "sami"}
 
 
 def whole_check(ros2, host: str, timeout: float = 240) -> dict[str, dict]:
@@ -33,9 +34,10 @@ def own_verdict(entry: dict, results: dict) -> None:
 
 
 @pytest.mark.parametrize("n", range(REPS))
-def test_at_64_kbit_the_ros2_checks_end_with_what_they_saw(ros2, n):
+@pytest.mark.parametrize("host", ["laptop", "robot"])
+def test_at_64_kbit_the_ros2_checks_end_with_what_they_saw(ros2, host, n):
     ros2.shape_robot("64kbit", latency="2s")
-    results = whole_check(ros2, "laptop")
+    results = whole_check(ros2, host)
     print(explain(results))
     for cid, entry in results.items():
         if cid != "security.outsider":          # another helper's (issue 31's round)
@@ -46,4 +48,4 @@ def test_at_64_kbit_the_ros2_checks_end_with_what_they_saw(ros2, n):
     assert router["data"]["reachable"] or "slow or busy link" in router["summary"], \
         explain(results)
     link = results["ros2.link"]
-    assert link["data"]["peers"]["turtlebot"]["rtt_ms"] is not None, explain(results)
+    assert link["data"]["peers"][PEER[host]]["rtt_ms"] is not None, explain(results)

@@ -16,6 +16,7 @@ from tests.lab.firewall import secured
 
 pytestmark = pytest.mark.lab
 REPS = int(os.environ.get("REPS", "1"))     # more rounds: REPS=5 (a load-dependent edge)
+PEER = {"laptop": "turtlebot", "robot": "sami"}
 
 
 def whole_check(lab, host: str, timeout: float = 240) -> dict[str, dict]:
@@ -41,22 +42,23 @@ def own_verdict(entry: dict, results: dict) -> None:
 
 
 @pytest.mark.parametrize("n", range(REPS))
-def test_at_64_kbit_every_check_ends_with_what_it_saw(ros1_lab, n):
+@pytest.mark.parametrize("host", ["laptop", "robot"])
+def test_at_64_kbit_every_check_ends_with_what_it_saw(ros1_lab, host, n):
     lab = ros1_lab
     lab.reset()
     lab.shape_robot("64kbit", latency="2s")
     try:
         with secured(lab):                 # ROS 1 as the product sets it up: the firewall on
-            results = whole_check(lab, "laptop")
+            results = whole_check(lab, host)
         print(explain(results))
         for entry in results.values():
             own_verdict(entry, results)
         nodes = results["ros.node_uris"]
         assert "here" in nodes["data"]["from"], explain(results)     # the master's list, tested
         for cid in ("ros.pubsub_out", "ros.pubsub_in"):
-            assert "turtlebot" in results[cid]["summary"], explain(results)
+            assert PEER[host] in results[cid]["summary"], explain(results)
         # the link: at least a round trip, measured once the round's other probes are done
         link = results["ros.link"]
-        assert link["data"]["peers"]["turtlebot"]["rtt_ms"] is not None, explain(results)
+        assert link["data"]["peers"][PEER[host]]["rtt_ms"] is not None, explain(results)
     finally:
         lab.reset()
