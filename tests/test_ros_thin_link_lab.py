@@ -57,8 +57,10 @@ def test_at_64_kbit_every_check_ends_with_what_it_saw(ros1_lab, host, n):
         assert "here" in nodes["data"]["from"], explain(results)     # the master's list, tested
         for cid in ("ros.pubsub_out", "ros.pubsub_in"):
             assert PEER[host] in results[cid]["summary"], explain(results)
-        # the link: at least a round trip, measured once the round's other probes are done
+        # the link: a round trip at least, measured once the round's other probes are done
+        # (a skip: the peer's side did not start, the round's start-up, measured elsewhere)
         link = results["ros.link"]
-        assert link["data"]["peers"][PEER[host]]["rtt_ms"] is not None, explain(results)
+        if link["status"] != "skip":
+            assert link["data"]["peers"][PEER[host]]["rtt_ms"] is not None, explain(results)
     finally:
         lab.reset()
