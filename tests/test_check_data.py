@@ -187,6 +187,26 @@ async def test_run_check_refuses_an_undeclared_key_in_strict_mode(monkeypatch, t
     assert r.data == {"port": 1, "listenning": True}
 
 
+async def test_the_runners_timeout_is_told_apart_from_a_wait_inside_a_check(tmp_path):
+    """"no verdict within S s (timed out)" is the runner's own word for a check that overran its
+    timeout; a wait inside a check that gave up and got out (a TimeoutError) is not that."""
+    async def overruns(ctx: CheckContext) -> Outcome:
+        await asyncio.sleep(5)
+        return Outcome(Status.PASS, "late", [], {})
+
+    async def lets_a_wait_out(ctx: CheckContext) -> Outcome:
+        await asyncio.wait_for(asyncio.sleep(5), 0.05)
+        return Outcome(Status.PASS, "never", [], {})
+
+    ctx = _ctx(tmp_path, Settings())
+    ctx.timeout_s = 0.3
+    late = await run_check(CheckSpec("ros.env", "ros", "t", overruns), ctx)
+    assert late.summary == "no verdict within 0.3 s (timed out)"
+    inner = await run_check(CheckSpec("ros.env", "ros", "t", lets_a_wait_out), ctx)
+    assert inner.status == Status.FAIL and inner.duration_s < 0.3
+    assert inner.summary.startswith("the check failed unexpectedly: a wait inside it timed out")
+
+
 # --------------------------------------------------------------------------- consumers
 def test_view_refuses_undeclared_keys_at_every_level():
     raw = {"ports": [{"port": 5000, "reachable": True, "listener": True, "via": "echoip"}],

@@ -11,6 +11,7 @@ import pytest
 
 from rosnet_tui.core.config.settings_model import LinkTopic
 from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
+from tests.lab.delay_sites import delay_between_sites
 from tests.lab.firewall import secured
 
 pytestmark = pytest.mark.lab
@@ -134,3 +135,25 @@ def test_at_64_kbit_the_check_ends_in_its_budget_and_says_what_it_has(ros1_lab):
             assert d["out_bps"] is None or d["out_bps"] < 128e3, explain(results)
     finally:
         lab.reset()
+
+
+@pytest.mark.parametrize("delay_ms", [40, 120])
+def test_the_round_trip_follows_a_delay_added_on_the_path(ros1_lab, delay_ms):
+    """A userspace hop on the robot's modem (this kernel has no netem) holds every chunk
+    *delay_ms* each way on every TCP connection between the sites (XML-RPC to the master and the
+    nodes, TCPROS between the probe nodes, both directions; tests/lab/delay_sites.py): the round
+    trip ros.link measures is the added 2 x delay (plus the lab's own) within 20 %."""
+    lab = ros1_lab
+    lab.reset()
+    results = check(lab, "laptop")
+    base = results["ros.link"]["data"]["peers"]["turtlebot"]["rtt_ms"]
+    assert base is not None, explain(results)
+    with delay_between_sites(lab, delay_ms):
+        results = check(lab, "laptop")
+    link = results["ros.link"]
+    print(explain({"ros.link": link}))
+    assert results["ros.pubsub_in"]["status"] == "pass", explain(results)
+    d = link["data"]["peers"]["turtlebot"]
+    assert _within(d["rtt_ms"], 2 * delay_ms + base, 0.2), explain(results)
+    assert d["out_bps"] and d["in_bps"], explain(results)
+    _bounded(link, results)

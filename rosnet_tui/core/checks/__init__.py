@@ -151,11 +151,18 @@ async def run_check(spec: CheckSpec, ctx: CheckContext) -> CheckResult:
     if not spec.applies(ctx.settings):
         return CheckResult(spec.id, spec.step, Status.SKIP, spec.not_applicable(ctx.settings), [],
                            0.0, timeout, {})
+    limit = asyncio.timeout(timeout)
     try:
-        outcome = await asyncio.wait_for(spec.func(ctx), timeout)
-    except asyncio.TimeoutError:
-        outcome = Outcome(Status.FAIL, f"no verdict within {timeout:g} s (timed out)",
-                          [f"the check was stopped after {timeout:g} s"])
+        async with limit:
+            outcome = await spec.func(ctx)
+    except asyncio.TimeoutError as exc:
+        if limit.expired():
+            outcome = Outcome(Status.FAIL, f"no verdict within {timeout:g} s (timed out)",
+                              [f"the check was stopped after {timeout:g} s"])
+        else:   # a wait inside the check gave up, and the check let it out: not our timeout
+            outcome = Outcome(Status.FAIL, "the check failed unexpectedly: a wait inside it "
+                                           f"timed out after {time.monotonic() - start:.1f} s "
+                                           "(not its own timeout)", [repr(exc)])
     except asyncio.CancelledError:
         raise
     except Exception as exc:  # a bug or an unexpected failure is a result, not a crash

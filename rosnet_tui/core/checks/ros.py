@@ -34,6 +34,11 @@ from rosnet_tui.core.ssh.connection import SshResult
 READY_MARK = '"rosnet_probe_ready"'
 FACTOR_NODE_URIS = 3.0
 FACTOR_PUBSUB = 4.0
+# A check's own verdict lands this long before the runner's timeout (its budget): the probes
+# stop by then, and what they saw is said (on a thin link an unregistering call may take
+# seconds: it goes on in the background).
+OWN_END_S = 0.25
+STOP_S = 0.5                 # before that end: the probe nodes stop (unregister, close)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -53,6 +58,15 @@ def _uri_parts(uri: str) -> tuple[str, int | None]:
 
 def _remote_report(res: SshResult) -> dict[str, Any] | None:
     return rosproto.parse_report_line(res.stdout)
+
+
+async def _stop(node: rosproto.ProbePublisher, by: float) -> rosproto.ProbeReport:
+    """Stop *node* (unregister, close), waiting for it until *by* at most: its report as it
+    stands (a stop still under way on a slow link ends in the background)."""
+    try:
+        return await run_blocking(node.stop, timeout=max(0.05, by - time.monotonic()))
+    except asyncio.TimeoutError:
+        return node.report
 
 
 # --------------------------------------------------------------------------- ros.env
@@ -289,7 +303,8 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
     if uri is None:
         return Outcome(Status.SKIP, f"skipped: {why}", [], data)
     budget = _budget(ctx, FACTOR_NODE_URIS)
-    deadline = time.monotonic() + budget - 0.3
+    end = time.monotonic() + budget - OWN_END_S        # our verdict by then, the runner's after
+    deadline = end - STOP_S
     ct = max(0.3, min(2.0, ctx.timeout_s * 0.8))
     evidence: list[str] = []
     # A probe node of ours, advertised like any node started here: the peers test it too.
@@ -302,7 +317,7 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
     else:
         evidence.extend(me.report.evidence("here"))
         if me.master_error in ("refused", "timeout", "unreachable", "resolve"):
-            await run_blocking(me.stop, timeout=2.0)
+            await _stop(me, end)
             return Outcome(Status.FAIL, f"cannot list the nodes: the master does not answer "
                                         f"({me.report.hops[-1].detail})", evidence, data)
     peers = ros1_peers(ctx.settings)
@@ -314,25 +329,30 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
     remote_tasks = [asyncio.ensure_future(each_peer(
         peers, lambda p: peer_run(ctx, p, ROS_AGENT, "ros", argv, timeout=ssh_t,
                                   tcp_timeout=ctx.timeout_s), return_exceptions=True))]
+    local_wait = max(0.1, min(local_t + 1.0, deadline - time.monotonic()))
+    remote_results: list[Any] = []
     try:
         try:
             local: Any = await run_blocking(_local_nodes, uri, local_t,
                                             [me.caller_id] if registered else [],
-                                            timeout=local_t + 1.0)
+                                            timeout=local_wait)
         except asyncio.TimeoutError as exc:
             local = exc
         if isinstance(local, dict) and not local.get("error"):
-            remote_results = await remote_tasks[0]
-        else:
-            remote_results = []  # no master here: the peers' view adds nothing
+            # the peers' view, as far as it came by the deadline (a thin link: the agent late)
+            done, _ = await asyncio.wait(remote_tasks,
+                                         timeout=max(0.05, deadline - time.monotonic()))
+            remote_results = remote_tasks[0].result() if done else \
+                [asyncio.TimeoutError()] * len(peers)
     finally:
         for t in remote_tasks:
             t.cancel()
         await asyncio.gather(*remote_tasks, return_exceptions=True)
-        await run_blocking(me.stop, timeout=2.0)
+        await _stop(me, end)
 
     if isinstance(local, BaseException):
-        return Outcome(Status.FAIL, f"no verdict from here within {local_t + 1.0:.1f} s",
+        return Outcome(Status.FAIL, f"the probe here listed no nodes within {local_wait:.1f} s "
+                                    "(the master or the link too slow to answer)",
                        evidence, data)
     if local.get("error"):
         return Outcome(Status.FAIL, f"cannot list the nodes: {local['error']}",
@@ -349,6 +369,10 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
     if not peers:
         evidence.append("no peer with an SSH user in the settings: checked from here only")
     for peer, res in zip(peers, remote_results, strict=True):
+        if isinstance(res, asyncio.TimeoutError):
+            problems.append(f"{peer.name}: its probe gave no report within the check's "
+                            f"{budget:g} s")
+            continue
         if isinstance(res, BaseException):
             problems.append(f"{peer.name}: {type(res).__name__}")
             continue
@@ -427,26 +451,30 @@ def _failure_summary(direction: str, sub_where: str, pub_where: str,
     return f"{direction}: {sub_where} connected to the publisher on {pub_where} but {last}"
 
 
-async def _pubsub_out_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
-                          ) -> tuple[Status, str, list[str], dict[str, Any]]:
-    """We publish, *peer* subscribes (over SSH)."""
-    deadline = time.monotonic() + budget
+async def _pubsub_out_one(ctx: CheckContext, peer: Peer, uri: str, end: float,
+                          seen: dict[str, Any]) -> tuple[Status, str, list[str], dict[str, Any]]:
+    """We publish, *peer* subscribes (over SSH), by *end*; *seen* says how far it got."""
+    deadline = end - STOP_S
+    budget = deadline - time.monotonic()
     ct = max(0.3, min(2.0, ctx.timeout_s * 0.8))
     topic = f"{rosproto.PROBE_PREFIX}/{rosproto.new_probe_id()}"
     pub = rosproto.ProbePublisher(uri, topic, env=ctx.env, bashrc=str(ctx.paths.bashrc_path),
                                   call_timeout=ct)
     evidence: list[str] = []
     res: SshResult | None = None
+    seen.update(node=pub, stage="registering the publisher here with the master")
     try:
         started = await _start_publisher(pub, ct)
         if started:
+            seen["stage"] = (f"starting the subscriber on {peer.name} (its probe, over SSH) "
+                             "and waiting for its message")
             remote_t = max(1.0, budget * 0.55)
             argv = ["sub", "--master", uri, "--topic", topic, "--timeout", f"{remote_t:.1f}"]
             res = await peer_run(ctx, peer, ROS_AGENT, "ros", argv,
                                  timeout=max(0.5, deadline - time.monotonic()),
                                  tcp_timeout=ctx.timeout_s)
     finally:
-        local = await run_blocking(pub.stop, timeout=2.0)
+        local = await _stop(pub, end)
     evidence.extend(local.evidence("here (publisher)"))
     if local.failed_hop == "registration":
         return (Status.FAIL, f"publishing here failed: {local.hops[-1].detail}", evidence,
@@ -474,15 +502,17 @@ async def _pubsub_out_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
                          rep.uri or (uri if rep.failed_hop == "registration" else None)))
 
 
-async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
-                         ) -> tuple[Status, str, list[str], dict[str, Any]]:
-    """*peer* publishes (over SSH), we subscribe."""
-    deadline = time.monotonic() + budget
+async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, end: float,
+                         seen: dict[str, Any]) -> tuple[Status, str, list[str], dict[str, Any]]:
+    """*peer* publishes (over SSH), we subscribe, by *end*; *seen* says how far it got."""
+    deadline = end - STOP_S
+    budget = deadline - time.monotonic()
     topic = f"{rosproto.PROBE_PREFIX}/{rosproto.new_probe_id()}"
     remote_t = max(1.5, budget * 0.7)
     argv = ["pub", "--master", uri, "--topic", topic, "--timeout", f"{remote_t:.1f}"]
     evidence: list[str] = []
     local: rosproto.ProbeReport | None = None
+    seen["stage"] = f"starting the publisher on {peer.name} (its probe, over SSH)"
     async with peer_session(ctx, peer, ROS_AGENT, "ros", argv, timeout=max(0.5, budget * 0.4),
                             tcp_timeout=ctx.timeout_s) as s:
         if not s.ok:
@@ -491,17 +521,20 @@ async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
                     evidence, _pubsub_data(peer.name, False))
         ready = await s.read_until(READY_MARK, timeout=max(0.3, budget * 0.4))
         if ready is not None:
+            seen["stage"] = (f"the publisher on {peer.name} registered; subscribing here and "
+                             "waiting for its message")
             sub_t = max(0.5, deadline - time.monotonic() - 0.8)
+            wait_t = max(0.3, min(sub_t + 1.5, end - time.monotonic() - 0.3))
             try:
-                local = await run_blocking(_run_sub, uri, topic, sub_t, ctx, timeout=sub_t + 1.5)
+                local = await run_blocking(_run_sub, uri, topic, sub_t, ctx, timeout=wait_t)
             except asyncio.TimeoutError:  # run_subscriber bounds itself; this is a safety net
                 local = rosproto.ProbeReport("sub", topic, uri)
                 local.fail("no_message", f"the subscriber here gave no verdict within "
-                                         f"{sub_t + 1.5:.1f} s")
+                                         f"{wait_t:.1f} s")
         # A served publisher ends at once; an unserved one would run to its own timeout (it is
         # bounded and unregisters itself), so after a failure we only wait briefly for its report.
         wait_t = deadline - time.monotonic() if local is None or local.ok else 0.5
-        res = await s.wait(max(0.3, wait_t))
+        res = await s.wait(max(0.1, min(wait_t, end - time.monotonic() - 0.1)))
     why_not = peer_program_problem(res, peer) if res.failure != "timeout" else None
     rdata = _remote_report(res)
     remote = rosproto.ProbeReport.from_json(rdata) if rdata else None
@@ -533,6 +566,19 @@ async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, budget: float
                          local.uri))
 
 
+def _ran_out(peer: Peer, direction: str, budget: float, seen: dict[str, Any]
+             ) -> tuple[Status, str, list[str], dict[str, Any]]:
+    """The verdict of an exchange with *peer* that was still under way when the check's time
+    ran out: how far it got (*seen*), and what the probe here saw by then."""
+    way = f"here -> {peer.name}" if direction == "out" else f"{peer.name} -> here"
+    node = seen.get("node")
+    evidence = node.report.evidence("here (publisher)") if node is not None else []
+    evidence.append(f"{way}: the check's {budget:g} s ran out while {seen['stage']}")
+    return (Status.FAIL, f"{way}: no message within the check's {budget:g} s; it got as far as "
+                         f"{seen['stage']} (a slow or busy link: see the evidence)",
+            evidence, _pubsub_data(peer.name, False, "no_message"))
+
+
 def _run_sub(uri: str, topic: str, timeout: float, ctx: CheckContext) -> rosproto.ProbeReport:
     ct = max(0.3, min(2.0, ctx.timeout_s * 0.8))
     return rosproto.run_subscriber(uri, topic, timeout, env=ctx.env, bashrc=str(ctx.paths.bashrc_path),
@@ -548,9 +594,19 @@ async def _pubsub(ctx: CheckContext, direction: str) -> Outcome:
         return Outcome(Status.SKIP, "skipped: no peer with an SSH user in the settings, so the "
                                     "other side of the exchange cannot be run from here",
                        [], _pubsub_data("", False))
-    budget = _budget(ctx, FACTOR_PUBSUB) - 0.5
+    budget = _budget(ctx, FACTOR_PUBSUB)
+    end = time.monotonic() + budget - OWN_END_S
     one = _pubsub_out_one if direction == "out" else _pubsub_in_one
-    outcomes = await each_peer(peers, lambda p: one(ctx, p, uri, budget))
+
+    async def bounded(p: Peer) -> tuple[Status, str, list[str], dict[str, Any]]:
+        seen: dict[str, Any] = {"stage": "starting", "node": None}
+        try:
+            return await asyncio.wait_for(one(ctx, p, uri, end, seen),
+                                          max(0.05, end - time.monotonic()))
+        except asyncio.TimeoutError:
+            return _ran_out(p, direction, budget, seen)
+
+    outcomes = await each_peer(peers, bounded)
     rank = {Status.FAIL: 0, Status.SKIP: 1, Status.WARN: 2, Status.PASS: 3}
     worst = min(range(len(peers)), key=lambda i: rank[outcomes[i][0]])
     status, summary, _, data = outcomes[worst]

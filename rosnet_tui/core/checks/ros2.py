@@ -309,7 +309,7 @@ async def check_router(ctx: CheckContext) -> Outcome:
         data["failure"] = "resolve"
         also = ""
         if local_task is not None:   # this machine's own router is asked all the same
-            data["local_router"] = await _local_router(local_task, node_ep, ev)
+            data["local_router"] = await _local_router(local_task, node_ep, ev, deadline)
             if not data["local_router"]["reachable"]:
                 also = f"; this machine's own router does not answer at {node_ep} either"
         elif hub_here and data["listen_problem"] == "not_running":
@@ -323,7 +323,7 @@ async def check_router(ctx: CheckContext) -> Outcome:
     data["failure"] = kind
     local: dict[str, Any] = {}
     if local_task is not None:
-        data["local_router"] = local = await _local_router(local_task, node_ep, ev)
+        data["local_router"] = local = await _local_router(local_task, node_ep, ev, deadline)
     if info:
         data.update(reachable=True, router_zid=info.get("zid"), router_version=info.get("version"),
                     locators=info.get("locators") or [])
@@ -348,12 +348,23 @@ async def check_router(ctx: CheckContext) -> Outcome:
                 "unreachable": "no route to that address",
                 "not_zenoh": "something else answers on that port"}.get(kind or "", "")
         if kind == "not_zenoh" and ros2.mtls(s):   # TCP answered: name what TLS refused
-            problem, hint = await run_blocking(
-                tls_handshake.handshake, addrs[0], port, name, tls_paths,
-                max(0.2, min(1.0, deadline - time.monotonic())),
-                "relay" if s.relayed else "master", timeout=max(0.3, min(1.2, deadline - time.monotonic() + 0.2)))
+            left = deadline - time.monotonic()
+            try:
+                problem, hint = await run_blocking(
+                    tls_handshake.handshake, addrs[0], port, name, tls_paths,
+                    max(0.05, min(1.0, left - 0.1)), "relay" if s.relayed else "master",
+                    timeout=max(0.05, min(1.2, left)))
+            except asyncio.TimeoutError:    # the check's time is up: said as not known
+                problem, hint = None, "no answer in the time left (a slow or busy link?)"
             data["tls"]["handshake"] = problem
             ev.append(f"TLS handshake with {name} ({addrs[0]}:{port}): {hint}")
+        if kind == "not_zenoh" and ("slow or busy link" in words or _stalled(ev)):
+            return Outcome(Status.FAIL, f"no session with the Zenoh router at {endpoint} "
+                                        f"({addrs[0]}) in the check's {t:g} s: TCP connects, but "
+                                        "the TLS handshake did not finish either: a slow or busy "
+                                        "link (see ros2.link) or a router that stalls; check "
+                                        "again when the link is quieter, or raise [checks] "
+                                        "timeout_s", ev, data)
         if hub_here and data.get("listen_problem") == "ipv6_only":
             hint = (f"the router's config listens on tcp/[::]:{port} and this host has no IPv6, "
                     f"so rmw_zenohd cannot start: listen on tcp/0.0.0.0:{port}")
@@ -414,18 +425,39 @@ def _skew_words(data: dict[str, Any]) -> list[str]:
     return [f"{n} runs {zenoh_release(by_label[n].get('version'))}" for n in data["version_skew"]]
 
 
-async def _local_router(task: asyncio.Future, endpoint: str, ev: list[str]) -> dict[str, Any]:
-    """What the session *task* opened to this machine's own router found (ros2.router's
-    ``local_router``); the session is closed."""
+def _stalled(ev: list[str]) -> bool:
+    """The TLS handshake that was to say why no session opened timed out too (no refusal)."""
+    last = next((e for e in reversed(ev) if e.startswith("TLS handshake with ")), "")
+    return "timed out" in last or "time left" in last
+
+
+async def _local_router(task: asyncio.Future, endpoint: str, ev: list[str], deadline: float
+                        ) -> dict[str, Any]:
+    """What the session *task* opened to this machine's own router found by *deadline*
+    (ros2.router's ``local_router``); the session is closed."""
     local: dict[str, Any] = {"reachable": False, "endpoint": endpoint, "zid": None,
                              "version": None, "routers": [], "failure": None}
-    ls, lwhy = await task
+    try:
+        ls, lwhy = await asyncio.wait_for(asyncio.shield(task),
+                                          max(0.05, deadline - time.monotonic()))
+    except asyncio.TimeoutError:
+        ls, lwhy = None, "no session in the check's time"
+        task.add_done_callback(lambda t: t.cancelled() or asyncio.ensure_future(
+            close_zenoh(t.result()[0])))     # a late session is closed all the same
     if ls is None:
         local["failure"] = lwhy
         ev.append(f"this machine's router at {endpoint}: {lwhy}")
         return local
-    li = await run_blocking(zenohproto.router_info, ls, 0.5, timeout=1.0)
-    await close_zenoh(ls)
+    left = deadline - time.monotonic()
+    try:
+        li = await run_blocking(zenohproto.router_info, ls, max(0.05, min(0.5, left - 0.1)),
+                                timeout=max(0.05, min(1.0, left)))
+    except asyncio.TimeoutError:
+        li = {}
+        ev.append(f"this machine's router at {endpoint}: its admin space gave no answer in "
+                  "the check's time")
+    finally:
+        await close_zenoh(ls, min(1.0, deadline - time.monotonic()))
     local.update(reachable=True, zid=li.get("zid"), version=li.get("version"),
                  routers=router_links(li))
     ev.append(f"this machine's router at {endpoint}: {li.get('zid')} "

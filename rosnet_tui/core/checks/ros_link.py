@@ -50,8 +50,9 @@ FACTOR_LINK = 6.0
 PINGS = 5                      # round trips measured
 BURST_CAP = 512 * 1024        # bytes a burst sends at most (a fast link ends it there)
 LARGE = (65536, 1 << 20)       # the large messages tried, in bytes
-CONNECT_SHARE = 0.35           # of the budget: the probes connected both ways by then (a few
-                               # round trips through the master: seconds on a thin, busy link)
+CONNECT_SHARE = 0.6            # of the budget: the probes connected both ways by then (a few
+                               # round trips through the master: seconds on a thin link busy
+                               # with the round's other probes; a fast link connects at once)
 PUBSUB = ("ros.pubsub_out", "ros.pubsub_in")
 READY_MARK = f'"{rosproto.READY_KEY}"'    # the peer's probe registered its topic
 
@@ -166,7 +167,7 @@ async def _peer_link(ctx: CheckContext, peer: Peer, uri: str, deadline: float) -
                     bashrc=str(ctx.paths.bashrc_path), call_timeout=ct)
     # Our node registers and subscribes while the peer's program starts: it finds the peer's
     # publisher as soon as that registers (the master's publisherUpdate).
-    late = time.monotonic() + (deadline - time.monotonic()) * 0.5    # no later than this
+    late = time.monotonic() + (deadline - time.monotonic()) * 0.7    # no later than this
     setup = asyncio.ensure_future(run_blocking(_set_up, node, late,
                                                timeout=late - time.monotonic() + 1.0))
     m: dict[str, Any] = {}

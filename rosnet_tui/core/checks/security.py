@@ -116,9 +116,17 @@ async def check_ssh_auth(ctx: CheckContext) -> Outcome:
     rem = left()
     cmd = installed_python_command(target, str(SSH_PORT), f"{rem * 0.3:.1f}", *users,
                                    mark=outsider.SSH_MARK)
-    got = await each_peer(peers[:2], lambda p: ssh_run(
-        ctx.ssh, p, cmd, stdin=outsider.SSH_AUDIT_PROGRAM, timeout=rem * 0.85,
-        connect_timeout=min(t * 0.4, rem * 0.45), tcp_timeout=ctx.timeout_s))
+    try:    # bounded by our end as well: on a thin, busy link SSH can outlast its own bounds
+        got = await asyncio.wait_for(each_peer(peers[:2], lambda p: ssh_run(
+            ctx.ssh, p, cmd, stdin=outsider.SSH_AUDIT_PROGRAM, timeout=rem * 0.85,
+            connect_timeout=min(t * 0.4, rem * 0.45), tcp_timeout=ctx.timeout_s)),
+            max(0.1, end - loop.time()))
+    except asyncio.TimeoutError:
+        data["from"] = ""
+        return Outcome(Status.WARN, f"no peer could run the SSH audit within the check's {t:g} s "
+                                    "(SSH to the peers too slow: a slow or busy link?)",
+                       ev + [f"the audit on {', '.join(p.name for p in peers[:2])} gave no "
+                             f"report by the end of the check's {t:g} s"], data)
     audits: list[tuple[Peer, outsider.SshAudit, dict[str, Any]]] = []
     problems: list[str] = []
     for p, res in zip(peers[:2], got, strict=True):

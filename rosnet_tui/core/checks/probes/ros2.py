@@ -67,10 +67,12 @@ async def open_zenoh(endpoint: str, t: float, how: str = "client"
         return None, str(exc)
 
 
-async def close_zenoh(session: Any) -> None:
+async def close_zenoh(session: Any, wait_s: float = 1.0) -> None:
+    """Close *session*, waiting *wait_s* at most (a close still under way on a slow link ends
+    in the background)."""
     if session is not None:
         with contextlib.suppress(Exception):
-            await run_blocking(session.close, timeout=1.0)
+            await run_blocking(session.close, timeout=max(0.05, wait_s))
 
 
 def ros2_peers(ctx: CheckContext) -> list[Peer]:
@@ -127,6 +129,9 @@ async def tcp_reach(host: str, port: int, t: float) -> tuple[str | None, str]:
             await close_writer(writer, 0.3)
 
 
+SLOW_TCP_S = 0.5     # a TCP connect slower than this to a router: a slow or busy link
+
+
 async def dial_router(address: str, port: int, endpoint: str, t: float, deadline: float,
                       ev: list[str], how: str = "", *, others: bool = False
                       ) -> tuple[str | None, str, Any]:
@@ -135,12 +140,18 @@ async def dial_router(address: str, port: int, endpoint: str, t: float, deadline
     (with *others*, the other routers' too: zenohproto.router_info).
     (failure kind or None, the TCP attempt in words, the router's info or None); what was seen
     goes to *ev* (*how* says with what the session was opened)."""
+    began = time.monotonic()
     kind, words = await tcp_reach(address, port,
                                   max(0.2, min(t * 0.4, deadline - time.monotonic())))
+    took = time.monotonic() - began
+    if kind is None and took > SLOW_TCP_S:     # a thin or busy link: said with the figure
+        words = f"connected after {took:.1f} s (a slow or busy link)"
     ev.append(f"TCP {address}:{port}: {words}")
     if kind is not None:
         return kind, words, None
-    session, why = await open_zenoh(endpoint, max(0.2, min(t * 0.4, deadline - time.monotonic())))
+    # the session has the time left but what its account (or a TLS handshake saying why not)
+    # and the close need
+    session, why = await open_zenoh(endpoint, max(0.2, deadline - time.monotonic() - 1.0))
     if session is None:
         ev.append(f"Zenoh session on {endpoint}{how}: {why}")
         return "not_zenoh", words, None
@@ -154,4 +165,4 @@ async def dial_router(address: str, port: int, endpoint: str, t: float, deadline
             ev.append(f"Zenoh router at {endpoint}: its admin space gave no answer in time")
             return None, words, {}
     finally:
-        await close_zenoh(session)
+        await close_zenoh(session, min(1.0, deadline - time.monotonic()))
