@@ -111,6 +111,9 @@ def test_large_messages_dropped_on_the_way_are_named_before_the_path(ros2):
     finally:    # the robot's router back on its own config (healthy() restarts no live router)
         ros2.write_router_config("robot")
         ros2.start_router("robot")
+        # and the laptop's linked to it again before the next test (it re-dials every 4 s at
+        # most): the 64 kbit/s test after this one found no link and no message otherwise
+        _linked_check(ros2, "laptop")
 
 
 def test_at_64_kbit_the_check_ends_in_its_budget_and_reports_what_it_measured(ros2):
@@ -119,21 +122,15 @@ def test_at_64_kbit_the_check_ends_in_its_budget_and_reports_what_it_measured(ro
     it ends within its budget with the round trip and the rates it measured, says the large
     messages were not tried and why, and never floods the line past its budget."""
     ros2.shape_robot("64kbit", latency="2s")
-    # The round's timeout doubled (6 s): with the settings' 3 s the pub/sub checks, whose
-    # message ros2.link waits for, found none in one CI-like run (the whole suite on both cores
-    # and more beside it) while the peer's agent came up over the line; what is proved here is
-    # that ros2.link measures at 64 kbit/s within its budget, whatever the budget.
-    results = ros2.check("laptop", timeout=240, timeout_s=6)
+    results = ros2.check("laptop", timeout=180)
     link = results["ros2.link"]
-    print(explain({"ros2.link": link}))
     _bounded(link, results)
+    assert "turtlebot" in link["data"]["peers"], explain(results)
     d = link["data"]["peers"]["turtlebot"]
     assert d["rtt_ms"] is not None, explain(results)
     assert _within(d["out_bps"], 64e3, 0.5) and _within(d["in_bps"], 64e3, 0.5), explain(results)
     assert d["tried_out"] < 1 << 20 and d["tried_in"] < 1 << 20, explain(results)
-    # 64 kB (about 12 s here) is tried when the time left allows it, else said not tried
-    assert d["tried_out"] == 65536 or "64 kB up not tried: about" in " ".join(
-        link["evidence"]), explain(results)
+    assert "64 kB up not tried: about" in " ".join(link["evidence"]), explain(results)
 
 
 def test_on_a_thin_link_it_reports_what_it_measured_in_its_budget(ros2):

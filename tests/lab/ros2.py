@@ -224,13 +224,10 @@ class Ros2World:
         return proc
 
     def check(self, host: str, *, step: str = "ros", config: Path | None = None,
-              env: dict[str, str] | None = None, timeout: float = 90,
-              timeout_s: float | None = None) -> dict[str, dict]:
-        """`rosnet-tui check --json --step STEP` on *host*: {check id: entry}; *timeout_s* is
-        the round's `--timeout` (the settings' by default)."""
-        more = ["--timeout", f"{timeout_s:g}"] if timeout_s is not None else []
+              env: dict[str, str] | None = None, timeout: float = 90) -> dict[str, dict]:
+        """`rosnet-tui check --json --step STEP` on *host*: {check id: entry}."""
         r = self.lab.rosnet(host, "check", "--json", "--step", step, "--config",
-                            str(config or self.config_path(host)), *more,
+                            str(config or self.config_path(host)),
                             env=env or self.env(host), timeout=timeout)
         assert r.stdout.strip(), r.stderr
         return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
