@@ -151,18 +151,26 @@ async def run_check(spec: CheckSpec, ctx: CheckContext) -> CheckResult:
     if not spec.applies(ctx.settings):
         return CheckResult(spec.id, spec.step, Status.SKIP, spec.not_applicable(ctx.settings), [],
                            0.0, timeout, {})
-    limit = asyncio.timeout(timeout)
+    # The check runs as a task of its own, so that the runner's timeout is told apart from a
+    # TimeoutError a wait inside the check lets out (asyncio.timeout would do it: Python 3.11+).
+    task = asyncio.ensure_future(spec.func(ctx))
     try:
-        async with limit:
-            outcome = await spec.func(ctx)
-    except asyncio.TimeoutError as exc:
-        if limit.expired():
+        try:
+            done, _pending = await asyncio.wait({task}, timeout=timeout)
+        except asyncio.CancelledError:
+            task.cancel()
+            raise
+        if done:
+            outcome = task.result()
+        else:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
             outcome = Outcome(Status.FAIL, f"no verdict within {timeout:g} s (timed out)",
                               [f"the check was stopped after {timeout:g} s"])
-        else:   # a wait inside the check gave up, and the check let it out: not our timeout
-            outcome = Outcome(Status.FAIL, "the check failed unexpectedly: a wait inside it "
-                                           f"timed out after {time.monotonic() - start:.1f} s "
-                                           "(not its own timeout)", [repr(exc)])
+    except asyncio.TimeoutError as exc:     # a wait inside the check gave up: not our timeout
+        outcome = Outcome(Status.FAIL, "the check failed unexpectedly: a wait inside it "
+                                       f"timed out after {time.monotonic() - start:.1f} s "
+                                       "(not its own timeout)", [repr(exc)])
     except asyncio.CancelledError:
         raise
     except Exception as exc:  # a bug or an unexpected failure is a result, not a crash

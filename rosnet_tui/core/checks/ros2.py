@@ -318,8 +318,10 @@ async def check_router(ctx: CheckContext) -> Outcome:
                                     f"it to /etc/hosts (Linux step){also}", ev, data)
     data["address"] = addrs[0]
     ev.append(f"{name} resolves to {addrs[0]}")
+    dialled: dict[str, Any] = {}
     kind, words, info = await dial_router(addrs[0], port, endpoint, t, deadline, ev,
-                                          others=hub_here)
+                                          others=hub_here, facts=dialled)
+    stalled = "slow_tcp_s" in dialled       # TCP connected, slowly: a slow or busy link
     data["failure"] = kind
     local: dict[str, Any] = {}
     if local_task is not None:
@@ -349,16 +351,19 @@ async def check_router(ctx: CheckContext) -> Outcome:
                 "not_zenoh": "something else answers on that port"}.get(kind or "", "")
         if kind == "not_zenoh" and ros2.mtls(s):   # TCP answered: name what TLS refused
             left = deadline - time.monotonic()
+            began, wait = time.monotonic(), max(0.05, min(1.0, left - 0.1))
             try:
                 problem, hint = await run_blocking(
-                    tls_handshake.handshake, addrs[0], port, name, tls_paths,
-                    max(0.05, min(1.0, left - 0.1)), "relay" if s.relayed else "master",
-                    timeout=max(0.05, min(1.2, left)))
+                    tls_handshake.handshake, addrs[0], port, name, tls_paths, wait,
+                    "relay" if s.relayed else "master", timeout=max(0.05, min(1.2, left)))
+                # no refusal, only its own time running out: the handshake stalled too
+                stalled |= problem == "unreachable" and time.monotonic() - began >= wait * 0.9
             except asyncio.TimeoutError:    # the check's time is up: said as not known
                 problem, hint = None, "no answer in the time left (a slow or busy link?)"
+                stalled = True
             data["tls"]["handshake"] = problem
             ev.append(f"TLS handshake with {name} ({addrs[0]}:{port}): {hint}")
-        if kind == "not_zenoh" and ("slow or busy link" in words or _stalled(ev)):
+        if kind == "not_zenoh" and stalled:
             return Outcome(Status.FAIL, f"no session with the Zenoh router at {endpoint} "
                                         f"({addrs[0]}) in the check's {t:g} s: TCP connects, but "
                                         "the TLS handshake did not finish either: a slow or busy "
@@ -423,12 +428,6 @@ def _members_evidence(s: Settings, info: dict, data: dict[str, Any], ev: list[st
 def _skew_words(data: dict[str, Any]) -> list[str]:
     by_label = {member_label(m): m for m in data.get("member_routers") or []}
     return [f"{n} runs {zenoh_release(by_label[n].get('version'))}" for n in data["version_skew"]]
-
-
-def _stalled(ev: list[str]) -> bool:
-    """The TLS handshake that was to say why no session opened timed out too (no refusal)."""
-    last = next((e for e in reversed(ev) if e.startswith("TLS handshake with ")), "")
-    return "timed out" in last or "time left" in last
 
 
 async def _local_router(task: asyncio.Future, endpoint: str, ev: list[str], deadline: float

@@ -133,19 +133,22 @@ SLOW_TCP_S = 0.5     # a TCP connect slower than this to a router: a slow or bus
 
 
 async def dial_router(address: str, port: int, endpoint: str, t: float, deadline: float,
-                      ev: list[str], how: str = "", *, others: bool = False
-                      ) -> tuple[str | None, str, Any]:
+                      ev: list[str], how: str = "", *, others: bool = False,
+                      facts: dict[str, Any] | None = None) -> tuple[str | None, str, Any]:
     """Reach a Zenoh router as this component's router would (ros2.router, relay.router): TCP
     to *address*:*port*, then a session on *endpoint* and the router's own account of itself
     (with *others*, the other routers' too: zenohproto.router_info).
     (failure kind or None, the TCP attempt in words, the router's info or None); what was seen
-    goes to *ev* (*how* says with what the session was opened)."""
+    goes to *ev* (*how* says with what the session was opened); *facts* gets ``slow_tcp_s``, the
+    seconds a TCP connect took when it was slower than :data:`SLOW_TCP_S`."""
     began = time.monotonic()
     kind, words = await tcp_reach(address, port,
                                   max(0.2, min(t * 0.4, deadline - time.monotonic())))
     took = time.monotonic() - began
     if kind is None and took > SLOW_TCP_S:     # a thin or busy link: said with the figure
         words = f"connected after {took:.1f} s (a slow or busy link)"
+        if facts is not None:
+            facts["slow_tcp_s"] = round(took, 2)
     ev.append(f"TCP {address}:{port}: {words}")
     if kind is not None:
         return kind, words, None
