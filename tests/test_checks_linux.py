@@ -285,3 +285,27 @@ async def test_chats_skip_without_an_ssh_user(tmp_path):
     for cid in ("linux.chat_out", "linux.chat_in"):
         r = await run(cid, ctx(settings(), tmp_path))
         assert r.status is Status.SKIP and r.data["peers"]["sami"]["failure"] == "no_user"
+
+
+@pytest.mark.skipif(shutil.which("nc") is None, reason="needs nc")
+def test_the_nc_listener_says_it_is_nc_before_it_says_listening(monkeypatch):
+    """chat_out reads the peer's output up to LISTENING and decides from what it read whether nc
+    listens (slow to start: connect tried again) or python3 (once). nc's NC came after LISTENING:
+    when the two lines arrived apart, the check took nc for python3, tried once, was refused
+    (test_chats_fall_back_to_nc_without_python3 failed about 1 run in 5)."""
+    import subprocess
+
+    from rosnet_tui.core.checks.linux_chat import listen_command
+
+    monkeypatch.setattr(probe_agents, "PEER_PYTHON", "no-such-python3")
+    cmd = listen_command(free_port(), "t0ken", 1.0)
+    with subprocess.Popen(["sh", "-c", cmd], stdout=subprocess.PIPE, text=True) as p:
+        try:
+            before = []
+            for line in p.stdout:      # bounded: nc gives up after the chat's wait (1 s)
+                before.append(line)
+                if line.startswith("LISTENING"):
+                    break
+        finally:
+            p.kill()
+    assert "NC\n" in before, before

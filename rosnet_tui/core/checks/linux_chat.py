@@ -62,7 +62,9 @@ def listen_command(port: int, token: str, wait: float) -> str:
     (OpenBSD or traditional)."""
     py = python_command(CHAT_SOURCE.decode(), "listen", str(port), token, f"{wait:.1f}",
                         python=peer_python())
-    nc = f"echo LISTENING {port}; echo NC; " + _nc_chat(token, wait, f"-l {port}", f"-l -p {port}")
+    # NC first: the reader stops at LISTENING, and must know by then that nc (slow to listen,
+    # so tried again) is the one listening
+    nc = f"echo NC; echo LISTENING {port}; " + _nc_chat(token, wait, f"-l {port}", f"-l -p {port}")
     return _python_else(py, nc)
 
 
