@@ -18,15 +18,12 @@ Leaving the block stops routers and nodes and puts the fleet back (ROS 1 forward
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import time
 
 from .fleet import Fleet
-from .ros2 import ROS2_IDS, SCRIPTS, ZROUTER, Ros2World, explain
-
-ZLINKS = SCRIPTS / "zlinks.py"
+from .ros2 import ROS2_IDS, ZROUTER, Ros2World, explain
 
 
 class FleetRos2(Ros2World):
@@ -66,33 +63,11 @@ class FleetRos2(Ros2World):
                     raise RuntimeError(f"the Zenoh router on {h} did not start: "
                                        + self.lab.log_path(f"zrouter-{h}").read_text()[-2000:])
 
-    def router_zid(self, host: str) -> str | None:
-        """The id *host*'s router printed at start (None before it did)."""
-        text = self.lab.log_path(f"zrouter-{host}").read_text(errors="replace")
-        for line in text.splitlines():
-            if line.startswith("ZROUTER "):
-                return line.split()[1]
-        return None
+    def master_host(self) -> str:
+        return self.lab.master
 
-    def linked(self, timeout: float = 20.0) -> dict[str, bool]:
-        """{member: its router has a session with the master's}, waiting (bounded) for all."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and not all(
-                self.router_zid(m) for m in self.lab.members):   # printed once the session is up
-            time.sleep(0.02)
-        r = self.lab.run(self.lab.master, [sys.executable, str(ZLINKS), "tcp/127.0.0.1:7447",
-                                           str(len(self.lab.members)), str(timeout)],
-                         timeout=timeout + 15)
-        line = next((x for x in r.stdout.splitlines() if x.startswith("ZLINKS ")), None)
-        if line is None:
-            raise RuntimeError(f"no link report from the master's router: {r.stdout}{r.stderr}")
-        routers = {z.lstrip("0") for z in json.loads(line[len("ZLINKS "):])["routers"]}
-        return {m: (self.router_zid(m) or "-").lstrip("0") in routers for m in self.lab.members}
-
-    def wait_linked(self, timeout: float = 20.0) -> None:
-        links = self.linked(timeout)
-        if not all(links.values()):
-            raise RuntimeError(f"members' routers not linked to the master's: {links}")
+    def member_hosts(self) -> list[str]:
+        return list(self.lab.members)
 
     # ------------------------------------------------------------------ the world
     def _write_all(self) -> None:
