@@ -396,3 +396,39 @@ async def test_a_master_whose_router_is_down_is_told_so_while_our_stand_in_holds
     assert r.data["listen_problem"] == "not_running", (r.summary, r.evidence)
     assert r.data["listening"] == [], r.evidence
     assert r.status is Status.FAIL, r.summary
+
+
+async def test_a_stand_in_that_opens_while_ros2_router_looks_is_not_taken_for_the_router(
+        tmp_path, monkeypatch):
+    """Fresh-clone CI saw it once (test_ros2_fresh_install[robot]): ros2.router asked whether
+    rosnet-tui had the Zenoh port (not yet), router.port_open's stand-in opened, and the look at
+    the port's listeners then found it: the stopped router counted as running. Here the stand-in
+    opens exactly during the look."""
+    import psutil
+
+    from tests.builders import ros2_master
+
+    zport = free_port()
+    s = ros2_master(zenoh_port=zport, security="none")
+    s.ros.master = "localhost"
+    ctx = CheckContext(settings=s, timeout_s=2.0, paths=Paths(state_dir=tmp_path / "state"),
+                       upnp=False, ssh_options=SshOptions(ssh_agent=False))
+    loop = asyncio.get_running_loop()
+    stand_in = contextlib.AsyncExitStack()
+    real = psutil.net_connections
+
+    def looking(kind: str = "inet"):        # in the check's thread, as psutil is called
+        if not ctx.listeners.holds(zport):
+            asyncio.run_coroutine_threadsafe(
+                stand_in.enter_async_context(ctx.listeners.hold(zport)), loop).result(5)
+        return real(kind)
+
+    monkeypatch.setattr(psutil, "net_connections", looking)
+    try:
+        r = await run("ros2.router", ctx)
+    finally:
+        await stand_in.aclose()
+    assert ctx.listeners.holds(zport) is False
+    assert r.data["listen_problem"] == "not_running", (r.summary, r.evidence)
+    assert r.data["listening"] == [], r.evidence
+    assert "own test listener" in " ".join(r.evidence), r.evidence

@@ -115,7 +115,7 @@ FUNCTION_LEVEL_IMPORTS: dict[tuple[str, str], str] = {
     ("rosnet_tui/core/peer/agentproto.py", "traceback"): "start-up cost: a program fed to peers over SSH loads only what its run needs",
     ("rosnet_tui/core/checks/__init__.py", "importlib"): "start-up cost: stdlib module loaded when used",
     ("rosnet_tui/core/checks/__init__.py", "pkgutil"): "start-up cost: stdlib module loaded when used",
-    ("rosnet_tui/core/checks/linux_chat.py", "psutil"): "start-up cost: psutil kept off the start-up path",
+    ("rosnet_tui/core/checks/probes/listening.py", "psutil"): "start-up cost: psutil kept off the start-up path",
     ("rosnet_tui/core/checks/rosbridge.py", "websockets.asyncio.client"): "start-up cost: websockets kept off the start-up path",
     ("rosnet_tui/core/checks/rosbridge.py", "websockets.exceptions"): "start-up cost: websockets kept off the start-up path",
     ("rosnet_tui/core/ros/fleet_tls.py", "cryptography.hazmat.primitives.asymmetric"): "start-up cost: cryptography kept off the start-up path",

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from rosnet_tui.core.checks import REGISTRY, CheckContext, load_builtin_checks, run_check
+from rosnet_tui.core.checks.probes.listening import services_listening
 from rosnet_tui.core.config.paths import Paths
 from rosnet_tui.core.config.settings_model import ProbeSettings, Settings, ThisComponent
 from rosnet_tui.core.net import portshare
@@ -282,6 +283,53 @@ def test_a_listener_of_another_run_is_told_from_a_service_of_the_users():
         assert not second.rosnet_listens(port)
 
     asyncio.run(go())
+
+
+def test_services_listening_tells_a_users_service_from_rosnet_tuis_listeners():
+    """What the checks ask before they stand in for a service: a plain listener is somebody's
+    service (loopback left out when only reachable ones count); our own listener and another
+    run's are none."""
+    port = free_port()
+
+    async def go() -> None:
+        ours, other = ListenerPool(), ListenerPool()
+        with socket.socket() as service:
+            service.bind(("127.0.0.1", port))
+            service.listen(1)
+            assert services_listening(port, ours) == ["127.0.0.1"]
+            assert services_listening(port, ours, reachable=True) == []
+        async with other.hold(port):
+            assert services_listening(port) == ["0.0.0.0"]     # without the pool: a listener
+            assert services_listening(port, ours) == []        # another run's
+            async with ours.hold(port):
+                assert services_listening(port, ours) == []    # ours (shared)
+        await other.aclose()
+
+    asyncio.run(go())
+
+
+def test_the_pool_has_its_listener_until_it_is_closed(monkeypatch):
+    """Released, the listener is closed first and forgotten after: while it still listens the
+    pool says it has the port (it used to forget it first, so a check looking at the port in
+    between took our listener for a service of the user's)."""
+    port = free_port()
+    pool = ListenerPool()
+    while_closing: list[bool] = []
+    real_close = TestListener.close
+
+    async def close(self: TestListener) -> None:
+        while_closing.append(pool.holds(port))
+        await real_close(self)
+
+    monkeypatch.setattr(TestListener, "close", close)
+
+    async def go() -> None:
+        async with pool.hold(port):
+            pass
+        assert not pool.holds(port)
+
+    asyncio.run(go())
+    assert while_closing == [True]
 
 
 def test_router_port_free_says_plainly_when_another_run_keeps_the_port(tmp_path):

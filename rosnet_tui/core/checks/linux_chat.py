@@ -26,6 +26,7 @@ from rosnet_tui.core.checks.probes.agents import (
     peer_session,
 )
 from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.listening import services_listening
 from rosnet_tui.core.checks.probes.peers import NO_SSH_USER, each_peer, ssh_peers
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.net.blocking import run_blocking
@@ -291,17 +292,6 @@ async def check_chat_in(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- ROS 2: the Linux chats
-def _listening_here(port: int) -> bool:
-    """Whether a process listens on TCP *port* here (the master's router, normally)."""
-    import psutil  # noqa: PLC0415
-
-    try:
-        return any(c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == port
-                   for c in psutil.net_connections(kind="tcp"))
-    except (psutil.AccessDenied, OSError):
-        return False
-
-
 async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
     """linux.chat_out / linux.chat_in under ROS 2 (they call it first thing).
 
@@ -346,8 +336,8 @@ async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
         return Outcome(Status.SKIP, "no peer has an SSH user in the settings (peer.ssh_user), so "
                                     "the members' side cannot be run from here", data=data)
     async with contextlib.AsyncExitStack() as stack:
-        if ctx.listeners.rosnet_listens(port) or not await run_blocking(_listening_here, port,
-                                                                         timeout=1.0):
+        if not await run_blocking(lambda: services_listening(port, ctx.listeners),
+                                  timeout=1.0):
             with contextlib.suppress(OSError):
                 await stack.enter_async_context(ctx.listeners.hold(port, wait_s=t * 0.1))
         argv = ["connect", me, str(port), f"{t * 0.5:.1f}"]

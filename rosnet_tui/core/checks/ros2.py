@@ -13,12 +13,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-import psutil
-
 from rosnet_tui.core.addresses import is_loopback
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_run
 from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.listening import services_listening
 from rosnet_tui.core.checks.probes.peers import each_peer
 from rosnet_tui.core.checks.probes.ros2 import (
     close_zenoh,
@@ -191,15 +190,6 @@ async def check_env(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- ros2.router
-def _listening(port: int) -> list[str]:
-    try:
-        conns = psutil.net_connections(kind="tcp")
-    except (psutil.AccessDenied, OSError):
-        return []
-    return sorted({c.laddr.ip for c in conns if c.status == psutil.CONN_LISTEN and c.laddr
-                   and c.laddr.port == port})
-
-
 def _remote_peers(info: dict, local: set[str]) -> list[str]:
     """Addresses of other machines with sessions attached in peer mode ("N from ADDRESS")."""
     count: dict[str, int] = {}
@@ -287,11 +277,11 @@ async def check_router(ctx: CheckContext) -> Outcome:
     if not hub_here and how == "router":
         local_task = asyncio.ensure_future(open_zenoh(node_ep, max(0.2, t * 0.3)))
     if hub_here:
-        if ctx.listeners.rosnet_listens(port):   # router.port_open's stand-in: no router
-            data["listening"] = lst = []
+        data["listening"] = lst = await run_blocking(
+            lambda: services_listening(port, ctx.listeners), timeout=1.0)
+        if not lst and ctx.listeners.rosnet_listens(port):  # router.port_open's stand-in
             ev.append(f"TCP {port} is held by rosnet-tui's own test listener (no router there)")
         else:
-            data["listening"] = lst = await run_blocking(_listening, port, timeout=1.0)
             ev.append(f"TCP {port} listened on here: {', '.join(lst) or 'nothing'}")
         # Known before the name is looked up: a name missing from /etc/hosts must not hide it.
         problem = None

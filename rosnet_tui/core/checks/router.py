@@ -20,6 +20,7 @@ import psutil
 from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import chat_agent, peer_run
 from rosnet_tui.core.checks.probes.budget import budget
+from rosnet_tui.core.checks.probes.listening import services_listening, who_listens
 from rosnet_tui.core.checks.probes.peers import ssh_peers
 from rosnet_tui.core.checks.probes.public_ip import fetch_public_ip, round_public_ip
 from rosnet_tui.core.checks.probes.relay_port import relay_port_open
@@ -106,35 +107,6 @@ async def check_local_ip(ctx: CheckContext) -> Outcome:
 
 
 # --------------------------------------------------------------------------- router.port_free
-def who_listens(port: int) -> tuple[int | None, str | None, bool]:
-    """(pid, process name, found) of a TCP listener on *port* (pid None: another user's)."""
-    try:
-        conns = psutil.net_connections(kind="tcp")
-    except (psutil.AccessDenied, OSError):
-        return None, None, False
-    for c in conns:
-        if c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == port:
-            if c.pid is None:
-                return None, None, True
-            try:
-                p = psutil.Process(c.pid)
-                name = " ".join(p.cmdline()[:3]) or p.name()
-            except (psutil.Error, OSError):
-                name = None
-            return c.pid, name, True
-    return None, None, False
-
-
-def listening_locally(port: int) -> bool:
-    """Whether some process listens on TCP *port* on an address others can reach."""
-    try:
-        conns = psutil.net_connections(kind="tcp")
-    except (psutil.AccessDenied, OSError):
-        return False
-    return any(c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == port
-               and not c.laddr.ip.startswith("127.") and c.laddr.ip != "::1" for c in conns)
-
-
 @check("router.port_free", "router", "The test port is free for our listener", 1.0)
 async def check_port_free(ctx: CheckContext) -> Outcome:
     port = ctx.settings.probe.port
@@ -451,7 +423,8 @@ async def check_port_open(ctx: CheckContext) -> Outcome:
                 randoms.append(lst.port)
         services: list[int] = []
         for p in (22, s.ros.port or 11311):
-            if p not in services and await run_blocking(listening_locally, p, timeout=1.0):
+            if p not in services and await run_blocking(
+                    lambda p=p: services_listening(p, reachable=True), timeout=1.0):
                 services.append(p)
         ports = [test_port, *randoms, *services]
         peer = next(iter(ssh_peers(s)), None)
@@ -575,8 +548,8 @@ async def _port_open_ros2(ctx: CheckContext) -> Outcome:
     evidence: list[str] = []
     ours: dict[int, PortListener | None] = {}
     async with contextlib.AsyncExitStack() as stack:
-        if not ctx.listeners.rosnet_listens(zport) and await run_blocking(
-                listening_locally, zport, timeout=1.0):
+        if await run_blocking(lambda: services_listening(zport, ctx.listeners, reachable=True),
+                              timeout=1.0):
             data["zenoh_listener"] = "router"
             evidence.append(f"TCP {zport}: a process listens here (the Zenoh router)")
         else:

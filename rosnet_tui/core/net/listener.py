@@ -353,9 +353,7 @@ class ListenerPool:
                     if lst.sharing is not None and lst.sharing.guests:
                         self._lingering[port] = asyncio.ensure_future(self._linger(port, lst))
                     else:
-                        del self._refs[port]
-                        del self._listeners[port]
-                        await lst.close()
+                        await self._drop(port, lst)
 
     async def _open(self, port: int, wait_s: float) -> PortListener:
         """Take *port*: its lock and a listener, or a share of another run's (see the module)."""
@@ -408,10 +406,18 @@ class ListenerPool:
             await asyncio.wait_for(lst.sharing.idle.wait(), LINGER_MAX_S)
         async with self._get_lock():
             if self._refs.get(port) == 0 and self._listeners.get(port) is lst:
-                del self._refs[port]
+                await self._drop(port, lst)
+
+    async def _drop(self, port: int, lst: PortListener) -> None:
+        """Close *lst*, then forget it: while it still listens, :meth:`rosnet_listens` says so
+        (a check looking at the port meanwhile must not take it for a service of the user's)."""
+        try:
+            await lst.close()
+        finally:
+            if self._listeners.get(port) is lst:
                 del self._listeners[port]
-                self._lingering.pop(port, None)
-                await lst.close()
+                self._refs.pop(port, None)
+            self._lingering.pop(port, None)
 
     async def aclose(self) -> None:
         """The end of the round: wait for the runs that share our listeners (each at most
@@ -425,7 +431,4 @@ class ListenerPool:
                 t.cancel()
             for port, lst in list(self._listeners.items()):
                 if self._refs.get(port, 0) <= 0:
-                    self._listeners.pop(port, None)
-                    self._refs.pop(port, None)
-                    self._lingering.pop(port, None)
-                    await asyncio.shield(lst.close())
+                    await asyncio.shield(self._drop(port, lst))
