@@ -340,6 +340,27 @@ async def test_each_run_keeps_its_own_timeout(ssh_client):
         opts.pool.close()
 
 
+async def test_a_slow_start_is_waited_for_as_long_as_its_most_patient_caller_waits(ssh_client):
+    """A thin link takes seconds to carry the agent's programs. The round's quick check that
+    started the agent gives up at its own bound; the start goes on for ros2.link, which waits
+    longer (at 64 kbit/s under load the start used to end at the first caller's bound, and the
+    link measurement was skipped: 'did not start in time')."""
+    slow = AgentKind("slow", lambda m: f"sleep 5; {KIND.command(m)}", KIND.programs)
+    opts = ssh_client.opts(timeout_s=1.0, pool=SshPool())
+    agents, peer = PeerAgents(), ssh_client.peer()
+    try:
+        quick = asyncio.ensure_future(agent_run(agents, opts, peer, slow, "p", ["0"],
+                                                timeout=0.5))
+        await asyncio.sleep(0.2)            # the quick one starts the agent
+        patient = await agent_run(agents, opts, peer, slow, "p", ["0"], timeout=20.0)
+        quick_res = await quick
+    finally:
+        agents.close()
+        opts.pool.close()
+    assert quick_res.failure == "timeout", quick_res
+    assert patient.ok and patient.exit_status == 7, patient
+
+
 async def test_an_unreachable_peer_gives_the_same_classified_failure_as_a_lone_command(
         ssh_client):
     peer = ssh_client.peer(ssh_port=free_port())           # nothing listens there

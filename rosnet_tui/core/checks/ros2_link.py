@@ -180,7 +180,8 @@ async def _peer_link(ctx: CheckContext, peer: Peer, deadline: float, gate: async
         argv = ["link", "--topic", topic, "--timeout", f"{remote_t:.1f}", *member_arg(ctx, peer)]
         async with peer_session(ctx, peer, ZENOH_AGENT, "zlink", argv,
                                 timeout=max(0.5, min(remote_t * 0.3, ctx.timeout_s * 0.6)),
-                                needs_install=True) as sess:
+                                needs_install=True,    # a thin link takes seconds to start it
+                                start_timeout=max(0.5, remote_t * 0.5)) as sess:
             if not sess.ok:
                 return (Status.SKIP, f"{peer.name}: could not run the other side: SSH failed "
                                      f"({sess.result.failure}): {sess.result.detail}", [], empty)

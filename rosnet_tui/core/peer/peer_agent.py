@@ -187,12 +187,29 @@ class PeerAgent:
         self.send_lock = asyncio.Lock()
         self.closed = False
         self.loaded: dict[str, bytes] = {}     # programs loaded after the start (call's source)
+        self.ready_by = 0.0                    # loop time: the most patient caller's wait
 
     def start(self, opts: SshOptions | None, timeout: float, tcp_timeout: float | None,
-              max_s: float) -> asyncio.Task:
+              max_s: float, ready_s: float) -> asyncio.Task:
+        """The start, shared by the round's callers: it waits for the agent as long as the most
+        patient of them (*ready_s* from now, for this one) and no longer. A thin link takes
+        seconds to carry the programs; a check with little time gives up, one that measures the
+        link keeps the start going for itself."""
+        self.ready_by = max(self.ready_by, asyncio.get_running_loop().time() + ready_s)
         if self.started is None:
             self.started = asyncio.ensure_future(self._start(opts, timeout, tcp_timeout, max_s))
         return self.started
+
+    async def _wait_ready(self, s: SshSession) -> str | None:
+        """The agent's output up to its ready line; None when it ended or nobody waits longer."""
+        loop = asyncio.get_running_loop()
+        while True:
+            ready = await s.read_until(self._marker(), timeout=max(self.ready_by - loop.time(),
+                                                                   0.0))
+            if ready is not None or loop.time() >= self.ready_by:
+                return ready
+            if (await s.wait(0.0)).failure != "timeout":       # it ended
+                return None
 
     async def _start(self, opts: SshOptions | None, timeout: float, tcp_timeout: float | None,
                      max_s: float) -> SshResult:
@@ -204,7 +221,9 @@ class PeerAgent:
             if not s.ok:
                 return s.result
             await s.write(payload)
-            ready = await s.read_until(self._marker(), timeout=max(timeout, 2.0) * 2)
+            self.ready_by = max(self.ready_by, asyncio.get_running_loop().time()
+                                + max(timeout, 2.0) * 2)      # the least any start is given
+            ready = await self._wait_ready(s)
             if ready is not None and f'"{agentproto.READY}"' in ready:
                 self._take_lines()
                 self.reader = asyncio.ensure_future(self._read())
@@ -357,10 +376,10 @@ async def agent_call(agents: PeerAgents, opts: SshOptions | None, peer: Peer, ki
         if conn.transport is None:
             return _failed(peer, conn.result, timeout)
     agent = agents.get(peer, kind)
-    task = agent.start(opts, timeout, tcp_timeout, max_s)
     base = float(getattr(opts, "timeout_s", 3.0) or 3.0)
     if start_timeout is None:
         start_timeout = max(timeout, base) * 2 + 0.5
+    task = agent.start(opts, timeout, tcp_timeout, max_s, start_timeout)
     try:
         started = await asyncio.wait_for(asyncio.shield(task), max(start_timeout, 0.05))
     except asyncio.TimeoutError:

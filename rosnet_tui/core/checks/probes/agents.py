@@ -113,13 +113,14 @@ async def peer_run(ctx: CheckContext, peer: Peer, kind: AgentKind, program: str,
 
 def peer_session(ctx: CheckContext, peer: Peer, kind: AgentKind, program: str,
                  argv: Sequence[str], *, timeout: float, tcp_timeout: float | None = None,
-                 needs_install: bool = False
+                 needs_install: bool = False, start_timeout: float | None = None
                  ) -> contextlib.AbstractAsyncContextManager[AgentCall]:
     """*program* running on *peer*'s agent for an ``async with`` block, read as ``ssh_session``'s
-    session is (``ok``, ``result``, ``read_until``, ``wait``)."""
+    session is (``ok``, ``result``, ``read_until``, ``wait``); *start_timeout*: how long this
+    caller waits for the agent to start (default: see ``agent_call``)."""
     return agent_session(_agents(ctx), ctx.ssh, peer, kind, program, argv, timeout=timeout,
                          tcp_timeout=tcp_timeout, max_s=agent_life(ctx),
-                         needs_install=needs_install)
+                         needs_install=needs_install, start_timeout=start_timeout)
 
 
 def peer_program_problem(res: SshResult, peer: Peer) -> str | None:
