@@ -15,7 +15,13 @@ import threading
 import warnings
 from types import ModuleType
 
-_LOCK = threading.Lock()
+_GUARD = threading.Lock()
+_LOCKS: dict[str, threading.Lock] = {}     # one a library: two libraries import side by side
+
+
+def _lock_for(name: str) -> threading.Lock:
+    with _GUARD:
+        return _LOCKS.setdefault(name, threading.Lock())
 
 
 def import_without(name: str, *held: str, quiet: str | None = None) -> ModuleType:
@@ -23,8 +29,11 @@ def import_without(name: str, *held: str, quiet: str | None = None) -> ModuleTyp
     them inside it raises ImportError. Held modules already imported are left alone; afterwards
     any of them can be imported again as usual. *quiet*: a warning the import may give about
     a held module (a regular expression of its text), not shown. A module another thread is
-    still importing is waited for, as ``import`` waits."""
-    with _LOCK:
+    still importing is waited for, as ``import`` waits; the import of another library is not
+    (the round's SSH login waited for requests' import otherwise, about 50 ms)."""
+    if name in sys.modules:     # imported, or being imported: import waits for its end
+        return importlib.import_module(name)
+    with _lock_for(name):
         if name in sys.modules:
             return importlib.import_module(name)
         mine = [h for h in held if h not in sys.modules]
