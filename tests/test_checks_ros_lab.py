@@ -3,12 +3,12 @@ side over the lab's SSH, the master on the robot behind its modem's port forward
 
 from __future__ import annotations
 
-import json
 import time
 
 import pytest
 
 from tests.lab.firewall import secured
+from tests.lab.verdicts import explain, lab_check
 
 pytestmark = pytest.mark.lab
 
@@ -18,17 +18,9 @@ ROS_IDS = ["ros.env", "ros.master", "ros.node_uris", "ros.pubsub_out", "ros.pubs
 
 def ros_check(lab, host: str) -> dict[str, dict]:
     """`rosnet-tui check --json --step ros` on *host*, in its ROS environment."""
-    r = lab.rosnet(host, "check", "--json", "--step", "ros", "--config",
-                   str(lab.config_path(host)), env=lab.ros_env(host), timeout=60)
-    assert r.stdout.strip(), r.stderr
-    results = {c["id"]: c for c in json.loads(r.stdout)["checks"]}
-    assert list(results) == ROS_IDS, r.stderr
+    results = lab_check(lab, host, step="ros", timeout=60)
+    assert list(results) == ROS_IDS, explain(results)
     return results
-
-
-def explain(results: dict[str, dict]) -> str:
-    return "\n".join(f"{c['id']}: {c['status']} - {c['summary']}\n  " + "\n  ".join(c["evidence"])
-                     for c in results.values())
 
 
 def test_healthy_lab_passes_both_directions_from_each_seat(ros1_lab):

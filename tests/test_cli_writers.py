@@ -438,11 +438,9 @@ def test_commands_hosts_prints_to_run_next_name_the_same_files(box):
     assert done.returncode == 0 and b"rosnet-tui" in box.hosts.read_bytes(), done.stderr
 
 
-def test_ros_apply_takes_out_the_relay_block_once_the_relay_is_gone(box):
-    """[relay] (or the peers' tunnels) removed from the settings: `ros apply` took the old
-    ~/.ssh/config block out of nothing, so `ssh sami` kept jumping through a relay no longer
-    there. Now the preview shows it going, the user's lines stay byte for byte, and undo puts
-    it back."""
+def _user_ssh_config_and_a_relay(box):
+    """The user's own ~/.ssh/config (CRLF in it), and settings of a ROS 2 master whose peer sami
+    is reached through a relay: (the config's path, its bytes, the settings)."""
     from rosnet_tui.core.config.settings_model import RelaySettings
     from rosnet_tui.core.saved.settings import render_settings
 
@@ -453,6 +451,18 @@ def test_ros_apply_takes_out_the_relay_block_once_the_relay_is_gone(box):
     s = ros2_master(security="mtls")
     s.relay = RelaySettings(host="relay", ssh_user="jump", tunnels={"sami": 2202})
     box.cfg.write_text(render_settings(s))
+    return cfg, mine, s
+
+
+def test_ros_apply_takes_out_the_relay_block_once_the_relay_is_gone(box):
+    """[relay] (or the peers' tunnels) removed from the settings: `ros apply` took the old
+    ~/.ssh/config block out of nothing, so `ssh sami` kept jumping through a relay no longer
+    there. Now the preview shows it going, the user's lines stay byte for byte, and undo puts
+    it back."""
+    from rosnet_tui.core.config.settings_model import RelaySettings
+    from rosnet_tui.core.saved.settings import render_settings
+
+    cfg, mine, s = _user_ssh_config_and_a_relay(box)
     done = run(box, "ros", "apply", "--yes", "--no-checks")
     assert done.returncode == 0, done.stdout + done.stderr
     assert cfg.read_bytes().startswith(b"# BEGIN rosnet-tui") and cfg.read_bytes().endswith(mine)
@@ -478,16 +488,7 @@ def test_ros1_apply_takes_out_a_stale_relay_block_too(box, monkeypatch):
     apply` wrote its ~/.bashrc block and left the ~/.ssh/config block, so `ssh sami` kept
     jumping through a relay the network no longer uses. Now it is taken out as ROS 2's apply
     does: previewed, the user's lines kept byte for byte, one undo with the .bashrc block."""
-    from rosnet_tui.core.config.settings_model import RelaySettings
-    from rosnet_tui.core.saved.settings import render_settings
-
-    mine = b"Host *\r\n    ServerAliveInterval 30\nIdentityFile ~/.ssh/other\n"
-    cfg = box.home / ".ssh" / "config"
-    cfg.parent.mkdir(mode=0o700)
-    cfg.write_bytes(mine)
-    s = ros2_master(security="mtls")
-    s.relay = RelaySettings(host="relay", ssh_user="jump", tunnels={"sami": 2202})
-    box.cfg.write_text(render_settings(s))
+    cfg, mine, _s = _user_ssh_config_and_a_relay(box)
     assert run(box, "ros", "apply", "--yes", "--no-checks").returncode == 0
     relayed = cfg.read_bytes()
     assert relayed.startswith(b"# BEGIN rosnet-tui") and relayed.endswith(mine)

@@ -17,7 +17,8 @@ import pytest
 from tests.lab import procs
 from tests.lab.firewall import apply_firewall, remove_firewall
 from tests.lab.fleet import Fleet
-from tests.lab.fleet_ros2 import ROS2_IDS, FleetRos2, explain
+from tests.lab.fleet_ros2 import ROS2_IDS, FleetRos2
+from tests.lab.verdicts import explain
 
 pytestmark = pytest.mark.lab
 FLEET_SITES = 9

@@ -16,7 +16,8 @@ import time
 import pytest
 
 from rosnet_tui.core.ros import fleet_tls, pairing
-from tests.lab.ros2 import ROS2_IDS, explain
+from tests.lab.ros2 import ROS2_IDS
+from tests.lab.verdicts import explain
 
 pytestmark = pytest.mark.lab
 

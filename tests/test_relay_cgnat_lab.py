@@ -23,8 +23,8 @@ import pytest
 
 from tests.lab import outsider
 from tests.lab.relay_cgnat import TUNNELS, RelayCgnat
-from tests.lab.ros2 import explain
 from tests.lab.topology import ADDR, COMPUTERS
+from tests.lab.verdicts import explain
 
 pytestmark = pytest.mark.lab
 

@@ -11,8 +11,8 @@ import pytest
 
 from tests.lab import outsider
 from tests.lab.relay import RelayWorld
-from tests.lab.ros2 import explain
 from tests.lab.topology import ADDR
+from tests.lab.verdicts import explain
 
 pytestmark = pytest.mark.lab
 

@@ -16,7 +16,8 @@ import time
 
 import pytest
 
-from tests.lab.fleet_ros2 import ROS2_IDS, explain
+from tests.lab.fleet_ros2 import ROS2_IDS
+from tests.lab.verdicts import explain
 
 pytestmark = pytest.mark.lab
 FLEET_SITES = 3

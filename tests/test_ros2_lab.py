@@ -14,8 +14,9 @@ import time
 import pytest
 
 from tests.lab.lab import REPO
-from tests.lab.ros2 import ROS2_IDS, explain
+from tests.lab.ros2 import ROS2_IDS
 from tests.lab.topology import ADDR
+from tests.lab.verdicts import explain
 
 pytestmark = pytest.mark.lab
 TIMEOUT = 3.0  # [checks] timeout_s of the lab's settings

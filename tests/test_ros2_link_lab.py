@@ -10,25 +10,22 @@ import time
 
 import pytest
 
-from rosnet_tui.core.config.settings_model import LinkTopic
 from rosnet_tui.core.ros import ros2 as ros2_cfg
-from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
-from tests.lab.ros2 import explain
+from tests.lab.verdicts import (
+    explain,
+    measured_delay,
+    measured_thin,
+    measured_unshaped,
+    needing,
+    own_verdict,
+    within,
+)
 
 pytestmark = pytest.mark.lab
 
 
 def rules(entry: dict) -> list[str]:
     return [a["rule"] for a in entry.get("advice") or []]
-
-
-def _within(value: float | None, want: float, share: float) -> bool:
-    return value is not None and abs(value - want) <= want * share
-
-
-def _bounded(link: dict, results: dict) -> None:
-    assert link["duration_s"] <= link["timeout_s"] + 0.5, explain(results)
-    assert "timed out" not in link["summary"], explain(results)
 
 
 def _linked_check(ros2, host: str) -> dict:
@@ -42,36 +39,20 @@ def _linked_check(ros2, host: str) -> dict:
         time.sleep(1)
 
 
-def _needing(ros2, host: str, size: int, hz: float):
-    """*host*'s settings file with one [[link.topic]] of *size* bytes at *hz*."""
-    s = ros2.settings(host)
-    s.link.topics = [LinkTopic("/camera/image/compressed", size, hz)]
-    path = ros2.lab.home(host) / ".config" / "rosnet-tui" / "need.toml"
-    atomic_write_text(path, render_settings(s), mode=0o644)
-    return path
-
-
 def test_unshaped_the_link_passes_with_its_figures(ros2):
     for host, peer in (("laptop", "turtlebot"), ("robot", "sami")):
-        results = ros2.check(host)
-        link = results["ros2.link"]
-        assert link["status"] == "pass", explain(results)
-        d = link["data"]["peers"][peer]
-        assert d["rtt_ms"] is not None and d["out_bps"] > 10e6 and d["in_bps"] > 10e6, d
-        assert d["largest_out"] == d["largest_in"] == 1 << 20, d
-        assert "Mbit/s" in link["summary"] and " ms" in link["summary"], link["summary"]
-        _bounded(link, results)
+        measured_unshaped(ros2.check(host), "ros2.link", peer)
 
 
 def test_shaped_to_2_mbit_each_way_the_rates_a_round_trip_and_the_need(ros2):
     ros2.shape_robot("2mbit")
     # From the robot, with a need of 10 x 50 kB (4.0 Mbit/s): the rates and a warning with them.
-    results = ros2.check("robot", config=_needing(ros2, "robot", 50_000, 10))
+    results = ros2.check("robot", config=needing(ros2.settings("robot"), ros2.lab.home("robot"), 50_000, 10))
     link = results["ros2.link"]
     d = link["data"]["peers"]["sami"]
-    assert _within(d["out_bps"], 2e6, 0.25) and _within(d["in_bps"], 2e6, 0.25), explain(results)
+    assert within(d["out_bps"], 2e6, 0.25) and within(d["in_bps"], 2e6, 0.25), explain(results)
     assert d["rtt_ms"] is not None and link["data"]["need_bps"] == 4e6, explain(results)
-    _bounded(link, results)
+    own_verdict(link, results)
     assert link["status"] in ("warn", "fail"), explain(results)
     assert "needs 4.0 Mbit/s up, measured " in link["summary"], explain(results)
     assert "needs 4.0 Mbit/s down, measured " in link["summary"], explain(results)
@@ -81,9 +62,9 @@ def test_shaped_to_2_mbit_each_way_the_rates_a_round_trip_and_the_need(ros2):
     results = ros2.check("laptop")
     link = results["ros2.link"]
     d = link["data"]["peers"]["turtlebot"]
-    assert _within(d["out_bps"], 2e6, 0.25) and _within(d["in_bps"], 2e6, 0.25), explain(results)
+    assert within(d["out_bps"], 2e6, 0.25) and within(d["in_bps"], 2e6, 0.25), explain(results)
     assert d["rtt_ms"] is not None, explain(results)
-    _bounded(link, results)
+    own_verdict(link, results)
 
 
 def test_large_messages_dropped_on_the_way_are_named_before_the_path(ros2):
@@ -120,30 +101,15 @@ def test_at_64_kbit_the_check_ends_in_its_budget_and_reports_what_it_measured(ro
     messages were not tried and why, and never floods the line past its budget."""
     ros2.shape_robot("64kbit", latency="2s")
     results = ros2.check("laptop", timeout=180)
-    link = results["ros2.link"]
-    _bounded(link, results)
-    assert "turtlebot" in link["data"]["peers"], explain(results)
-    d = link["data"]["peers"]["turtlebot"]
-    assert d["rtt_ms"] is not None, explain(results)
-    assert _within(d["out_bps"], 64e3, 0.5) and _within(d["in_bps"], 64e3, 0.5), explain(results)
-    assert d["tried_out"] < 1 << 20 and d["tried_in"] < 1 << 20, explain(results)
-    assert "64 kB up not tried: about" in " ".join(link["evidence"]), explain(results)
+    assert "turtlebot" in results["ros2.link"]["data"]["peers"], explain(results)
+    measured_thin(results, "ros2.link", 64e3, 0.5, "64 kB")
 
 
 def test_on_a_thin_link_it_reports_what_it_measured_in_its_budget(ros2):
     """At 256 kbit/s the pings and both bursts fit the budget, 1 MB does not (about 33 s): the
     rates are reported, and the large message is said not tried, with why."""
     ros2.shape_robot("256kbit", latency="1s")
-    results = ros2.check("laptop", timeout=180)
-    link = results["ros2.link"]
-    print(explain({"ros2.link": link}))
-    _bounded(link, results)
-    d = link["data"]["peers"]["turtlebot"]
-    assert d["rtt_ms"] is not None, explain(results)
-    assert _within(d["out_bps"], 256e3, 0.35) and _within(d["in_bps"], 256e3, 0.35), \
-        explain(results)
-    assert d["tried_out"] < 1 << 20 and d["tried_in"] < 1 << 20, explain(results)
-    assert "1 MB up not tried: about" in " ".join(link["evidence"]), explain(results)
+    measured_thin(ros2.check("laptop", timeout=180), "ros2.link", 256e3, 0.35, "1 MB")
 
 
 
@@ -157,10 +123,4 @@ def test_the_round_trip_follows_a_delay_added_on_the_path(ros2, delay_ms):
     assert base is not None, explain(results)
     with ros2.delay_to_master(delay_ms):
         results = _linked_check(ros2, "laptop")     # its router linked again, through the hop
-    link = results["ros2.link"]
-    print(explain({"ros2.link": link}))
-    assert results["ros2.pubsub_in"]["status"] == "pass", explain(results)
-    d = link["data"]["peers"]["turtlebot"]
-    assert _within(d["rtt_ms"], 2 * delay_ms + base, 0.2), explain(results)
-    assert d["out_bps"] and d["in_bps"], explain(results)
-    _bounded(link, results)
+    measured_delay(results, "ros2.link", base, delay_ms)

@@ -11,7 +11,7 @@ import os
 
 import pytest
 
-from tests.lab.ros2 import explain
+from tests.lab.verdicts import explain, own_verdict
 
 pytestmark = pytest.mark.lab
 REPS = int(os.environ.get("REPS", "1"))
@@ -24,13 +24,6 @@ def whole_check(ros2, host: str, timeout: float = 240) -> dict[str, dict]:
                         env=ros2.env(host), timeout=timeout)
     assert r.stdout.strip(), r.stderr
     return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
-
-
-def own_verdict(entry: dict, results: dict) -> None:
-    assert entry["duration_s"] <= entry["timeout_s"] + 0.5, explain(results)
-    assert not entry["summary"].startswith("no verdict within"), explain(results)
-    assert entry["summary"], explain(results)
-    assert entry["evidence"] or entry["status"] == "skip", explain(results)
 
 
 @pytest.mark.parametrize("n", range(REPS))

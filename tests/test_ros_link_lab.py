@@ -5,63 +5,31 @@ need from [[link.topic]] compared. The ROS 2 twin is tests/test_ros2_link_lab.py
 
 from __future__ import annotations
 
-import json
-
 import pytest
 
-from rosnet_tui.core.config.settings_model import LinkTopic
-from rosnet_tui.core.saved.settings import atomic_write_text, render_settings
 from tests.lab.delay_sites import delay_between_sites
 from tests.lab.firewall import secured
+from tests.lab.verdicts import (
+    explain,
+    lab_check,
+    measured_delay,
+    measured_thin,
+    measured_unshaped,
+    needing,
+    own_verdict,
+    within,
+)
 
 pytestmark = pytest.mark.lab
-
-
-def check(lab, host: str, config=None, timeout: float = 90) -> dict[str, dict]:
-    """`rosnet-tui check --json --step ros` on *host*, in its ROS environment."""
-    r = lab.rosnet(host, "check", "--json", "--step", "ros", "--config",
-                   str(config or lab.config_path(host)), env=lab.ros_env(host), timeout=timeout)
-    assert r.stdout.strip(), r.stderr
-    return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
-
-
-def explain(results: dict[str, dict]) -> str:
-    return "\n".join(f"{c['id']}: {c['status']} ({c['duration_s']:.2f} s) - {c['summary']}\n  "
-                     + "\n  ".join(c["evidence"]) for c in results.values())
-
-
-def _within(value: float | None, want: float, share: float) -> bool:
-    return value is not None and abs(value - want) <= want * share
-
-
-def _bounded(link: dict, results: dict) -> None:
-    assert link["duration_s"] <= link["timeout_s"] + 0.5, explain(results)
-    assert not link["summary"].startswith("no verdict within"), explain(results)   # bare
-
-
-def _needing(lab, host: str, size: int, hz: float):
-    """*host*'s settings file with one [[link.topic]] of *size* bytes at *hz*."""
-    s = lab.settings(host)
-    s.link.topics = [LinkTopic("/camera/image/compressed", size, hz)]
-    path = lab.home(host) / ".config" / "rosnet-tui" / "need.toml"
-    atomic_write_text(path, render_settings(s), mode=0o644)
-    return path
 
 
 def test_unshaped_the_link_passes_with_its_figures(ros1_lab):
     lab = ros1_lab
     lab.reset()
     with secured(lab):                     # ROS 1 as the product sets it up: the firewall on
-        both = {h: check(lab, h) for h in ("laptop", "robot")}
+        both = {h: lab_check(lab, h, step="ros") for h in ("laptop", "robot")}
     for host, peer in (("laptop", "turtlebot"), ("robot", "sami")):
-        results = both[host]
-        link = results["ros.link"]
-        assert link["status"] == "pass", explain(results)
-        d = link["data"]["peers"][peer]
-        assert d["rtt_ms"] is not None and d["out_bps"] > 10e6 and d["in_bps"] > 10e6, d
-        assert d["largest_out"] == d["largest_in"] == 1 << 20, d
-        assert "Mbit/s" in link["summary"] and " ms" in link["summary"], link["summary"]
-        _bounded(link, results)
+        measured_unshaped(both[host], "ros.link", peer)
 
 
 def test_shaped_to_2_mbit_each_way_the_rates_a_round_trip_and_the_need(ros1_lab):
@@ -70,13 +38,13 @@ def test_shaped_to_2_mbit_each_way_the_rates_a_round_trip_and_the_need(ros1_lab)
     lab.shape_robot("2mbit")
     try:
         # From the robot, a need of 10 x 50 kB (4.0 Mbit/s): the rates and a warning with them.
-        results = check(lab, "robot", config=_needing(lab, "robot", 50_000, 10))
+        results = lab_check(lab, "robot", step="ros", config=needing(lab.settings("robot"), lab.home("robot"), 50_000, 10))
         link = results["ros.link"]
         d = link["data"]["peers"]["sami"]
-        assert _within(d["out_bps"], 2e6, 0.25) and _within(d["in_bps"], 2e6, 0.25), \
+        assert within(d["out_bps"], 2e6, 0.25) and within(d["in_bps"], 2e6, 0.25), \
             explain(results)
         assert d["rtt_ms"] is not None and link["data"]["need_bps"] == 4e6, explain(results)
-        _bounded(link, results)
+        own_verdict(link, results)
         assert link["status"] in ("warn", "fail"), explain(results)
         assert "needs 4.0 Mbit/s up, measured 1." in link["summary"] or \
             "needs 4.0 Mbit/s up, measured 2." in link["summary"], explain(results)
@@ -85,13 +53,13 @@ def test_shaped_to_2_mbit_each_way_the_rates_a_round_trip_and_the_need(ros1_lab)
         assert "4.0 Mbit/s" in thin["meaning"] and "compressed" in " ".join(thin["actions"])
         assert "downsampling" not in " ".join(thin["actions"]), thin   # Zenoh's: not ROS 1's
         # From the laptop, no need: the rates each way (up is the laptop's: the robot's download).
-        results = check(lab, "laptop")
+        results = lab_check(lab, "laptop", step="ros")
         link = results["ros.link"]
         d = link["data"]["peers"]["turtlebot"]
-        assert _within(d["out_bps"], 2e6, 0.25) and _within(d["in_bps"], 2e6, 0.25), \
+        assert within(d["out_bps"], 2e6, 0.25) and within(d["in_bps"], 2e6, 0.25), \
             explain(results)
         assert d["rtt_ms"] is not None, explain(results)
-        _bounded(link, results)
+        own_verdict(link, results)
     finally:
         lab.reset()
 
@@ -103,16 +71,8 @@ def test_on_a_thin_link_it_reports_what_it_measured_in_its_budget(ros1_lab):
     lab.reset()
     lab.shape_robot("256kbit", latency="1s")
     try:
-        results = check(lab, "laptop", timeout=180)
-        link = results["ros.link"]
-        print(explain({"ros.link": link}))
-        _bounded(link, results)
-        d = link["data"]["peers"]["turtlebot"]
-        assert d["rtt_ms"] is not None, explain(results)
-        assert _within(d["out_bps"], 256e3, 0.35) and _within(d["in_bps"], 256e3, 0.35), \
-            explain(results)
-        assert d["tried_out"] < 1 << 20 and d["tried_in"] < 1 << 20, explain(results)
-        assert "1 MB up not tried: about" in " ".join(link["evidence"]), explain(results)
+        measured_thin(lab_check(lab, "laptop", step="ros", timeout=180), "ros.link", 256e3,
+                      0.35, "1 MB")
     finally:
         lab.reset()
 
@@ -125,10 +85,10 @@ def test_at_64_kbit_the_check_ends_in_its_budget_and_says_what_it_has(ros1_lab):
     lab.reset()
     lab.shape_robot("64kbit", latency="2s")
     try:
-        results = check(lab, "laptop", timeout=180)
+        results = lab_check(lab, "laptop", step="ros", timeout=180)
         link = results["ros.link"]
         print(explain({"ros.link": link}))
-        _bounded(link, results)
+        own_verdict(link, results)
         assert link["summary"], explain(results)
         d = link["data"]["peers"].get("turtlebot") or {}
         if link["status"] == "pass":      # measured: the rates are about the shaping's
@@ -145,15 +105,9 @@ def test_the_round_trip_follows_a_delay_added_on_the_path(ros1_lab, delay_ms):
     trip ros.link measures is the added 2 x delay (plus the lab's own) within 20 %."""
     lab = ros1_lab
     lab.reset()
-    results = check(lab, "laptop")
+    results = lab_check(lab, "laptop", step="ros")
     base = results["ros.link"]["data"]["peers"]["turtlebot"]["rtt_ms"]
     assert base is not None, explain(results)
     with delay_between_sites(lab, delay_ms):
-        results = check(lab, "laptop")
-    link = results["ros.link"]
-    print(explain({"ros.link": link}))
-    assert results["ros.pubsub_in"]["status"] == "pass", explain(results)
-    d = link["data"]["peers"]["turtlebot"]
-    assert _within(d["rtt_ms"], 2 * delay_ms + base, 0.2), explain(results)
-    assert d["out_bps"] and d["in_bps"], explain(results)
-    _bounded(link, results)
+        results = lab_check(lab, "laptop", step="ros")
+    measured_delay(results, "ros.link", base, delay_ms)

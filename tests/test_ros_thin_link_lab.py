@@ -7,38 +7,16 @@ out)", and the ROS checks say how far they got. ROS 2 in tests/test_ros2_thin_li
 
 from __future__ import annotations
 
-import json
 import os
 
 import pytest
 
 from tests.lab.firewall import secured
+from tests.lab.verdicts import explain, lab_check, own_verdict
 
 pytestmark = pytest.mark.lab
 REPS = int(os.environ.get("REPS", "1"))     # more rounds: REPS=5 (a load-dependent edge)
 PEER = {"laptop": "turtlebot", "robot": "sami"}
-
-
-def whole_check(lab, host: str, timeout: float = 240) -> dict[str, dict]:
-    """The whole `rosnet-tui check --json` on *host* (every step), in its ROS environment."""
-    r = lab.rosnet(host, "check", "--json", "--config", str(lab.config_path(host)),
-                   env=lab.ros_env(host), timeout=timeout)
-    assert r.stdout.strip(), r.stderr
-    return {c["id"]: c for c in json.loads(r.stdout)["checks"]}
-
-
-def explain(results: dict[str, dict]) -> str:
-    return "\n".join(f"{c['id']}: {c['status']} ({c['duration_s']:.2f}/{c['timeout_s']:g} s) - "
-                     f"{c['summary']}\n  " + "\n  ".join(c["evidence"]) for c in results.values())
-
-
-def own_verdict(entry: dict, results: dict) -> None:
-    """*entry* ended by itself within its budget, with a summary that is not the runner's."""
-    assert entry["duration_s"] <= entry["timeout_s"] + 0.5, explain(results)
-    assert not entry["summary"].startswith("no verdict within"), explain(results)
-    assert "failed unexpectedly" not in entry["summary"], explain(results)
-    assert entry["summary"], explain(results)
-    assert entry["evidence"] or entry["status"] == "skip", explain(results)
 
 
 @pytest.mark.parametrize("n", range(REPS))
@@ -49,7 +27,7 @@ def test_at_64_kbit_every_check_ends_with_what_it_saw(ros1_lab, host, n):
     lab.shape_robot("64kbit", latency="2s")
     try:
         with secured(lab):                 # ROS 1 as the product sets it up: the firewall on
-            results = whole_check(lab, host)
+            results = lab_check(lab, host, timeout=240)
         print(explain(results))
         for entry in results.values():
             own_verdict(entry, results)

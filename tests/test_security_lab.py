@@ -32,8 +32,8 @@ import pytest
 from rosnet_tui.core.net.probe_server import ProbeLimits
 from tests.lab import outsider, readme_install
 from tests.lab.firewall import secured
-from tests.lab.ros2 import explain
 from tests.lab.topology import ADDR, ZENOH_PORT
+from tests.lab.verdicts import explain
 
 pytestmark = pytest.mark.lab
 TIMEOUT = 3.0

@@ -12,8 +12,9 @@ import time
 import pytest
 
 from tests.lab import ADDR
-from tests.lab.ros2 import Ros2World, explain
+from tests.lab.ros2 import Ros2World
 from tests.lab.upnp import LAN2_IP, UpnpModem
+from tests.lab.verdicts import explain
 
 pytestmark = pytest.mark.lab
 

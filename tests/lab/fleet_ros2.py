@@ -23,7 +23,7 @@ import sys
 import time
 
 from .fleet import Fleet
-from .ros2 import ROS2_IDS, ZROUTER, Ros2World, explain
+from .ros2 import ROS2_IDS, ZROUTER, Ros2World
 
 
 class FleetRos2(Ros2World):
@@ -108,4 +108,4 @@ class FleetRos2(Ros2World):
             self.wait_linked()
 
 
-__all__ = ["ROS2_IDS", "FleetRos2", "explain"]
+__all__ = ["ROS2_IDS", "FleetRos2"]

@@ -332,11 +332,4 @@ class Ros2World:
             self.remove_tls(h)
 
 
-def explain(results: dict[str, dict]) -> str:
-    return "\n".join(f"{c['id']}: {c['status']} ({c.get('duration_s', 0):.2f} s) - {c['summary']}"
-                     + "".join(f"\n    {e}" for e in c["evidence"])
-                     + "".join(f"\n  -> {a['meaning']}" for a in c.get("advice") or [])
-                     for c in results.values())
-
-
-__all__ = ["ADDR", "ROS2_IDS", "Ros2World", "explain"]
+__all__ = ["ADDR", "ROS2_IDS", "Ros2World"]
