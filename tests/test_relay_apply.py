@@ -265,6 +265,49 @@ def test_a_yes_enables_and_starts_the_unit_on_the_relay(systemd_relay, tmp_path)
     assert f"run on the relay: {line}" in bad.stderr, bad.stderr
 
 
+def test_undo_stops_and_disables_the_unit_before_it_takes_it_away(systemd_relay, tmp_path):
+    """Undo of a `relay apply` took the unit's file away and left its router running (and
+    linked for the next boot). Now it stops and disables the unit first, while its file is there,
+    then puts the files back and has systemd read them again. Where systemctl fails, the undo
+    changes nothing on the relay, says what to run there, and exits 1."""
+    for p in relay_files(systemd_relay.home).values():
+        p.unlink(missing_ok=True)
+    m = Master(tmp_path, systemd_relay)
+    calls = systemd_relay.bin / "calls"
+    unit = m.unit_dir / "rosnet-tui-relay.service"
+    out = m.apply("--yes")
+    assert out.returncode == 0 and unit.exists(), out.stdout + out.stderr
+    calls.unlink()
+    (systemd_relay.bin / "fail").touch()
+    try:
+        refused = m.run("undo", "--yes")
+    finally:
+        (systemd_relay.bin / "fail").unlink()
+    assert refused.returncode == 1 and "Traceback" not in refused.stderr, refused.stderr
+    said = refused.stdout + refused.stderr
+    assert "run on the relay `systemctl disable --now rosnet-tui-relay.service`" in said, said
+    assert "nothing was changed on the relay" in said, said
+    assert unit.exists() and relay_files(systemd_relay.home)["config"].exists()
+    calls.unlink()
+    undo = m.run("undo", "--yes")
+    assert undo.returncode == 0, undo.stdout + undo.stderr
+    assert [x.split() for x in calls.read_text().splitlines()] == [
+        ["disable", "--now", "rosnet-tui-relay.service"], ["daemon-reload"]], undo.stdout
+    assert not unit.exists() and not relay_files(systemd_relay.home)["config"].exists()
+    assert "ran `systemctl disable --now rosnet-tui-relay.service`" in undo.stdout, undo.stdout
+
+
+def test_undo_steps_stop_a_unit_it_made_and_restart_one_put_back():
+    unit = {"path": "/etc/systemd/system/rosnet-tui-relay.service", "before": None}
+    config = {"path": "/home/r/.config/rosnet-tui/relay.json5", "before": "{}"}
+    assert relay_apply.undo_steps([config, unit]) == (["systemctl disable --now rosnet-tui-relay.service"],
+                                          ["systemctl daemon-reload"])
+    assert relay_apply.undo_steps([config, dict(unit, before="[Unit]\n")]) == (
+        [], ["systemctl daemon-reload", "systemctl try-restart rosnet-tui-relay.service"])
+    assert relay_apply.undo_steps([config]) == (
+        [], ["systemctl daemon-reload", "systemctl try-restart rosnet-tui-relay.service"])
+
+
 def test_the_systemctl_line_names_the_unit_as_systemd_knows_it():
     """In systemd's own folder the unit is enabled and started by name (restarted when the
     apply changed what it reads); a login that is not root is told to use sudo."""

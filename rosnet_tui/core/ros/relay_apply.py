@@ -298,8 +298,13 @@ async def start_unit(s: Settings, opts: SshOptions | None, p: RelayPlan,
     """Run :func:`start_steps` on the relay over SSH, as root or through ``sudo -n``. True: done;
     None: this login may not (not root, and sudo asks for a password or refuses); False: a step
     failed. The words say which."""
-    steps = start_steps(p, unit_path)
-    if p.look.user == "root":
+    return await _systemctl(s, opts, p.look.user, start_steps(p, unit_path))
+
+
+async def _systemctl(s: Settings, opts: SshOptions | None, user: str,
+                     steps: list[str]) -> tuple[bool | None, str]:
+    """*steps* (systemctl commands) on the relay, as :func:`start_unit` says."""
+    if user == "root":
         cmd = " && ".join(steps)
     else:
         cmd = (f"sudo -n true 2>/dev/null || exit {NOT_ALLOWED_EXIT}; "
@@ -307,9 +312,8 @@ async def start_unit(s: Settings, opts: SshOptions | None, p: RelayPlan,
     res = await ssh_run(opts, relay_peer(s), cmd, timeout=STEP_TIMEOUT_S)
     if res.failure:
         return False, f"{hop_words(s)} failed ({res.failure}): {res.detail}"
-    if res.exit_status == NOT_ALLOWED_EXIT and p.look.user != "root":
-        return None, (f"the relay's user {p.look.user} is not root and sudo asks it for a "
-                      "password")
+    if res.exit_status == NOT_ALLOWED_EXIT and user != "root":
+        return None, f"the relay's user {user} is not root and sudo asks it for a password"
     if res.exit_status != 0:
         tail = " | ".join((res.stderr or res.stdout or "").strip().splitlines()[-3:])
         return False, (f"on the relay {s.relay.host}, systemctl failed (exit status "
@@ -318,13 +322,25 @@ async def start_unit(s: Settings, opts: SshOptions | None, p: RelayPlan,
 
 
 # --------------------------------------------------------------------------- undo
+def undo_steps(files: list[dict]) -> tuple[list[str], list[str]]:
+    """The systemctl steps (before, after) putting the relay's *files* back (an undo entry's):
+    a unit the apply made is stopped and disabled first, while its file is there to say how (its
+    router would run on, and start again at the next boot, with no unit left); a unit or config
+    put back to its older text is read again, and the router restarted if it runs."""
+    unit = next((f for f in files if str(f.get("path") or "").endswith("/" + UNIT_NAME)), None)
+    if unit is not None and unit.get("before") is None:
+        return [f"systemctl disable --now {UNIT_NAME}"], ["systemctl daemon-reload"]
+    return [], ["systemctl daemon-reload", f"systemctl try-restart {UNIT_NAME}"]
+
+
 async def _undo_one(change: dict, force: bool) -> str:
     s = Settings()
     s.relay.host, s.relay.ssh_user = str(change.get("host")), str(change.get("user"))
     s.relay.ssh_port = int(change.get("port") or 22)
     files = [f for f in change.get("files") or [] if isinstance(f, dict)]
-    now = RelayLook.from_report(await _run(None, s, "look",
-                                           *[str(f.get("path")) for f in files])).files
+    look = RelayLook.from_report(await _run(None, s, "look",
+                                            *[str(f.get("path")) for f in files]))
+    now = look.files
     changed = [str(f["path"]) for f in files
                if relayproto.digest(now.get(str(f["path"]))) not in (f.get("after"),
                                                                      relayproto.digest(
@@ -333,13 +349,32 @@ async def _undo_one(change: dict, force: bool) -> str:
         raise ManagedFileError("changed on the relay since rosnet-tui wrote it: "
                                + ", ".join(changed) + "; nothing was changed there (force it "
                                "to put them back anyway)")
+    before, after = undo_steps(files) if look.systemd else ([], [])
+    said: list[str] = []
+    if before:      # the router stopped first: refused, the undo changes nothing (unless forced)
+        ok, words = await _unit_words(s, look.user, before)
+        if not ok and not force:
+            raise RelayApplyError(words)
+        said.append(words)
     spec = {"files": [{"path": str(f["path"]), "content": f.get("before"),
                        "mode": int(f.get("mode") or 0o644), "expect": None} for f in files]}
     await _run(None, s, "write", json.dumps(spec))
     change["state"] = "removed"
+    if after:
+        said.append((await _unit_words(s, look.user, after))[1])
     return (f"the relay {s.relay.host}: " + ", ".join(
         f"{f['path']} {'put back' if f.get('before') is not None else 'removed'}"
-        for f in files))
+        for f in files) + "".join(f"; {w}" for w in said))
+
+
+async def _unit_words(s: Settings, user: str, steps: list[str]) -> tuple[bool, str]:
+    """*steps* run on the relay for an undo: (done, what ran or what to run there by hand)."""
+    ok, words = await _systemctl(s, None, user, steps)
+    if ok:
+        return True, words
+    sudo = "" if user == "root" else "sudo "
+    return False, (f"{words}: run on the relay `{' && '.join(sudo + x for x in steps)}` (its "
+                   f"router may run as {UNIT_NAME} until then)")
 
 
 def _blocking(change: dict, force: bool) -> str:
