@@ -9,10 +9,12 @@ import hashlib
 import hmac
 import os
 import stat
+import subprocess
 
 import pytest
 
 from rosnet_tui.core.ssh.known_hosts import (
+    fingerprint_command,
     host_key_name,
     key_fingerprint,
     known_host_keys,
@@ -193,14 +195,26 @@ def test_trusting_refuses_garbage_a_second_key_and_what_is_not_a_file(tmp_path):
         trust_host_key(SshOptions(ssh_dir=dev), "robot", 22, _host_key())
 
 
-def test_verify_commands_name_the_host_key_file_and_the_port():
+def test_verify_commands_ask_the_machine_itself_for_the_key_of_the_type_shown():
+    """Its own sshd is asked on the machine itself (wherever it keeps its keys); the check from
+    here it also offered proved nothing (a man in the middle answers it too)."""
     v = verify_commands("robot", 2222, "ecdsa-sha2-nistp256", "ops")
-    assert "/etc/ssh/ssh_host_ecdsa_key.pub" in v and "ssh-keyscan -p 2222 robot" in v
-    assert "`ssh -p 2222 ops@robot`" in v
+    assert "`ssh-keyscan -t ecdsa -p 2222 127.0.0.1 2>/dev/null | ssh-keygen -lf -`" in v
+    assert "prints on robot itself" in v and "`ssh -p 2222 ops@robot`" in v
+    assert "from here" not in v and "ssh-keyscan -p 2222 robot" not in v
     v = verify_commands("robot", 22, "ssh-rsa")
-    assert "ssh_host_rsa_key.pub" in v and "ssh-keyscan robot" in v and "`ssh robot`" in v
-    assert "ssh_host_ed25519_key.pub" in verify_commands("robot", 22, "ssh-unknown")
-    assert "ssh_host_dsa_key.pub" in verify_commands("robot", 22, "ssh-dss")
+    assert "`ssh-keyscan -t rsa 127.0.0.1 2>/dev/null" in v and "`ssh robot`" in v
+    assert "ssh-keyscan 127.0.0.1 2>" in verify_commands("robot", 22, "ssh-unknown")   # all types
+    assert fingerprint_command(22, "ssh-dss").startswith("ssh-keyscan -t dsa 127.0.0.1")
+
+
+def test_the_fingerprint_command_finds_keys_sshd_keeps_outside_etc_ssh(sshd):
+    """The advice used to name /etc/ssh/ssh_host_ed25519_key.pub: a real sshd whose only host key
+    is elsewhere (this one's, in its own folder) is asked, and prints that key's fingerprint."""
+    cmd = fingerprint_command(sshd.port, "ssh-ed25519")
+    r = subprocess.run(["sh", "-c", cmd], capture_output=True, text=True, timeout=30)
+    assert sshd.fingerprint in r.stdout, (cmd, r.stdout, r.stderr)
+    assert not str(sshd.host_key).startswith("/etc/ssh")
 
 
 def test_lines_after_markers_other_hosts_and_bad_bytes_are_still_read(tmp_path):

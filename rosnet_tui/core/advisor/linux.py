@@ -24,6 +24,7 @@ from rosnet_tui.core.advisor.ranking import (
     ssh_refused_first,
 )
 from rosnet_tui.core.config.settings_model import PORT_MAX, PORT_MIN
+from rosnet_tui.core.ssh.known_hosts import fingerprint_command
 
 
 def _ssh_caused(ev: Evidence, name: str) -> list[str]:
@@ -193,6 +194,12 @@ def _ssh_refused(ev: Evidence) -> list[Hit]:
     return hits
 
 
+def _fp_command(ev: Evidence, name: str, st: Mapping) -> str:
+    """The command printing *name*'s own sshd key fingerprint there, of the type it showed."""
+    p = ev.s.peer(name)
+    return fingerprint_command(p.ssh_port if p else 22, str(st.get("host_key") or "").split(" ")[0])
+
+
 @rule("linux.ssh.host_key_changed", "linux", ("linux.ssh",),
       "SSH host key changed",
       "The peer shows a different host key than the one recorded: a reinstall or new keys, or "
@@ -211,7 +218,7 @@ def _ssh_key_changed(ev: Evidence) -> list[Hit]:
             f"~/.ssh/known_hosts: either {name} was reinstalled or its keys regenerated, or "
             "someone is intercepting the connection. We refuse to connect until you verify.",
             [f"Verify out of band (at {name}'s console, or by someone you trust there): "
-             f"`ssh-keygen -lf /etc/ssh/ssh_host_ed25519_key.pub` on {name} must print {fp}.",
+             f"`{_fp_command(ev, name, st)}` on {name} must list {fp}.",
              f"If it matches: `ssh-keygen -R {name}` here (and `ssh-keygen -R ADDRESS` for its "
              f"IP), then `ssh {user}@{name}` once and accept the verified key.",
              "If it does not match: do not connect; treat it as an attack and tell whoever runs "
@@ -236,8 +243,8 @@ def _ssh_key_unknown(ev: Evidence) -> list[Hit]:
         hits.append(Hit(
             f"{name}'s host key ({fp}) is not in ~/.ssh/known_hosts yet; it is never accepted "
             "silently.",
-            [f"On {name} (console or a trusted channel) run "
-             f"`ssh-keygen -lf /etc/ssh/ssh_host_ed25519_key.pub` and compare with {fp}.",
+            [f"On {name} (console or a trusted channel) run `{_fp_command(ev, name, st)}` and "
+             f"compare with {fp}.",
              f"If they match: `ssh {ev.ssh_user(name)}@{name}` once and answer yes, then re-run "
              "the Linux step."],
             severity=ev.sev("linux.ssh", "warn"),

@@ -8,6 +8,7 @@ from collections.abc import Mapping
 
 from rosnet_tui.core.advisor.engine import Hit, rule
 from rosnet_tui.core.advisor.evidence import Evidence, behind_relay
+from rosnet_tui.core.ssh.known_hosts import fingerprint_command
 
 CHECK = "relay.tunnel"
 
@@ -93,8 +94,8 @@ def _ssh_relay(ev: Evidence) -> list[Hit]:
             login = f"{ev.s.relay.ssh_user}@{relay}" if ev.s.relay.ssh_user else relay
             actions = [f"Run `ssh {login}` once from {ev.me}: "
                        "compare the host key it shows with the relay's own "
-                       "(`ssh-keygen -lf /etc/ssh/ssh_host_ed25519_key.pub` there) and accept "
-                       "it; install this key there if it asks for a password.",
+                       f"(`{fingerprint_command(ev.s.relay.ssh_port or 22)}` there) and "
+                       "accept it; install this key there if it asks for a password.",
                        f"In the relay account's ~/.ssh/authorized_keys this key's line must "
                        f"allow permitopen=\"127.0.0.1:{port}\" (docs/SECURITY.md)."]
         else:

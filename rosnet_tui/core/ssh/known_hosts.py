@@ -186,14 +186,23 @@ def trust_host_key(opts: SshOptions | None, name: str, port: int, host_key: str)
     return path
 
 
-_KEY_FILE_KIND = {"ssh-ed25519": "ed25519", "ssh-rsa": "rsa", "ssh-dss": "dsa"}
+_KEYSCAN_TYPE = {"ssh-ed25519": "ed25519", "ssh-rsa": "rsa", "ssh-dss": "dsa"}
+
+
+def fingerprint_command(port: int = 22, key_type: str = "") -> str:
+    """The command that prints, run on a machine itself, its sshd's host key fingerprint (of
+    *key_type* when known): it asks the running sshd, so it holds wherever sshd keeps its keys
+    (a HostKey outside /etc/ssh) and whatever their type. Run from anywhere else it would show
+    whatever answers on the way, a man in the middle too: it proves nothing there."""
+    kind = _KEYSCAN_TYPE.get(key_type, "ecdsa" if key_type.startswith("ecdsa") else "")
+    opts = (f" -t {kind}" if kind else "") + (f" -p {port}" if port != 22 else "")
+    return f"ssh-keyscan{opts} 127.0.0.1 2>/dev/null | ssh-keygen -lf -"
 
 
 def verify_commands(name: str, port: int, key_type: str = "ssh-ed25519", user: str = "") -> str:
     """How a user can check a fingerprint themselves, and accept it with plain ssh."""
-    kind = _KEY_FILE_KIND.get(key_type, "ecdsa" if key_type.startswith("ecdsa") else "ed25519")
     p = f" -p {port}" if port != 22 else ""
     login = f"{user}@{name}" if user else name
-    return (f"compare with `ssh-keygen -lf /etc/ssh/ssh_host_{kind}_key.pub` run on {name} itself "
-            f"(or `ssh-keyscan{p} {name} | ssh-keygen -lf -` from here); if it matches, accept it "
-            f"by running `ssh{p} {login}` once, or in rosnet-tui")
+    return (f"compare with what `{fingerprint_command(port, key_type)}` prints on {name} itself "
+            f"(its console, or someone you trust there); if it matches, accept it by running "
+            f"`ssh{p} {login}` once, or in rosnet-tui")
