@@ -163,6 +163,7 @@ def test_relay_apply_sets_the_relay_up_and_undo_puts_its_files_back(clean_relay,
     assert start == (f"ExecStart={venv_python} -m rosnet_tui relay serve --router-config "
                      f"{files['config']}")              # the relay's install, not the master's
     assert f"User={getpass.getuser()}" in unit.read_text()
+    assert "RestartPreventExitStatus=2" in unit.read_text().splitlines()  # refused: no loop
     assert "Undo (the config and unit, not the key) with: rosnet-tui undo" in out.stdout
 
     # The unit's command starts the relay's router from what was written (its own install).

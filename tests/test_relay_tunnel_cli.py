@@ -50,6 +50,9 @@ def test_the_unit_runs_this_same_command_and_restarts(tmp_path):
     assert start.endswith(f"--config {tmp_path / 'c.toml'} relay tunnel --sshd-port 2222 "
                           f"--ssh-dir {tmp_path / 'keys'}")
     assert "Restart=always" in text and "User=" in text
+    # a refusal of the settings (exit 2: see the test above, ROS 1 has no tunnel) is not
+    # restarted every 5 s for ever
+    assert "RestartPreventExitStatus=2" in text.splitlines()
 
 
 SETTINGS = """\

@@ -663,6 +663,7 @@ def test_cli_install_service_shows_then_writes(tmp_path):
     assert r.returncode == 0, r.stderr
     unit = (units / "rosnet-tui-sync.service").read_text()
     assert "Restart=on-failure" in unit and "WantedBy=multi-user.target" in unit
+    assert "RestartPreventExitStatus=2" in unit.splitlines()     # its settings refused: no loop
     exec_line = next(x for x in unit.splitlines() if x.startswith("ExecStart="))
     assert f"--config {w.config}" in exec_line and exec_line.split()[-2] == "--bashrc"
     assert "systemctl daemon-reload" in r.stdout

@@ -19,7 +19,7 @@ from rosnet_tui.cli.common import (
     say,
     state_dir_of,
 )
-from rosnet_tui.cli.units import exec_lines
+from rosnet_tui.cli.units import exec_lines, restart_lines
 from rosnet_tui.cli.writing import command_line, confirm, load_settings_for
 from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.files.managed_text import ManagedFileError
@@ -63,8 +63,7 @@ def unit_text(python: str, root: str, user: str, config: str) -> str:
         "Type=simple",
         f"User={user}",
         *exec_lines(argv, Path(root) if root else Path()),
-        "Restart=always",
-        "RestartSec=5",
+        *restart_lines("always", 5),
         "",
         "[Install]",
         "WantedBy=multi-user.target",

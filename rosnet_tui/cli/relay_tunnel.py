@@ -18,7 +18,7 @@ from rosnet_tui.cli.common import (
     config_path,
     say,
 )
-from rosnet_tui.cli.units import exec_lines, install_unit
+from rosnet_tui.cli.units import exec_lines, install_unit, restart_lines
 from rosnet_tui.cli.writing import load_settings_for
 from rosnet_tui.core.files import privilege
 from rosnet_tui.core.ssh.options import SshOptions
@@ -105,8 +105,7 @@ def unit_text(args: argparse.Namespace) -> str:
              "Type=simple",
              f"User={getpass.getuser()}",
              *exec_lines(argv),
-             "Restart=always",
-             "RestartSec=5"]
+             *restart_lines("always", 5)]
     lines += ["", "[Install]", "WantedBy=multi-user.target", ""]
     return "\n".join(lines)
 

@@ -29,7 +29,7 @@ from rosnet_tui.cli.common import (
     state_dir_of,
     state_dir_problem,
 )
-from rosnet_tui.cli.units import exec_lines, install_unit
+from rosnet_tui.cli.units import exec_lines, install_unit, restart_lines
 from rosnet_tui.cli.writing import ask, confirm
 from rosnet_tui.core.config.paths import Paths, xdg_config_home
 from rosnet_tui.core.config.settings_model import SettingsError
@@ -384,8 +384,7 @@ def unit_text(args: argparse.Namespace, *, user: bool) -> tuple[str, list[str]]:
         "[Service]",
         "Type=simple",
         *exec_lines(argv),
-        "Restart=on-failure",
-        "RestartSec=10",
+        *restart_lines("on-failure", 10),
     ]
     lines += ["", "[Install]", f"WantedBy={'default.target' if user else 'multi-user.target'}", ""]
     return "\n".join(lines), notes

@@ -10,7 +10,7 @@ import sys
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
-from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, say
+from rosnet_tui.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, say
 from rosnet_tui.cli.writing import confirm
 from rosnet_tui.core.files import privilege
 
@@ -32,6 +32,15 @@ def exec_lines(argv: Sequence[str], root: Path | None = None) -> list[str]:
     if root.parts and not any(part in ("site-packages", "dist-packages") for part in root.parts):
         lines.append("Environment=" + systemd_quote(f"PYTHONPATH={root}"))
     return lines
+
+
+def restart_lines(policy: str, seconds: int) -> list[str]:
+    """How a unit's command is started again: *policy* after *seconds*, but never after it
+    refused its settings (exit 2: a restart cannot mend them; a tunnel unit left from ROS 2 days
+    on a component now on ROS 1 started Python every few seconds, for ever). The journal keeps
+    the refusal; once the settings are mended, ``systemctl restart`` runs it again."""
+    return [f"Restart={policy}", f"RestartSec={seconds}",
+            f"RestartPreventExitStatus={EXIT_USAGE}"]
 
 
 def install_unit(args: argparse.Namespace, path: Path, text: str, *, ctl: str = "systemctl",
