@@ -269,6 +269,40 @@ def test_on_a_slow_link_the_refusals_still_count_as_refusals(world):
     assert a["insider"]["result"] == "accepted", a
 
 
+def test_a_link_too_slow_for_any_answer_is_not_judged_not_called_open(world):
+    """At 64 kbit/s behind a full queue the router's TLS answer came after the probe's wait, and
+    the silence was read as a port that does not speak TLS: "an outsider gets a Zenoh session
+    (in plain TCP)", a false alarm. Silence proves nothing now: a plain Zenoh hello is asked
+    too, and with no answer to either the check warns that it could not judge."""
+    fleet, member_tls, start = world
+    _member_cert(fleet, member_tls)
+    link = SlowLink(start("mtls"), 2.0)         # a 4 s round trip: longer than the probe waits
+    try:
+        t0 = time.monotonic()
+        r = _run(_settings(link.port))
+        took = time.monotonic() - t0
+    finally:
+        link.close()
+    a = r.data["attempts"]
+    assert r.status == "warn" and r.data["cause"] == "no_verdict", _explain(r)
+    assert a["no_cert"]["result"] == "timeout" and a["plain"]["result"] == "timeout", a
+    assert "not judged" in r.summary and "in plain TCP" in r.summary, r.summary
+    assert took <= r.timeout_s + 1.0, took         # its budget (and the round's set-up)
+
+
+def test_plain_attempt_is_decided_by_an_answer_never_by_silence():
+    tls = {"result": "alert"}
+    silent = {"result": "timeout"}
+    assert outsider.plain_attempt(tls)["result"] == "refused"
+    assert outsider.plain_attempt({"result": "not_tls"})["result"] == "accepted"
+    assert outsider.plain_attempt({"result": "closed"})["result"] == "closed"
+    for plain, verdict in ((None, "timeout"), ({"result": "timeout"}, "timeout"),
+                           ({"result": "accepted"}, "accepted"), ({"result": "refused"}, "refused"),
+                           ({"result": "hung_up"}, "accepted"), ({"result": "other"}, "accepted")):
+        assert outsider.plain_attempt(silent, plain)["result"] == verdict, plain
+    assert outsider.no_verdict(silent) and not outsider.refused(silent)
+
+
 def test_a_strangers_late_refusal_from_a_busy_router_still_counts(world):
     """Issue 29's CI flake (nine sites on two cores): the router's refusal of a foreign
     certificate came more than a second after the handshake, and silence was read as a session:
@@ -295,6 +329,7 @@ def test_plain_router_today_fails_with_security_off(world):
     assert r.status == "fail", _explain(r)
     assert r.data["cause"] == "security_off" and r.data["attempts"]["plain"]["result"] == \
         "accepted", _explain(r)
+    assert "InitAck" in r.data["attempts"]["plain"]["detail"], _explain(r)   # an answer, proven
     r = _run(_settings(port, security="mtls"))           # settings say mTLS, the router is plain
     assert r.status == "fail" and r.data["cause"] == "plain_open", _explain(r)
 

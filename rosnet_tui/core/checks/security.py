@@ -317,13 +317,14 @@ def ros2_verdict(s: Settings, rep: dict[str, Any], data: dict[str, Any]) -> Outc
     master, port = _hub(s)
     no_cert = outsider.as_dict(rep.get("no_cert"))
     attempts = {"no_cert": no_cert, "foreign": outsider.as_dict(rep.get("foreign")),
-                "plain": outsider.plain_attempt(no_cert),
+                "plain": outsider.plain_attempt(no_cert, outsider.as_dict(rep.get("plain"))),
                 "insider": outsider.as_dict(rep.get("insider"))}
     ev = [f"{data.get('from')}: {_ATTEMPT_WORDS[k]} -> {a.get('result')}"
           + (f" ({a.get('detail')})" if a.get("detail") else "") for k, a in attempts.items()]
     data["attempts"] = {k: {"result": str(a.get("result") or "none"),
                             "detail": str(a.get("detail") or "")} for k, a in attempts.items()}
-    let_in = [k for k in ("no_cert", "foreign", "plain") if not outsider.refused(attempts[k])]
+    let_in = [k for k in ("no_cert", "foreign", "plain") if not outsider.refused(attempts[k])
+              and not outsider.no_verdict(attempts[k])]
     cert_b64 = next((a.get("server_cert") for a in attempts.values() if a.get("server_cert")), "")
     facts = outsider.cert_facts(cert_b64) if cert_b64 else None
     if facts is not None:
@@ -346,6 +347,14 @@ def ros2_verdict(s: Settings, rep: dict[str, Any], data: dict[str, Any]) -> Outc
         words = ", ".join(_ATTEMPT_WORDS[k] for k in let_in)
         return Outcome(Status.FAIL, f"an outsider gets a Zenoh session at {master}:{port} "
                                     f"({words})", ev, data)
+    late = [k for k in ("no_cert", "foreign", "plain") if outsider.no_verdict(attempts[k])]
+    if late:    # no answer in time to these: not judged (a slow or busy link), not insecure
+        data["cause"] = "no_verdict"
+        words = ", ".join(_ATTEMPT_WORDS[k] for k in late)
+        return Outcome(Status.WARN, f"not judged from {data.get('from')}: {master}:{port} gave "
+                                    f"no answer in time to a session {words} (a slow or busy "
+                                    "link, see ros2.link); check again when it is quieter, or "
+                                    "raise [checks] timeout_s", ev, data)
     if insider_cause:
         data["cause"] = insider_cause
         return Outcome(Status.FAIL, f"outsiders are refused at {master}:{port}, but so is the "

@@ -162,6 +162,10 @@ def attempt(cert=None, key=None, ca=None, patient=True):
         why = e.reason or str(e)
         out.update(result="alert" if "ALERT" in why else "not_tls", detail=str(why)[:160])
         return out
+    except socket.timeout:      # no answer: a plain router waits for more, a slow link is late
+        raw.close()
+        out.update(result="timeout", detail="no TLS answer to our hello within %.1f s" % t)
+        return out
     except (OSError, ValueError) as e:
         raw.close()
         out.update(result="not_tls", detail=("%s: %s" % (type(e).__name__, e))[:160])
@@ -177,17 +181,19 @@ def attempt(cert=None, key=None, ca=None, patient=True):
     # at once, and a busy router's late refusal must not read as a session); the insider five
     # handshake times (0.4 s to `wait`).
     limit = t if patient else min(wait, max(0.4, 5 * (time.monotonic() - started)))
-    out.update(zip(("result", "detail"), verdict(s, limit)))
+    out.update(zip(("result", "detail"), verdict(s, limit, patient)))
     return out
 
 
-def verdict(s, limit):
+def verdict(s, limit, patient):
     end = time.monotonic() + limit
     try:
         s.setblocking(False)
         while True:
             left = end - time.monotonic()
             if not s.pending() and (left <= 0 or not select.select([s], [], [], left)[0]):
+                if patient:     # a stranger: Zenoh takes a certificate with tickets, refuses
+                    return "timeout", "no verdict within %.1f s" % limit   # with an alert
                 return "accepted", "no verdict within %.1f s: taken" % limit
             try:
                 return ("accepted", "data") if s.recv(1) else ("closed", "the server hung up")
@@ -201,6 +207,34 @@ def verdict(s, limit):
     finally:
         s.close()
 
+# A Zenoh client's first message in plain TCP (InitSyn of protocol 1.x, no extensions, a client
+# with a random id): a plain router answers with its InitAck at once, a TLS-only port with an
+# alert. Asked only when our TLS hello got no answer: the proof of a plain port is then an
+# answer, not a silence (which a slow link gives too).
+def plain_hello():
+    body = bytes([0x41, 0x09, 0xf2]) + os.urandom(16) + bytes([0x0a, 0xc8, 0xff])
+    try:
+        raw = socket.create_connection((host, port), timeout=t)
+    except OSError as e:
+        return {"result": "closed", "detail": str(e)[:160]}
+    try:
+        raw.settimeout(t)
+        raw.sendall(len(body).to_bytes(2, "little") + body)
+        data = raw.recv(64)
+    except socket.timeout:
+        return {"result": "timeout", "detail": "no answer to a plain Zenoh hello within %.1f s" % t}
+    except OSError as e:
+        return {"result": "hung_up", "detail": str(e)[:160]}
+    finally:
+        raw.close()
+    if not data:
+        return {"result": "hung_up", "detail": "the port hung up on a plain Zenoh hello"}
+    if len(data) >= 3 and data[2] & 0x3f == 0x21:      # INIT with its ack flag
+        return {"result": "accepted", "detail": "a plain Zenoh hello got the router's InitAck"}
+    if data[0] in (0x15, 0x16):                         # a TLS record: an alert, as a rule
+        return {"result": "refused", "detail": "the port answered a plain Zenoh hello in TLS"}
+    return {"result": "other", "detail": "an answer that is no Zenoh InitAck: " + data[:8].hex()}
+
 import threading
 rep = {}
 
@@ -210,6 +244,8 @@ def run(name, *a):
     except (OSError, ssl.SSLError, ValueError) as e:
         rep[name] = {"result": "no_fleet_cert" if name == "insider" else "error",
                      "detail": str(e)[:160]}
+    if name == "no_cert" and rep[name].get("result") == "timeout":
+        rep["plain"] = plain_hello()
 
 tmp = tempfile.mkdtemp(prefix="rosnet-outsider-")
 try:
@@ -242,7 +278,7 @@ try:
     for th in threads[-2:]:
         th.start()
     for th in threads:
-        th.join(3 * t + wait + 1)
+        th.join(4 * t + wait + 1)
 finally:
     shutil.rmtree(tmp, ignore_errors=True)
 print(MARK + json.dumps(rep))
@@ -365,21 +401,40 @@ def ssh_fix(host_name: str, user: str) -> list[str]:
 
 # --------------------------------------------------------------------------- TLS verdict
 def refused(att: dict[str, Any]) -> bool:
-    """Whether an outsider attempt got no session (anything but an accepted handshake or a port
-    that speaks plain TCP)."""
-    return att.get("result") not in ("accepted", "not_tls", None)   # None: no verdict came
+    """Whether an outsider attempt got no session (anything but an accepted handshake, a port
+    that speaks plain TCP, or no verdict in time)."""
+    return att.get("result") not in ("accepted", "not_tls", "timeout", None)  # None: no report
 
 
-def plain_attempt(no_cert: dict[str, Any]) -> dict[str, Any]:
-    """The plain-TCP verdict from the first attempt: a port that answers a ClientHello with a
-    TLS handshake speaks only TLS, so a plain Zenoh session cannot open there; one that does
-    not speak TLS (its reply is no TLS record, or it says nothing) takes plain sessions."""
+def no_verdict(att: dict[str, Any]) -> bool:
+    """Whether an attempt's answer did not come in time (a slow or busy link): not judged."""
+    return att.get("result") == "timeout"
+
+
+def plain_attempt(no_cert: dict[str, Any], plain: dict[str, Any] | None = None
+                  ) -> dict[str, Any]:
+    """The plain-TCP verdict: a port that answers our ClientHello with a TLS handshake speaks
+    only TLS, so a plain Zenoh session cannot open there; one whose reply is no TLS record takes
+    plain sessions. Silence to the ClientHello proves nothing (a plain router waits for more, a
+    slow link is late): then *plain*, the answer to a plain Zenoh hello, decides: an InitAck
+    (open), TLS (refused), a hang-up or another answer (no TLS and no Zenoh of this version:
+    taken as open), or silence again (no verdict)."""
     r = no_cert.get("result")
     if r == "closed":
         return {"result": "closed", "detail": "the port did not accept TCP"}
     if r == "not_tls":
         return {"result": "accepted", "detail": "the port does not speak TLS: a plain Zenoh "
                                                 "session opens there"}
+    if r == "timeout":
+        p = plain or {}
+        pr, detail = p.get("result"), str(p.get("detail") or "")
+        if pr == "accepted":
+            return {"result": "accepted", "detail": detail}
+        if pr in ("hung_up", "other"):
+            return {"result": "accepted", "detail": f"no TLS answer, and {detail}: taken as open"}
+        if pr == "refused":
+            return {"result": "refused", "detail": detail}
+        return {"result": "timeout", "detail": detail or "no answer to our hellos in time"}
     return {"result": "refused", "detail": "the port speaks only TLS (it answered our "
                                            "ClientHello with a TLS handshake)"}
 

@@ -30,7 +30,7 @@ SecuritySshAuthData = TypedDict("SecuritySshAuthData", {
 
 
 class OutsiderAttempt(TypedDict, total=False):
-    result: str  # ROS 2: accepted, alert, closed, not_tls, server_cert, no_fleet_cert, refused
+    result: str  # ROS 2: accepted, alert, closed, not_tls, server_cert, no_fleet_cert, refused, timeout (no answer in time)
     detail: str  # the TLS alert, the verify message, or the error seen
 
 
@@ -42,7 +42,7 @@ class MasterCertData(TypedDict, total=False):
 
 OutsiderCause = Literal["security_off", "plain_open", "no_mtls", "no_fleet_cert", "foreign_ca",
                         "expired", "wrong_name", "unreachable", "refused", "firewall_missing",
-                        "insider_blocked", "checker_unavailable"]
+                        "insider_blocked", "checker_unavailable", "no_verdict"]
 
 
 SecurityOutsiderData = TypedDict("SecurityOutsiderData", {
