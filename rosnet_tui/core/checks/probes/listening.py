@@ -15,15 +15,15 @@ from rosnet_tui.core.addresses import is_loopback
 from rosnet_tui.core.net.listener import ListenerPool
 
 
-def _listening(port: int) -> list[tuple[str, int | None]] | None:
-    """(address, pid) of each TCP listener on *port* (pid None: another user's); None when the
-    kernel's table cannot be read."""
+def _listening(port: int) -> list[tuple[str, int | None]]:
+    """(address, pid) of each TCP listener on *port* (pid None: another user's); none seen when
+    the kernel's table cannot be read."""
     import psutil  # noqa: PLC0415
 
     try:
         conns = psutil.net_connections(kind="tcp")
     except (psutil.AccessDenied, OSError):
-        return None
+        return []
     return [(c.laddr.ip, c.pid) for c in conns
             if c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == port]
 
@@ -32,7 +32,7 @@ def who_listens(port: int) -> tuple[int | None, str | None, bool]:
     """(pid, process name, found) of a TCP listener on *port* (pid None: another user's)."""
     import psutil  # noqa: PLC0415
 
-    found = _listening(port) or []
+    found = _listening(port)
     if not found:
         return None, None, False
     pid = found[0][1]
@@ -53,7 +53,7 @@ def services_listening(port: int, pool: ListenerPool | None = None, *,
     rosnet-tui's, this round's or another run's, is nobody's service: the answer is then []."""
     if pool is not None and pool.rosnet_listens(port):
         return []
-    addrs = sorted({a for a, _pid in _listening(port) or []
+    addrs = sorted({a for a, _pid in _listening(port)
                     if not (reachable and is_loopback(a))})
     if addrs and pool is not None and pool.rosnet_listens(port):   # a stand-in came meanwhile
         return []
