@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
+import warnings
 
 import pytest
 
@@ -64,3 +65,34 @@ def test_a_library_being_imported_is_waited_for_not_imported_twice(libs):
     first.join(10)
     assert len(got) == 2 and got[0] is got[1]
     assert hasattr(got[1], "HAS_OPTIONAL")              # whole, not half-imported
+
+
+def test_a_quieted_warning_stays_quiet_while_another_library_is_imported(tmp_path, monkeypatch):
+    """requests' warning about the held character detector reached stderr in the lab: paramiko's
+    import, side by side in another thread, left its ``catch_warnings`` while requests was still
+    importing and put back the filters it had saved, without requests' quieting one."""
+    (tmp_path / "quick_lib.py").write_text("import time\ntime.sleep(0.3)\n")
+    (tmp_path / "warn_lib.py").write_text(
+        "import time, warnings\ntime.sleep(0.8)\n"
+        "try:\n    import warn_optional\nexcept ImportError:\n"
+        "    warnings.warn('no warn_optional here, going on without it')\n")
+    (tmp_path / "warn_optional.py").write_text("")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    shown: list[str] = []
+    monkeypatch.setattr("warnings.showwarning", lambda msg, *a, **k: shown.append(str(msg)))
+    first = threading.Thread(target=import_without, args=("quick_lib", "quick_optional"))
+    second = threading.Thread(target=import_without, args=("warn_lib", "warn_optional"),
+                              kwargs={"quiet": "no warn_optional here"})
+    try:
+        first.start()
+        deadline = time.monotonic() + 5     # the first import under way, then the second's
+        while "quick_lib" not in sys.modules and time.monotonic() < deadline:
+            time.sleep(0.005)
+        second.start()
+        first.join(5)
+        second.join(5)
+        assert "warn_lib" in sys.modules and "quick_lib" in sys.modules
+    finally:
+        for name in ("quick_lib", "warn_lib", "warn_optional"):
+            sys.modules.pop(name, None)
+    assert shown == []

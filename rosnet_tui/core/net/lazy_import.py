@@ -28,7 +28,7 @@ def import_without(name: str, *held: str, quiet: str | None = None) -> ModuleTyp
     """Module *name*, imported (the first time) with the modules *held* off: ``import`` of one of
     them inside it raises ImportError. Held modules already imported are left alone; afterwards
     any of them can be imported again as usual. *quiet*: a warning the import may give about
-    a held module (a regular expression of its text), not shown. A module another thread is
+    a held module (a regular expression of its text), not shown (from then on). A module another thread is
     still importing is waited for, as ``import`` waits; the import of another library is not
     (the round's SSH login waited for requests' import otherwise, about 50 ms)."""
     if name in sys.modules:     # imported, or being imported: import waits for its end
@@ -39,11 +39,13 @@ def import_without(name: str, *held: str, quiet: str | None = None) -> ModuleTyp
         mine = [h for h in held if h not in sys.modules]
         for h in mine:
             sys.modules[h] = None  # type: ignore[assignment]  # the import system's "not here"
+        if quiet is not None:
+            # For good, not inside catch_warnings: that saves and puts back the filters of the
+            # whole process, and another thread leaving its own (paramiko's import, side by
+            # side) put back filters without this one while the import was still running.
+            warnings.filterwarnings("ignore", message=quiet)
         try:
-            with warnings.catch_warnings():
-                if quiet is not None:
-                    warnings.filterwarnings("ignore", message=quiet)
-                return importlib.import_module(name)
+            return importlib.import_module(name)
         finally:
             for h in mine:
                 if h in sys.modules and sys.modules[h] is None:
