@@ -78,10 +78,30 @@ def main(argv: list[str] | None = None) -> int:
     exit took about 30 ms of every run; files are closed and atexit handlers run as before)."""
     if argv is not None:
         return _main(list(argv))
+    argv = sys.argv[1:]
     try:
-        return _main(sys.argv[1:])
+        if argv[:1] == ["check"]:  # the checks again: run by the warm process the last run left
+            from rosnet_tui.cli import warm
+
+            if warm.wanted(argv):
+                code = warm.run_through(argv)
+                if code is not None:
+                    return code
+                warm.leave_one_after()
+        return _main(argv)
     finally:
         gc.freeze()
+
+
+def serve_warm(argv: list[str]) -> int:
+    """The warm process (:mod:`.warm`): serves `rosnet-tui check` by :func:`main`."""
+    from rosnet_tui.cli import warm
+    from rosnet_tui.cli.check import preload as preload_check
+
+    def preload() -> None:
+        build_parser(list(warm.COMMANDS))
+        preload_check()
+    return warm.main(argv, run=main, preload=preload)
 
 
 def _main(argv: list[str]) -> int:

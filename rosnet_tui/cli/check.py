@@ -11,6 +11,7 @@ import json
 import sys
 from typing import Any
 
+from rosnet_tui.cli import warm
 from rosnet_tui.cli.common import (
     EXIT_FAIL,
     EXIT_OK,
@@ -18,6 +19,7 @@ from rosnet_tui.cli.common import (
     add_config_option,
     load_settings_or_say,
     number_in,
+    preload_settings,
 )
 from rosnet_tui.core.procedure import STEP_IDS
 
@@ -70,7 +72,21 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.flush()
     else:
         _print_table(ordered, advice)
+    warm.after_run(settings.checks.keep_warm_s)
     return EXIT_FAIL if failed else EXIT_OK
+
+
+def preload() -> None:
+    """Import what :func:`run` imports as it goes (for the warm process, :mod:`.warm`)."""
+    import rich.console
+    import rich.markup
+    import rich.table  # noqa: F401
+
+    from rosnet_tui.core.advisor import advise  # noqa: F401
+    from rosnet_tui.core.checks.runner import preload as preload_round
+
+    preload_settings()
+    preload_round()
 
 
 def collect_results(settings: Any, steps: list[str] | None = None, *, timeout: float | None = None,

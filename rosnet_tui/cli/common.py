@@ -146,6 +146,12 @@ def interactive() -> bool:
         return False
 
 
+def preload_settings() -> None:
+    """Import what :func:`load_settings_or_say` imports (for a process that loads ahead)."""
+    import rosnet_tui.core.net.netinfo
+    import rosnet_tui.core.saved.settings  # noqa: F401
+
+
 def load_settings_or_say(args: argparse.Namespace, *, complete: bool = False):
     """The settings named by --config (Settings), or None after saying why on stderr.
 

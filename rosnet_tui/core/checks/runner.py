@@ -23,7 +23,9 @@ from rosnet_tui.core.checks import (
 from rosnet_tui.core.config.paths import Paths
 from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.files.managed_write import settle
+from rosnet_tui.core.net.http import load_requests
 from rosnet_tui.core.results import CheckResult
+from rosnet_tui.core.ssh.connection import load_paramiko
 from rosnet_tui.core.ssh.options import SshOptions, relay_route
 from rosnet_tui.core.ssh.pool import SshPool
 
@@ -53,6 +55,14 @@ def select(steps: Iterable[str] | None = None, ids: Iterable[str] | None = None,
     load_builtin_checks()
     wanted = set(ids)
     return [s for s in checks_for(None) if s.id in wanted]
+
+
+def preload() -> None:
+    """Import what a round imports as it goes (the checks, paramiko, requests), for a process
+    that is to run rounds later without waiting for them (the command line's warm process)."""
+    load_builtin_checks()
+    load_paramiko()
+    load_requests()
 
 
 def unknown_ids(ids: Iterable[str]) -> list[str]:

@@ -307,6 +307,9 @@ class ProbeSettings:
 @dataclass
 class CheckSettings:
     timeout_s: float = 3.0
+    # Seconds a warm process stays after `rosnet-tui check` to run the next one without loading
+    # anew (rosnet_tui.cli.warm); 0: none.
+    keep_warm_s: float = 900.0
 
 
 @dataclass
@@ -526,6 +529,8 @@ class Settings:
         add("probe.port_check_url", validate_url(self.probe.port_check_url))
         if not number_within(self.checks.timeout_s, 0.1, 120):
             add("checks.timeout_s", "must be between 0.1 and 120 seconds")
+        if not number_within(self.checks.keep_warm_s, 0, 86400):
+            add("checks.keep_warm_s", "must be between 0 (no warm process) and 86400 seconds")
         b = self.rosbridge
         if not isinstance(b.enabled, bool):
             add("rosbridge.enabled", "must be true or false")

@@ -13,6 +13,7 @@ import socket
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from urllib.parse import urljoin, urlsplit
 
 from rosnet_tui import __version__
@@ -108,13 +109,18 @@ def _charset(content_type: str | None) -> str:
     return m.get_content_charset() or "utf-8"
 
 
+def load_requests() -> ModuleType:
+    """requests, imported on first use without a character detector (nothing here guesses a
+    body's encoding; the detector's import cost about 30 ms)."""
+    return import_without("requests", "chardet", "charset_normalizer",
+                          quiet="Unable to find acceptable character detection")
+
+
 def _http_get_blocking(url: str, timeout: float) -> HttpAnswer:
     """GET *url* with requests (imported here: never on the start-up path). No proxies from the
     environment (a proxy would answer with its own address); redirects are followed on the same
     host only; the body is streamed and capped at MAX_BODY."""
-    requests = import_without("requests", "chardet", "charset_normalizer",
-                              quiet="Unable to find acceptable character detection")
-
+    requests = load_requests()
     deadline = time.monotonic() + timeout
     current = url
     with requests.Session() as http:

@@ -18,6 +18,7 @@ from rosnet_tui.core.config.settings_model import (
     MAX_NESTING,
     MAX_SETTINGS_BYTES,
     ZENOH_PORT_DEFAULT,
+    CheckSettings,
     FirewallSettings,
     Gap,
     LinkTopic,
@@ -47,7 +48,7 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "ros": {"master": str, "port": int, "version": int, "zenoh_port": int, "domain_id": int,
             "security": str},
     "probe": {"port": int, "public_ip_urls": list, "port_check_url": str},
-    "checks": {"timeout_s": (int, float)},
+    "checks": {"timeout_s": (int, float), "keep_warm_s": (int, float)},
     "sync": {"store": str, "folder": str, "interval_s": (int, float), "dns_server": str,
              "zone": str, "tsig_key_file": str},
     "rosbridge": {"enabled": bool, "port": int, "host": str},
@@ -393,7 +394,10 @@ def _table_values(s: Settings) -> dict[str, dict[str, Any]]:
     if r.ssh_user:
         relay["ssh_user"] = r.ssh_user
     relay.update(ssh_port=r.ssh_port, zenoh_port=r.zenoh_port)
-    return {"this": this, "ros": ros, "probe": probe, "checks": {"timeout_s": s.checks.timeout_s},
+    checks: dict[str, Any] = {"timeout_s": s.checks.timeout_s}
+    if s.checks.keep_warm_s != CheckSettings.keep_warm_s:
+        checks["keep_warm_s"] = s.checks.keep_warm_s
+    return {"this": this, "ros": ros, "probe": probe, "checks": checks,
             "sync": sync, "rosbridge": rosbridge, "firewall": {"allow": list(s.firewall.allow)},
             "relay": relay}
 
@@ -439,6 +443,8 @@ def render_settings(s: Settings, previous_text: str | None = None) -> str:
         peers.append(tbl)
     if "peer" in doc:
         del doc["peer"]
+    if "keep_warm_s" in (doc.get("checks") or {}):    # the user's line, kept even at its default
+        values["checks"]["keep_warm_s"] = s.checks.keep_warm_s
     for name in ("ros", "probe", "checks"):
         _merge_table(doc, name, values[name])
     if s.has_sync or s.sync != SyncSettings():
