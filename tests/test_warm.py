@@ -388,3 +388,16 @@ def test_another_user_is_not_served_even_where_the_files_would_let_them(box, ask
                          timeout=30, user=65534, group=65534, cwd="/")
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() in ("b''", "reset")
+
+
+def test_a_request_keeps_undecodable_bytes_and_nothing_else_is_taken_for_one():
+    r = warm.Request(["check", "--json"], "rosnet-tui", "/tmp", {"NAME": "caf\udce9"}, 0o022)
+    assert warm.Request.decode(r.encode()) == r
+    good = json.loads(r.encode())
+    bad = [b"", b"[]", b"not json", json.dumps({**good, "more": 1}).encode(),
+           json.dumps({k: v for k, v in good.items() if k != "env"}).encode()]
+    for field, value in [("argv", "check"), ("argv", [1]), ("env", {"A": 1}), ("env", [["A", "b"]]),
+                         ("umask", True), ("umask", -1), ("umask", 0o1000), ("cwd", None),
+                         ("argv", [[[["deep"]]]])]:
+        bad.append(json.dumps({**good, field: value}).encode())
+    assert [warm.Request.decode(b) for b in bad] == [None] * len(bad)

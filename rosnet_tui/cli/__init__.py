@@ -35,6 +35,9 @@ SUBCOMMAND_HELP = {
     "probe_server": "run your own what-is-my-IP and port-check service (echoip-compatible)",
 }
 
+# The commands a warm process runs (rosnet_tui.cli.warm): a re-run of the checks.
+WARM_COMMANDS = ("check",)
+
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # argparse's default, with a hint
@@ -80,10 +83,10 @@ def main(argv: list[str] | None = None) -> int:
         return _main(list(argv))
     argv = sys.argv[1:]
     try:
-        if argv[:1] == ["check"]:  # the checks again: run by the warm process the last run left
+        if argv[:1] and argv[0] in WARM_COMMANDS:   # run by the warm process a last run left
             from rosnet_tui.cli import warm
 
-            if warm.wanted(argv):
+            if warm.enabled():
                 code = warm.run_through(argv)
                 if code is not None:
                     return code
@@ -99,7 +102,7 @@ def serve_warm(argv: list[str]) -> int:
     from rosnet_tui.cli.check import preload as preload_check
 
     def preload() -> None:
-        build_parser(list(warm.COMMANDS))
+        build_parser(list(WARM_COMMANDS))
         preload_check()
     return warm.main(argv, run=main, preload=preload)
 

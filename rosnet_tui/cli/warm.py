@@ -33,10 +33,12 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
+from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
+
 ENV_SWITCH = "ROSNET_TUI_WARM"      # "0": never use or leave a warm process
-COMMANDS = ("check",)               # the commands a warm process runs (see cli.main)
 _LEN = struct.Struct("!I")
 _MAX_REQUEST = 1 << 20
 _SUN_PATH = 107                     # the longest path a Unix socket can be bound to
@@ -52,13 +54,44 @@ _NAMESPACES = ("net", "pid", "user", "ipc")
 _SERVER = "import sys; from rosnet_tui.cli import serve_warm; sys.exit(serve_warm(sys.argv[1:]))"
 
 in_child = False                    # True in a child running a served command
-_state: dict = {"leave": False, "server": 0}   # this process: leaves one after it; the warm one's pid
+_leave_after = False                # this (cold) run leaves a warm process when it ends
+_server_pid = 0                     # the warm process (in it and its children)
 
 
-def wanted(argv: list[str]) -> bool:
-    """Whether *argv* is a command a warm process may run, and warm processes are not off."""
-    return bool(argv) and argv[0] in COMMANDS and os.environ.get(ENV_SWITCH, "1") != "0" \
-        and not in_child
+@dataclass(frozen=True)
+class Request:
+    """What a command hands the warm process besides its stdin, stdout and stderr."""
+
+    argv: list[str]              # the command line, after the program's name
+    argv0: str
+    cwd: str
+    env: dict[str, str]
+    umask: int
+
+    def encode(self) -> bytes:
+        return json.dumps(asdict(self)).encode("ascii")   # undecodable bytes as \udcXX escapes
+
+    @classmethod
+    def decode(cls, data: bytes) -> Request | None:
+        """The request in *data*; None for anything else."""
+        try:
+            raw = loads_bounded(data.decode("utf-8", "surrogateescape"), max_depth=3)
+        except JsonInputError:
+            return None
+        if not isinstance(raw, dict) or set(raw) != {f.name for f in fields(cls)}:
+            return None
+        r = cls(**raw)
+        texts = isinstance(r.argv0, str) and isinstance(r.cwd, str) and isinstance(r.argv, list) \
+            and all(isinstance(a, str) for a in r.argv)
+        env = isinstance(r.env, dict) and all(isinstance(k, str) and isinstance(v, str)
+                                              for k, v in r.env.items())
+        mask = isinstance(r.umask, int) and not isinstance(r.umask, bool) and 0 <= r.umask <= 0o777
+        return r if texts and env and mask else None
+
+
+def enabled() -> bool:
+    """Whether this process may use or leave a warm process (not switched off, not one's child)."""
+    return os.environ.get(ENV_SWITCH, "1") != "0" and not in_child
 
 
 def socket_dir() -> Path | None:
@@ -173,9 +206,7 @@ def _ask(sock: socket.socket, path: Path, argv: list[str]) -> int | None:
         cwd = os.getcwd()
     except OSError:
         return None
-    request = json.dumps({"argv": argv, "argv0": sys.argv[0], "cwd": cwd,
-                          "env": dict(os.environ), "umask": _umask()}).encode(
-                              "utf-8", "surrogateescape")
+    request = Request(argv, sys.argv[0], cwd, dict(os.environ), _umask()).encode()
     fds, spare = _stdio_fds()
     try:
         socket.send_fds(sock, [_LEN.pack(len(request))], fds)
@@ -246,16 +277,17 @@ def _unlink(path: Path) -> None:
 
 def leave_one_after() -> None:
     """This (cold) run of a command leaves a warm process when it ends (:func:`after_run`)."""
-    _state["leave"] = True
+    global _leave_after
+    _leave_after = True
 
 
 def after_run(keep_s: float) -> None:
     """A command's run is over and the settings say *keep_s* (``checks.keep_warm_s``): a cold run
     leaves a warm process; a served one with *keep_s* 0 stops the warm process."""
     if in_child:
-        if keep_s <= 0 and _state["server"] and os.getppid() == _state["server"]:
-            os.kill(_state["server"], signal.SIGTERM)
-    elif _state["leave"]:
+        if keep_s <= 0 and _server_pid and os.getppid() == _server_pid:
+            os.kill(_server_pid, signal.SIGTERM)
+    elif _leave_after:
         start(keep_s)
 
 
@@ -346,7 +378,8 @@ def serve(path: Path, keep_s: float, run: Runner, preload: Callable[[], None]) -
     _sweep(path.parent)
     preload()
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    me = _state["server"] = os.getpid()
+    global _server_pid
+    me = _server_pid = os.getpid()
     staging = path.with_name(f".{path.name}.{me}")
     _unlink(staging)
     listener.bind(str(staging))
@@ -451,7 +484,7 @@ def _child(conn: socket.socket, run: Runner) -> int:
     return code
 
 
-def _run_as(request: dict, fds: list[int], run: Runner) -> int:
+def _run_as(request: Request, fds: list[int], run: Runner) -> int:
     """Take on the command's stdin, stdout, stderr, directory, umask, environment and arguments,
     and run it."""
     for target, fd in zip((0, 1, 2), fds, strict=True):
@@ -462,16 +495,16 @@ def _run_as(request: dict, fds: list[int], run: Runner) -> int:
     for stream in (sys.stdout, sys.stderr):
         stream.reconfigure(line_buffering=stream.isatty())
     try:
-        os.chdir(request["cwd"])
+        os.chdir(request.cwd)
     except OSError as exc:
-        print(f"rosnet-tui: cannot work in {request['cwd']}: {exc.strerror}", file=sys.stderr)
+        print(f"rosnet-tui: cannot work in {request.cwd}: {exc.strerror}", file=sys.stderr)
         return 2
-    os.umask(request["umask"])
+    os.umask(request.umask)
     os.environ.clear()
-    os.environ.update(request["env"])
-    sys.argv = [request["argv0"], *request["argv"]]
+    os.environ.update(request.env)
+    sys.argv = [request.argv0, *request.argv]
     try:
-        return run(list(request["argv"]))
+        return run(list(request.argv))
     except SystemExit as exc:     # argparse's refusals, as in a cold run
         if exc.code is None or isinstance(exc.code, int):
             return exc.code or 0
@@ -479,41 +512,29 @@ def _run_as(request: dict, fds: list[int], run: Runner) -> int:
         return 1
 
 
-def _receive(conn: socket.socket) -> tuple[dict, list[int]]:
+def _receive(conn: socket.socket) -> tuple[Request, list[int]]:
+    """The request on *conn* and the three file descriptors it came with (ValueError: none)."""
     head, fds, _flags, _addr = socket.recv_fds(conn, _LEN.size, 3)
-    if len(head) != _LEN.size or len(fds) != 3:
-        for fd in fds:
-            os.close(fd)
-        raise ValueError("a request without its length or its three file descriptors")
-    (size,) = _LEN.unpack(head)
-    if size > _MAX_REQUEST:
-        raise ValueError("a request too long")
-    data = b""
-    while len(data) < size:
-        chunk = conn.recv(size - len(data))
-        if not chunk:
-            raise ValueError("a request cut short")
-        data += chunk
     try:
-        request = json.loads(data.decode("utf-8", "surrogateescape"))
-    except ValueError:
-        request = None
-    if not _well_formed(request):
+        if len(head) != _LEN.size or len(fds) != 3:
+            raise ValueError("a request without its length or its three file descriptors")
+        (size,) = _LEN.unpack(head)
+        if size > _MAX_REQUEST:
+            raise ValueError("a request too long")
+        data = b""
+        while len(data) < size:
+            chunk = conn.recv(size - len(data))
+            if not chunk:
+                raise ValueError("a request cut short")
+            data += chunk
+        request = Request.decode(data)
+        if request is None:
+            raise ValueError("not a request of rosnet-tui's")
+    except (OSError, ValueError):
         for fd in fds:
             os.close(fd)
-        raise ValueError("not a request of rosnet-tui's")
+        raise
     return request, fds
-
-
-def _well_formed(request: object) -> bool:
-    if not isinstance(request, dict):
-        return False
-    texts = [request.get("argv0"), request.get("cwd")]
-    argv, env = request.get("argv"), request.get("env")
-    return (all(isinstance(t, str) for t in texts) and isinstance(argv, list)
-            and all(isinstance(a, str) for a in argv) and isinstance(env, dict)
-            and all(isinstance(k, str) and isinstance(v, str) for k, v in env.items())
-            and isinstance(request.get("umask"), int) and 0 <= request["umask"] <= 0o777)
 
 
 def _watch(conn: socket.socket, done: list[bool]) -> None:
