@@ -401,3 +401,21 @@ def test_a_request_keeps_undecodable_bytes_and_nothing_else_is_taken_for_one():
                          ("argv", [[[["deep"]]]])]:
         bad.append(json.dumps({**good, field: value}).encode())
     assert [warm.Request.decode(b) for b in bad] == [None] * len(bad)
+
+
+def test_the_warm_process_has_loaded_what_a_run_of_the_checks_loads(tmp_path, asked):
+    """What a served run would still import is CPU on its path again (the ROS steps: the lab's
+    bench, row 2)."""
+    write_settings(tmp_path, asked.url)
+    code = ("import json, sys\nfrom rosnet_tui.cli import main, preload_warm\npreload_warm()\n"
+            "before = set(sys.modules)\n"
+            "main(['check', '--step', 'isp', '--step', 'router', '--json', '--no-upnp', "
+            "'--config', 'config.toml'])\n"
+            "print('NEW', json.dumps(sorted(set(sys.modules) - before)))\n")
+    env = {k: v for k, v in os.environ.items() if not k.lower().endswith("_proxy")}
+    env.update(XDG_STATE_HOME=str(tmp_path / "state"), XDG_CONFIG_HOME=str(tmp_path / "cfg"))
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, text=True,
+                         capture_output=True, timeout=60, stdin=subprocess.DEVNULL)
+    line = [ln for ln in out.stdout.splitlines() if ln.startswith("NEW ")]
+    assert line, out.stderr[-2000:]
+    assert json.loads(line[0][4:]) == []

@@ -47,11 +47,19 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _wanted(argv: list[str] | None) -> set[str]:
-    """The sub-commands *argv* may run (None: all of them, e.g. to test every parser)."""
+    """The sub-command *argv* runs: its first word that is not an option (nor --config's file);
+    None: all of them, e.g. to test every parser. (Any word once counted: `check --step router`
+    imported the router command and the modem's protocols.)"""
     if argv is None:
         return set(SUBCOMMAND_MODULES)
     names = {m.replace("_", "-"): m for m in SUBCOMMAND_MODULES}
-    return {names[a] for a in argv if a in names}
+    words = iter(argv)
+    for a in words:
+        if a == "--config":
+            next(words, None)
+        elif not a.startswith("-"):
+            return {names[a]} if a in names else set()
+    return set()
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
@@ -99,12 +107,16 @@ def main(argv: list[str] | None = None) -> int:
 def serve_warm(argv: list[str]) -> int:
     """The warm process (:mod:`.warm`): serves `rosnet-tui check` by :func:`main`."""
     from rosnet_tui.cli import warm
+
+    return warm.main(argv, run=main, preload=preload_warm)
+
+
+def preload_warm() -> None:
+    """Import what a run of the warm process's commands imports."""
     from rosnet_tui.cli.check import preload as preload_check
 
-    def preload() -> None:
-        build_parser(list(WARM_COMMANDS))
-        preload_check()
-    return warm.main(argv, run=main, preload=preload)
+    build_parser(list(WARM_COMMANDS))
+    preload_check()
 
 
 def _main(argv: list[str]) -> int:

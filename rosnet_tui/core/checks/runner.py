@@ -25,6 +25,7 @@ from rosnet_tui.core.config.settings_model import Settings
 from rosnet_tui.core.files.managed_write import settle
 from rosnet_tui.core.net.http import load_requests
 from rosnet_tui.core.results import CheckResult
+from rosnet_tui.core.ros import fleet_tls
 from rosnet_tui.core.ssh.connection import load_paramiko
 from rosnet_tui.core.ssh.options import SshOptions, relay_route
 from rosnet_tui.core.ssh.pool import SshPool
@@ -58,11 +59,13 @@ def select(steps: Iterable[str] | None = None, ids: Iterable[str] | None = None,
 
 
 def preload() -> None:
-    """Import what a round imports as it goes (the checks, paramiko, requests), for a process
-    that is to run rounds later without waiting for them (the command line's warm process)."""
+    """Import what a round imports as it goes (the checks, paramiko, requests, cryptography's
+    certificates), for a process that is to run rounds later without waiting for them (the
+    command line's warm process)."""
     load_builtin_checks()
     load_paramiko()
     load_requests()
+    fleet_tls.preload()
 
 
 def unknown_ids(ids: Iterable[str]) -> list[str]:
