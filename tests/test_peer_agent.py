@@ -419,3 +419,29 @@ def test_the_agents_start_is_compressed_for_a_thin_link(local):
     assert "a loadz frame of 0 bytes" in a.line()["e"]
     a.send({"run": "p", "id": 2, "argv": []})
     assert a.until_exits(1)[2]["x"] == 7
+
+
+async def test_a_run_waiting_behind_another_senders_write_ends_at_its_own_timeout(ssh_client):
+    """At 64 kbit/s a program's source (security.outsider's, some kB) takes seconds to send,
+    and every other run's request waits for the channel behind it: ros2.env, which gives its
+    peer 0.8 of its time, then overran the round's bound ("no verdict within 3 s"). Another
+    sender holding the channel is that write, made as long as wanted."""
+    opts = ssh_client.opts(timeout_s=3.0, pool=SshPool())
+    agents, peer = PeerAgents(), ssh_client.peer()
+    try:
+        warm = await agent_run(agents, opts, peer, KIND, "p", ["0"], timeout=20)
+        assert warm.exit_status == 7, warm
+        (agent,) = agents.agents.values()
+        async with agent.send_lock:                 # a long write of another check's
+            t0 = time.monotonic()
+            r = await asyncio.wait_for(      # bounded here: it waited for the lock for good
+                agent_run(agents, opts, peer, KIND, "p", ["0"], timeout=1.0), 10)
+            took = time.monotonic() - t0
+        assert r.failure == "timeout", r
+        assert took < 1.0 + 0.25, took
+        assert "in time" in r.detail, r
+        after = await agent_run(agents, opts, peer, KIND, "p", ["0"], timeout=20)
+        assert after.exit_status == 7, after        # the agent's stream is whole
+    finally:
+        agents.close()
+        opts.pool.close()

@@ -286,13 +286,20 @@ class PeerAgent:
         if self.session is None or self.closed:
             return False
         async with self.send_lock:
-            return await self.session.write("".join(json.dumps(m) + "\n" for m in msgs))
+            return await self._write(msgs)
+
+    async def _write(self, msgs: Sequence[dict[str, Any]]) -> bool:
+        assert self.session is not None
+        return await self.session.write("".join(json.dumps(m) + "\n" for m in msgs))
 
     async def call(self, program: str, argv: Sequence[str], timeout: float,
-                   needs_install: bool = False, source: bytes | None = None) -> AgentCall:
+                   needs_install: bool = False, source: bytes | None = None,
+                   send_within: float | None = None) -> AgentCall:
         """Start a run of *program*; with *source*, a program the agent's kind does not load
         at its start (run as ``__main__``): loaded first, once per agent (and again if its
-        source changed)."""
+        source changed). *send_within*: how long the request may wait for the channel, which
+        another run's request holds while it is sent (a program's source takes seconds at
+        64 kbit/s); then the run fails "timeout", nothing of it sent."""
         assert self.session is not None
         rid = next(self.ids)
         call = AgentCall(self.peer, self.session.result, timeout, self, rid)
@@ -302,15 +309,27 @@ class PeerAgent:
         if self.closed:
             call.end()
             return call
-        self.calls[rid] = call
-        msg: dict[str, Any] = {"run": program, "id": rid, "argv": list(argv)}
-        if needs_install and self.kind.no_install is not None:
-            msg["ni"] = list(self.kind.no_install)
-        msgs = [msg]
-        if source is not None and self.loaded.get(program) != source:
-            self.loaded[program] = source
-            msgs.insert(0, {"load": program, "src": source.decode(), "entry": None})
-        if not await self.send(*msgs):
+        try:
+            await asyncio.wait_for(self.send_lock.acquire(), send_within)
+        except asyncio.TimeoutError:
+            r = self.session.result
+            return _failed(self.peer, SshResult(
+                False, None, "", "", "timeout", f"the request to {self.peer.name} was not sent "
+                f"in time: the line was busy with the round's other requests", r.fingerprint,
+                r.host_key, r.address, r.tcp), timeout)
+        try:
+            self.calls[rid] = call
+            msg: dict[str, Any] = {"run": program, "id": rid, "argv": list(argv)}
+            if needs_install and self.kind.no_install is not None:
+                msg["ni"] = list(self.kind.no_install)
+            msgs = [msg]
+            if source is not None and self.loaded.get(program) != source:
+                self.loaded[program] = source
+                msgs.insert(0, {"load": program, "src": source.decode(), "entry": None})
+            sent = not self.closed and await self._write(msgs)
+        finally:
+            self.send_lock.release()
+        if not sent:
             self.calls.pop(rid, None)
             call.end()
         return call
@@ -368,20 +387,23 @@ async def agent_call(agents: PeerAgents, opts: SshOptions | None, peer: Peer, ki
     reaching the peer (and is the default for reads and waits), *tcp_timeout* its TCP part, as
     for an SSH session; *max_s* bounds the agent's life if this call starts it; *needs_install*:
     the run needs the peer's rosnet-tui (see AgentKind.no_install); *start_timeout* bounds the
-    wait for the agent to be ready (default: twice the longer of *timeout* and the round's);
+    wait for the agent to be ready and the request sent, from this call on (default: twice the
+    longer of *timeout* and the round's);
     *source*: a program *kind* does not load at the start (see :meth:`PeerAgent.call`)."""
+    loop = asyncio.get_running_loop()
+    base = float(getattr(opts, "timeout_s", 3.0) or 3.0)
+    if start_timeout is None:
+        start_timeout = max(timeout, base) * 2 + 0.5
+    end = loop.time() + max(start_timeout, 0.05)     # from now: the connection's wait included
     pool = getattr(opts, "pool", None)
     if pool is not None:       # the peer's connection first: its failures, within our bounds
         conn, _shared = await pool.connect(opts, peer, timeout, tcp_timeout)
         if conn.transport is None:
             return _failed(peer, conn.result, timeout)
     agent = agents.get(peer, kind)
-    base = float(getattr(opts, "timeout_s", 3.0) or 3.0)
-    if start_timeout is None:
-        start_timeout = max(timeout, base) * 2 + 0.5
-    task = agent.start(opts, timeout, tcp_timeout, max_s, start_timeout)
+    task = agent.start(opts, timeout, tcp_timeout, max_s, max(end - loop.time(), 0.05))
     try:
-        started = await asyncio.wait_for(asyncio.shield(task), max(start_timeout, 0.05))
+        started = await asyncio.wait_for(asyncio.shield(task), max(end - loop.time(), 0.05))
     except asyncio.TimeoutError:
         return _failed(peer, SshResult(False, None, "", "", "timeout",
                                        f"the probe program on {peer.name} did not start in time",
@@ -394,7 +416,8 @@ async def agent_call(agents: PeerAgents, opts: SshOptions | None, peer: Peer, ki
         raise
     if started.failure is not None:
         return _failed(peer, started, timeout)
-    return await agent.call(program, argv, timeout, needs_install, source)
+    return await agent.call(program, argv, timeout, needs_install, source,
+                            send_within=max(end - loop.time(), 0.05))
 
 
 @contextlib.asynccontextmanager

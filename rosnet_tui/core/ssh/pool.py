@@ -112,7 +112,7 @@ class SshPool:
                 if not connected:
                     raise
                 conn = await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(fut)),
-                                              max(end - loop.time(), 0.05) + 0.5)
+                                              max(end - loop.time(), 0.05))
             except asyncio.TimeoutError:
                 return failed("timeout", f"no SSH connection to {peer.name} within "
                                         f"{first if not connected else timeout:.1f} s",
