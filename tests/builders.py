@@ -68,6 +68,36 @@ def free_port(host: str = "127.0.0.1") -> int:
         return s.getsockname()[1]
 
 
+def loopback_master_config(folder: Path, ip_url: str, probe_url: str, *,
+                           ros_port: int | None = None, timeout_s: float = 2.0,
+                           keep_warm_s: float | None = None) -> Path:
+    """folder/config.toml: a ROS 1 master of its own, with no peers, whose what-is-my-IP and
+    port-check services are *ip_url* and *probe_url* (on loopback: `rosnet-tui check` as a user
+    runs it, with nothing leaving this machine)."""
+    warm = "" if keep_warm_s is None else f"keep_warm_s = {keep_warm_s}\n"
+    cfg = folder / "config.toml"
+    cfg.write_text(f"""
+[this]
+name = "turtlebot"
+role = "master"
+connection = "home"
+profile = "remote"
+
+[ros]
+master = "turtlebot"
+port = {ros_port or free_port()}
+
+[probe]
+port = {free_port()}
+public_ip_urls = ["{ip_url}"]
+port_check_url = "{probe_url}"
+
+[checks]
+timeout_s = {timeout_s}
+{warm}""")
+    return cfg
+
+
 # --------------------------------------------------------------------------- whole settings
 def checked_settings(this: ThisComponent, peers: list[Peer], master: str, *, probe_port: int,
                      public_ip_url: str, port_check_url: str, timeout_s: float = 3.0

@@ -15,7 +15,7 @@ import sys
 import pytest
 
 from rosnet_tui.core.checks import checks_for
-from tests.builders import free_port
+from tests.builders import free_port, loopback_master_config
 from tests.plugins.web import ProbeThread, WebServer
 
 ROUTER_IDS = [s.id for s in checks_for(["router"]) if s.ros != 2]   # ROS 1 settings here
@@ -31,27 +31,8 @@ def run(tmp_path, *args: str) -> subprocess.CompletedProcess:
 
 
 def write_config(tmp_path, probe_url: str, ip_url: str, **extra) -> str:
-    cfg = tmp_path / "config.toml"
-    cfg.write_text(f"""
-[this]
-name = "turtlebot"
-role = "master"
-connection = "home"
-profile = "remote"
-
-[ros]
-master = "turtlebot"
-port = {extra.get("ros_port", free_port())}
-
-[probe]
-port = {free_port()}
-public_ip_urls = ["{ip_url}"]
-port_check_url = "{probe_url}"
-
-[checks]
-timeout_s = 2.0
-""")
-    return str(cfg)
+    return str(loopback_master_config(tmp_path, ip_url, probe_url,
+                                      ros_port=extra.get("ros_port")))
 
 
 @pytest.fixture(scope="module")

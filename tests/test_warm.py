@@ -19,50 +19,39 @@ import sys
 import tempfile
 import threading
 import time
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 import psutil
 import pytest
 
 from rosnet_tui.cli import warm
-from tests.builders import free_port
+from tests.builders import loopback_master_config
+from tests.plugins.web import WebServer
 
 
 class Asked:
-    """A what-is-my-IP service on loopback that notes which process asked it and its parent,
-    and can hold its answer (``hold`` cleared) to keep a check running."""
+    """A what-is-my-IP service on loopback (tests/plugins/web.py) that notes which process asked
+    it and that process's parent, and can hold its answer (``hold`` cleared) to keep a check
+    running."""
 
     def __init__(self) -> None:
         self.askers: list[tuple[int, int]] = []       # (pid, parent pid)
         self.hold = threading.Event()
         self.hold.set()
         self.asked = threading.Event()
-        me = self
+        self.web = WebServer()
+        self.web.routes["/ip"] = (200, "203.0.113.9\n")
+        self.web.on_request = self._noted
+        self.url = self.web.url("/ip")
 
-        class Handler(BaseHTTPRequestHandler):
-            def do_GET(self):  # noqa: N802
-                me.askers.append(_owner(self.client_address))
-                me.asked.set()
-                me.hold.wait(20)
-                data = b"203.0.113.9\n"
-                self.send_response(200)
-                self.send_header("Content-Length", str(len(data)))
-                self.end_headers()
-                self.wfile.write(data)
-
-            def log_message(self, *a):
-                pass
-
-        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.httpd.daemon_threads = True
-        threading.Thread(target=self.httpd.serve_forever, args=(0.05,), daemon=True).start()
-        self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}/ip"
+    def _noted(self, client: tuple[str, int]) -> None:
+        self.askers.append(_owner(client))
+        self.asked.set()
+        self.hold.wait(20)
 
     def close(self) -> None:
         self.hold.set()
-        self.httpd.shutdown()
-        self.httpd.server_close()
+        self.web.close()
 
 
 def _owner(client: tuple[str, int]) -> tuple[int, int]:
@@ -106,26 +95,8 @@ def box(tmp_path, asked):
 
 
 def write_settings(folder: Path, url: str, keep_warm_s: float = 60, timeout_s: float = 2) -> None:
-    (folder / "config.toml").write_text(f"""
-[this]
-name = "turtlebot"
-role = "master"
-connection = "home"
-profile = "remote"
-
-[ros]
-master = "turtlebot"
-port = {free_port()}
-
-[probe]
-port = {free_port()}
-public_ip_urls = ["{url}"]
-port_check_url = "http://127.0.0.1:9"
-
-[checks]
-timeout_s = {timeout_s}
-keep_warm_s = {keep_warm_s}
-""")
+    loopback_master_config(folder, url, "http://127.0.0.1:9", timeout_s=timeout_s,
+                           keep_warm_s=keep_warm_s)
 
 
 def warm_processes(b) -> list[psutil.Process]:
@@ -239,15 +210,21 @@ def test_ctrl_c_stops_the_served_check(box, asked):
                     psutil.Process(child).status() == psutil.STATUS_ZOMBIE, 5)
 
 
+def held_served_check(b, asked: Asked) -> tuple[subprocess.Popen, int]:
+    """A served check kept running (the service holds its answer, the check would wait 20 s):
+    the command and the child of the warm process that runs it."""
+    write_settings(b.dir, asked.url, timeout_s=20)
+    asked.hold.clear()
+    asked.asked.clear()
+    proc = check(b)
+    assert asked.asked.wait(15)
+    return proc, asked.askers[-1][0]
+
+
 def test_a_killed_command_takes_its_served_check_with_it(box, asked):
     assert finish(check(box))[0] == 0
     the_warm_process(box)
-    write_settings(box.dir, asked.url, timeout_s=20)    # the check would wait 20 s
-    asked.hold.clear()
-    asked.asked.clear()
-    proc = check(box)
-    assert asked.asked.wait(15)
-    child = asked.askers[-1][0]
+    proc, child = held_served_check(box, asked)
     proc.kill()
     proc.communicate(timeout=10)
     assert wait_for(lambda: not psutil.pid_exists(child) or
@@ -319,12 +296,7 @@ def test_two_cold_runs_at_once_leave_one_warm_process(box, asked):
 def test_a_terminated_command_ends_as_a_cold_one_would(box, asked):
     assert finish(check(box))[0] == 0
     the_warm_process(box)
-    write_settings(box.dir, asked.url, timeout_s=20)
-    asked.hold.clear()
-    asked.asked.clear()
-    proc = check(box)
-    assert asked.asked.wait(15)
-    child = asked.askers[-1][0]
+    proc, child = held_served_check(box, asked)
     proc.terminate()
     code, _out, _err = finish(proc, timeout=10)
     assert code == -signal.SIGTERM

@@ -19,12 +19,15 @@ class WebServer:
     def __init__(self) -> None:
         self.routes: dict[str, tuple[int, str]] = {}
         self.fallback = None  # callable(path) -> (status, body) for paths not in routes
+        self.on_request = None  # callable((host, port) of the client), before it is answered
         self.hits: list[str] = []
         routes, hits, server = self.routes, self.hits, self
 
         class Handler(BaseHTTPRequestHandler):
             def do_GET(self):  # noqa: N802
                 hits.append(self.path)
+                if server.on_request is not None:
+                    server.on_request(self.client_address)
                 if self.path in routes or server.fallback is None:
                     status, body = routes.get(self.path, (404, "not found"))
                 else:
