@@ -445,3 +445,28 @@ async def test_a_run_waiting_behind_another_senders_write_ends_at_its_own_timeou
     finally:
         agents.close()
         opts.pool.close()
+
+
+async def test_the_agents_start_is_bounded_from_the_call_the_connections_wait_included(
+        ssh_client):
+    """A run's time covers reaching the peer and its agent's start together: the start's bound
+    was counted after the connection's wait, so a slow connection and a slow start could take
+    the two of them. The slow connection here is the pool's own, delayed before it connects."""
+    class SlowPool(SshPool):
+        async def connect(self, *a, **k):
+            await asyncio.sleep(0.6)
+            return await super().connect(*a, **k)
+
+    slow = AgentKind("slow", lambda m: f"sleep 5; {KIND.command(m)}", KIND.programs)
+    opts = ssh_client.opts(timeout_s=1.0, pool=SlowPool())
+    agents, peer = PeerAgents(), ssh_client.peer()
+    try:
+        t0 = time.monotonic()
+        r = await asyncio.wait_for(agent_run(agents, opts, peer, slow, "p", ["0"], timeout=1.2),
+                                   10)
+        took = time.monotonic() - t0
+    finally:
+        agents.close()
+        opts.pool.close()
+    assert r.failure == "timeout", r
+    assert took < 1.2 + 0.25, took
