@@ -52,6 +52,13 @@ class CheckContext:
     # another (ros2.link's bursts after the pub/sub checks) knows whether to wait for it.
     round_ids: frozenset[str] = frozenset()
 
+    async def after(self, ids: Iterable[str], until: float) -> None:
+        """Wait, until the monotonic time *until* at the latest, for those of *ids* this round
+        runs to end: a check whose work would slow theirs goes after them."""
+        wanted = [c for c in ids if c in self.round_ids]
+        while time.monotonic() < until and any(c not in self.results for c in wanted):
+            await asyncio.sleep(0.01)     # (a look costs nothing: 10 ms late at most)
+
     @property
     def ssh(self) -> SshOptions:
         """The SSH options with this round's timeout, its shared connections and the relay of

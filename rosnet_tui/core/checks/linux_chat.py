@@ -28,6 +28,7 @@ from rosnet_tui.core.checks.probes.agents import (
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.listening import services_listening
 from rosnet_tui.core.checks.probes.peers import NO_SSH_USER, each_peer, ssh_peers
+from rosnet_tui.core.checks.probes.ros2 import after_outsider_attempts
 from rosnet_tui.core.config.settings_model import Peer
 from rosnet_tui.core.net.blocking import run_blocking
 from rosnet_tui.core.net.connect import close_writer, kind_from_text, tcp_failure_kind
@@ -319,6 +320,7 @@ async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
         if not addrs:
             data["peers"][master] = {"ok": False, "failure": "resolve"}
             return Outcome(Status.FAIL, f"{master} does not resolve here: {err}", [], data)
+        await after_outsider_attempts(ctx, min(1.0, t * 0.2))
         ok, line, kind = await _tcp_connect(addrs[0], port, t * 0.6)
         data["peers"][master] = {"ok": ok, "failure": None if ok else "connect", "tcp": kind}
         ev = [f"{master} -> {addrs[0]}", line]
@@ -335,6 +337,9 @@ async def chat_ros2(ctx: CheckContext, out: bool) -> Outcome:
     if not peers:
         return Outcome(Status.SKIP, "no peer has an SSH user in the settings (peer.ssh_user), so "
                                     "the members' side cannot be run from here", data=data)
+    began = time.monotonic()
+    await after_outsider_attempts(ctx, min(1.0, t * 0.2))
+    t -= time.monotonic() - began
     async with contextlib.AsyncExitStack() as stack:
         if not await run_blocking(lambda: services_listening(port, ctx.listeners),
                                   timeout=1.0):

@@ -220,13 +220,6 @@ async def _peer_link(ctx: CheckContext, peer: Peer, deadline: float, gate: async
     return Status.PASS, "", ev, d
 
 
-async def _after_pubsub(ctx: CheckContext, until: float) -> None:
-    """Wait (bounded) for the round's pub/sub checks to end: our bursts would delay them."""
-    wanted = [c for c in PUBSUB if c in ctx.round_ids]
-    while time.monotonic() < until and any(c not in ctx.results for c in wanted):
-        await asyncio.sleep(0.01)     # (a look costs nothing: 10 ms late at most)
-
-
 def _no_path(ctx: CheckContext) -> str | None:
     """The pub/sub check of this round that found no message passing (None: none did)."""
     for cid in PUBSUB:
@@ -251,7 +244,7 @@ async def check_link(ctx: CheckContext) -> Outcome:
         return Outcome(Status.SKIP, "skipped: no peer with an SSH user in the settings, so the "
                                     "other end of the link cannot be run from here", [], data)
     deadline = start + t - 0.4
-    gate = asyncio.ensure_future(_after_pubsub(ctx, start + t * 0.4))
+    gate = asyncio.ensure_future(ctx.after(PUBSUB, start + t * 0.4))
     try:
         outcomes = await each_peer(peers, lambda p: _peer_link(ctx, p, deadline, gate))
         await gate

@@ -23,6 +23,18 @@ from rosnet_tui.core.ros import fleet_tls, ros2
 from rosnet_tui.core.ssh.connection import SshResult
 
 
+async def after_outsider_attempts(ctx: CheckContext, wait_s: float) -> None:
+    """Let security.outsider's attempts go first (waiting up to *wait_s* for it to end) before
+    a bare TCP connection to the master's Zenoh port under mutual TLS. The router refuses that
+    connection's handshake, and Zenoh's TLS listener then sleeps 100 ms and takes no handshake
+    meanwhile (TLS_ACCEPT_THROTTLE_TIME): the outsider's insider, whose session ticket times
+    the fleet's way in, waited behind the master's round's two such probes (linux.chat_in,
+    router.port_open): 120-160 ms instead of 7-10."""
+    s = ctx.settings
+    if s.ros2 and s.ros.security == "mtls" and not s.relayed:
+        await ctx.after(("security.outsider",), time.monotonic() + max(wait_s, 0.0))
+
+
 def zenoh_env(ctx: CheckContext) -> dict[str, str]:
     """The ROS 2 variables nodes started here get (environment, then ~/.bashrc)."""
     return zenohproto.ros_env(ctx.env, str(ctx.paths.bashrc_path))
