@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import json
 import os
 import pty
 import pwd
@@ -31,13 +32,15 @@ import termios
 import time
 from pathlib import Path
 
+import psutil
 import pytest
 
 import rosnet_tui
 from rosnet_tui.cli import build_parser
 from rosnet_tui.cli import sync as sync_cli
 from rosnet_tui.core.files import privilege
-from tests.builders import ROBOT_CONFIG
+from tests.builders import ROBOT_CONFIG, loopback_master_config
+from tests.plugins.web import WebServer
 
 REPO = Path(__file__).resolve().parent.parent
 SYSTEM_PYTHON = Path("/usr/bin/python3")
@@ -227,8 +230,16 @@ class NewUser:
     def remove(self) -> None:
         self.sudoers.unlink(missing_ok=True)
         self.sudoers.with_name(f".{self.name}.draft").unlink(missing_ok=True)
+        # what it left running (a warm process of rosnet-tui check) would keep userdel off
+        subprocess.run(["pkill", "-KILL", "-u", self.name], capture_output=True, timeout=30)
+        for _ in range(100):
+            if subprocess.run(["pgrep", "-u", self.name], capture_output=True,
+                              timeout=30).returncode != 0:
+                break
+            time.sleep(0.05)
         subprocess.run(["userdel", "--remove", self.name], capture_output=True, timeout=60)
         shutil.rmtree(self.home, ignore_errors=True)
+        shutil.rmtree(f"/tmp/rosnet-tui-{self.uid}", ignore_errors=True)
 
 
 def _copy_checkout(dest: Path) -> None:
@@ -374,12 +385,58 @@ def test_the_readme_install_line_as_a_new_user_on_the_system_python():
         r = subprocess.run([*argv[:3], "--version"], env={"PATH": SECURE_PATH}, cwd="/",
                            capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
         assert r.returncode == 0 and r.stdout.strip() == VERSION_LINE, r.stderr
+
+        # 6. The checks again: the second run is served by the warm process the first one left,
+        #    this install's Python in the user's own socket folder.
+        _served_by_a_warm_process(user, program)
     finally:
         user.remove()
         shutil.rmtree(scratch, ignore_errors=True)
     assert not user.home.exists() and not user.sudoers.exists()
     with pytest.raises(KeyError):
         pwd.getpwnam(user.name)
+
+
+def _served_by_a_warm_process(user: NewUser, program: str) -> None:
+    asked: list[int] = []       # the parent of each process that asked the service
+
+    def note(client: tuple[str, int]) -> None:
+        for c in psutil.net_connections(kind="tcp4"):
+            if c.laddr and (c.laddr.ip, c.laddr.port) == tuple(client) and c.pid:
+                with contextlib.suppress(psutil.Error):
+                    asked.append(psutil.Process(c.pid).ppid())
+                return
+        asked.append(0)
+
+    web = WebServer()
+    web.routes["/ip"] = (200, "203.0.113.9\n")
+    web.on_request = note
+    try:
+        folder = user.home / "checks"
+        folder.mkdir()
+        loopback_master_config(folder, web.url("/ip"), "http://127.0.0.1:9")
+        user.chown_tree(folder)
+        run = f"{program} check --step isp --json --no-upnp --config {folder}/config.toml"
+        first = user.run(run, timeout=60)
+        assert first.returncode == 0, first.stderr
+        sockets = Path(f"/tmp/rosnet-tui-{user.uid}")
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and not list(sockets.glob("warm-*.sock")):
+            time.sleep(0.05)
+        (sock,) = sockets.glob("warm-*.sock")
+        assert sock.stat().st_uid == user.uid and (sockets.stat().st_mode & 0o777) == 0o700
+        servers = [p.pid for p in psutil.process_iter(["cmdline", "uids"])
+                   if p.info["uids"] and p.info["uids"].real == user.uid
+                   and any("serve_warm" in c for c in p.info["cmdline"] or [])]
+        assert len(servers) == 1, servers
+        second = user.run(run, timeout=60)
+        assert second.returncode == 0, second.stderr
+        assert asked[-1] == servers[0], (asked, servers)
+        verdicts = [[(c["id"], c["status"]) for c in json.loads(r.stdout)["checks"]]
+                    for r in (first, second)]
+        assert verdicts[0] == verdicts[1]
+    finally:
+        web.close()
 
 
 # --------------------------------------------------------------------------- lowest Python
