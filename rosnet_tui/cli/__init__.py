@@ -98,7 +98,6 @@ def main(argv: list[str] | None = None) -> int:
                 code = warm.run_through(argv)
                 if code is not None:
                     return code
-                warm.leave_one_after()
         return _main(argv)
     finally:
         gc.freeze()

@@ -54,7 +54,7 @@ _NAMESPACES = ("net", "pid", "user", "ipc")
 _SERVER = "import sys; from rosnet_tui.cli import serve_warm; sys.exit(serve_warm(sys.argv[1:]))"
 
 in_child = False                    # True in a child running a served command
-_leave_after = False                # this (cold) run leaves a warm process when it ends
+_leave_at: Path | None = None       # this (cold) run leaves a warm process there when it ends
 _server_pid = 0                     # the warm process (in it and its children)
 
 
@@ -179,13 +179,18 @@ def socket_path() -> Path | None:
 
 def run_through(argv: list[str]) -> int | None:
     """Run *argv* in this user's warm process: its exit code, or None when there is none to use
-    (the caller runs the command itself, nothing having been said or done)."""
+    (the caller runs the command itself, nothing having been said or done, and leaves one when
+    it ends: :func:`after_run`)."""
+    global _leave_at
     path = socket_path()
     if path is None:
         return None
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
-        return _ask(sock, path, argv)
+        code = _ask(sock, path, argv)
+        if code is None:
+            _leave_at = path
+        return code
     except KeyboardInterrupt:       # before the child was named: it ends with our socket
         print("interrupted", file=sys.stderr)
         return 130
@@ -275,29 +280,20 @@ def _unlink(path: Path) -> None:
         pass
 
 
-def leave_one_after() -> None:
-    """This (cold) run of a command leaves a warm process when it ends (:func:`after_run`)."""
-    global _leave_after
-    _leave_after = True
-
-
 def after_run(keep_s: float) -> None:
     """A command's run is over and the settings say *keep_s* (``checks.keep_warm_s``): a cold run
     leaves a warm process; a served one with *keep_s* 0 stops the warm process."""
     if in_child:
         if keep_s <= 0 and _server_pid and os.getppid() == _server_pid:
             os.kill(_server_pid, signal.SIGTERM)
-    elif _leave_after:
-        start(keep_s)
+    elif _leave_at is not None:
+        start(keep_s, _leave_at)
 
 
-def start(keep_s: float) -> None:
-    """Leave a warm process for the next run of this user's commands here (unless one is there
-    or warm processes are off)."""
-    if keep_s <= 0 or in_child or os.environ.get(ENV_SWITCH, "1") == "0":
-        return
-    path = socket_path()
-    if path is None or path.exists() or _locked(_lock_path(path)):
+def start(keep_s: float, path: Path) -> None:
+    """Leave a warm process on *path* for the next run of this user's commands here (unless
+    one is there or warm processes are off)."""
+    if keep_s <= 0 or not enabled() or path.exists() or _locked(_lock_path(path)):
         return
     import subprocess
 

@@ -28,9 +28,9 @@ def import_without(name: str, *held: str, quiet: str | None = None) -> ModuleTyp
     """Module *name*, imported (the first time) with the modules *held* off: ``import`` of one of
     them inside it raises ImportError. Held modules already imported are left alone; afterwards
     any of them can be imported again as usual. *quiet*: a warning the import may give about
-    a held module (a regular expression of its text), not shown (from then on). A module another thread is
-    still importing is waited for, as ``import`` waits; the import of another library is not
-    (the round's SSH login waited for requests' import otherwise, about 50 ms)."""
+    a held module (a regular expression of its text), not shown (from then on). A module
+    another thread is still importing is waited for, as ``import`` waits; the import of another
+    library is not (the round's SSH login waited for requests' import otherwise, about 50 ms)."""
     if name in sys.modules:     # imported, or being imported: import waits for its end
         return importlib.import_module(name)
     with _lock_for(name):

@@ -28,8 +28,9 @@ async def after_outsider_attempts(ctx: CheckContext, wait_s: float) -> None:
     a bare TCP connection to the master's Zenoh port under mutual TLS. The router refuses that
     connection's handshake, and Zenoh's TLS listener then sleeps 100 ms and takes no handshake
     meanwhile (TLS_ACCEPT_THROTTLE_TIME): the outsider's insider, whose session ticket times
-    the fleet's way in, waited behind the master's round's two such probes (linux.chat_in,
-    router.port_open): 120-160 ms instead of 7-10."""
+    the fleet's way in, waited 120-160 ms behind the master's round's bare probes instead of
+    7-10. linux.chat_in and linux.chat_out wait here; router.port_open does not (its own probe
+    is long: behind the outsider it made the master's round slower)."""
     s = ctx.settings
     if s.ros2 and s.ros.security == "mtls" and not s.relayed:
         await ctx.after(("security.outsider",), time.monotonic() + max(wait_s, 0.0))
