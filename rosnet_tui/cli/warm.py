@@ -54,7 +54,7 @@ _NAMESPACES = ("net", "pid", "user", "ipc")
 _SERVER = "import sys; from rosnet_tui.cli import serve_warm; sys.exit(serve_warm(sys.argv[1:]))"
 
 in_child = False                    # True in a child running a served command
-_leave_at: Path | None = None       # this (cold) run leaves a warm process there when it ends
+_leave_after = False                # this (cold) run leaves a warm process when it ends
 _server_pid = 0                     # the warm process (in it and its children)
 
 
@@ -140,13 +140,17 @@ def key(env: dict[str, str] | None = None) -> str:
 
 
 def _mounts() -> str:
-    """What is mounted where (/proc/self/mountinfo without the mounts' own numbers)."""
+    """What is mounted where (/proc/self/mountinfo without the mounts' own numbers), namespace
+    handles left out: `ip netns add` and `del` mount and unmount one under /run/netns, which
+    changes no file a check reads (a key that followed them missed its warm process whenever
+    a network namespace came or went meanwhile: seen in CI beside the lab's tests)."""
     try:
         with open("/proc/self/mountinfo", encoding="utf-8", errors="replace") as f:
             lines = f.read().splitlines()
     except OSError:
         return ""
-    return "\n".join(line.split(" ", 2)[-1] for line in lines)
+    return "\n".join(line.split(" ", 2)[-1] for line in lines
+                     if line.partition(" - ")[2].split(" ", 1)[0] != "nsfs")
 
 
 def _code_stamp() -> tuple[str, int, int]:
@@ -181,15 +185,14 @@ def run_through(argv: list[str]) -> int | None:
     """Run *argv* in this user's warm process: its exit code, or None when there is none to use
     (the caller runs the command itself, nothing having been said or done, and leaves one when
     it ends: :func:`after_run`)."""
-    global _leave_at
+    global _leave_after
     path = socket_path()
     if path is None:
         return None
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
         code = _ask(sock, path, argv)
-        if code is None:
-            _leave_at = path
+        _leave_after = code is None
         return code
     except KeyboardInterrupt:       # before the child was named: it ends with our socket
         print("interrupted", file=sys.stderr)
@@ -286,14 +289,18 @@ def after_run(keep_s: float) -> None:
     if in_child:
         if keep_s <= 0 and _server_pid and os.getppid() == _server_pid:
             os.kill(_server_pid, signal.SIGTERM)
-    elif _leave_at is not None:
-        start(keep_s, _leave_at)
+    elif _leave_after:
+        start(keep_s)
 
 
-def start(keep_s: float, path: Path) -> None:
-    """Leave a warm process on *path* for the next run of this user's commands here (unless
-    one is there or warm processes are off)."""
-    if keep_s <= 0 or not enabled() or path.exists() or _locked(_lock_path(path)):
+def start(keep_s: float) -> None:
+    """Leave a warm process for the next run of this user's commands here (unless one is there
+    or warm processes are off). Its socket is named anew, not taken from the run's start: the
+    process checks the name against what it sees a moment later, the run's end."""
+    if keep_s <= 0 or not enabled():
+        return
+    path = socket_path()
+    if path is None or path.exists() or _locked(_lock_path(path)):
         return
     import subprocess
 
