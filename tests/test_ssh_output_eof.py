@@ -26,3 +26,27 @@ async def test_a_quick_command_never_loses_its_output(ssh_client):
         assert res.ok and res.exit_status == 0
         missing += "rosnet-tui-ssh-ok" not in res.stdout
     assert missing == 0
+
+
+async def test_output_that_comes_with_the_end_is_kept(ssh_client, monkeypatch):
+    """The pump looked at the buffer, then at the channel's state: output and the end that came
+    between the two looks were dropped (CI: a pairing answer lost, "gave no answer (exit status
+    1)"). Here each look at the buffer, while the channel is open, lasts until it has closed."""
+    import paramiko
+
+    real, looked = paramiko.Channel.recv_ready, []
+
+    def recv_ready(chan):
+        if not looked:                        # the first look: the answer and the end come now
+            looked.append(chan)
+            for _ in range(500):              # at most 5 s: the command ends within 0.3 s
+                if chan.closed:
+                    break
+                chan.status_event.wait(0.01)
+            return False
+        return real(chan)
+
+    monkeypatch.setattr(paramiko.Channel, "recv_ready", recv_ready)
+    res = await ssh_run(ssh_client.opts(), ssh_client.peer(),
+                        "sleep 0.3; echo the-answer; exit 1", timeout=10)
+    assert res.exit_status == 1 and res.stdout == "the-answer\n", res

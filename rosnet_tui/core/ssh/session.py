@@ -113,10 +113,15 @@ class SshSession:
         self._arrived.clear()
 
     def _pump(self) -> bool:
-        """Move whatever arrived into the buffers; True when the channel is finished."""
+        """Move whatever arrived into the buffers; True when the channel is finished.
+
+        The channel's state is read before its buffers are emptied: paramiko queues data before
+        it marks the end that follows it, so output that came with the end is never left behind.
+        """
         chan = self._chan
         if chan is None:
             return True
+        finished = self._finished(chan)
         while chan.recv_ready():
             data = chan.recv(65536)
             if not data:
@@ -127,6 +132,9 @@ class SshSession:
             if not data:
                 break
             self._err += data
+        return finished
+
+    def _finished(self, chan: paramiko.Channel) -> bool:
         if chan.closed or not (self._transport and self._transport.is_active()):
             return True
         if not chan.exit_status_ready() or chan.recv_ready() or chan.recv_stderr_ready():
