@@ -231,6 +231,24 @@ def test_a_killed_command_takes_its_served_check_with_it(box, asked):
                     psutil.Process(child).status() == psutil.STATUS_ZOMBIE, 3)
 
 
+def test_ctrl_z_stops_the_served_check_and_fg_goes_on(box, asked):
+    """A technician's Ctrl-Z stops the command: the child that runs it stops too (it would go
+    on writing to the terminal), and both go on when the shell continues the command."""
+    assert finish(check(box))[0] == 0
+    the_warm_process(box)
+    proc, child = held_served_check(box, asked)
+    stopped = psutil.STATUS_STOPPED
+    proc.send_signal(signal.SIGTSTP)
+    assert wait_for(lambda: psutil.Process(proc.pid).status() == stopped, 5)
+    assert wait_for(lambda: psutil.Process(child).status() == stopped, 5)
+    proc.send_signal(signal.SIGCONT)
+    assert wait_for(lambda: psutil.Process(child).status() != stopped, 5)
+    assert psutil.Process(proc.pid).status() != stopped
+    asked.hold.set()
+    code, out, _err = finish(proc)
+    assert code == 0 and verdicts(out)
+
+
 def test_no_warm_process_when_it_is_switched_off(box, asked):
     assert finish(check(box, env=dict(box.env, ROSNET_TUI_WARM="0")))[0] == 0
     write_settings(box.dir, asked.url, keep_warm_s=0)

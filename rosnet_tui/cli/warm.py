@@ -9,7 +9,8 @@ or ``ROSNET_TUI_WARM=0``), a process is left that has imported all of that and w
 stdout and stderr (the file descriptors themselves); the warm process forks a child, which runs
 the command exactly as a cold process would (the settings are read anew, the SSH connections made
 anew: nothing of one run is kept for the next) and tells the exit code back. Ctrl-C and other
-signals to the command are passed on to the child; a command that dies takes its child with it.
+signals to the command are passed on to the child, Ctrl-Z stops the child with the command; a
+command that dies takes its child with it.
 
 One warm process serves one user, in one set of namespaces (network, mounts, hostname, PIDs),
 with one environment, one interpreter and one installed copy of rosnet-tui: any difference gives
@@ -237,14 +238,28 @@ def _wait_for(child: int, reader) -> int:
     one of them ends this process the same way."""
     forwarded: list[int] = []
 
-    def forward(signum: int, _frame: object) -> None:
-        forwarded.append(signum)
+    def tell(signum: int) -> None:
         try:
             os.kill(child, signum)
         except OSError:
             pass
+
+    def forward(signum: int, _frame: object) -> None:
+        forwarded.append(signum)
+        tell(signum)
+
+    def pause(_signum: int, _frame: object) -> None:
+        # Ctrl-Z: the child stops first (it writes to our terminal), then this process, as the
+        # shell expects; when the shell continues this process, the child goes on too.
+        tell(signal.SIGSTOP)
+        signal.signal(signal.SIGTSTP, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTSTP)
+        signal.signal(signal.SIGTSTP, pause)
+        tell(signal.SIGCONT)
+
     for sig in _FORWARDED:
         signal.signal(sig, forward)
+    signal.signal(signal.SIGTSTP, pause)
     line = reader.readline(64)
     if line.startswith(b"E") and line[1:].strip().lstrip(b"-").isdigit():
         return int(line[1:])
