@@ -24,7 +24,8 @@ def run_answering(argv: list[str], answers: list[str], *, env: dict[str, str], c
     deadline = time.monotonic() + timeout
     try:
         while time.monotonic() < deadline:
-            if select.select([master], [], [], 0.1)[0]:
+            ended = proc.poll() is not None     # before the look: what it wrote last is read
+            if select.select([master], [], [], 0 if ended else 0.1)[0]:
                 try:
                     chunk = os.read(master, 4096)
                 except OSError:
@@ -34,7 +35,7 @@ def run_answering(argv: list[str], answers: list[str], *, env: dict[str, str], c
                 out += chunk
                 if pending and out.count(b"[y/N]") > len(answers) - len(pending):
                     os.write(master, pending.pop(0).encode() + b"\n")
-            elif proc.poll() is not None:
+            elif ended:
                 break
         rc = proc.wait(timeout=max(0.1, deadline - time.monotonic()))
     finally:

@@ -132,13 +132,15 @@ def _wait_line(proc: subprocess.Popen, word: str, timeout: float = 20.0) -> str:
     import threading
 
     got: queue.Queue[str] = queue.Queue()
-    threading.Thread(target=lambda: [got.put(ln) for ln in proc.stdout], daemon=True).start()
+    reader = threading.Thread(target=lambda: [got.put(ln) for ln in proc.stdout], daemon=True)
+    reader.start()
     end = time.monotonic() + timeout
     while time.monotonic() < end:
+        ended = not reader.is_alive()           # before the look: its last line is in the queue
         try:
             line = got.get(timeout=0.2)
         except queue.Empty:
-            if proc.poll() is not None:
+            if ended:
                 break
             continue
         if word in line:
