@@ -249,6 +249,24 @@ def test_ctrl_z_stops_the_served_check_and_fg_goes_on(box, asked):
     assert code == 0 and verdicts(out)
 
 
+def test_a_command_killed_while_stopped_takes_its_stopped_child_with_it(box, asked):
+    """Ctrl-Z, then `kill -9 %1` after the warm process's idle time: the child, stopped with the
+    command, cannot see it go; the warm process, still there for it, continues it, and it
+    ends."""
+    write_settings(box.dir, asked.url, keep_warm_s=3)
+    assert finish(check(box))[0] == 0
+    server = the_warm_process(box)
+    proc, child = held_served_check(box, asked)
+    proc.send_signal(signal.SIGTSTP)
+    assert wait_for(lambda: psutil.Process(child).status() == psutil.STATUS_STOPPED, 5)
+    time.sleep(4)                                   # its 3 s are up: it stays for its child
+    assert server.is_running() and server.status() != psutil.STATUS_ZOMBIE
+    proc.kill()
+    proc.communicate(timeout=10)
+    assert wait_for(lambda: not psutil.pid_exists(child) or
+                    psutil.Process(child).status() == psutil.STATUS_ZOMBIE, 5)
+
+
 def test_no_warm_process_when_it_is_switched_off(box, asked):
     assert finish(check(box, env=dict(box.env, ROSNET_TUI_WARM="0")))[0] == 0
     write_settings(box.dir, asked.url, keep_warm_s=0)

@@ -429,12 +429,15 @@ def serve(path: Path, keep_s: float, run: Runner, preload: Callable[[], None]) -
 
 def _serve_until_idle(listener: socket.socket, mine: tuple[Path, int, int], keep_s: float,
                       run: Runner) -> None:
-    """Fork a child for each command that connects, until *keep_s* pass without one or the
-    socket's name is no longer ours (*mine*: the socket's path and inode, and the lock)."""
+    """Fork a child for each command that connects, until *keep_s* pass without one and no
+    child is left, or the socket's name is no longer ours (*mine*: the socket's path and inode,
+    and the lock)."""
     path, inode, lock_fd = mine
     deadline = time.monotonic() + keep_s
+    children: dict[int, tuple[str | None, int, str | None]] = {}  # pid: start, its command's
     listener.settimeout(1.0)
-    while time.monotonic() < deadline:
+    while time.monotonic() < deadline or children:
+        _mind(children)
         if not _is(path, inode):
             return                    # removed, or another process took the name
         try:
@@ -444,14 +447,44 @@ def _serve_until_idle(listener: socket.socket, mine: tuple[Path, int, int], keep
         with conn:
             creds = conn.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED,
                                     struct.calcsize("3i"))
-            _pid, uid, _gid = struct.unpack("3i", creds)
+            pid, uid, _gid = struct.unpack("3i", creds)
             if uid != os.geteuid():
                 continue
-            if os.fork() == 0:
+            child = os.fork()
+            if child == 0:
                 listener.close()
                 os.close(lock_fd)
                 sys.exit(_child(conn, run))
+            children[child] = (_started(child), pid, _started(pid))
         deadline = time.monotonic() + keep_s
+
+
+def _mind(children: dict[int, tuple[str | None, int, str | None]]) -> None:
+    """Forget the children that ended; continue those whose command is gone. A command killed
+    while Ctrl-Z had it stopped (``kill -9 %1``) leaves its child stopped, where nothing of the
+    child can see that: continued, it sees the command's socket closed and ends."""
+    for child, (born, pid, started) in list(children.items()):
+        if born is None or _started(child) != born:     # ended (reaped at once: SIGCHLD ignored)
+            del children[child]
+            continue
+        if started is None or _started(pid) != started:
+            try:
+                os.kill(child, signal.SIGCONT)
+            except OSError:
+                pass
+
+
+def _started(pid: int) -> str | None:
+    """When process *pid* started (clock ticks after boot), or None when it is gone or has died
+    (a zombie): a pid that names another process by then has another start."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    if len(fields) < 20 or fields[0] in (b"Z", b"X"):
+        return None
+    return fields[19].decode()
 
 
 def _is(path: Path, inode: int) -> bool:
