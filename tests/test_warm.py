@@ -253,13 +253,13 @@ def test_a_command_killed_while_stopped_takes_its_stopped_child_with_it(box, ask
     """Ctrl-Z, then `kill -9 %1` after the warm process's idle time: the child, stopped with the
     command, cannot see it go; the warm process, still there for it, continues it, and it
     ends."""
-    write_settings(box.dir, asked.url, keep_warm_s=3)
+    write_settings(box.dir, asked.url, keep_warm_s=5)   # time enough to start the next run
     assert finish(check(box))[0] == 0
     server = the_warm_process(box)
     proc, child = held_served_check(box, asked)
     proc.send_signal(signal.SIGTSTP)
     assert wait_for(lambda: psutil.Process(child).status() == psutil.STATUS_STOPPED, 5)
-    time.sleep(4)                                   # its 3 s are up: it stays for its child
+    time.sleep(5.5)                     # its 5 s since the run came are up: it stays for its child
     assert server.is_running() and server.status() != psutil.STATUS_ZOMBIE
     proc.kill()
     proc.communicate(timeout=10)
