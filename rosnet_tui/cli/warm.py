@@ -37,6 +37,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
+from rosnet_tui.core.files.tempfiles import process_start
 from rosnet_tui.core.jsonsafe import JsonInputError, loads_bounded
 
 ENV_SWITCH = "ROSNET_TUI_WARM"      # "0": never use or leave a warm process
@@ -455,7 +456,7 @@ def _serve_until_idle(listener: socket.socket, mine: tuple[Path, int, int], keep
                 listener.close()
                 os.close(lock_fd)
                 sys.exit(_child(conn, run))
-            children[child] = (_started(child), pid, _started(pid))
+            children[child] = (process_start(child), pid, process_start(pid))
         deadline = time.monotonic() + keep_s
 
 
@@ -464,27 +465,14 @@ def _mind(children: dict[int, tuple[str | None, int, str | None]]) -> None:
     while Ctrl-Z had it stopped (``kill -9 %1``) leaves its child stopped, where nothing of the
     child can see that: continued, it sees the command's socket closed and ends."""
     for child, (born, pid, started) in list(children.items()):
-        if born is None or _started(child) != born:     # ended (reaped at once: SIGCHLD ignored)
+        if born is None or process_start(child) != born:   # ended (reaped: SIGCHLD ignored)
             del children[child]
             continue
-        if started is None or _started(pid) != started:
+        if started is None or process_start(pid) != started:
             try:
                 os.kill(child, signal.SIGCONT)
             except OSError:
                 pass
-
-
-def _started(pid: int) -> str | None:
-    """When process *pid* started (clock ticks after boot), or None when it is gone or has died
-    (a zombie): a pid that names another process by then has another start."""
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            fields = f.read().rsplit(b")", 1)[1].split()
-    except (OSError, IndexError):
-        return None
-    if len(fields) < 20 or fields[0] in (b"Z", b"X"):
-        return None
-    return fields[19].decode()
 
 
 def _is(path: Path, inode: int) -> bool:

@@ -30,11 +30,20 @@ ATOMIC_TMP = re.compile(r"^\.(?P<name>.+)\.tmp-(?P<pid>\d+)-[0-9a-f]+$")
 
 
 def pid_alive(pid: int) -> bool:
+    return process_start(pid) is not None
+
+
+def process_start(pid: int) -> str | None:
+    """When process *pid* started (clock ticks after boot), or None when there is none or it
+    has died (a zombie): a pid that has come to name another process has another start."""
     try:
         with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as f:
-            return f.read().rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
+            fields = f.read().rsplit(")", 1)[-1].split()
     except OSError:
-        return False
+        return None
+    if len(fields) < 20 or fields[0] in ("Z", "X"):
+        return None
+    return fields[19]
 
 
 def lock_free(path: str) -> bool:
