@@ -21,7 +21,7 @@ from rosnet_tui.core.checks.probes.agents import (
     ZENOH_AGENT,
     peer_program_problem,
     peer_run,
-    stderr_tail,
+    why_no_report,
 )
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import each_peer, ssh_peers
@@ -62,7 +62,7 @@ async def _from_peer(ctx: CheckContext, peer: Peer, route: RelayRoute, port: int
     if rep is None:
         return {"up": None, "failure": None, "fingerprint": None,
                 "detail": problem or f"no report from {peer.name} "
-                                     f"({stderr_tail(res) or res.detail})"}
+                                     f"({why_no_report(res)})"}
     key = rep.get("key")
     if isinstance(key, str) and key:
         try:

@@ -20,7 +20,7 @@ from rosnet_tui.core.checks.probes.agents import (
     peer_program_problem,
     peer_run,
     peer_session,
-    stderr_tail,
+    why_no_report,
 )
 from rosnet_tui.core.checks.probes.peers import each_peer
 from rosnet_tui.core.checks.probes.ros1 import master_uri, ros1_peers
@@ -380,7 +380,7 @@ async def check_node_uris(ctx: CheckContext) -> Outcome:
         rep = _remote_report(res) if why_not is None else None
         if rep is None:
             problems.append(why_not or f"the probe on {peer.name} gave no report "
-                                       f"({stderr_tail(res) or 'no output'})")
+                                       f"({why_no_report(res)})")
             continue
         if rep.get("error"):
             problems.append(f"on {peer.name}: {rep['error']}")
@@ -484,7 +484,7 @@ async def _pubsub_out_one(ctx: CheckContext, peer: Peer, uri: str, end: float,
     rdata = _remote_report(res) if why_not is None else None
     if rdata is None:
         why = why_not or (f"the probe on {peer.name} gave no report "
-                          f"({stderr_tail(res) or 'no output'})")
+                          f"({why_no_report(res)})")
         return (Status.SKIP, f"skipped: could not run the subscriber on {peer.name}: {why}",
                 evidence, _pubsub_data(peer.name, False))
     rep = rosproto.ProbeReport.from_json(rdata)
@@ -547,7 +547,7 @@ async def _pubsub_in_one(ctx: CheckContext, peer: Peer, uri: str, end: float,
                                  f"registering with the master: {last}", evidence,
                     _pubsub_data(peer.name, False, "registration", remote.caller_id, uri))
         why = why_not or (f"the probe on {peer.name} did not start "
-                          f"({stderr_tail(res) or res.detail})")
+                          f"({why_no_report(res)})")
         return (Status.SKIP, f"skipped: could not run the publisher on {peer.name}: {why}",
                 evidence, _pubsub_data(peer.name, False))
     evidence.extend(local.evidence("here (subscriber)"))

@@ -33,7 +33,7 @@ from rosnet_tui.core.checks.probes.agents import (
     chat_agent,
     peer_program_problem,
     peer_run,
-    stderr_tail,
+    why_no_report,
 )
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.peers import each_peer, ssh_peers
@@ -137,7 +137,7 @@ async def check_ssh_auth(ctx: CheckContext) -> Outcome:
             problems.append(peer_program_problem(res, p) or (
                 f"rosnet-tui is not installed on {p.name} (the audit needs its paramiko)"
                 if rep and rep.get("error") == "no_install" else
-                f"the audit on {p.name} gave no report ({stderr_tail(res) or res.detail})"))
+                f"the audit on {p.name} gave no report ({why_no_report(res)})"))
             continue
         audits.append((p, outsider.read_ssh_audit(rep, user), rep))
     ev += problems
@@ -293,7 +293,7 @@ async def _outsider_ros2(ctx: CheckContext, data: dict[str, Any]) -> Outcome:
                              connect_timeout=t * 0.4, tcp_timeout=ctx.timeout_s, source=program)
         rep = outsider.parse_marked(res.stdout, outsider.TLS_MARK)
         problem = None if rep is not None else (peer_program_problem(res, peer) or
-                                                f"no report ({stderr_tail(res) or res.detail})")
+                                                f"no report ({why_no_report(res)})")
         if res.failure:
             data["ssh_failures"] = {peer.name: res.failure}
         if rep is None and res.failure:   # no way to look from outside: unknown, not insecure

@@ -76,6 +76,8 @@ class SshSession:
         self._err = bytearray()
         self._exited_at: float | None = None   # when the exit status arrived
         self._arrived: asyncio.Event | None = None  # output or the end came (see _nap)
+        self._input_short: tuple[int, int] | None = None   # (bytes sent, of) when write failed
+        self._cut = False     # the connection died before the output's end (EOF) came
 
     @property
     def ok(self) -> bool:
@@ -136,6 +138,9 @@ class SshSession:
 
     def _finished(self, chan: paramiko.Channel) -> bool:
         if chan.closed or not (self._transport and self._transport.is_active()):
+            # closed with no EOF first: the connection died (paramiko closes its channels then),
+            # and output may still have been coming (sshd may send the exit status before it)
+            self._cut = not chan.eof_received
             return True
         if not chan.exit_status_ready() or chan.recv_ready() or chan.recv_stderr_ready():
             return False
@@ -152,21 +157,23 @@ class SshSession:
         if self._chan is None:
             return False
         buf = data.encode() if isinstance(data, str) else bytes(data)
-        deadline = time.monotonic() + self.timeout
+        total, deadline = len(buf), time.monotonic() + self.timeout
         while buf:
             try:
                 if self._chan.send_ready():
                     n = self._chan.send(buf)
                     if n <= 0:
-                        return False
+                        break
                     buf = buf[n:]
                     continue
             except (OSError, EOFError, paramiko.SSHException):   # EOFError: the link died
-                return False
+                break
             if time.monotonic() > deadline or self._chan.closed:
-                return False
+                break
             await asyncio.sleep(_POLL_S)
-        return True
+        if buf:     # the result says so: a program fed on stdin may have run cut short
+            self._input_short = (total - len(buf), total)
+        return not buf
 
     async def close_stdin(self) -> None:
         if self._chan is not None:
@@ -208,11 +215,22 @@ class SshSession:
         else:
             detail = (f"the command on {self.peer.name} ended without an exit status "
                       "(a signal ended it, or sshd closed the session)")
+        if status is not None and self._cut:
+            detail += "; the SSH connection broke before its output ended (it may be cut short)"
+        if self._input_short is not None:
+            detail += (f"; only {self._input_short[0]} of the {self._input_short[1]} bytes of "
+                       "its input were sent (it ended first, or the link broke)")
         detail += self._said
         return SshResult(status is not None, status, self.stdout, self.stderr,
                          None if status is not None else "sshd", detail,
                          self.result.fingerprint, self.result.host_key, self.result.address,
                          self.result.tcp)
+
+    @property
+    def output_cut(self) -> bool:
+        """True when the connection died before the command's output ended: what was read may
+        be only a part (the exit status, which sshd may send first, can have come)."""
+        return self._cut
 
     @property
     def connection_broke(self) -> bool:
@@ -317,7 +335,7 @@ async def ssh_run(opts: SshOptions | None, peer: Peer, command: str, *,
                 await s.write(stdin)
             await s.close_stdin()
             res = await s.wait(max(deadline - time.monotonic(), 0.05))
-            broke = s._shared and res.exit_status is None and s.connection_broke
+            broke = s._shared and s.connection_broke and (res.exit_status is None or s.output_cut)
         if attempt == 2:
             return dataclasses.replace(res, detail=res.detail + " (ran again: the round's "
                                                                 "connection broke under the first run)")

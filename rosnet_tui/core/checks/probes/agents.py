@@ -136,3 +136,13 @@ def stderr_tail(res: SshResult) -> str:
     """The last lines the peer's program wrote on stderr, on one line."""
     tail = (res.stderr or "").strip().splitlines()[-3:]
     return " | ".join(tail)
+
+
+def why_no_report(res: SshResult) -> str:
+    """What a peer's program that gave no report left behind, on one line: its last lines on
+    stderr, else the end of what it printed, else "no output"; then how it ended."""
+    said = stderr_tail(res)
+    if not said:
+        out = (res.stdout or "").strip()
+        said = f"its output ends {out[-80:]!r}" if out else "no output"
+    return f"{said}; {res.detail}" if res.detail else said

@@ -11,7 +11,7 @@ import time
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext
-from rosnet_tui.core.checks.probes.agents import stderr_tail
+from rosnet_tui.core.checks.probes.agents import why_no_report
 from rosnet_tui.core.checks.probes.peers import ssh_peers
 from rosnet_tui.core.config.paths import default_config_dir
 from rosnet_tui.core.config.settings_model import Peer
@@ -114,7 +114,7 @@ def zenoh_peer_problem(res: SshResult, peer: Peer, rep: dict | None) -> str | No
                 f"`{README_INSTALL}`")
     if rep is None:
         return (f"the probe on {peer.name} gave no report "
-                f"({stderr_tail(res) or res.detail or 'no output'})")
+                f"({why_no_report(res)})")
     return None
 
 
