@@ -210,13 +210,13 @@ def test_ctrl_c_stops_the_served_check(box, asked):
                     psutil.Process(child).status() == psutil.STATUS_ZOMBIE, 5)
 
 
-def held_served_check(b, asked: Asked) -> tuple[subprocess.Popen, int]:
+def held_served_check(b, asked: Asked, **popen) -> tuple[subprocess.Popen, int]:
     """A served check kept running (the service holds its answer, the check would wait 20 s):
     the command and the child of the warm process that runs it."""
     write_settings(b.dir, asked.url, timeout_s=20)
     asked.hold.clear()
     asked.asked.clear()
-    proc = check(b)
+    proc = check(b, **popen)
     assert asked.asked.wait(15)
     return proc, asked.askers[-1][0]
 
@@ -236,7 +236,7 @@ def test_ctrl_z_stops_the_served_check_and_fg_goes_on(box, asked):
     on writing to the terminal), and both go on when the shell continues the command."""
     assert finish(check(box))[0] == 0
     the_warm_process(box)
-    proc, child = held_served_check(box, asked)
+    proc, child = held_served_check(box, asked, process_group=0)   # a job of a shell
     stopped = psutil.STATUS_STOPPED
     proc.send_signal(signal.SIGTSTP)
     assert wait_for(lambda: psutil.Process(proc.pid).status() == stopped, 5)
@@ -249,6 +249,20 @@ def test_ctrl_z_stops_the_served_check_and_fg_goes_on(box, asked):
     assert code == 0 and verdicts(out)
 
 
+def test_ctrl_z_where_nothing_may_stop_leaves_the_check_running(box, asked):
+    """A command in an orphaned process group (started by a process that left, or by setsid)
+    is not stopped by the kernel on SIGTSTP: nobody could continue it. The child, stopped first,
+    must go on at once, or the run would hang."""
+    assert finish(check(box))[0] == 0
+    the_warm_process(box)
+    proc, child = held_served_check(box, asked, start_new_session=True)
+    proc.send_signal(signal.SIGTSTP)
+    time.sleep(0.5)
+    asked.hold.set()
+    code, out, _err = finish(proc, timeout=15)
+    assert code == 0 and verdicts(out)
+
+
 def test_a_command_killed_while_stopped_takes_its_stopped_child_with_it(box, asked):
     """Ctrl-Z, then `kill -9 %1` after the warm process's idle time: the child, stopped with the
     command, cannot see it go; the warm process, still there for it, continues it, and it
@@ -256,7 +270,7 @@ def test_a_command_killed_while_stopped_takes_its_stopped_child_with_it(box, ask
     write_settings(box.dir, asked.url, keep_warm_s=5)   # time enough to start the next run
     assert finish(check(box))[0] == 0
     server = the_warm_process(box)
-    proc, child = held_served_check(box, asked)
+    proc, child = held_served_check(box, asked, process_group=0)
     proc.send_signal(signal.SIGTSTP)
     assert wait_for(lambda: psutil.Process(child).status() == psutil.STATUS_STOPPED, 5)
     time.sleep(5.5)                     # its 5 s since the run came are up: it stays for its child

@@ -251,7 +251,9 @@ def _wait_for(child: int, reader) -> int:
 
     def pause(_signum: int, _frame: object) -> None:
         # Ctrl-Z: the child stops first (it writes to our terminal), then this process, as the
-        # shell expects; when the shell continues this process, the child goes on too.
+        # shell expects; when the shell continues this process, the child goes on too. In an
+        # orphaned process group the kernel does not stop us (nobody could continue us): the
+        # child then goes on at once.
         tell(signal.SIGSTOP)
         signal.signal(signal.SIGTSTP, signal.SIG_DFL)
         os.kill(os.getpid(), signal.SIGTSTP)
