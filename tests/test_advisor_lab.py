@@ -11,6 +11,7 @@ import json
 
 import pytest
 
+from rosnet_tui.core.checks.ros_link import PUBSUB
 from tests.lab.firewall import secured
 
 pytestmark = pytest.mark.lab
@@ -120,6 +121,12 @@ def test_ros_ip_on_the_laptop_says_unset_it_on_sami(ros1_lab, tmp_path):
     first = failures(on_robot)[0]
     assert first["rule"] == "ros.node_uri.local_ip", explain(on_robot)
     assert first["actions"][0].startswith("Unset ROS_IP on sami"), first
+    for doc in (on_laptop, on_robot):   # no path: ros.link says so once a pub/sub check has
+        checks = {c["id"]: c for c in doc["checks"]}
+        link, failed = checks["ros.link"], [c for c in PUBSUB if checks[c]["status"] == "fail"]
+        assert link["status"] == "skip" and "found no message passing" in link["summary"], link
+        assert link["duration_s"] <= min(checks[c]["duration_s"] for c in failed) + 1.0, \
+            explain(doc)                  # not at the end of its budget (11 s here)
 
 
 def test_markdown_report_on_a_broken_network_reads_well(ros1_lab, tmp_path):

@@ -13,6 +13,7 @@ import time
 
 import pytest
 
+from rosnet_tui.core.checks.ros2_link import PUBSUB
 from tests.lab.lab import REPO
 from tests.lab.ros2 import ROS2_IDS
 from tests.lab.topology import ADDR
@@ -145,6 +146,10 @@ def test_a_domain_id_mismatch_is_named(ros2):
     assert robot["ros2.pubsub_out"]["status"] == "fail", explain(robot)
     assert "ROS_DOMAIN_ID 5" in robot["ros2.pubsub_out"]["data"]["detail"], explain(robot)
     assert "ros2.env.domain" in rules(robot["ros2.pubsub_out"]), explain(robot)
+    for seat in (laptop, robot):   # no path: ros2.link says so once the pub/sub checks have
+        link, last = seat["ros2.link"], max(seat[c]["duration_s"] for c in PUBSUB)
+        assert link["status"] == "skip" and "found no message passing" in link["summary"], link
+        assert link["duration_s"] <= last + 1.0, explain(seat)   # not at the end of its budget
 
 
 def test_master_behind_cgnat_needs_a_public_router(ros2):

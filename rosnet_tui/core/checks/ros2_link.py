@@ -31,6 +31,7 @@ from rosnet_tui.core.checks.probes.link import (
     link_data,
     link_outcome,
     need_of,
+    unless_no_path,
 )
 from rosnet_tui.core.checks.probes.peers import each_peer
 from rosnet_tui.core.checks.probes.ros2 import (
@@ -246,11 +247,14 @@ async def check_link(ctx: CheckContext) -> Outcome:
     deadline = start + t - 0.4
     gate = asyncio.ensure_future(ctx.after(PUBSUB, start + t * 0.4))
     try:
-        outcomes = await each_peer(peers, lambda p: _peer_link(ctx, p, deadline, gate))
-        await gate
+        outcomes, broken = await unless_no_path(
+            ctx, PUBSUB, each_peer(peers, lambda p: _peer_link(ctx, p, deadline, gate)),
+            deadline)
+        if broken is None:
+            await gate
     finally:
         gate.cancel()
-    broken = _no_path(ctx)
+    broken = broken or _no_path(ctx)
     if broken:
         return Outcome(Status.SKIP, f"skipped: {broken} found no message passing, so there is no "
                                     "link to measure (see its advice)", [], data)

@@ -37,6 +37,7 @@ from rosnet_tui.core.checks.probes.link import (
     link_data,
     link_outcome,
     need_of,
+    unless_no_path,
 )
 from rosnet_tui.core.checks.probes.peers import each_peer
 from rosnet_tui.core.checks.probes.ros1 import master_uri, ros1_peers
@@ -263,5 +264,9 @@ async def check_link(ctx: CheckContext) -> Outcome:
         return Outcome(Status.SKIP, "skipped: no peer with an SSH user in the settings, so the "
                                     "other end of the link cannot be run from here", [], data)
     deadline = start + t - 0.4
-    outcomes = await each_peer(peers, lambda p: _peer_link(ctx, p, uri, deadline))
+    outcomes, broken = await unless_no_path(
+        ctx, PUBSUB, each_peer(peers, lambda p: _peer_link(ctx, p, uri, deadline)), deadline)
+    if broken:
+        return Outcome(Status.SKIP, f"skipped: {broken} found no message passing, so there is no "
+                                    "link to measure (see its advice)", [], data)
     return link_outcome(ctx, peers, outcomes, data)

@@ -4,7 +4,10 @@ outcome over every peer."""
 
 from __future__ import annotations
 
+import asyncio
 import statistics
+import time
+from collections.abc import Awaitable, Iterable
 from typing import Any
 
 from rosnet_tui.core.checks import CheckContext
@@ -118,3 +121,37 @@ def link_outcome(ctx: CheckContext, peers: list[Peer], outcomes: list[PeerLink],
     if worst == Status.SKIP and all(o[0] == Status.SKIP for o in outcomes):
         return Outcome(Status.SKIP, "skipped: " + "; ".join(words), ev, data)
     return Outcome(worst, "; ".join(words), ev, data)
+
+
+async def _first_failed(ctx: CheckContext, ids: Iterable[str], until: float) -> str | None:
+    """The first of *ids* (those this round runs) that fails, as soon as it does; None once
+    they have all passed, or at *until*."""
+    wanted = [c for c in ids if c in ctx.round_ids]
+    while time.monotonic() < until:
+        for c in wanted:
+            r = ctx.results.get(c)
+            if r is not None and r.status == Status.FAIL:
+                return c
+        if all(c in ctx.results for c in wanted):
+            return None
+        await asyncio.sleep(0.01)     # (a look costs nothing: 10 ms late at most)
+    return None
+
+
+async def unless_no_path(ctx: CheckContext, pubsub: Iterable[str], measure: Awaitable[Any],
+                         until: float) -> tuple[Any, str | None]:
+    """(what *measure* gave, None), or (None, the pub/sub check's id) when one of *pubsub*
+    finds no message passing first: the measurement is then stopped at once, since its bursts
+    would wait out the budget for acknowledgements that cannot come."""
+    task = asyncio.ensure_future(measure)
+    watch = asyncio.ensure_future(_first_failed(ctx, pubsub, until))
+    try:
+        await asyncio.wait({task, watch}, return_when=asyncio.FIRST_COMPLETED)
+        if not task.done() and watch.result() is not None:
+            return None, watch.result()
+        return await task, None
+    finally:
+        watch.cancel()
+        if not task.done():
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
