@@ -11,10 +11,10 @@ import json
 
 import pytest
 
-from rosnet_tui.core.checks.ros_link import PUBSUB
 from tests.lab.firewall import secured
 
 pytestmark = pytest.mark.lab
+PUBSUB = ("ros.pubsub_out", "ros.pubsub_in")  # (importing the check module would register it first)
 
 T1 = "table1.listener_up_closed"
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import getpass
 import socket
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -256,3 +258,19 @@ async def test_pubsub_with_dead_master_fails_at_registration(tmp_path: Path,
     r = await run(ctx, "ros.pubsub_in")
     assert r.status == Status.FAIL and r.data["failed_hop"] == "registration", r.summary
     assert r.duration_s < r.timeout_s
+
+
+def test_the_order_of_the_checks_does_not_follow_what_was_imported_first():
+    """A module importing a check module for a constant (ros_link's PUBSUB) registered its
+    checks first, and the ROS step listed ros.link before ros.env."""
+    def order(first: str) -> list[str]:
+        code = (first + "from rosnet_tui.core.checks import checks_for\n"
+                "from rosnet_tui.core.config.settings_model import Settings\n"
+                "print(' '.join(c.id for c in checks_for(None, Settings())))")
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              timeout=60, check=True).stdout.split()
+
+    plain = order("")
+    assert plain.index("ros.env") < plain.index("ros.link") < plain.index("security.outsider")
+    assert order("import rosnet_tui.core.checks.ros_link, rosnet_tui.core.checks.security\n"
+                 "import rosnet_tui.core.checks.router_upnp\n") == plain

@@ -13,13 +13,13 @@ import time
 
 import pytest
 
-from rosnet_tui.core.checks.ros2_link import PUBSUB
 from tests.lab.lab import REPO
 from tests.lab.ros2 import ROS2_IDS
 from tests.lab.topology import ADDR
 from tests.lab.verdicts import explain
 
 pytestmark = pytest.mark.lab
+PUBSUB = ("ros2.pubsub_out", "ros2.pubsub_in")  # (importing the check module would register it first)
 TIMEOUT = 3.0  # [checks] timeout_s of the lab's settings
 
 

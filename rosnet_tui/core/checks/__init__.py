@@ -129,14 +129,20 @@ def check(id: str, step: str, title: str, timeout_factor: float = 1.0, ros: int 
     return deco
 
 
+def _builtin_modules() -> list[str]:
+    """The modules that register the built-in checks, in their order (by name)."""
+    import pkgutil
+
+    return sorted(f"{__name__}.{m.name}" for m in pkgutil.iter_modules(__path__)
+                  if not m.name.startswith("_"))
+
+
 def load_builtin_checks() -> None:
     """Import the modules that register the built-in checks (idempotent)."""
     import importlib
-    import pkgutil
 
-    for mod in pkgutil.iter_modules(__path__):
-        if not mod.name.startswith("_"):
-            importlib.import_module(f"{__name__}.{mod.name}")
+    for name in _builtin_modules():
+        importlib.import_module(name)
 
 
 def checks_for(steps: Iterable[str] | None = None, settings: Settings | None = None
@@ -148,7 +154,12 @@ def checks_for(steps: Iterable[str] | None = None, settings: Settings | None = N
     order = {s: i for i, s in enumerate(STEP_IDS)}
     specs = [c for c in REGISTRY.values() if c.step in wanted
              and (settings is None or c.applies(settings))]
-    return sorted(specs, key=lambda c: (order[c.step], list(REGISTRY).index(c.id)))
+    # By module, then as each module declares them: the same order whichever module some
+    # other code imported first (registration order alone would follow that)
+    modules = {m: i for i, m in enumerate(_builtin_modules())}
+    ids = list(REGISTRY)
+    return sorted(specs, key=lambda c: (order[c.step], modules.get(c.func.__module__, len(modules)),
+                                        ids.index(c.id)))
 
 
 async def run_check(spec: CheckSpec, ctx: CheckContext) -> CheckResult:
