@@ -81,9 +81,10 @@ async def test_a_program_without_its_report_says_what_it_left(ssh_client):
 async def test_a_connection_that_breaks_before_the_output_ends_is_named(ssh_client):
     """sshd sends the exit status when the command ends, its output after: the connection
     dying in between left "exit status 0" and a part of the output, read as whole. The command
-    here ends at once; what it left behind kills its sshd before writing the rest."""
+    here ends at once; what it left behind kills its sshd before writing the rest (0.9 s later:
+    after the exit status, within the 1 s the session waits for the output's end after it)."""
     res = await ssh_run(ssh_client.opts(), ssh_client.peer(),
-                        "p=$PPID; (sleep 0.5; kill -9 $p; sleep 0.2; echo late) & "
+                        "p=$PPID; (sleep 0.9; kill -9 $p; sleep 0.2; echo late) & "
                         "echo early; exit 0", timeout=10)
     assert res.exit_status == 0 and res.stdout == "early\n", res
     assert "the SSH connection broke before its output ended" in res.detail, res.detail

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     import paramiko
 
 _POLL_S = 0.02
+_SEND_CHUNK = 32768     # what one SSH data packet carries (paramiko cuts to the peer's maximum)
 RETRY_MIN_S = 1.0
 """A command whose shared connection broke under it runs again only with this much time left."""
 EOF_GRACE_S = 1.0
@@ -157,23 +158,25 @@ class SshSession:
         if self._chan is None:
             return False
         buf = data.encode() if isinstance(data, str) else bytes(data)
-        total, deadline = len(buf), time.monotonic() + self.timeout
-        while buf:
+        sent, total, deadline = 0, len(buf), time.monotonic() + self.timeout
+        while sent < total:
             try:
                 if self._chan.send_ready():
-                    n = self._chan.send(buf)
+                    # a packet's worth at a time (no copy of the rest), letting others run
+                    n = self._chan.send(buf[sent:sent + _SEND_CHUNK])
                     if n <= 0:
                         break
-                    buf = buf[n:]
+                    sent += n
+                    await asyncio.sleep(0)
                     continue
             except (OSError, EOFError, paramiko.SSHException):   # EOFError: the link died
                 break
             if time.monotonic() > deadline or self._chan.closed:
                 break
             await asyncio.sleep(_POLL_S)
-        if buf:     # the result says so: a program fed on stdin may have run cut short
-            self._input_short = (total - len(buf), total)
-        return not buf
+        if sent < total:    # the result says so: a program fed on stdin may have run cut short
+            self._input_short = (sent, total)
+        return sent == total
 
     async def close_stdin(self) -> None:
         if self._chan is not None:
