@@ -334,6 +334,20 @@ def test_plain_router_today_fails_with_security_off(world):
     assert r.status == "fail" and r.data["cause"] == "plain_open", _explain(r)
 
 
+def test_a_plain_router_is_proven_without_waiting_out_the_tls_hello(world):
+    """A plain router says nothing to our TLS hello (it waits for more): the plain hello used to
+    be asked only when that wait (here 2 s) was over. Now it goes beside it once the TLS hello
+    has been unanswered for five connect times (0.3 s at least), and its answer settles it."""
+    fleet, member_tls, start = world
+    _member_cert(fleet, member_tls)      # the insider's hello waits too: it is not waited for
+    port = start("plain")
+    r = _run(_settings(port, security="none"), timeout_s=10.0)   # the probe's wait: 2 s
+    a = r.data["attempts"]
+    assert r.status == "fail" and r.data["cause"] == "security_off", _explain(r)
+    assert a["plain"]["result"] == "accepted" and a["no_cert"]["result"] == "timeout", a
+    assert r.duration_s < 2.0, _explain(r)
+
+
 def test_tls_without_mtls_lets_a_stranger_in(world):
     fleet, member_tls, start = world
     _member_cert(fleet, member_tls)
