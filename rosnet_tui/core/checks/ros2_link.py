@@ -249,7 +249,7 @@ async def check_link(ctx: CheckContext) -> Outcome:
     try:
         outcomes, broken = await unless_no_path(
             ctx, PUBSUB, each_peer(peers, lambda p: _peer_link(ctx, p, deadline, gate)),
-            deadline)
+            deadline, also=("ros2.router", "ros2.graph"))
         if broken is None:
             await gate
     finally:

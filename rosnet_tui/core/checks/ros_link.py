@@ -265,7 +265,8 @@ async def check_link(ctx: CheckContext) -> Outcome:
                                     "other end of the link cannot be run from here", [], data)
     deadline = start + t - 0.4
     outcomes, broken = await unless_no_path(
-        ctx, PUBSUB, each_peer(peers, lambda p: _peer_link(ctx, p, uri, deadline)), deadline)
+        ctx, PUBSUB, each_peer(peers, lambda p: _peer_link(ctx, p, uri, deadline)), deadline,
+        also=("ros.master", "ros.node_uris"))
     if broken:
         return Outcome(Status.SKIP, f"skipped: {broken} found no message passing, so there is no "
                                     "link to measure (see its advice)", [], data)

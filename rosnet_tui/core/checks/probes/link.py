@@ -139,19 +139,28 @@ async def _first_failed(ctx: CheckContext, ids: Iterable[str], until: float) -> 
 
 
 async def unless_no_path(ctx: CheckContext, pubsub: Iterable[str], measure: Awaitable[Any],
-                         until: float) -> tuple[Any, str | None]:
+                         until: float, also: Iterable[str] = ()) -> tuple[Any, str | None]:
     """(what *measure* gave, None), or (None, the pub/sub check's id) when one of *pubsub*
-    finds no message passing first: the measurement is then stopped at once, since its bursts
-    would wait out the budget for acknowledgements that cannot come."""
+    finds no message passing first: the measurement then stops, since its bursts would wait
+    out the budget for acknowledgements that cannot come. It stops once the round's checks of
+    *pubsub* and *also* have ended (at *until* at the latest): stopping our probes (the peer's
+    killed, ours unregistering) must not load the master or router while they still ask it."""
+    ids = [*pubsub, *also]
     task = asyncio.ensure_future(measure)
     watch = asyncio.ensure_future(_first_failed(ctx, pubsub, until))
+    settled: asyncio.Future | None = None
     try:
         await asyncio.wait({task, watch}, return_when=asyncio.FIRST_COMPLETED)
         if not task.done() and watch.result() is not None:
-            return None, watch.result()
+            settled = asyncio.ensure_future(ctx.after(ids, until))
+            await asyncio.wait({task, settled}, return_when=asyncio.FIRST_COMPLETED)
+            if not task.done():
+                return None, watch.result()
         return await task, None
     finally:
-        watch.cancel()
+        for f in (watch, settled):
+            if f is not None:
+                f.cancel()
         if not task.done():
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
