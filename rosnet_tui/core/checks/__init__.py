@@ -8,6 +8,7 @@ raises or overruns its timeout becomes a ``fail`` result, never an exception.
 from __future__ import annotations
 
 import asyncio
+import functools
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
 from dataclasses import dataclass, field, replace
@@ -129,12 +130,14 @@ def check(id: str, step: str, title: str, timeout_factor: float = 1.0, ros: int 
     return deco
 
 
-def _builtin_modules() -> list[str]:
-    """The modules that register the built-in checks, in their order (by name)."""
+@functools.cache
+def _builtin_modules() -> tuple[str, ...]:
+    """The modules that register the built-in checks, in their order (by name); looked up once
+    (checks_for asks on every step shown)."""
     import pkgutil
 
-    return sorted(f"{__name__}.{m.name}" for m in pkgutil.iter_modules(__path__)
-                  if not m.name.startswith("_"))
+    return tuple(sorted(f"{__name__}.{m.name}" for m in pkgutil.iter_modules(__path__)
+                        if not m.name.startswith("_")))
 
 
 def load_builtin_checks() -> None:

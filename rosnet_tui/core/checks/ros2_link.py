@@ -26,6 +26,7 @@ from rosnet_tui.core.checks import CheckContext, check
 from rosnet_tui.core.checks.probes.agents import ZENOH_AGENT, peer_session
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.link import (
+    failed_one,
     figures_line,
     large_wait,
     link_data,
@@ -193,7 +194,7 @@ async def _peer_link(ctx: CheckContext, peer: Peer, deadline: float, gate: async
                 t = max(0.3, deadline - time.monotonic() - 0.4) * 0.4
                 m = await run_blocking(_pings, end, t, timeout=t + 1.5)
                 await asyncio.shield(gate)
-                if m["rtts"] and not _no_path(ctx):
+                if m["rtts"] and not failed_one(ctx, PUBSUB):
                     t = max(0.3, deadline - time.monotonic() - 0.4)
                     m = await run_blocking(_bursts, end, m, t, timeout=t + 1.0)
                 end.put("e")
@@ -221,15 +222,6 @@ async def _peer_link(ctx: CheckContext, peer: Peer, deadline: float, gate: async
     return Status.PASS, "", ev, d
 
 
-def _no_path(ctx: CheckContext) -> str | None:
-    """The pub/sub check of this round that found no message passing (None: none did)."""
-    for cid in PUBSUB:
-        r = ctx.results.get(cid)
-        if r is not None and r.status == Status.FAIL:
-            return cid
-    return None
-
-
 @check("ros2.link", "ros", "The link to each peer measured: round trip, throughput, large "
        "messages", FACTOR_LINK, ros=2)
 async def check_link(ctx: CheckContext) -> Outcome:
@@ -254,7 +246,7 @@ async def check_link(ctx: CheckContext) -> Outcome:
             await gate
     finally:
         gate.cancel()
-    broken = broken or _no_path(ctx)
+    broken = broken or failed_one(ctx, PUBSUB)
     if broken:
         return Outcome(Status.SKIP, f"skipped: {broken} found no message passing, so there is no "
                                     "link to measure (see its advice)", [], data)

@@ -32,6 +32,7 @@ from rosnet_tui.core.checks.probes.agents import (
 from rosnet_tui.core.checks.probes.budget import budget
 from rosnet_tui.core.checks.probes.link import (
     PeerLink,
+    failed_one,
     figures_line,
     large_wait,
     link_data,
@@ -239,8 +240,7 @@ def _no_figures(ctx: CheckContext, peer: Peer, res: Any, rep: dict[str, Any] | N
                                         f"on {peer.name}, stderr: {stderr_tail(res)}"
                                         if rep is None and res is not None and stderr_tail(res)
                                         else None) if w]
-    broken = next((c for c in PUBSUB if (r := ctx.results.get(c)) is not None
-                   and r.status == Status.FAIL), None)
+    broken = failed_one(ctx, PUBSUB)
     if broken:
         return (Status.SKIP, f"{peer.name}: {broken} found no message passing, so there is no "
                              "link to measure (see its advice)", ev, empty)

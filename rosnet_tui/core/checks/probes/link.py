@@ -123,15 +123,23 @@ def link_outcome(ctx: CheckContext, peers: list[Peer], outcomes: list[PeerLink],
     return Outcome(worst, "; ".join(words), ev, data)
 
 
+def failed_one(ctx: CheckContext, ids: Iterable[str]) -> str | None:
+    """The first of *ids* (pub/sub checks) that has failed in this round so far: no message
+    passes, so there is no link to measure (None: none has)."""
+    for c in ids:
+        r = ctx.results.get(c)
+        if r is not None and r.status == Status.FAIL:
+            return c
+    return None
+
+
 async def _first_failed(ctx: CheckContext, ids: Iterable[str], until: float) -> str | None:
     """The first of *ids* (those this round runs) that fails, as soon as it does; None once
     they have all passed, or at *until*."""
     wanted = [c for c in ids if c in ctx.round_ids]
     while time.monotonic() < until:
-        for c in wanted:
-            r = ctx.results.get(c)
-            if r is not None and r.status == Status.FAIL:
-                return c
+        if (failed := failed_one(ctx, wanted)) is not None:
+            return failed
         if all(c in ctx.results for c in wanted):
             return None
         await asyncio.sleep(0.01)     # (a look costs nothing: 10 ms late at most)
